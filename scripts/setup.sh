@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Installs everything mousepose needs on a Debian 12 machine, as root.
+# Idempotent: when every package is already there it only checks and returns.
+set -euo pipefail
+
+packages=(
+  # build
+  build-essential pkg-config clang libclang-dev
+  # depth cameras (OpenNI2 with its Dummy and PS1080 drivers)
+  libopenni2-dev libopenni2-0
+  # GenICam colour cameras (Aravis 0.8, its fake GigE Vision camera and tools)
+  libaravis-dev aravis-tools libusb-1.0-0-dev
+  # image processing, calibration and the paw cascade (OpenCV 4.6 and its shipped cascades)
+  libopencv-dev opencv-data
+  # video export and import
+  ffmpeg
+  # unit and rules checks
+  systemd udev
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if ((${#missing[@]})); then
+  if [[ $(id -u) -ne 0 ]]; then
+    echo "setup: these packages are missing and installing them needs root: ${missing[*]}" >&2
+    exit 1
+  fi
+  echo "setup: installing ${missing[*]}" >&2
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+if ! command -v cargo >/dev/null 2>&1; then
+  echo "setup: cargo is not on PATH; install the Rust toolchain (rustup) first" >&2
+  exit 1
+fi
