@@ -6,3 +6,4 @@ pub mod geometry;
 pub mod kinematics;
 pub mod pose;
 pub mod skeleton;
+pub mod store;
