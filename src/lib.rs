@@ -5,5 +5,6 @@ pub mod frame;
 pub mod geometry;
 pub mod kinematics;
 pub mod pose;
+pub mod session;
 pub mod skeleton;
 pub mod store;
