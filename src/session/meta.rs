@@ -7,6 +7,7 @@
 
 use super::codec::FrameFormat;
 use crate::geometry::{Camera, Intrinsics, Rig};
+use crate::store::Kind;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use std::fmt;
@@ -32,6 +33,16 @@ impl CameraRole {
         match self {
             CameraRole::Depth => "depth",
             CameraRole::Color => "color",
+        }
+    }
+}
+
+impl CameraRole {
+    /// The kind of record file that holds this camera's frames.
+    pub fn store_kind(self) -> Kind {
+        match self {
+            CameraRole::Depth => Kind::DepthFrames,
+            CameraRole::Color => Kind::ColorFrames,
         }
     }
 }
@@ -248,8 +259,6 @@ mod rig_repr {
         }
     }
 
-    // The signature serde's `with` requires.
-    #[allow(clippy::ref_option)]
     pub fn serialize<S: Serializer>(rig: &Option<Rig>, serializer: S) -> Result<S::Ok, S::Error> {
         rig.as_ref()
             .map(|rig| RigRepr {

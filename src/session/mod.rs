@@ -119,6 +119,13 @@ pub enum SessionError {
         #[source]
         source: CodecError,
     },
+    #[error("{}: cannot compress at zstd level {level}", path.display())]
+    Compression {
+        path: PathBuf,
+        level: i32,
+        #[source]
+        source: CodecError,
+    },
     #[error("{}: frame {frame}", path.display())]
     Frame {
         path: PathBuf,

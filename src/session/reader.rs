@@ -18,13 +18,6 @@ use nalgebra::Point3;
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, PoisonError};
 
-fn kind_of(role: CameraRole) -> Kind {
-    match role {
-        CameraRole::Depth => Kind::DepthFrames,
-        CameraRole::Color => Kind::ColorFrames,
-    }
-}
-
 /// One camera's frame file opened for random access, with its index.
 #[derive(Debug)]
 struct Stream {
@@ -41,7 +34,7 @@ impl Stream {
     fn open(dir: &Path, role: CameraRole) -> Result<Self> {
         let sub = dir.join(role.name());
         let path = sub.join(FRAMES_FILE);
-        let mut reader = RecordReader::open(&path, kind_of(role))?;
+        let mut reader = RecordReader::open(&path, role.store_kind())?;
         let (entries, index_status) = reader.load_index(sub.join(INDEX_FILE), peek_seq)?;
         let damage = if index_status.rebuilt() {
             reader.damage().clone()

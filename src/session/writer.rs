@@ -12,7 +12,7 @@ use super::{
 };
 use crate::frame::{ColorFrame, DepthFrame, Stamp};
 use crate::pose::JointPositions;
-use crate::store::{self, Kind, RecordWriter};
+use crate::store::{self, RecordWriter};
 use std::fmt::Write as _;
 use std::fs::{self, OpenOptions};
 use std::io::Write;
@@ -55,16 +55,13 @@ impl StreamWriter {
     fn create(dir: &Path, role: CameraRole, codec: Codec, level: i32) -> Result<Self> {
         let sub = dir.join(role.name());
         fs::create_dir(&sub).map_err(io_error(&sub, "create directory"))?;
-        let kind = match role {
-            CameraRole::Depth => Kind::DepthFrames,
-            CameraRole::Color => Kind::ColorFrames,
-        };
-        let store = RecordWriter::create(sub.join(FRAMES_FILE), kind)?;
-        let encoder = FrameEncoder::new(codec, level).map_err(|source| SessionError::Encode {
-            path: store.path().to_path_buf(),
-            seq: 0,
-            source,
-        })?;
+        let store = RecordWriter::create(sub.join(FRAMES_FILE), role.store_kind())?;
+        let encoder =
+            FrameEncoder::new(codec, level).map_err(|source| SessionError::Compression {
+                path: store.path().to_path_buf(),
+                level,
+                source,
+            })?;
         let timestamps = LineWriter::create(sub.join(TIMESTAMPS_FILE), Some(TIMESTAMPS_HEADER))?;
         Ok(Self {
             store,
@@ -139,8 +136,8 @@ impl SessionWriter {
     /// # Errors
     /// [`SessionError::NotEmpty`] when `dir` holds anything; [`SessionError::Format`] when
     /// the metadata is not valid for this format version ([`SessionMeta::problem`]);
-    /// [`SessionError::Io`] when a file can not be created; [`SessionError::Encode`] when
-    /// zstd rejects a compression level.
+    /// [`SessionError::Io`] when a file can not be created; [`SessionError::Compression`]
+    /// when zstd rejects a compression level.
     pub fn create_with(
         dir: impl AsRef<Path>,
         meta: &SessionMeta,
