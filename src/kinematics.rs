@@ -53,10 +53,11 @@ pub fn any_orthogonal(v: &Vector3<f64>) -> Vector3<f64> {
 /// Hind limb from the hip to a paw on or near the floor, with the angle at the ankle between
 /// knee and paw fixed at `ankle_angle` (the paper sets it to 90 degrees).
 ///
-/// `forward` is the leg's forward direction (the knee bends towards it) and `up` the world's
-/// up. Returns `(knee, ankle)`. The ankle is placed on the circle of radius `foot` around the
-/// paw, in the plane of the hip, the paw and `up`, at the elevation that lets the thigh reach
-/// it; when none does the closest is taken and the thigh is clamped by [`two_bone`].
+/// `forward` is the body's forward direction (the foot points along it and the knee bends
+/// towards it) and `up` the world's up. Returns `(knee, ankle)`. The ankle is placed behind
+/// the paw at the foot's length, in the vertical plane along `forward`, at the elevation that
+/// lets the thigh reach it; when none does the closest is taken and the thigh is clamped by
+/// [`two_bone`].
 pub fn hind_limb(
     hip: &Point3<f64>,
     paw: &Point3<f64>,
@@ -65,10 +66,11 @@ pub fn hind_limb(
     forward: &Vector3<f64>,
     up: &Vector3<f64>,
 ) -> (Point3<f64>, Point3<f64>) {
-    // The leg's plane: spanned by `up` and the horizontal direction from paw to hip.
-    let mut back = hip - paw;
+    // The leg's plane: spanned by `up` and the body's forward direction (the foot points
+    // forward from the ankle, the knee forward from the hip).
+    let mut back = -forward;
     back -= up * up.dot(&back);
-    let back = if back.norm() > 1e-6 { back.normalize() } else { -forward.normalize() };
+    let back = if back.norm() > 1e-6 { back.normalize() } else { any_orthogonal(up) };
     let knee_for = |elevation: f64| {
         let foot_dir = back * elevation.cos() + up * elevation.sin();
         let ankle = paw + foot_dir * foot;
@@ -84,7 +86,8 @@ pub fn hind_limb(
         let knee = ankle + shin_dir * shin;
         (knee, ankle)
     };
-    // Scan the foot's elevation for the ankle whose knee lies at thigh length from the hip.
+    // Scan the foot's elevation from flat upwards for the first ankle whose knee lies at thigh
+    // length from the hip (the lowest heel, as a crouching mouse holds it).
     let mut best = (f64::INFINITY, 0.0);
     let steps = 90;
     for i in 0..=steps {
@@ -93,6 +96,9 @@ pub fn hind_limb(
         let err = ((knee - hip).norm() - thigh).abs();
         if err < best.0 {
             best = (err, e);
+        }
+        if err < 0.2 {
+            break;
         }
     }
     let (_, ankle) = knee_for(best.1);

@@ -1,10 +1,16 @@
 //! mousepose: live 3D pose of a lab mouse from a depth camera above its cage and a colour
 //! camera under its glass floor. See `docs/ARCHITECTURE.md` for how the parts fit.
 
+pub mod bench;
+pub mod cli;
 pub mod frame;
 pub mod geometry;
+pub mod image;
 pub mod kinematics;
+pub mod output;
 pub mod pose;
+pub mod progress;
 pub mod session;
 pub mod skeleton;
 pub mod store;
+pub mod synth;

@@ -1,5 +1,7 @@
 //! The one integration test binary: each module tests one area through the public API or the
 //! built `mousepose` binary.
 
+mod cli;
 mod session;
+mod synth;
 mod util;
