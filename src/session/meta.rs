@@ -182,7 +182,7 @@ impl SessionMeta {
 }
 
 /// `Option<Rig>` as `[rig.depth]` and `[rig.color]` tables of explicit fields.
-mod rig_repr {
+pub mod rig_repr {
     use super::*;
 
     #[derive(Serialize, Deserialize)]

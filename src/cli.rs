@@ -1,0 +1,273 @@
+//! The command line: argument parsing and the commands themselves. `main.rs` only calls
+//! [`main`] and turns its result into an exit code.
+
+use crate::bench;
+use crate::frame::PixelFormat;
+use crate::output::Staging;
+use crate::progress;
+use crate::synth::dataset::{DatasetSpec, write_dataset};
+use crate::synth::noise::{DepthNoise, NoiseModel};
+use crate::synth::session::{SessionSpec, write_session};
+use anyhow::{Context, Result};
+use clap::{Args, Parser, Subcommand};
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Debug, Parser)]
+#[command(name = "mousepose", version, about = "3D pose of a lab mouse from a top depth camera and a bottom colour camera")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Render synthetic training data and sessions.
+    #[command(subcommand)]
+    Synth(SynthCommand),
+    /// Measure the speed of mousepose's parts on this machine.
+    Bench(BenchArgs),
+}
+
+#[derive(Debug, Subcommand)]
+enum SynthCommand {
+    /// A training or test set of independent rendered instants.
+    Dataset(DatasetArgs),
+    /// A continuous behaviour sequence written as a recorded session.
+    Session(SessionArgs),
+}
+
+#[derive(Debug, Args)]
+struct NoiseArgs {
+    /// Gaussian depth noise, standard deviation in millimetres.
+    #[arg(long = "noise-mm", value_name = "SIGMA", default_value_t = 0.0, value_parser = parse_noise_mm, allow_negative_numbers = true)]
+    noise_mm: f64,
+}
+
+#[derive(Debug, Args)]
+struct DatasetArgs {
+    /// The dataset directory to create.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Number of images.
+    #[arg(long, value_name = "N", value_parser = parse_images, allow_negative_numbers = true)]
+    images: u64,
+    /// Seed of the random poses, placements and noise.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    #[command(flatten)]
+    noise: NoiseArgs,
+    /// Depth camera noise model: none, structured-light or tof.
+    #[arg(long = "noise-model", value_name = "MODEL", default_value = "none")]
+    noise_model: NoiseModel,
+    /// Leave out the bottom colour views (smaller and faster, for body and part training).
+    #[arg(long)]
+    no_bottom: bool,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    force: bool,
+}
+
+#[derive(Debug, Args)]
+struct SessionArgs {
+    /// The session directory to create.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Length of the session.
+    #[arg(long, value_name = "N", value_parser = parse_seconds, allow_negative_numbers = true)]
+    seconds: f64,
+    /// Frame rate of both cameras.
+    #[arg(long, value_name = "FPS", default_value_t = 30.0, value_parser = parse_fps, allow_negative_numbers = true)]
+    fps: f64,
+    /// Seed of the behaviour sequence, the clocks and the noise.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    #[command(flatten)]
+    noise: NoiseArgs,
+    /// Depth camera noise model: none, structured-light or tof.
+    #[arg(long = "noise-model", value_name = "MODEL", default_value = "structured-light")]
+    noise_model: NoiseModel,
+    /// Bin the colour camera's 1280x1024 sensor by this factor (1, 2 or 4).
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = parse_binning)]
+    color_binning: u32,
+    /// Depth camera only (the paper's single-depth-image mode).
+    #[arg(long)]
+    no_color: bool,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    force: bool,
+}
+
+#[derive(Debug, Args)]
+struct BenchArgs {
+    /// A short run (a few seconds) instead of the full measurement.
+    #[arg(long)]
+    quick: bool,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+fn parse_ranged<T>(s: &str, what: &str, lo: T, hi: T) -> Result<T, String>
+where
+    T: std::str::FromStr + PartialOrd + std::fmt::Display + Copy,
+{
+    let v: T = s.trim().parse().map_err(|_| format!("expected {what} from {lo} to {hi}, got {s:?}"))?;
+    if v < lo || v > hi {
+        return Err(format!("expected {what} from {lo} to {hi}, got {s}"));
+    }
+    Ok(v)
+}
+
+fn parse_images(s: &str) -> Result<u64, String> {
+    parse_ranged(s, "a whole number of images", 1, 10_000_000)
+}
+
+fn parse_seconds(s: &str) -> Result<f64, String> {
+    let v = parse_ranged(s, "a number of seconds", 0.0, 86_400.0)?;
+    if v <= 0.0 {
+        return Err(format!("expected a number of seconds above 0, got {s}"));
+    }
+    Ok(v)
+}
+
+fn parse_fps(s: &str) -> Result<f64, String> {
+    parse_ranged(s, "a frame rate", 1.0, 1000.0)
+}
+
+fn parse_noise_mm(s: &str) -> Result<f64, String> {
+    parse_ranged(s, "a noise level in millimetres", 0.0, 100.0)
+}
+
+fn parse_binning(s: &str) -> Result<u32, String> {
+    match s.trim() {
+        "1" => Ok(1),
+        "2" => Ok(2),
+        "4" => Ok(4),
+        other => Err(format!("expected a binning factor of 1, 2 or 4, got {other:?}")),
+    }
+}
+
+/// Sets up logging to stderr: plain lines for journald under systemd, with colours on a
+/// terminal; `RUST_LOG` picks the level (default `info`).
+fn init_logging() {
+    let journald = std::env::var_os("JOURNAL_STREAM").is_some();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into());
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false);
+    let result = if journald {
+        builder.with_ansi(false).without_time().try_init()
+    } else {
+        builder.with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr())).try_init()
+    };
+    // A subscriber installed already (in tests) is fine.
+    drop(result);
+}
+
+/// Runs the command line and returns the process's exit code: 0 on success, 1 for bad
+/// arguments or configuration, 2 when the work itself failed.
+pub fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let code = if e.use_stderr() { 1 } else { 0 };
+            // Printing help or an argument error; nothing more to say if stdout is gone.
+            let _ = e.print();
+            return ExitCode::from(code);
+        }
+    };
+    init_logging();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(exit_code(&e))
+        }
+    }
+}
+
+/// 1 when the error is about what the user asked for, 2 when the work failed.
+fn exit_code(e: &anyhow::Error) -> u8 {
+    let usage = e.chain().any(|c| {
+        matches!(
+            c.downcast_ref::<crate::output::OutputError>(),
+            Some(crate::output::OutputError::NotEmpty(_) | crate::output::OutputError::NotADirectory(_))
+        )
+    });
+    if usage { 1 } else { 2 }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Synth(SynthCommand::Dataset(args)) => synth_dataset(args),
+        Command::Synth(SynthCommand::Session(args)) => synth_session(args),
+        Command::Bench(args) => run_bench(&args),
+    }
+}
+
+fn synth_dataset(args: DatasetArgs) -> Result<()> {
+    let staging = Staging::new(&args.out, args.force)?;
+    let spec = DatasetSpec {
+        count: args.images,
+        seed: args.seed,
+        noise: DepthNoise {
+            model: args.noise_model,
+            gaussian_mm: args.noise.noise_mm,
+        },
+        bottom_views: !args.no_bottom,
+    };
+    let bar = progress::bar(spec.count, "rendering");
+    let rig = crate::geometry::Rig::default_rig();
+    write_dataset(staging.path(), &rig, &spec, |done| bar.set_position(done))
+        .with_context(|| format!("writing dataset {:?}", args.out))?;
+    bar.finish_and_clear();
+    let out = staging.commit()?;
+    tracing::info!(message = "Dataset written.", path = %out.display(), images = spec.count);
+    Ok(())
+}
+
+fn synth_session(args: SessionArgs) -> Result<()> {
+    let staging = Staging::new(&args.out, args.force)?;
+    let spec = SessionSpec {
+        seconds: args.seconds,
+        fps: args.fps,
+        seed: args.seed,
+        noise: DepthNoise {
+            model: args.noise_model,
+            gaussian_mm: args.noise.noise_mm,
+        },
+        color_binning: args.color_binning,
+        color_format: PixelFormat::BayerRg8,
+        color: !args.no_color,
+    };
+    let bar = progress::bar(0, "rendering");
+    let summary = write_session(staging.path(), &spec, |done, total| {
+        bar.set_length(total);
+        bar.set_position(done);
+    })
+    .with_context(|| format!("writing session {:?}", args.out))?;
+    bar.finish_and_clear();
+    let out = staging.commit()?;
+    tracing::info!(
+        message = "Session written.",
+        path = %out.display(),
+        depth_frames = summary.depth_frames,
+        color_frames = summary.color_frames,
+        preview = %out.join(crate::synth::session::PREVIEW_FILE).display(),
+    );
+    Ok(())
+}
+
+fn run_bench(args: &BenchArgs) -> Result<()> {
+    let report = bench::run(args.quick);
+    let mut stdout = std::io::stdout().lock();
+    if args.json {
+        writeln!(stdout, "{}", serde_json::to_string_pretty(&report)?)?;
+    } else {
+        write!(stdout, "{}", report.table())?;
+    }
+    Ok(())
+}

@@ -1,0 +1,280 @@
+//! The mouse's skin: ellipsoids and capsules hung on the posed skeleton, each surface point
+//! carrying one of the six part labels and a material for the bottom camera's shading.
+//!
+//! Seen from above it reads as a mouse: a pointed head with two round ears, a pear-shaped
+//! trunk widest at the hips, a thin tapering tail; the legs are thin capsules folded under the
+//! trunk, so from the top little more than the paws' tips shows.
+
+use super::mouse::{MouseInstance, PAW_SOLE_MM, TAIL_POINTS};
+use crate::skeleton::{Joint, LIMBS, Part, Side};
+use nalgebra::{Point3, Rotation3, Vector3};
+
+/// A solid.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Shape {
+    /// Centre, orientation (columns are the ellipsoid's axes) and semi-axes.
+    Ellipsoid {
+        centre: Point3<f64>,
+        axes: Rotation3<f64>,
+        radii: Vector3<f64>,
+    },
+    /// The points within `radius` of the segment `a`-`b`.
+    Capsule {
+        a: Point3<f64>,
+        b: Point3<f64>,
+        radius: f64,
+    },
+}
+
+/// What a surface looks like to the bottom colour camera.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Material {
+    Fur,
+    Skin,
+    Paw,
+}
+
+/// How a primitive's surface points are labelled.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Labeller {
+    Fixed(Part),
+    /// Trunk: front or rear by the side of the plane through `mid` (the mid-back joint) with
+    /// normal `forward`, left or right by the side of the primitive's own sagittal plane
+    /// (through `centre`, normal `left`).
+    Trunk {
+        mid: Point3<f64>,
+        forward: Vector3<f64>,
+        centre: Point3<f64>,
+        left: Vector3<f64>,
+    },
+    /// The neck: head ahead of the plane through `origin` with normal `forward`, trunk behind.
+    Neck {
+        origin: Point3<f64>,
+        forward: Vector3<f64>,
+        left: Vector3<f64>,
+    },
+}
+
+impl Labeller {
+    /// The part label of the surface point `p` (same frame as the labeller).
+    pub fn label(&self, p: &Point3<f64>) -> Part {
+        match *self {
+            Labeller::Fixed(part) => part,
+            Labeller::Trunk { mid, forward, centre, left } => {
+                Part::trunk((p - mid).dot(&forward) > 0.0, side_of(p, &centre, &left))
+            }
+            Labeller::Neck { origin, forward, left } => {
+                if (p - origin).dot(&forward) > 0.0 {
+                    Part::Head
+                } else {
+                    Part::trunk(true, side_of(p, &origin, &left))
+                }
+            }
+        }
+    }
+
+    /// The same labeller with its points and directions mapped by `iso`.
+    pub fn transformed(&self, iso: &nalgebra::Isometry3<f64>) -> Labeller {
+        match *self {
+            Labeller::Fixed(part) => Labeller::Fixed(part),
+            Labeller::Trunk { mid, forward, centre, left } => Labeller::Trunk {
+                mid: iso * mid,
+                forward: iso * forward,
+                centre: iso * centre,
+                left: iso * left,
+            },
+            Labeller::Neck { origin, forward, left } => Labeller::Neck {
+                origin: iso * origin,
+                forward: iso * forward,
+                left: iso * left,
+            },
+        }
+    }
+}
+
+fn side_of(p: &Point3<f64>, origin: &Point3<f64>, left: &Vector3<f64>) -> Side {
+    if (p - origin).dot(left) >= 0.0 { Side::Left } else { Side::Right }
+}
+
+/// One piece of skin.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Primitive {
+    pub shape: Shape,
+    pub labeller: Labeller,
+    pub material: Material,
+}
+
+/// Which leg a paw primitive belongs to, for the bottom view's ground truth.
+pub const PAW_PRIMITIVES: usize = 4;
+
+/// The skin of a posed mouse, in the world frame. The first [`PAW_PRIMITIVES`] primitives are
+/// the paws in [`Joint::PAWS`] order.
+pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
+    let s = m.scale;
+    let g = m.girth;
+    let mut out = Vec::with_capacity(40);
+    let j = |joint: Joint| m.joint(joint);
+    let ellipsoid = |centre: Point3<f64>, axes: Rotation3<f64>, radii: [f64; 3]| Shape::Ellipsoid {
+        centre,
+        axes,
+        radii: Vector3::new(radii[0], radii[1], radii[2]),
+    };
+
+    // Paws first (their order is the paw boxes' order).
+    for paw in Joint::PAWS {
+        let limb = LIMBS.iter().find(|l| l.paw == paw).copied().unwrap_or(LIMBS[0]);
+        let heading = super::mouse::flat_heading(m.frame(limb.root));
+        let (len, width) = if limb.fore { (3.2, 2.4) } else { (4.8, 2.6) };
+        let axes = Rotation3::from_axis_angle(&Vector3::z_axis(), heading.y.atan2(heading.x));
+        out.push(Primitive {
+            shape: ellipsoid(j(paw), axes, [len * s, width * s, PAW_SOLE_MM * s]),
+            labeller: Labeller::Fixed(Part::trunk(limb.fore, limb.side)),
+            material: Material::Paw,
+        });
+    }
+
+    // Legs, folded under the trunk.
+    for limb in LIMBS {
+        let root = if limb.fore {
+            m.shoulders[usize::from(limb.side == Side::Right)]
+        } else {
+            j(limb.root)
+        };
+        let part = Part::trunk(limb.fore, limb.side);
+        let radii = if limb.fore { [2.6, 1.8, 1.3] } else { [3.6, 2.2, 1.5] };
+        let points = [root, j(limb.upper), j(limb.lower), j(limb.paw)];
+        for (k, r) in radii.into_iter().enumerate() {
+            out.push(Primitive {
+                shape: Shape::Capsule {
+                    a: points[k],
+                    b: points[k + 1],
+                    radius: r * s,
+                },
+                labeller: Labeller::Fixed(part),
+                material: if k == 2 { Material::Skin } else { Material::Fur },
+            });
+        }
+    }
+
+    // Head: cranium and muzzle, ears.
+    let head = j(Joint::Head);
+    let snout = j(Joint::Snout);
+    let head_frame = *m.frame(Joint::Head);
+    let muzzle_len = (snout - head).norm();
+    out.push(Primitive {
+        shape: ellipsoid(head - head_frame * Vector3::new(1.0 * s, 0.0, 0.0), head_frame, [8.5 * s, 7.2 * s * g, 6.6 * s]),
+        labeller: Labeller::Fixed(Part::Head),
+        material: Material::Fur,
+    });
+    out.push(Primitive {
+        shape: ellipsoid(
+            head + (snout - head) * 0.5 - head_frame * Vector3::new(0.0, 0.0, 0.6 * s),
+            head_frame,
+            [0.5 * muzzle_len + 1.6 * s, 5.0 * s * g, 4.4 * s],
+        ),
+        labeller: Labeller::Fixed(Part::Head),
+        material: Material::Fur,
+    });
+    for (ear, side) in [(Joint::LeftEar, Side::Left), (Joint::RightEar, Side::Right)] {
+        // A thin disc facing forward and outward.
+        let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), side.sign() * 0.5);
+        let tilt = Rotation3::from_axis_angle(&Vector3::y_axis(), -0.35);
+        out.push(Primitive {
+            shape: ellipsoid(j(ear), head_frame * turn * tilt, [1.3 * s, 4.4 * s, 4.4 * s]),
+            labeller: Labeller::Fixed(Part::Head),
+            material: Material::Skin,
+        });
+    }
+
+    // Trunk: overlapping ellipsoids along the spine from the tail base to the neck, their
+    // width and height following a mouse's profile (widest over the hips, narrowing to the
+    // neck), so the outline from above is smooth. Centres sit a little below the spine, which
+    // runs along the back.
+    let spine = [Joint::TailBase, Joint::Rump, Joint::MidBack, Joint::Withers, Joint::Neck];
+    let lengths: Vec<f64> = spine.windows(2).map(|w| (j(w[1]) - j(w[0])).norm()).collect();
+    let total: f64 = lengths.iter().sum();
+    let mid_back = j(Joint::MidBack);
+    let front_normal = m.frame(Joint::Withers) * Vector3::x();
+    const SAMPLES: usize = 10;
+    for k in 0..SAMPLES {
+        let u = 0.04 + 0.96 * k as f64 / (SAMPLES - 1) as f64;
+        let (centre_on_spine, frame) = along(&spine, &lengths, total * u, m);
+        let [ry, rz] = trunk_profile(u);
+        let centre = centre_on_spine - frame * Vector3::new(0.0, 0.0, 1.8 * s);
+        let step = total / (SAMPLES - 1) as f64;
+        out.push(Primitive {
+            shape: ellipsoid(centre, frame, [1.2 * step.max(6.0 * s), ry * s * g, rz * s]),
+            labeller: Labeller::Trunk {
+                mid: mid_back,
+                forward: front_normal,
+                left: frame * Vector3::y(),
+                centre,
+            },
+            material: Material::Fur,
+        });
+    }
+    let neck_frame = *m.frame(Joint::Neck);
+    out.push(Primitive {
+        shape: ellipsoid(j(Joint::Neck) - neck_frame * Vector3::new(-1.0 * s, 0.0, 1.6 * s), neck_frame, [8.0 * s, 8.6 * s * g, 7.8 * s]),
+        labeller: Labeller::Neck {
+            origin: j(Joint::Neck),
+            forward: neck_frame * Vector3::x(),
+            left: neck_frame * Vector3::y(),
+        },
+        material: Material::Fur,
+    });
+
+    // Tail: tapering capsules along its centre line.
+    for k in 0..TAIL_POINTS - 1 {
+        let t = k as f64 / (TAIL_POINTS - 2) as f64;
+        out.push(Primitive {
+            shape: Shape::Capsule {
+                a: m.tail[k],
+                b: m.tail[k + 1],
+                radius: (2.4 - 1.6 * t) * s,
+            },
+            labeller: Labeller::Fixed(Part::Tail),
+            material: Material::Skin,
+        });
+    }
+    out
+}
+
+/// The point at arc length `at` along the spine polyline `spine` (segment lengths `lengths`)
+/// and the frame of the segment it falls in (x along the segment).
+fn along(spine: &[Joint], lengths: &[f64], at: f64, m: &MouseInstance) -> (Point3<f64>, Rotation3<f64>) {
+    let mut left = at;
+    for (k, &len) in lengths.iter().enumerate() {
+        if left <= len || k + 1 == lengths.len() {
+            let (a, b) = (m.joint(spine[k]), m.joint(spine[k + 1]));
+            let t = if len > 1e-9 { (left / len).clamp(0.0, 1.0) } else { 0.0 };
+            // The segment's frame is stored at its anterior joint (the rump's for the pelvis).
+            let frame = if spine[k] == Joint::TailBase { *m.frame(Joint::Rump) } else { *m.frame(spine[k + 1]) };
+            return (a + (b - a) * t, frame);
+        }
+        left -= len;
+    }
+    (m.joint(spine[0]), *m.frame(Joint::Rump))
+}
+
+/// Half-width and half-height (mm, unscaled) of the trunk at fraction `u` of the way from the
+/// tail base to the neck.
+fn trunk_profile(u: f64) -> [f64; 2] {
+    const PROFILE: [(f64, f64, f64); 7] = [
+        (0.0, 5.5, 5.0),
+        (0.12, 10.5, 9.0),
+        (0.3, 14.5, 11.6),
+        (0.5, 14.2, 11.4),
+        (0.7, 12.6, 10.8),
+        (0.88, 10.8, 9.8),
+        (1.0, 9.2, 8.6),
+    ];
+    for w in PROFILE.windows(2) {
+        let ((u0, y0, z0), (u1, y1, z1)) = (w[0], w[1]);
+        if u <= u1 {
+            let t = ((u - u0) / (u1 - u0)).clamp(0.0, 1.0);
+            return [y0 + (y1 - y0) * t, z0 + (z1 - z0) * t];
+        }
+    }
+    [PROFILE[6].1, PROFILE[6].2]
+}

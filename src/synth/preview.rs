@@ -1,0 +1,92 @@
+//! A picture of one rendered instant: the top depth image colour-mapped with the skeleton, its
+//! part labels, and the bottom view with the paws' boxes.
+
+use super::body::skin;
+use super::mouse::MouseInstance;
+use super::noise::DepthNoise;
+use super::render::{Cage, Region};
+use super::views::{render_bottom, render_top};
+use crate::geometry::{Camera, Rig};
+use crate::image::{RgbImage, depth_to_rgb};
+use crate::skeleton::{BACKGROUND_LABEL, BONES, BoneKind, Part};
+use rand::Rng;
+
+/// Colours of bones in drawings: the paper's spine red, ears green, limbs blue.
+pub fn bone_colour(kind: BoneKind) -> [u8; 3] {
+    match kind {
+        BoneKind::Spine => [230, 30, 30],
+        BoneKind::Ear => [30, 200, 30],
+        BoneKind::Limb => [40, 90, 255],
+    }
+}
+
+/// Draws the skeleton of `m` as seen by `camera` onto `img`, whose pixel (0, 0) is the
+/// camera's pixel `origin`, magnified `zoom` times.
+pub fn draw_skeleton(img: &mut RgbImage, camera: &Camera, joints: &crate::pose::JointPositions, origin: (f64, f64), zoom: f64) {
+    let to_img = |p: &nalgebra::Point3<f64>| {
+        camera
+            .project_world(p)
+            .map(|q| ((q.x - origin.0 + 0.5) * zoom, (q.y - origin.1 + 0.5) * zoom))
+    };
+    for (a, b, kind) in BONES {
+        if let (Some(pa), Some(pb)) = (to_img(&joints[a.index()]), to_img(&joints[b.index()])) {
+            img.line(pa, pb, bone_colour(kind), zoom.max(1.0));
+        }
+    }
+    for p in joints.iter().filter_map(to_img) {
+        img.disc(p, zoom * 0.9, [255, 255, 255]);
+    }
+}
+
+/// The three-panel picture of one instant (each panel the mouse's surroundings, magnified).
+pub fn preview(rig: &Rig, m: &MouseInstance, noise: &DepthNoise, rng: &mut impl Rng) -> RgbImage {
+    let skin = skin(m);
+    let cage = Cage::new(&rig.depth);
+    // A fixed-size window of the top image centred on the mouse.
+    let probe = render_top(&rig.depth, &cage, &skin, None, 0, &DepthNoise::default(), rng);
+    let (w, h) = (150u32, 120u32);
+    let i = &rig.depth.intrinsics;
+    let cx = probe.region.x0 + probe.region.width / 2;
+    let cy = probe.region.y0 + probe.region.height / 2;
+    let window = Region {
+        x0: cx.saturating_sub(w / 2).min(i.width - w),
+        y0: cy.saturating_sub(h / 2).min(i.height - h),
+        width: w,
+        height: h,
+    };
+    let top = render_top(&rig.depth, &cage, &skin, Some(window), 0, noise, rng);
+    let zoom = 3;
+    let floor = f64::from(top.depth.iter().copied().max().unwrap_or(600));
+    let mut depth_img = depth_to_rgb(&top.depth, w, h, floor - 60.0, floor + 5.0).upscale(zoom);
+    draw_skeleton(&mut depth_img, &rig.depth, &m.joints, (f64::from(window.x0), f64::from(window.y0)), f64::from(zoom));
+
+    let mut labels = RgbImage::new(w, h, [20, 20, 20]);
+    for (k, &l) in top.label.iter().enumerate() {
+        if l != BACKGROUND_LABEL {
+            let c = Part::from_label(l).map_or([255; 3], Part::colour);
+            labels.data[k * 3..k * 3 + 3].copy_from_slice(&c);
+        }
+    }
+    let labels = labels.upscale(zoom);
+
+    // The bottom view, cropped to the same on-screen size.
+    let bottom = render_bottom(&rig.color, m, &skin, 40, rng);
+    let mut bottom_img = RgbImage {
+        width: bottom.region.width,
+        height: bottom.region.height,
+        data: bottom.rgb.clone(),
+    };
+    for paw in &bottom.paws {
+        let c = if paw.contact { [80, 255, 80] } else { [255, 200, 40] };
+        bottom_img.rect(
+            (f64::from(paw.x0) - f64::from(bottom.region.x0), f64::from(paw.y0) - f64::from(bottom.region.y0)),
+            (f64::from(paw.x1) - f64::from(bottom.region.x0), f64::from(paw.y1) - f64::from(bottom.region.y0)),
+            c,
+            1.0,
+        );
+    }
+    let target_h = h * zoom;
+    let k = (target_h / bottom_img.height.max(1)).max(1);
+    let bottom_img = bottom_img.upscale(k);
+    RgbImage::hstack(&[depth_img, labels, bottom_img], 6, [255, 255, 255])
+}

@@ -1,0 +1,199 @@
+//! The built binary: `synth` commands end to end, determinism, and every bad input refused
+//! with one clear sentence and a non-zero exit.
+
+use crate::util::mousepose;
+use mousepose::session::{CameraRole, SessionEvent, SessionReader};
+use std::fs;
+use std::path::Path;
+use std::process::Output;
+use std::time::{Duration, Instant};
+
+fn run(args: &[&str]) -> Output {
+    mousepose().args(args).output().expect("runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_owned()];
+    while let Some(d) = stack.pop() {
+        for e in fs::read_dir(&d).expect("dir") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let name = p.strip_prefix(dir).expect("inside").to_string_lossy().into_owned();
+                out.push((name, fs::read(&p).expect("read")));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn synth_dataset_is_deterministic_and_readable() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let a = tmp.path().join("a");
+    let b = tmp.path().join("b");
+    for out in [&a, &b] {
+        let o = run(&["synth", "dataset", "--out", out.to_str().unwrap(), "--images", "24", "--seed", "5", "--noise-mm", "1.5"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    assert_eq!(files(&a), files(&b), "same seed, different bytes");
+    let ds = mousepose::synth::dataset::Dataset::open(&a).expect("opens");
+    let samples = ds.load().expect("loads");
+    assert_eq!(samples.len(), 24);
+    assert!(samples.iter().all(|s| s.bottom.is_some()));
+    assert_eq!(ds.meta.seed, 5);
+}
+
+#[test]
+fn synth_session_is_deterministic_and_round_trips() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let a = tmp.path().join("a");
+    let b = tmp.path().join("b");
+    for out in [&a, &b] {
+        let o = run(&[
+            "synth", "session", "--out", out.to_str().unwrap(), "--seconds", "2", "--seed", "9", "--color-binning", "4",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    assert_eq!(files(&a), files(&b), "same seed, different bytes");
+    assert!(a.join("preview.png").exists());
+
+    let s = SessionReader::open(&a).expect("opens");
+    assert!(s.complete());
+    assert!(s.damage().is_clean());
+    let depth: Vec<_> = s.depth_frames().collect::<Result<_, _>>().expect("depth frames");
+    let color: Vec<_> = s.color_frames().expect("colour").collect::<Result<_, _>>().expect("colour frames");
+    let events = s.events().expect("events");
+    let drops = |role| {
+        events
+            .iter()
+            .filter_map(|e| match e {
+                SessionEvent::FramesDropped { role: r, count, .. } if *r == role => Some(*count),
+                _ => None,
+            })
+            .sum::<u64>()
+    };
+    // 60 depth frames planned; every one is either in the file or logged as dropped.
+    assert_eq!(depth.len() as u64 + drops(CameraRole::Depth), 60);
+    assert!(drops(CameraRole::Depth) >= 1 && drops(CameraRole::Color) >= 1, "an occasional drop");
+    let first_color = color.first().expect("frames").stamp.seq;
+    assert_eq!(color.last().expect("frames").stamp.seq - first_color + 1, color.len() as u64 + drops(CameraRole::Color));
+    for w in depth.windows(2) {
+        assert!(w[1].stamp.seq > w[0].stamp.seq);
+        assert!(w[1].stamp.device_ns > w[0].stamp.device_ns);
+        assert!(w[1].stamp.host_ns > w[0].stamp.host_ns);
+    }
+    // The two device clocks are far apart; the host clock is shared.
+    let dd = depth[0].stamp.device_ns as i128 - color[0].stamp.device_ns as i128;
+    assert!(dd.abs() > 1_000_000_000, "device clocks should be offset");
+    let hd = depth[0].stamp.host_ns as i128 - color[0].stamp.host_ns as i128;
+    assert!(hd.abs() < 50_000_000);
+    // Frames carry real content: a floor at about 600 mm and a mouse above it.
+    let d = &depth[10];
+    assert_eq!((d.width, d.height), (640, 480));
+    let centre = d.data[240 * 640 + 320];
+    assert!(centre == 0 || (585..=615).contains(&centre), "floor at {centre}");
+    assert!(d.data.iter().any(|&z| z > 0 && z < 590));
+    assert_eq!((color[0].width, color[0].height), (320, 256));
+    // Ground truth for every depth frame written, and the true pairing.
+    let truth = s.truth().expect("truth").expect("synthetic");
+    assert_eq!(truth.joints.len(), depth.len());
+    assert_eq!(truth.pairs.len(), depth.len());
+    assert!(truth.pairs.iter().filter(|(_, c)| c.is_some()).count() >= depth.len() - 3);
+}
+
+#[test]
+fn non_empty_output_is_refused_unless_forced() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let out = tmp.path().join("out");
+    fs::create_dir(&out).expect("mkdir");
+    fs::write(out.join("keep.txt"), "precious").expect("write");
+    let args = ["synth", "dataset", "--out", out.to_str().unwrap(), "--images", "2"];
+    let o = run(&args);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("not empty"), "{}", stderr(&o));
+    assert!(out.join("keep.txt").exists(), "refused run must not touch the directory");
+    let o = run(&[&args[..], &["--force"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!out.join("keep.txt").exists());
+    assert!(out.join("dataset.toml").exists());
+    // An empty directory is fine without --force; a file in the way is not.
+    let empty = tmp.path().join("empty");
+    fs::create_dir(&empty).expect("mkdir");
+    assert!(run(&["synth", "dataset", "--out", empty.to_str().unwrap(), "--images", "1"]).status.success());
+    let file = tmp.path().join("file");
+    fs::write(&file, "x").expect("write");
+    let o = run(&["synth", "session", "--out", file.to_str().unwrap(), "--seconds", "1"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("not a directory"), "{}", stderr(&o));
+}
+
+#[test]
+fn bad_numbers_are_refused_with_one_sentence() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let out = tmp.path().join("out");
+    let out = out.to_str().unwrap();
+    let cases: &[(&[&str], &str)] = &[
+        (&["synth", "dataset", "--out", out, "--images", "-5"], "-5"),
+        (&["synth", "dataset", "--out", out, "--images", "0"], "from 1"),
+        (&["synth", "dataset", "--out", out, "--images", "99999999999"], "99999999999"),
+        (&["synth", "dataset", "--out", out, "--images", "lots"], "lots"),
+        (&["synth", "dataset", "--out", out, "--images", "3", "--noise-mm", "-1"], "noise"),
+        (&["synth", "dataset", "--out", out, "--images", "3", "--noise-model", "fog"], "fog"),
+        (&["synth", "session", "--out", out, "--seconds", "0"], "seconds"),
+        (&["synth", "session", "--out", out, "--seconds", "-3"], "seconds"),
+        (&["synth", "session", "--out", out, "--seconds", "1e9"], "seconds"),
+        (&["synth", "session", "--out", out, "--seconds", "1", "--fps", "0"], "frame rate"),
+        (&["synth", "session", "--out", out, "--seconds", "1", "--color-binning", "3"], "binning"),
+    ];
+    for (args, needle) in cases {
+        let o = run(args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {}", stderr(&o));
+        let first = stderr(&o).lines().next().unwrap_or_default().to_owned();
+        assert!(first.starts_with("error:") && first.contains(needle), "{args:?}: {first}");
+    }
+    assert!(!Path::new(out).exists(), "nothing written on bad input");
+}
+
+#[test]
+fn unwritable_output_is_a_clear_error() {
+    let o = run(&["synth", "dataset", "--out", "/proc/mousepose-cannot-write/here", "--images", "1"]);
+    assert_eq!(o.status.code(), Some(2));
+    let e = stderr(&o);
+    assert!(e.starts_with("error:") && e.contains("/proc/mousepose-cannot-write"), "{e}");
+    assert!(!e.contains("panicked"));
+}
+
+#[test]
+fn an_interrupted_run_leaves_nothing_that_looks_complete() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let out = tmp.path().join("session");
+    let mut child = mousepose()
+        .args(["synth", "session", "--out", out.to_str().unwrap(), "--seconds", "600", "--color-binning", "4"])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("starts");
+    // Wait until it is writing frames, then kill it hard.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let staging_has_frames = || {
+        fs::read_dir(tmp.path()).expect("dir").flatten().any(|e| {
+            let p = e.path().join("depth").join("frames.mpstore");
+            fs::metadata(p).map(|m| m.len() > 100_000).unwrap_or(false)
+        })
+    };
+    while !staging_has_frames() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child.kill().expect("kill");
+    child.wait().expect("wait");
+    assert!(!out.exists(), "a killed run left {out:?} looking complete");
+    let leftovers: Vec<_> = fs::read_dir(tmp.path()).expect("dir").flatten().map(|e| e.file_name()).collect();
+    assert!(leftovers.iter().all(|n| n.to_string_lossy().contains(".partial-")), "{leftovers:?}");
+}
