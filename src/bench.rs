@@ -36,7 +36,12 @@ impl BenchReport {
             ("mean rendered region, pixels", self.mean_region_px),
             ("dataset samples/s with bottom views", self.dataset_samples_per_s),
         ];
-        let _ = writeln!(s, "{:<40} {:>12}", format!("measure ({} threads)", self.threads), "value");
+        let _ = writeln!(
+            s,
+            "{:<40} {:>12}",
+            format!("measure ({} threads)", self.threads),
+            "value"
+        );
         for (name, v) in rows {
             let _ = writeln!(s, "{name:<40} {v:>12.1}");
         }
@@ -65,7 +70,9 @@ pub fn run(quick: bool) -> BenchReport {
         bottom_views: false,
     };
     // Warm up caches and the thread pool.
-    (0..32).into_par_iter().for_each(|i| drop(render_sample(&rig, &spec, &library, i)));
+    (0..32)
+        .into_par_iter()
+        .for_each(|i| drop(render_sample(&rig, &spec, &library, i)));
     let mut pixels = 0usize;
     let one = rate(n / 2, || {
         for i in 0..n / 2 {
@@ -73,7 +80,9 @@ pub fn run(quick: bool) -> BenchReport {
         }
     });
     let all = rate(n, || {
-        (0..n).into_par_iter().for_each(|i| drop(render_sample(&rig, &spec, &library, i)));
+        (0..n)
+            .into_par_iter()
+            .for_each(|i| drop(render_sample(&rig, &spec, &library, i)));
     });
     let with_bottom = DatasetSpec {
         bottom_views: true,
@@ -81,7 +90,9 @@ pub fn run(quick: bool) -> BenchReport {
     };
     let m = n / 4;
     let samples = rate(m, || {
-        (0..m).into_par_iter().for_each(|i| drop(encode_sample(&render_sample(&rig, &with_bottom, &library, i))));
+        (0..m)
+            .into_par_iter()
+            .for_each(|i| drop(encode_sample(&render_sample(&rig, &with_bottom, &library, i))));
     });
     BenchReport {
         threads: rayon::current_num_threads(),

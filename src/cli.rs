@@ -15,7 +15,11 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
-#[command(name = "mousepose", version, about = "3D pose of a lab mouse from a top depth camera and a bottom colour camera")]
+#[command(
+    name = "mousepose",
+    version,
+    about = "3D pose of a lab mouse from a top depth camera and a bottom colour camera"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -113,7 +117,10 @@ fn parse_ranged<T>(s: &str, what: &str, lo: T, hi: T) -> Result<T, String>
 where
     T: std::str::FromStr + PartialOrd + std::fmt::Display + Copy,
 {
-    let v: T = s.trim().parse().map_err(|_| format!("expected {what} from {lo} to {hi}, got {s:?}"))?;
+    let v: T = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("expected {what} from {lo} to {hi}, got {s:?}"))?;
     if v < lo || v > hi {
         return Err(format!("expected {what} from {lo} to {hi}, got {s}"));
     }
@@ -161,7 +168,9 @@ fn init_logging() {
     let result = if journald {
         builder.with_ansi(false).without_time().try_init()
     } else {
-        builder.with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr())).try_init()
+        builder
+            .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+            .try_init()
     };
     // A subscriber installed already (in tests) is fine.
     drop(result);
@@ -202,13 +211,13 @@ fn exit_code(e: &anyhow::Error) -> u8 {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Synth(SynthCommand::Dataset(args)) => synth_dataset(args),
-        Command::Synth(SynthCommand::Session(args)) => synth_session(args),
+        Command::Synth(SynthCommand::Dataset(args)) => synth_dataset(&args),
+        Command::Synth(SynthCommand::Session(args)) => synth_session(&args),
         Command::Bench(args) => run_bench(&args),
     }
 }
 
-fn synth_dataset(args: DatasetArgs) -> Result<()> {
+fn synth_dataset(args: &DatasetArgs) -> Result<()> {
     let staging = Staging::new(&args.out, args.force)?;
     let spec = DatasetSpec {
         count: args.images,
@@ -229,7 +238,7 @@ fn synth_dataset(args: DatasetArgs) -> Result<()> {
     Ok(())
 }
 
-fn synth_session(args: SessionArgs) -> Result<()> {
+fn synth_session(args: &SessionArgs) -> Result<()> {
     let staging = Staging::new(&args.out, args.force)?;
     let spec = SessionSpec {
         seconds: args.seconds,

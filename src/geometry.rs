@@ -76,10 +76,7 @@ impl Intrinsics {
 
     /// True when the pixel coordinate lies inside the image.
     pub fn contains(&self, pixel: &Point2<f64>) -> bool {
-        pixel.x >= 0.0
-            && pixel.y >= 0.0
-            && pixel.x < f64::from(self.width)
-            && pixel.y < f64::from(self.height)
+        pixel.x >= 0.0 && pixel.y >= 0.0 && pixel.x < f64::from(self.width) && pixel.y < f64::from(self.height)
     }
 }
 

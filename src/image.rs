@@ -133,7 +133,8 @@ impl RgbImage {
             for y in 0..img.height {
                 let src = y as usize * img.width as usize * 3;
                 let dst = (y as usize * width as usize + x0 as usize) * 3;
-                out.data[dst..dst + img.width as usize * 3].copy_from_slice(&img.data[src..src + img.width as usize * 3]);
+                out.data[dst..dst + img.width as usize * 3]
+                    .copy_from_slice(&img.data[src..src + img.width as usize * 3]);
             }
             x0 += img.width + gap;
         }

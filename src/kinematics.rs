@@ -32,7 +32,11 @@ pub fn two_bone(
     let sin_a = (1.0 - cos_a * cos_a).max(0.0).sqrt();
     let bend = {
         let p = pole - axis * axis.dot(pole);
-        if p.norm() > 1e-9 { p.normalize() } else { any_orthogonal(&axis) }
+        if p.norm() > 1e-9 {
+            p.normalize()
+        } else {
+            any_orthogonal(&axis)
+        }
     };
     let middle = root + (axis * cos_a + bend * sin_a) * upper;
     let end = root + axis * d;
@@ -70,18 +74,27 @@ pub fn hind_limb(
     // forward from the ankle, the knee forward from the hip).
     let mut back = -forward;
     back -= up * up.dot(&back);
-    let back = if back.norm() > 1e-6 { back.normalize() } else { any_orthogonal(up) };
+    let back = if back.norm() > 1e-6 {
+        back.normalize()
+    } else {
+        any_orthogonal(up)
+    };
     let knee_for = |elevation: f64| {
         let foot_dir = back * elevation.cos() + up * elevation.sin();
         let ankle = paw + foot_dir * foot;
         // The shin leaves the ankle at `ankle_angle` from the foot, turned forward and up.
         let from_paw = -foot_dir;
         let normal = from_paw.cross(up);
-        let normal = if normal.norm() > 1e-9 { normal.normalize() } else { any_orthogonal(up) };
+        let normal = if normal.norm() > 1e-9 {
+            normal.normalize()
+        } else {
+            any_orthogonal(up)
+        };
         let rot = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(normal), -ankle_angle);
         let mut shin_dir = rot * from_paw;
         if shin_dir.dot(up) < 0.0 {
-            shin_dir = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(normal), ankle_angle) * from_paw;
+            shin_dir =
+                nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(normal), ankle_angle) * from_paw;
         }
         let knee = ankle + shin_dir * shin;
         (knee, ankle)
@@ -102,7 +115,8 @@ pub fn hind_limb(
         }
     }
     let (_, ankle) = knee_for(best.1);
-    let (knee, _) = two_bone(hip, &ankle, thigh, shin, forward);
+    // The knee bends forward and a little up, never down through the floor.
+    let (knee, _) = two_bone(hip, &ankle, thigh, shin, &(forward + up * 0.5));
     (knee, ankle)
 }
 
@@ -138,7 +152,11 @@ mod tests {
         let paw = Point3::new(2.0, 0.0, 1.0);
         let lengths = [15.0, 17.0, 11.0];
         let (knee, ankle) = hind_limb(&hip, &paw, lengths, 90f64.to_radians(), &Vector3::x(), &Vector3::z());
-        let a = (knee - ankle).normalize().dot(&(paw - ankle).normalize()).acos().to_degrees();
+        let a = (knee - ankle)
+            .normalize()
+            .dot(&(paw - ankle).normalize())
+            .acos()
+            .to_degrees();
         assert!((a - 90.0).abs() < 8.0, "ankle angle {a}");
         assert!(((knee - hip).norm() - 15.0).abs() < 1e-6);
         assert!(((ankle - paw).norm() - 11.0).abs() < 1e-6);

@@ -9,7 +9,11 @@ pub fn bar(total: u64, what: &str) -> ProgressBar {
     let visible = std::io::stderr().is_terminal() && std::env::var_os("JOURNAL_STREAM").is_none();
     let pb = ProgressBar::with_draw_target(
         Some(total),
-        if visible { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() },
+        if visible {
+            ProgressDrawTarget::stderr()
+        } else {
+            ProgressDrawTarget::hidden()
+        },
     );
     let style = ProgressStyle::with_template("{msg:>12} [{bar:40}] {pos}/{len} ({per_sec}, eta {eta})")
         .unwrap_or_else(|_| ProgressStyle::default_bar())

@@ -70,17 +70,9 @@ pub enum StoreError {
     #[error("{}: unknown record file kind {code}", path.display())]
     UnknownKind { path: PathBuf, code: u32 },
     #[error("{}: holds {found}, expected {expected}", path.display())]
-    WrongKind {
-        path: PathBuf,
-        found: Kind,
-        expected: Kind,
-    },
+    WrongKind { path: PathBuf, found: Kind, expected: Kind },
     #[error("{}: record at offset {offset}: {reason}", path.display())]
-    Corrupt {
-        path: PathBuf,
-        offset: u64,
-        reason: String,
-    },
+    Corrupt { path: PathBuf, offset: u64, reason: String },
     #[error("{}: payload of {len} bytes exceeds the {MAX_PAYLOAD_LEN} byte limit", path.display())]
     PayloadTooLarge { path: PathBuf, len: usize },
     #[error("{}: an earlier write failed, the writer accepts no more records", path.display())]
@@ -315,10 +307,7 @@ impl RecordWriter {
     /// [`StoreError::Io`] when writing or syncing fails.
     pub fn sync(&mut self) -> Result<()> {
         self.flush()?;
-        self.out
-            .get_ref()
-            .sync_all()
-            .map_err(io_error(&self.path, "sync"))
+        self.out.get_ref().sync_all().map_err(io_error(&self.path, "sync"))
     }
 
     /// The file's length once everything appended is flushed: the offset of the next record.
@@ -437,8 +426,7 @@ impl RecordReader {
                 path: path.to_path_buf(),
             });
         }
-        file.read_exact(&mut header)
-            .map_err(io_error(path, "read"))?;
+        file.read_exact(&mut header).map_err(io_error(path, "read"))?;
         if header[0..8] != FILE_MAGIC {
             return Err(StoreError::NotRecordFile {
                 path: path.to_path_buf(),
@@ -568,10 +556,7 @@ impl RecordReader {
                         .map_err(io_error(&self.path, "read"))?;
                     self.pos = pos + record_len;
                     if crc32fast::hash(&payload) == payload_crc {
-                        return Ok(Some(Record {
-                            offset: pos,
-                            payload,
-                        }));
+                        return Ok(Some(Record { offset: pos, payload }));
                     }
                     self.damage.skipped.push(Skipped {
                         offset: pos,
@@ -603,8 +588,7 @@ impl RecordReader {
             if start.saturating_add(RECORD_HEADER_LEN) > self.len {
                 break None;
             }
-            let n =
-                usize::try_from(self.len - start).map_or(SCAN_CHUNK, |left| left.min(SCAN_CHUNK));
+            let n = usize::try_from(self.len - start).map_or(SCAN_CHUNK, |left| left.min(SCAN_CHUNK));
             buf.resize(n, 0);
             if let Err(e) = self.read_exact_at(start, &mut buf) {
                 self.scan_buf = buf;
@@ -644,16 +628,12 @@ impl RecordReader {
             reason,
         };
         if offset < FILE_HEADER_LEN || offset.saturating_add(RECORD_HEADER_LEN) > self.len {
-            return Err(corrupt(format!(
-                "no record header there (file is {} bytes)",
-                self.len
-            )));
+            return Err(corrupt(format!("no record header there (file is {} bytes)", self.len)));
         }
         let mut header = [0u8; 16];
         self.read_exact_at(offset, &mut header)
             .map_err(io_error(&self.path, "read"))?;
-        let (payload_len, payload_crc) =
-            parse_record_header(&header).map_err(|fault| corrupt(fault.to_string()))?;
+        let (payload_len, payload_crc) = parse_record_header(&header).map_err(|fault| corrupt(fault.to_string()))?;
         let end = offset + RECORD_HEADER_LEN + u64::from(payload_len);
         if end > self.len {
             return Err(corrupt(format!(
@@ -694,9 +674,7 @@ impl RecordReader {
                 index_data_len: index.data_len,
                 file_len: self.len,
             },
-            Err(StoreError::Io { source, .. }) if source.kind() == io::ErrorKind::NotFound => {
-                IndexStatus::Missing
-            }
+            Err(StoreError::Io { source, .. }) if source.kind() == io::ErrorKind::NotFound => IndexStatus::Missing,
             Err(e) => IndexStatus::Invalid(e),
         };
         let mut entries = Vec::new();
@@ -772,9 +750,7 @@ pub fn write_index(path: impl AsRef<Path>, data_len: u64, entries: &[(u64, u64)]
         path: path.to_path_buf(),
         reason: format!("{} entries do not fit the format", entries.len()),
     })?;
-    let mut bytes = Vec::with_capacity(
-        INDEX_HEADER_LEN as usize + entries.len() * INDEX_ENTRY_LEN as usize + 4,
-    );
+    let mut bytes = Vec::with_capacity(INDEX_HEADER_LEN as usize + entries.len() * INDEX_ENTRY_LEN as usize + 4);
     bytes.extend_from_slice(&INDEX_MAGIC);
     bytes.extend_from_slice(&INDEX_VERSION.to_le_bytes());
     bytes.extend_from_slice(&count.to_le_bytes());
@@ -807,8 +783,7 @@ pub fn read_index(path: impl AsRef<Path>) -> Result<Index> {
     if file_len < INDEX_HEADER_LEN + 4 {
         return Err(invalid("too short"));
     }
-    file.read_exact(&mut header)
-        .map_err(io_error(path, "read"))?;
+    file.read_exact(&mut header).map_err(io_error(path, "read"))?;
     if header[0..8] != INDEX_MAGIC {
         return Err(invalid("not a mousepose index file"));
     }
@@ -881,14 +856,8 @@ mod tests {
         }
         let mut r = RecordReader::open(&path, Kind::DepthFrames).unwrap();
         assert_eq!(r.read_at(offsets[3]).unwrap(), payload(3, lens[3]));
-        assert!(matches!(
-            r.read_at(offsets[3] + 1),
-            Err(StoreError::Corrupt { .. })
-        ));
-        assert!(matches!(
-            r.read_at(1 << 40),
-            Err(StoreError::Corrupt { .. })
-        ));
+        assert!(matches!(r.read_at(offsets[3] + 1), Err(StoreError::Corrupt { .. })));
+        assert!(matches!(r.read_at(1 << 40), Err(StoreError::Corrupt { .. })));
     }
 
     #[test]
@@ -898,10 +867,7 @@ mod tests {
         let err = RecordReader::open(&path, Kind::DatasetSamples).unwrap_err();
         assert_eq!(
             err.to_string(),
-            format!(
-                "{}: holds depth frames, expected dataset samples",
-                path.display()
-            )
+            format!("{}: holds depth frames, expected dataset samples", path.display())
         );
         let mut bytes = fs::read(&path).unwrap();
         bytes[8] = 7;
@@ -910,10 +876,7 @@ mod tests {
         assert!(err.to_string().ends_with("unsupported version 7"), "{err}");
         fs::write(&path, b"hello").unwrap();
         let err = RecordReader::open(&path, Kind::DepthFrames).unwrap_err();
-        assert!(
-            err.to_string().ends_with("not a mousepose record file"),
-            "{err}"
-        );
+        assert!(err.to_string().ends_with("not a mousepose record file"), "{err}");
     }
 
     #[test]
@@ -934,11 +897,7 @@ mod tests {
             assert_eq!(records.len(), complete, "cut at {n}");
             assert!(damage.skipped.is_empty(), "cut at {n}");
             let boundary = offsets.get(complete).map_or(full.len(), |&o| o as usize);
-            assert_eq!(
-                damage.truncated_tail_bytes as usize,
-                n - boundary.min(n),
-                "cut at {n}"
-            );
+            assert_eq!(damage.truncated_tail_bytes as usize, n - boundary.min(n), "cut at {n}");
         }
     }
 
@@ -957,11 +916,7 @@ mod tests {
             assert_eq!(records.len(), lens.len() - 1, "flip at {i}");
             assert_eq!(damage.skipped_records(), 1, "flip at {i}");
             for r in &records {
-                assert!(
-                    lens.iter()
-                        .enumerate()
-                        .any(|(k, &l)| r.payload == payload(k, l))
-                );
+                assert!(lens.iter().enumerate().any(|(k, &l)| r.payload == payload(k, l)));
             }
         }
     }
@@ -976,10 +931,7 @@ mod tests {
         fs::write(&path, &bytes).unwrap();
         let (records, damage) = read_all(&path);
         assert_eq!(records.len(), 2);
-        assert_eq!(
-            damage.skipped[0].reason,
-            SkipReason::Header(HeaderFault::BadHeaderCrc)
-        );
+        assert_eq!(damage.skipped[0].reason, SkipReason::Header(HeaderFault::BadHeaderCrc));
         assert_eq!(damage.skipped[0].len, 16 + 20);
     }
 
@@ -989,13 +941,7 @@ mod tests {
         let (path, offsets) = write_file(dir.path(), &[10, 20]);
         let mut bytes = fs::read(&path).unwrap();
         let garbage: Vec<u8> = (0..100_000u32)
-            .flat_map(|i| {
-                if i % 3 == 0 {
-                    *b"MPRC"
-                } else {
-                    i.to_le_bytes()
-                }
-            })
+            .flat_map(|i| if i % 3 == 0 { *b"MPRC" } else { i.to_le_bytes() })
             .collect();
         let at = offsets[1] as usize;
         bytes.splice(at..at, garbage.iter().copied());
@@ -1022,16 +968,10 @@ mod tests {
         let mut bytes = fs::read(&path).unwrap();
         bytes[30] ^= 1;
         fs::write(&path, &bytes).unwrap();
-        assert!(matches!(
-            read_index(&path),
-            Err(StoreError::InvalidIndex { .. })
-        ));
+        assert!(matches!(read_index(&path), Err(StoreError::InvalidIndex { .. })));
         bytes[12] = 200;
         fs::write(&path, &bytes).unwrap();
-        assert!(matches!(
-            read_index(&path),
-            Err(StoreError::InvalidIndex { .. })
-        ));
+        assert!(matches!(read_index(&path), Err(StoreError::InvalidIndex { .. })));
         write_index(&path, 0, &[]).unwrap();
         assert!(read_index(&path).unwrap().entries.is_empty());
     }
@@ -1061,10 +1001,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let mut w = RecordWriter::create(dir.path().join("x"), Kind::ColorFrames).unwrap();
         let big = vec![0u8; MAX_PAYLOAD_LEN as usize + 1];
-        assert!(matches!(
-            w.append(&big),
-            Err(StoreError::PayloadTooLarge { .. })
-        ));
+        assert!(matches!(w.append(&big), Err(StoreError::PayloadTooLarge { .. })));
         assert!(RecordWriter::create(dir.path().join("x"), Kind::ColorFrames).is_err());
     }
 }

@@ -40,7 +40,18 @@ fn synth_dataset_is_deterministic_and_readable() {
     let a = tmp.path().join("a");
     let b = tmp.path().join("b");
     for out in [&a, &b] {
-        let o = run(&["synth", "dataset", "--out", out.to_str().unwrap(), "--images", "24", "--seed", "5", "--noise-mm", "1.5"]);
+        let o = run(&[
+            "synth",
+            "dataset",
+            "--out",
+            out.to_str().unwrap(),
+            "--images",
+            "24",
+            "--seed",
+            "5",
+            "--noise-mm",
+            "1.5",
+        ]);
         assert!(o.status.success(), "{}", stderr(&o));
     }
     assert_eq!(files(&a), files(&b), "same seed, different bytes");
@@ -58,7 +69,16 @@ fn synth_session_is_deterministic_and_round_trips() {
     let b = tmp.path().join("b");
     for out in [&a, &b] {
         let o = run(&[
-            "synth", "session", "--out", out.to_str().unwrap(), "--seconds", "2", "--seed", "9", "--color-binning", "4",
+            "synth",
+            "session",
+            "--out",
+            out.to_str().unwrap(),
+            "--seconds",
+            "2",
+            "--seed",
+            "9",
+            "--color-binning",
+            "4",
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
     }
@@ -69,7 +89,11 @@ fn synth_session_is_deterministic_and_round_trips() {
     assert!(s.complete());
     assert!(s.damage().is_clean());
     let depth: Vec<_> = s.depth_frames().collect::<Result<_, _>>().expect("depth frames");
-    let color: Vec<_> = s.color_frames().expect("colour").collect::<Result<_, _>>().expect("colour frames");
+    let color: Vec<_> = s
+        .color_frames()
+        .expect("colour")
+        .collect::<Result<_, _>>()
+        .expect("colour frames");
     let events = s.events().expect("events");
     let drops = |role| {
         events
@@ -82,9 +106,15 @@ fn synth_session_is_deterministic_and_round_trips() {
     };
     // 60 depth frames planned; every one is either in the file or logged as dropped.
     assert_eq!(depth.len() as u64 + drops(CameraRole::Depth), 60);
-    assert!(drops(CameraRole::Depth) >= 1 && drops(CameraRole::Color) >= 1, "an occasional drop");
+    assert!(
+        drops(CameraRole::Depth) >= 1 && drops(CameraRole::Color) >= 1,
+        "an occasional drop"
+    );
     let first_color = color.first().expect("frames").stamp.seq;
-    assert_eq!(color.last().expect("frames").stamp.seq - first_color + 1, color.len() as u64 + drops(CameraRole::Color));
+    assert_eq!(
+        color.last().expect("frames").stamp.seq - first_color + 1,
+        color.len() as u64 + drops(CameraRole::Color)
+    );
     for w in depth.windows(2) {
         assert!(w[1].stamp.seq > w[0].stamp.seq);
         assert!(w[1].stamp.device_ns > w[0].stamp.device_ns);
@@ -119,7 +149,10 @@ fn non_empty_output_is_refused_unless_forced() {
     let o = run(&args);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("not empty"), "{}", stderr(&o));
-    assert!(out.join("keep.txt").exists(), "refused run must not touch the directory");
+    assert!(
+        out.join("keep.txt").exists(),
+        "refused run must not touch the directory"
+    );
     let o = run(&[&args[..], &["--force"]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!out.join("keep.txt").exists());
@@ -127,7 +160,11 @@ fn non_empty_output_is_refused_unless_forced() {
     // An empty directory is fine without --force; a file in the way is not.
     let empty = tmp.path().join("empty");
     fs::create_dir(&empty).expect("mkdir");
-    assert!(run(&["synth", "dataset", "--out", empty.to_str().unwrap(), "--images", "1"]).status.success());
+    assert!(
+        run(&["synth", "dataset", "--out", empty.to_str().unwrap(), "--images", "1"])
+            .status
+            .success()
+    );
     let file = tmp.path().join("file");
     fs::write(&file, "x").expect("write");
     let o = run(&["synth", "session", "--out", file.to_str().unwrap(), "--seconds", "1"]);
@@ -143,31 +180,77 @@ fn bad_numbers_are_refused_with_one_sentence() {
     let cases: &[(&[&str], &str)] = &[
         (&["synth", "dataset", "--out", out, "--images", "-5"], "-5"),
         (&["synth", "dataset", "--out", out, "--images", "0"], "from 1"),
-        (&["synth", "dataset", "--out", out, "--images", "99999999999"], "99999999999"),
+        (
+            &["synth", "dataset", "--out", out, "--images", "99999999999"],
+            "99999999999",
+        ),
         (&["synth", "dataset", "--out", out, "--images", "lots"], "lots"),
-        (&["synth", "dataset", "--out", out, "--images", "3", "--noise-mm", "-1"], "noise"),
-        (&["synth", "dataset", "--out", out, "--images", "3", "--noise-model", "fog"], "fog"),
+        (
+            &["synth", "dataset", "--out", out, "--images", "3", "--noise-mm", "-1"],
+            "noise",
+        ),
+        (
+            &[
+                "synth",
+                "dataset",
+                "--out",
+                out,
+                "--images",
+                "3",
+                "--noise-model",
+                "fog",
+            ],
+            "fog",
+        ),
         (&["synth", "session", "--out", out, "--seconds", "0"], "seconds"),
         (&["synth", "session", "--out", out, "--seconds", "-3"], "seconds"),
         (&["synth", "session", "--out", out, "--seconds", "1e9"], "seconds"),
-        (&["synth", "session", "--out", out, "--seconds", "1", "--fps", "0"], "frame rate"),
-        (&["synth", "session", "--out", out, "--seconds", "1", "--color-binning", "3"], "binning"),
+        (
+            &["synth", "session", "--out", out, "--seconds", "1", "--fps", "0"],
+            "frame rate",
+        ),
+        (
+            &[
+                "synth",
+                "session",
+                "--out",
+                out,
+                "--seconds",
+                "1",
+                "--color-binning",
+                "3",
+            ],
+            "binning",
+        ),
     ];
     for (args, needle) in cases {
         let o = run(args);
         assert_eq!(o.status.code(), Some(1), "{args:?}: {}", stderr(&o));
         let first = stderr(&o).lines().next().unwrap_or_default().to_owned();
-        assert!(first.starts_with("error:") && first.contains(needle), "{args:?}: {first}");
+        assert!(
+            first.starts_with("error:") && first.contains(needle),
+            "{args:?}: {first}"
+        );
     }
     assert!(!Path::new(out).exists(), "nothing written on bad input");
 }
 
 #[test]
 fn unwritable_output_is_a_clear_error() {
-    let o = run(&["synth", "dataset", "--out", "/proc/mousepose-cannot-write/here", "--images", "1"]);
+    let o = run(&[
+        "synth",
+        "dataset",
+        "--out",
+        "/proc/mousepose-cannot-write/here",
+        "--images",
+        "1",
+    ]);
     assert_eq!(o.status.code(), Some(2));
     let e = stderr(&o);
-    assert!(e.starts_with("error:") && e.contains("/proc/mousepose-cannot-write"), "{e}");
+    assert!(
+        e.starts_with("error:") && e.contains("/proc/mousepose-cannot-write"),
+        "{e}"
+    );
     assert!(!e.contains("panicked"));
 }
 
@@ -176,7 +259,16 @@ fn an_interrupted_run_leaves_nothing_that_looks_complete() {
     let tmp = tempfile::tempdir().expect("tmp");
     let out = tmp.path().join("session");
     let mut child = mousepose()
-        .args(["synth", "session", "--out", out.to_str().unwrap(), "--seconds", "600", "--color-binning", "4"])
+        .args([
+            "synth",
+            "session",
+            "--out",
+            out.to_str().unwrap(),
+            "--seconds",
+            "600",
+            "--color-binning",
+            "4",
+        ])
         .stderr(std::process::Stdio::null())
         .spawn()
         .expect("starts");
@@ -194,6 +286,13 @@ fn an_interrupted_run_leaves_nothing_that_looks_complete() {
     child.kill().expect("kill");
     child.wait().expect("wait");
     assert!(!out.exists(), "a killed run left {out:?} looking complete");
-    let leftovers: Vec<_> = fs::read_dir(tmp.path()).expect("dir").flatten().map(|e| e.file_name()).collect();
-    assert!(leftovers.iter().all(|n| n.to_string_lossy().contains(".partial-")), "{leftovers:?}");
+    let leftovers: Vec<_> = fs::read_dir(tmp.path())
+        .expect("dir")
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    assert!(
+        leftovers.iter().all(|n| n.to_string_lossy().contains(".partial-")),
+        "{leftovers:?}"
+    );
 }

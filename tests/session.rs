@@ -5,12 +5,10 @@ use mousepose::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
 use mousepose::geometry::Rig;
 use mousepose::pose::JointPositions;
 use mousepose::session::{
-    Backend, CameraMeta, CameraRole, FrameFormat, SessionError, SessionEvent, SessionMeta,
-    SessionReader, SessionSource, SessionSummary, SessionWriter, Truth,
+    Backend, CameraMeta, CameraRole, FrameFormat, SessionError, SessionEvent, SessionMeta, SessionReader,
+    SessionSource, SessionSummary, SessionWriter, Truth,
 };
-use mousepose::store::{
-    self, HeaderFault, IndexStatus, Kind, RecordReader, RecordWriter, SkipReason, StoreError,
-};
+use mousepose::store::{self, HeaderFault, IndexStatus, Kind, RecordReader, RecordWriter, SkipReason, StoreError};
 use nalgebra::Point3;
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -34,8 +32,8 @@ fn depth_frame(seq: u64) -> DepthFrame {
     let (bx, by) = (100.0 + 20.0 * seq as f64, 240.0 + 5.0 * seq as f64);
     for y in 0..h {
         for x in 0..w {
-            let mut z = 600.0 + 0.01 * f64::from(x) - 0.02 * f64::from(y)
-                + f64::from((x * 7 + y * 13 + seq as u32) % 5);
+            let mut z =
+                600.0 + 0.01 * f64::from(x) - 0.02 * f64::from(y) + f64::from((x * 7 + y * 13 + seq as u32) % 5);
             let d2 = (f64::from(x) - bx).powi(2) / 900.0 + (f64::from(y) - by).powi(2) / 400.0;
             if d2 < 1.0 {
                 z -= 30.0 * (1.0 - d2).sqrt();
@@ -178,11 +176,7 @@ fn write_full(dir: &Path, finish: bool) -> Result<Option<SessionSummary>, Sessio
             w.write_color(&color_frame(seq))?;
         }
     }
-    if finish {
-        w.finish().map(Some)
-    } else {
-        Ok(None)
-    }
+    if finish { w.finish().map(Some) } else { Ok(None) }
 }
 
 fn depth_path(dir: &Path) -> PathBuf {
@@ -202,9 +196,7 @@ fn chain(e: &dyn std::error::Error) -> String {
 }
 
 fn read_depth(r: &SessionReader) -> Vec<DepthFrame> {
-    r.depth_frames()
-        .collect::<Result<Vec<_>, _>>()
-        .expect("depth frames")
+    r.depth_frames().collect::<Result<Vec<_>, _>>().expect("depth frames")
 }
 
 /// Offsets of the depth records, from the index the writer left.
@@ -226,10 +218,7 @@ fn a_full_session_reads_back_identically() {
         (DEPTH_FRAMES, COLOR_FRAMES)
     );
     assert_eq!(summary.events, events().len() as u64 + 1);
-    assert_eq!(
-        summary.depth_bytes,
-        fs::metadata(depth_path(dir.path())).unwrap().len()
-    );
+    assert_eq!(summary.depth_bytes, fs::metadata(depth_path(dir.path())).unwrap().len());
     // Compression pays: delta + zstd stores the depth images in well under their raw size.
     assert!(
         summary.depth_bytes < DEPTH_FRAMES * 640 * 480 * 2 / 3,
@@ -253,39 +242,20 @@ fn a_full_session_reads_back_identically() {
 
     let r = SessionReader::open(dir.path()).unwrap();
     assert_eq!(r.meta(), &meta(true));
-    assert!(matches!(
-        r.index_status(CameraRole::Depth),
-        Some(IndexStatus::Loaded)
-    ));
-    assert!(matches!(
-        r.index_status(CameraRole::Color),
-        Some(IndexStatus::Loaded)
-    ));
+    assert!(matches!(r.index_status(CameraRole::Depth), Some(IndexStatus::Loaded)));
+    assert!(matches!(r.index_status(CameraRole::Color), Some(IndexStatus::Loaded)));
     assert_eq!(
         (r.depth_count(), r.color_count()),
         (DEPTH_FRAMES as usize, COLOR_FRAMES as usize)
     );
-    assert_eq!(
-        read_depth(&r),
-        (0..DEPTH_FRAMES).map(depth_frame).collect::<Vec<_>>()
-    );
-    let colors = r
-        .color_frames()
-        .unwrap()
-        .collect::<Result<Vec<_>, _>>()
-        .unwrap();
-    assert_eq!(
-        colors,
-        (0..COLOR_FRAMES).map(color_frame).collect::<Vec<_>>()
-    );
+    assert_eq!(read_depth(&r), (0..DEPTH_FRAMES).map(depth_frame).collect::<Vec<_>>());
+    let colors = r.color_frames().unwrap().collect::<Result<Vec<_>, _>>().unwrap();
+    assert_eq!(colors, (0..COLOR_FRAMES).map(color_frame).collect::<Vec<_>>());
     for i in [0, 7, 19] {
         assert_eq!(r.depth_frame(i).unwrap(), depth_frame(i as u64));
         assert_eq!(r.color_frame(i).unwrap(), color_frame(i as u64));
     }
-    assert_eq!(
-        r.seqs(CameraRole::Depth),
-        (0..DEPTH_FRAMES).collect::<Vec<_>>()
-    );
+    assert_eq!(r.seqs(CameraRole::Depth), (0..DEPTH_FRAMES).collect::<Vec<_>>());
     assert!(matches!(
         r.depth_frame(20),
         Err(SessionError::OutOfRange {
@@ -296,9 +266,7 @@ fn a_full_session_reads_back_identically() {
     ));
     assert_eq!(
         r.timestamps(CameraRole::Depth).unwrap(),
-        (0..DEPTH_FRAMES)
-            .map(|s| stamp(s, 5_000))
-            .collect::<Vec<_>>()
+        (0..DEPTH_FRAMES).map(|s| stamp(s, 5_000)).collect::<Vec<_>>()
     );
     assert_eq!(
         r.timestamps(CameraRole::Color).unwrap(),
@@ -306,10 +274,7 @@ fn a_full_session_reads_back_identically() {
     );
 
     let mut expected = events();
-    let last_host_ns = (0..DEPTH_FRAMES)
-        .map(|s| stamp(s, 5_000).host_ns)
-        .max()
-        .unwrap();
+    let last_host_ns = (0..DEPTH_FRAMES).map(|s| stamp(s, 5_000).host_ns).max().unwrap();
     expected.push(SessionEvent::SessionEnded {
         host_ns: last_host_ns,
         depth_frames: DEPTH_FRAMES,
@@ -339,10 +304,7 @@ fn a_full_session_reads_back_identically() {
     );
     assert!(header.ends_with(",right_hind_paw_z"), "{header}");
     let pairs = fs::read_to_string(dir.path().join("truth/pairs.csv")).unwrap();
-    assert!(
-        pairs.starts_with("depth_seq,color_seq\n0,0\n1,1\n2,2\n3,\n"),
-        "{pairs}"
-    );
+    assert!(pairs.starts_with("depth_seq,color_seq\n0,0\n1,1\n2,2\n3,\n"), "{pairs}");
 }
 
 #[test]
@@ -363,10 +325,7 @@ fn a_killed_writer_leaves_every_complete_frame_readable() {
         file.set_len(cut).unwrap();
         drop(file);
         let r = SessionReader::open(dir.path()).unwrap();
-        assert!(matches!(
-            r.index_status(CameraRole::Depth),
-            Some(IndexStatus::Missing)
-        ));
+        assert!(matches!(r.index_status(CameraRole::Depth), Some(IndexStatus::Missing)));
         assert_eq!(r.depth_count(), 19, "cut at {cut}");
         assert_eq!(r.damage().depth.truncated_tail_bytes, cut - last);
         assert!(r.damage().depth.skipped.is_empty());
@@ -389,10 +348,7 @@ fn a_killed_writer_leaves_every_complete_frame_readable() {
     let r = SessionReader::open(dir.path()).unwrap();
     assert_eq!(r.events().unwrap(), events());
     assert!(!r.complete());
-    assert_eq!(
-        r.truth().unwrap().unwrap().joints.len(),
-        DEPTH_FRAMES as usize
-    );
+    assert_eq!(r.truth().unwrap().unwrap().joints.len(), DEPTH_FRAMES as usize);
 }
 
 #[test]
@@ -410,24 +366,15 @@ fn a_damaged_payload_byte_skips_that_frame_only() {
     assert_eq!(r.depth_count(), 20);
     let mut frames = r.depth_frames();
     let read: Vec<DepthFrame> = frames.by_ref().map(Result::unwrap).collect();
-    let expected: Vec<DepthFrame> = (0..DEPTH_FRAMES)
-        .filter(|&s| s != 7)
-        .map(depth_frame)
-        .collect();
+    let expected: Vec<DepthFrame> = (0..DEPTH_FRAMES).filter(|&s| s != 7).map(depth_frame).collect();
     assert_eq!(read, expected);
     let damage = frames.damage();
     assert_eq!(damage.skipped_records(), 1);
     assert_eq!(damage.skipped[0].offset, offsets[7]);
     assert_eq!(damage.skipped[0].reason, SkipReason::PayloadCrc);
     let err = r.depth_frame(7).unwrap_err();
-    assert!(
-        matches!(err, SessionError::Store(StoreError::Corrupt { offset, .. }) if offset == offsets[7])
-    );
-    assert!(
-        chain(&err).contains("payload checksum mismatch"),
-        "{}",
-        chain(&err)
-    );
+    assert!(matches!(err, SessionError::Store(StoreError::Corrupt { offset, .. }) if offset == offsets[7]));
+    assert!(chain(&err).contains("payload checksum mismatch"), "{}", chain(&err));
     assert_eq!(r.depth_frame(8).unwrap(), depth_frame(8));
     assert_eq!(r.verify().unwrap().depth.skipped_records(), 1);
 
@@ -455,16 +402,10 @@ fn a_damaged_length_is_not_trusted_and_reading_resynchronises() {
     let r = SessionReader::open(dir.path()).unwrap();
     let mut frames = r.depth_frames();
     let seqs: Vec<u64> = frames.by_ref().map(|f| f.unwrap().stamp.seq).collect();
-    assert_eq!(
-        seqs,
-        (0..DEPTH_FRAMES).filter(|&s| s != 5).collect::<Vec<_>>()
-    );
+    assert_eq!(seqs, (0..DEPTH_FRAMES).filter(|&s| s != 5).collect::<Vec<_>>());
     let damage = frames.damage();
     assert_eq!(damage.skipped_records(), 1);
-    assert_eq!(
-        damage.skipped[0].reason,
-        SkipReason::Header(HeaderFault::BadHeaderCrc)
-    );
+    assert_eq!(damage.skipped[0].reason, SkipReason::Header(HeaderFault::BadHeaderCrc));
     assert_eq!(damage.skipped[0].len, offsets[6] - offsets[5]);
     assert_eq!(damage.truncated_tail_bytes, 0);
 
@@ -494,10 +435,7 @@ fn an_intact_record_that_is_not_a_valid_frame_is_named() {
     let path = depth_path(dir.path());
     let good: Vec<Vec<u8>> = {
         let mut r = RecordReader::open(&path, Kind::DepthFrames).unwrap();
-        r.records()
-            .take(3)
-            .map(|rec| rec.unwrap().payload)
-            .collect()
+        r.records().take(3).map(|rec| rec.unwrap().payload).collect()
     };
     let mut bad = good[1].clone();
     bad[24..26].copy_from_slice(&641u16.to_le_bytes());
@@ -543,54 +481,27 @@ fn what_is_not_a_session_is_rejected_clearly() {
     let original = fs::read_to_string(&toml_path).unwrap();
 
     // A newer format version.
-    fs::write(
-        &toml_path,
-        original.replace("format_version = 1", "format_version = 2"),
-    )
-    .unwrap();
+    fs::write(&toml_path, original.replace("format_version = 1", "format_version = 2")).unwrap();
     let err = SessionReader::open(dir.path()).unwrap_err();
     assert_eq!(
         err.to_string(),
-        format!(
-            "{}: unsupported session format version 2",
-            toml_path.display()
-        )
+        format!("{}: unsupported session format version 2", toml_path.display())
     );
 
     // Another format.
-    fs::write(
-        &toml_path,
-        original.replace("mousepose-session", "other-thing"),
-    )
-    .unwrap();
+    fs::write(&toml_path, original.replace("mousepose-session", "other-thing")).unwrap();
     let err = SessionReader::open(dir.path()).unwrap_err();
     assert!(err.to_string().contains("not a mousepose session"), "{err}");
 
     // An unknown key.
-    fs::write(
-        &toml_path,
-        original.replace("notes = ", "frame_rate = 3\nnotes = "),
-    )
-    .unwrap();
+    fs::write(&toml_path, original.replace("notes = ", "frame_rate = 3\nnotes = ")).unwrap();
     let err = SessionReader::open(dir.path()).unwrap_err();
     assert!(matches!(err, SessionError::Meta { .. }));
-    assert!(
-        chain(&err).contains("unknown field `frame_rate`"),
-        "{}",
-        chain(&err)
-    );
+    assert!(chain(&err).contains("unknown field `frame_rate`"), "{}", chain(&err));
     // ...also inside a camera.
-    fs::write(
-        &toml_path,
-        original.replacen("fps = ", "gain = 2.0\nfps = ", 1),
-    )
-    .unwrap();
+    fs::write(&toml_path, original.replacen("fps = ", "gain = 2.0\nfps = ", 1)).unwrap();
     let err = SessionReader::open(dir.path()).unwrap_err();
-    assert!(
-        chain(&err).contains("unknown field `gain`"),
-        "{}",
-        chain(&err)
-    );
+    assert!(chain(&err).contains("unknown field `gain`"), "{}", chain(&err));
 
     // A colour camera claiming depth pixels.
     fs::write(
@@ -622,16 +533,12 @@ fn what_is_not_a_session_is_rejected_clearly() {
     let err = SessionReader::open(dir.path()).unwrap_err();
     assert_eq!(
         err.to_string(),
-        format!(
-            "{}: holds colour frames, expected depth frames",
-            path.display()
-        )
+        format!("{}: holds colour frames, expected depth frames", path.display())
     );
     fs::remove_file(&path).unwrap();
     let err = SessionReader::open(dir.path()).unwrap_err();
     assert!(
-        err.to_string()
-            .starts_with(&format!("cannot open {}", path.display())),
+        err.to_string().starts_with(&format!("cannot open {}", path.display())),
         "{err}"
     );
 }
@@ -662,20 +569,13 @@ fn writing_needs_an_empty_directory_and_a_declared_camera() {
     let mut bad = depth_frame(0);
     bad.data.pop();
     let err = w.write_depth(&bad).unwrap_err();
-    assert!(
-        chain(&err).contains("cannot encode frame seq 0"),
-        "{}",
-        chain(&err)
-    );
+    assert!(chain(&err).contains("cannot encode frame seq 0"), "{}", chain(&err));
     w.write_depth(&depth_frame(0)).unwrap();
     w.finish().unwrap();
     let r = SessionReader::open(dir.path()).unwrap();
     assert!(r.color_frames().is_none());
     assert_eq!((r.depth_count(), r.color_count()), (1, 0));
-    assert!(matches!(
-        r.color_frame(0),
-        Err(SessionError::NoCamera { .. })
-    ));
+    assert!(matches!(r.color_frame(0), Err(SessionError::NoCamera { .. })));
     assert!(r.truth().unwrap().is_none());
     assert!(r.damage().color.is_none());
 }
@@ -718,14 +618,8 @@ fn missing_invalid_or_stale_indexes_are_rebuilt() {
 
     fs::remove_file(&index).unwrap();
     let r = SessionReader::open(dir.path()).unwrap();
-    assert!(matches!(
-        r.index_status(CameraRole::Color),
-        Some(IndexStatus::Missing)
-    ));
-    assert!(matches!(
-        r.index_status(CameraRole::Depth),
-        Some(IndexStatus::Loaded)
-    ));
+    assert!(matches!(r.index_status(CameraRole::Color), Some(IndexStatus::Missing)));
+    assert!(matches!(r.index_status(CameraRole::Depth), Some(IndexStatus::Loaded)));
     assert_eq!(r.color_count(), COLOR_FRAMES as usize);
     assert_eq!(r.color_frame(13).unwrap(), color_frame(13));
 
@@ -739,8 +633,7 @@ fn missing_invalid_or_stale_indexes_are_rebuilt() {
     assert_eq!(r.color_frame(19).unwrap(), color_frame(19));
 
     // An index written when the file held five frames fewer.
-    let mut reader =
-        RecordReader::open(dir.path().join("color/frames.mpstore"), Kind::ColorFrames).unwrap();
+    let mut reader = RecordReader::open(dir.path().join("color/frames.mpstore"), Kind::ColorFrames).unwrap();
     let entries: Vec<(u64, u64)> = reader
         .records()
         .map(|rec| rec.unwrap())
@@ -753,10 +646,7 @@ fn missing_invalid_or_stale_indexes_are_rebuilt() {
         Some(IndexStatus::Stale { .. })
     ));
     assert_eq!(r.color_count(), COLOR_FRAMES as usize);
-    assert_eq!(
-        r.seqs(CameraRole::Color),
-        (0..COLOR_FRAMES).collect::<Vec<_>>()
-    );
+    assert_eq!(r.seqs(CameraRole::Color), (0..COLOR_FRAMES).collect::<Vec<_>>());
     assert_eq!(r.color_frame(17).unwrap(), color_frame(17));
 }
 

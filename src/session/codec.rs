@@ -41,10 +41,7 @@ pub enum CodecError {
     #[error("unknown codec {0}")]
     UnknownCodec(u8),
     #[error("holds {found} pixels, expected {expected}")]
-    WrongFormat {
-        found: FrameFormat,
-        expected: &'static str,
-    },
+    WrongFormat { found: FrameFormat, expected: &'static str },
     #[error("{width}x{height} {format} takes {expected} bytes but the header says {stated}")]
     LengthMismatch {
         width: u16,
@@ -128,9 +125,7 @@ impl fmt::Display for FrameFormat {
 
 /// A name that is not a stored pixel format.
 #[derive(Debug, thiserror::Error)]
-#[error(
-    "unknown pixel format {0:?} (expected depth16, mono8, rgb8, bayer_rg8, bayer_gr8, bayer_gb8 or bayer_bg8)"
-)]
+#[error("unknown pixel format {0:?} (expected depth16, mono8, rgb8, bayer_rg8, bayer_gr8, bayer_gb8 or bayer_bg8)")]
 pub struct UnknownFormatName(pub String);
 
 impl FromStr for FrameFormat {
@@ -279,10 +274,7 @@ impl FrameHeader {
 /// The sequence number at the start of a payload, if it is long enough to hold one; for
 /// naming a frame in errors even when the rest of its header is bad.
 pub fn peek_seq(payload: &[u8]) -> Option<u64> {
-    payload
-        .get(..8)
-        .and_then(|b| b.try_into().ok())
-        .map(u64::from_le_bytes)
+    payload.get(..8).and_then(|b| b.try_into().ok()).map(u64::from_le_bytes)
 }
 
 /// Encodes frames into payloads with one codec and zstd level, reusing its compression
@@ -334,8 +326,7 @@ impl FrameEncoder {
             for line in frame.data.chunks_exact(row) {
                 let mut left = 0u16;
                 for &v in line {
-                    self.pixels
-                        .extend_from_slice(&v.wrapping_sub(left).to_le_bytes());
+                    self.pixels.extend_from_slice(&v.wrapping_sub(left).to_le_bytes());
                     left = v;
                 }
             }
@@ -372,13 +363,7 @@ impl FrameEncoder {
         self.finish(frame.stamp, width, height, FrameFormat::Color(frame.format))
     }
 
-    fn finish(
-        &mut self,
-        stamp: Stamp,
-        width: u16,
-        height: u16,
-        format: FrameFormat,
-    ) -> Result<Vec<u8>> {
+    fn finish(&mut self, stamp: Stamp, width: u16, height: u16, format: FrameFormat) -> Result<Vec<u8>> {
         let pixel_bytes = u32::try_from(self.pixels.len())
             .ok()
             .filter(|&n| n <= MAX_PIXEL_BYTES)
@@ -393,11 +378,9 @@ impl FrameEncoder {
         };
         let body = match self.codec {
             Codec::Raw => None,
-            Codec::Zstd | Codec::DeltaZstd => Some(
-                self.compressor
-                    .compress(&self.pixels)
-                    .map_err(CodecError::Compress)?,
-            ),
+            Codec::Zstd | Codec::DeltaZstd => {
+                Some(self.compressor.compress(&self.pixels).map_err(CodecError::Compress)?)
+            }
         };
         let body = body.as_deref().unwrap_or(&self.pixels);
         let mut payload = Vec::with_capacity(FRAME_HEADER_LEN + body.len());
@@ -550,10 +533,7 @@ mod tests {
                 let frame = depth(w, h);
                 let payload = enc.encode_depth(&frame).unwrap();
                 assert_eq!(decode_depth(&payload).unwrap(), frame, "{codec:?} {w}x{h}");
-                assert!(matches!(
-                    decode_color(&payload),
-                    Err(CodecError::WrongFormat { .. })
-                ));
+                assert!(matches!(decode_color(&payload), Err(CodecError::WrongFormat { .. })));
             }
         }
     }
@@ -577,10 +557,7 @@ mod tests {
                 data,
             };
             for codec in [Codec::Raw, Codec::Zstd, Codec::DeltaZstd] {
-                let payload = FrameEncoder::new(codec, 3)
-                    .unwrap()
-                    .encode_color(&frame)
-                    .unwrap();
+                let payload = FrameEncoder::new(codec, 3).unwrap().encode_color(&frame).unwrap();
                 assert_eq!(payload[28], FrameFormat::Color(format).code());
                 assert_eq!(decode_color(&payload).unwrap(), frame);
             }
@@ -600,10 +577,7 @@ mod tests {
             .encode_depth(&frame)
             .unwrap();
         let raw = zstd::bulk::decompress(&payload[FRAME_HEADER_LEN..], 12).unwrap();
-        let samples: Vec<u16> = raw
-            .chunks_exact(2)
-            .map(|b| u16::from_le_bytes([b[0], b[1]]))
-            .collect();
+        let samples: Vec<u16> = raw.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect();
         assert_eq!(samples, vec![10, 2, 65533, 500, 65436, 65135]);
     }
 
@@ -617,30 +591,18 @@ mod tests {
         ));
         let mut bad = good.clone();
         bad[28] = 9;
-        assert!(matches!(
-            decode_depth(&bad),
-            Err(CodecError::UnknownFormat(9))
-        ));
+        assert!(matches!(decode_depth(&bad), Err(CodecError::UnknownFormat(9))));
         let mut bad = good.clone();
         bad[29] = 3;
-        assert!(matches!(
-            decode_depth(&bad),
-            Err(CodecError::UnknownCodec(3))
-        ));
+        assert!(matches!(decode_depth(&bad), Err(CodecError::UnknownCodec(3))));
         let mut bad = good.clone();
         bad[24] = 17;
-        assert!(matches!(
-            decode_depth(&bad),
-            Err(CodecError::LengthMismatch { .. })
-        ));
+        assert!(matches!(decode_depth(&bad), Err(CodecError::LengthMismatch { .. })));
         // A header claiming a bigger frame, consistently: decompression must stop at the data.
         let mut bad = good.clone();
         bad[24..26].copy_from_slice(&32u16.to_le_bytes());
         bad[32..36].copy_from_slice(&(32u32 * 8 * 2).to_le_bytes());
-        assert!(matches!(
-            decode_depth(&bad),
-            Err(CodecError::DecompressedLength { .. })
-        ));
+        assert!(matches!(decode_depth(&bad), Err(CodecError::DecompressedLength { .. })));
         // Claiming a smaller one: zstd must not write past the announced length.
         let mut bad = good.clone();
         bad[24..26].copy_from_slice(&8u16.to_le_bytes());
@@ -654,10 +616,7 @@ mod tests {
         bad[24..26].copy_from_slice(&16384u16.to_le_bytes());
         bad[26..28].copy_from_slice(&16384u16.to_le_bytes());
         bad[32..36].copy_from_slice(&(16384u32 * 16384 * 2).to_le_bytes());
-        assert!(matches!(
-            decode_depth(&bad),
-            Err(CodecError::TooManyBytes(_))
-        ));
+        assert!(matches!(decode_depth(&bad), Err(CodecError::TooManyBytes(_))));
     }
 
     #[test]
@@ -665,20 +624,14 @@ mod tests {
         let mut enc = FrameEncoder::new(Codec::Raw, 1).unwrap();
         let mut frame = depth(4, 4);
         frame.data.pop();
-        assert!(matches!(
-            enc.encode_depth(&frame),
-            Err(CodecError::DataLength { .. })
-        ));
+        assert!(matches!(enc.encode_depth(&frame), Err(CodecError::DataLength { .. })));
         let frame = DepthFrame {
             stamp: Stamp::default(),
             width: 70_000,
             height: 0,
             data: vec![],
         };
-        assert!(matches!(
-            enc.encode_depth(&frame),
-            Err(CodecError::TooLarge { .. })
-        ));
+        assert!(matches!(enc.encode_depth(&frame), Err(CodecError::TooLarge { .. })));
     }
 
     #[test]

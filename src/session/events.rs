@@ -83,11 +83,9 @@ mod tests {
             r#"{"kind":"frames_dropped","host_ns":5,"role":"color","seq_from":10,"count":2,"reason":"queue full"}"#
         );
         assert_eq!(serde_json::from_str::<SessionEvent>(&line).unwrap(), e);
-        let future: SessionEvent =
-            serde_json::from_str(r#"{"kind":"laser_on","host_ns":1,"power":3}"#).unwrap();
+        let future: SessionEvent = serde_json::from_str(r#"{"kind":"laser_on","host_ns":1,"power":3}"#).unwrap();
         assert_eq!(future, SessionEvent::Unknown);
-        let extra: SessionEvent =
-            serde_json::from_str(r#"{"kind":"session_started","host_ns":1,"pid":3}"#).unwrap();
+        let extra: SessionEvent = serde_json::from_str(r#"{"kind":"session_started","host_ns":1,"pid":3}"#).unwrap();
         assert_eq!(extra, SessionEvent::SessionStarted { host_ns: 1 });
     }
 }

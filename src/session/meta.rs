@@ -116,11 +116,7 @@ pub struct SessionMeta {
 impl SessionMeta {
     /// Metadata for the current format and software version, without rig, notes or
     /// generator parameters.
-    pub fn new(
-        created: impl Into<String>,
-        source: SessionSource,
-        cameras: Vec<CameraMeta>,
-    ) -> Self {
+    pub fn new(created: impl Into<String>, source: SessionSource, cameras: Vec<CameraMeta>) -> Self {
         Self {
             format: FORMAT_NAME.to_owned(),
             format_version: FORMAT_VERSION,
@@ -143,23 +139,15 @@ impl SessionMeta {
     /// most one colour camera, pixel formats that fit the roles.
     pub fn problem(&self) -> Option<String> {
         if self.format != FORMAT_NAME {
-            return Some(format!(
-                "not a mousepose session (format = {:?})",
-                self.format
-            ));
+            return Some(format!("not a mousepose session (format = {:?})", self.format));
         }
         if self.format_version != FORMAT_VERSION {
-            return Some(format!(
-                "unsupported session format version {}",
-                self.format_version
-            ));
+            return Some(format!("unsupported session format version {}", self.format_version));
         }
         for role in [CameraRole::Depth, CameraRole::Color] {
             let count = self.cameras.iter().filter(|c| c.role == role).count();
             if count > 1 {
-                return Some(format!(
-                    "{count} cameras with role {role}, at most one allowed"
-                ));
+                return Some(format!("{count} cameras with role {role}, at most one allowed"));
             }
         }
         if self.camera(CameraRole::Depth).is_none() {
@@ -268,20 +256,12 @@ pub mod rig_repr {
             .serialize(serializer)
     }
 
-    pub fn deserialize<'de, D: Deserializer<'de>>(
-        deserializer: D,
-    ) -> Result<Option<Rig>, D::Error> {
+    pub fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<Option<Rig>, D::Error> {
         let Some(repr) = Option::<RigRepr>::deserialize(deserializer)? else {
             return Ok(None);
         };
-        let depth = repr
-            .depth
-            .to_camera("depth")
-            .map_err(serde::de::Error::custom)?;
-        let color = repr
-            .color
-            .to_camera("color")
-            .map_err(serde::de::Error::custom)?;
+        let depth = repr.depth.to_camera("depth").map_err(serde::de::Error::custom)?;
+        let color = repr.color.to_camera("color").map_err(serde::de::Error::custom)?;
         Ok(Some(Rig { depth, color }))
     }
 }
@@ -310,11 +290,7 @@ mod tests {
             model: "synthetic colour".into(),
             ..depth.clone()
         };
-        let mut meta = SessionMeta::new(
-            "2026-11-21T20:00:00Z",
-            SessionSource::Synthetic,
-            vec![depth, color],
-        );
+        let mut meta = SessionMeta::new("2026-11-21T20:00:00Z", SessionSource::Synthetic, vec![depth, color]);
         meta.rig = Some(Rig::default_rig().with_color_binning(2));
         let mut synthetic = toml::Table::new();
         synthetic.insert("seed".into(), toml::Value::Integer(42));
@@ -343,16 +319,13 @@ mod tests {
         assert!(!text.contains("[rig"));
         assert_eq!(toml::from_str::<SessionMeta>(&text).unwrap(), meta);
         let text = toml::to_string(&self::meta()).unwrap();
-        let i = text.find("rotation_quaternion_wxyz = [").unwrap()
-            + "rotation_quaternion_wxyz = [".len();
+        let i = text.find("rotation_quaternion_wxyz = [").unwrap() + "rotation_quaternion_wxyz = [".len();
         let broken = format!(
             "{}2.0, 0.0, 0.0, 0.0]{}",
             &text[..i],
             &text[i..].split_once(']').unwrap().1
         );
-        let err = toml::from_str::<SessionMeta>(&broken)
-            .unwrap_err()
-            .to_string();
+        let err = toml::from_str::<SessionMeta>(&broken).unwrap_err().to_string();
         assert!(err.contains("not a unit quaternion"), "{err}");
     }
 

@@ -26,9 +26,7 @@ mod writer;
 
 pub use codec::{Codec, CodecError, FrameEncoder, FrameFormat, FrameHeader};
 pub use events::SessionEvent;
-pub use meta::{
-    Backend, CameraMeta, CameraRole, FORMAT_NAME, FORMAT_VERSION, SessionMeta, SessionSource,
-};
+pub use meta::{Backend, CameraMeta, CameraRole, FORMAT_NAME, FORMAT_VERSION, SessionMeta, SessionSource};
 pub use reader::{ColorFrames, DepthFrames, Frames, SessionReader};
 pub use writer::{SessionWriter, WriterOptions};
 
@@ -147,11 +145,7 @@ pub enum SessionError {
         source: serde_json::Error,
     },
     #[error("{}: line {line}: {reason}", path.display())]
-    Text {
-        path: PathBuf,
-        line: u64,
-        reason: String,
-    },
+    Text { path: PathBuf, line: u64, reason: String },
     #[error("{}: line {line}: not UTF-8 text", path.display())]
     NotText {
         path: PathBuf,
@@ -171,10 +165,7 @@ pub enum SessionError {
 
 type Result<T, E = SessionError> = std::result::Result<T, E>;
 
-fn io_error<'a>(
-    path: &'a Path,
-    action: &'static str,
-) -> impl FnOnce(io::Error) -> SessionError + 'a {
+fn io_error<'a>(path: &'a Path, action: &'static str) -> impl FnOnce(io::Error) -> SessionError + 'a {
     move |source| SessionError::Io {
         path: path.to_path_buf(),
         action,

@@ -6,9 +6,8 @@ use super::events::SessionEvent;
 use super::meta::{CameraRole, FORMAT_NAME, FORMAT_VERSION, SessionMeta};
 use super::text::{Csv, read_lines};
 use super::{
-    EVENTS_FILE, FRAMES_FILE, FrameLocation, INDEX_FILE, JOINTS_FILE, META_FILE, PAIRS_FILE,
-    PAIRS_HEADER, Result, SessionDamage, SessionError, TIMESTAMPS_FILE, TIMESTAMPS_HEADER,
-    TRUTH_DIR, Truth, io_error, joints_header,
+    EVENTS_FILE, FRAMES_FILE, FrameLocation, INDEX_FILE, JOINTS_FILE, META_FILE, PAIRS_FILE, PAIRS_HEADER, Result,
+    SessionDamage, SessionError, TIMESTAMPS_FILE, TIMESTAMPS_HEADER, TRUTH_DIR, Truth, io_error, joints_header,
 };
 use crate::frame::{ColorFrame, DepthFrame, Stamp};
 use crate::pose::JointPositions;
@@ -51,26 +50,18 @@ impl Stream {
     }
 
     fn payload(&self, dir: &Path, role: CameraRole, index: usize) -> Result<(u64, Vec<u8>)> {
-        let &(_, offset) = self
-            .entries
-            .get(index)
-            .ok_or_else(|| SessionError::OutOfRange {
-                dir: dir.to_path_buf(),
-                role,
-                index,
-                count: self.entries.len(),
-            })?;
+        let &(_, offset) = self.entries.get(index).ok_or_else(|| SessionError::OutOfRange {
+            dir: dir.to_path_buf(),
+            role,
+            index,
+            count: self.entries.len(),
+        })?;
         // Reads leave nothing half-done that a panic elsewhere could have broken.
         let mut reader = self.reader.lock().unwrap_or_else(PoisonError::into_inner);
         Ok((offset, reader.read_at(offset)?))
     }
 
-    fn decode<T>(
-        &self,
-        offset: u64,
-        payload: &[u8],
-        decode: fn(&[u8]) -> Result<T, CodecError>,
-    ) -> Result<T> {
+    fn decode<T>(&self, offset: u64, payload: &[u8], decode: fn(&[u8]) -> Result<T, CodecError>) -> Result<T> {
         decode(payload).map_err(|source| SessionError::Frame {
             path: self.path.clone(),
             frame: FrameLocation {
@@ -143,11 +134,7 @@ impl SessionReader {
     /// (see [`Frames::damage`]); a frame whose record is intact but whose contents do not
     /// decode is an `Err` item, and the frames after it still follow.
     pub fn depth_frames(&self) -> DepthFrames {
-        Frames::new(
-            self.depth.path.clone(),
-            Kind::DepthFrames,
-            codec::decode_depth,
-        )
+        Frames::new(self.depth.path.clone(), Kind::DepthFrames, codec::decode_depth)
     }
 
     /// The colour frames in file order; `None` in depth-only sessions.
@@ -224,11 +211,7 @@ impl SessionReader {
         };
         Ok(SessionDamage {
             depth: scan(&self.depth, Kind::DepthFrames)?,
-            color: self
-                .color
-                .as_ref()
-                .map(|s| scan(s, Kind::ColorFrames))
-                .transpose()?,
+            color: self.color.as_ref().map(|s| scan(s, Kind::ColorFrames)).transpose()?,
         })
     }
 
@@ -240,10 +223,7 @@ impl SessionReader {
     /// malformed.
     pub fn timestamps(&self, role: CameraRole) -> Result<Vec<Stamp>> {
         self.stream(role)?;
-        let csv = Csv::read(
-            &self.dir.join(role.name()).join(TIMESTAMPS_FILE),
-            TIMESTAMPS_HEADER,
-        )?;
+        let csv = Csv::read(&self.dir.join(role.name()).join(TIMESTAMPS_FILE), TIMESTAMPS_HEADER)?;
         csv.rows(|r| {
             Ok(Stamp {
                 seq: r.u64(0)?,
@@ -278,11 +258,8 @@ impl SessionReader {
 
     /// True when the writer finished the session (its `session_ended` event is there).
     pub fn complete(&self) -> bool {
-        self.events().is_ok_and(|events| {
-            events
-                .iter()
-                .any(|e| matches!(e, SessionEvent::SessionEnded { .. }))
-        })
+        self.events()
+            .is_ok_and(|events| events.iter().any(|e| matches!(e, SessionEvent::SessionEnded { .. })))
     }
 
     /// The ground truth of a synthetic session; `None` when the session has no `truth`
@@ -304,8 +281,7 @@ impl SessionReader {
             }
             Ok((r.u64(0)?, r.u64(1)?, positions))
         })?;
-        let pairs = Csv::read(&dir.join(PAIRS_FILE), PAIRS_HEADER)?
-            .rows(|r| Ok((r.u64(0)?, r.opt_u64(1)?)))?;
+        let pairs = Csv::read(&dir.join(PAIRS_FILE), PAIRS_HEADER)?.rows(|r| Ok((r.u64(0)?, r.opt_u64(1)?)))?;
         Ok(Some(Truth { joints, pairs }))
     }
 }
@@ -325,16 +301,11 @@ fn read_meta(path: &Path) -> Result<SessionMeta> {
     match table.get("format").and_then(toml::Value::as_str) {
         Some(FORMAT_NAME) => {}
         Some(other) => {
-            return Err(format(format!(
-                "not a mousepose session (format = {other:?})"
-            )));
+            return Err(format(format!("not a mousepose session (format = {other:?})")));
         }
         None => return Err(format("not a mousepose session (no format key)".to_owned())),
     }
-    match table
-        .get("format_version")
-        .and_then(toml::Value::as_integer)
-    {
+    match table.get("format_version").and_then(toml::Value::as_integer) {
         Some(v) if v == i64::from(FORMAT_VERSION) => {}
         Some(v) => return Err(format(format!("unsupported session format version {v}"))),
         None => return Err(format("no integer format_version key".to_owned())),
@@ -381,10 +352,7 @@ impl<T> Frames<T> {
     /// What the iteration has stepped over so far: damaged records skipped and, once it has
     /// ended, the bytes of a truncated last record.
     pub fn damage(&self) -> Damage {
-        self.reader
-            .as_ref()
-            .map(|r| r.damage().clone())
-            .unwrap_or_default()
+        self.reader.as_ref().map(|r| r.damage().clone()).unwrap_or_default()
     }
 }
 
@@ -409,15 +377,13 @@ impl<T> Iterator for Frames<T> {
             Ok(record) => record,
             Err(e) => return Some(Err(e.into())),
         };
-        Some(
-            (self.decode)(&record.payload).map_err(|source| SessionError::Frame {
-                path: self.path.clone(),
-                frame: FrameLocation {
-                    offset: record.offset,
-                    seq: peek_seq(&record.payload),
-                },
-                source,
-            }),
-        )
+        Some((self.decode)(&record.payload).map_err(|source| SessionError::Frame {
+            path: self.path.clone(),
+            frame: FrameLocation {
+                offset: record.offset,
+                seq: peek_seq(&record.payload),
+            },
+            source,
+        }))
     }
 }

@@ -42,9 +42,7 @@ impl LineWriter {
         let mut bytes = Vec::with_capacity(line.len() + 1);
         bytes.extend_from_slice(line.as_bytes());
         bytes.push(b'\n');
-        self.out
-            .write_all(&bytes)
-            .map_err(io_error(&self.path, "write"))?;
+        self.out.write_all(&bytes).map_err(io_error(&self.path, "write"))?;
         self.out.flush().map_err(io_error(&self.path, "write"))?;
         self.lines += 1;
         Ok(())
@@ -58,10 +56,7 @@ impl LineWriter {
     /// Flushes and waits until the file is on disk.
     pub fn sync(&mut self) -> Result<()> {
         self.out.flush().map_err(io_error(&self.path, "write"))?;
-        self.out
-            .get_ref()
-            .sync_all()
-            .map_err(io_error(&self.path, "sync"))
+        self.out.get_ref().sync_all().map_err(io_error(&self.path, "sync"))
     }
 }
 
@@ -99,11 +94,7 @@ impl Csv {
     /// Reads a CSV file whose first line must be `header`.
     pub fn read(path: &Path, header: &str) -> Result<Self> {
         let mut rows = read_lines(path)?;
-        let found = if rows.is_empty() {
-            None
-        } else {
-            Some(rows.remove(0).1)
-        };
+        let found = if rows.is_empty() { None } else { Some(rows.remove(0).1) };
         if found.as_deref() != Some(header) {
             return Err(SessionError::Text {
                 path: path.to_path_buf(),
@@ -166,9 +157,7 @@ impl Row<'_> {
     }
 
     pub fn u64(&self, i: usize) -> Result<u64> {
-        self.field(i)
-            .parse()
-            .map_err(|e| self.invalid(i, Box::new(e)))
+        self.field(i).parse().map_err(|e| self.invalid(i, Box::new(e)))
     }
 
     /// An integer, or `None` for an empty field.
@@ -181,9 +170,7 @@ impl Row<'_> {
     }
 
     pub fn f64(&self, i: usize) -> Result<f64> {
-        self.field(i)
-            .parse()
-            .map_err(|e| self.invalid(i, Box::new(e)))
+        self.field(i).parse().map_err(|e| self.invalid(i, Box::new(e)))
     }
 }
 
@@ -205,11 +192,7 @@ mod tests {
             ("a\r\nb\r\n", vec!["a", "b"]),
         ] {
             std::fs::write(&path, text).unwrap();
-            let got: Vec<String> = read_lines(&path)
-                .unwrap()
-                .into_iter()
-                .map(|l| l.1)
-                .collect();
+            let got: Vec<String> = read_lines(&path).unwrap().into_iter().map(|l| l.1).collect();
             assert_eq!(got, lines, "{text:?}");
         }
     }
@@ -221,10 +204,7 @@ mod tests {
         std::fs::write(&path, "a,b\n1,2\n3,x\n").unwrap();
         let csv = Csv::read(&path, "a,b").unwrap();
         let err = csv.rows(|r| Ok((r.u64(0)?, r.u64(1)?))).unwrap_err();
-        assert_eq!(
-            err.to_string(),
-            format!("{}: line 3: invalid b", path.display())
-        );
+        assert_eq!(err.to_string(), format!("{}: line 3: invalid b", path.display()));
         assert!(Csv::read(&path, "a,c").is_err());
     }
 }

@@ -6,9 +6,8 @@ use super::events::SessionEvent;
 use super::meta::{CameraRole, SessionMeta};
 use super::text::LineWriter;
 use super::{
-    EVENTS_FILE, FRAMES_FILE, INDEX_FILE, JOINTS_FILE, META_FILE, PAIRS_FILE, PAIRS_HEADER, Result,
-    SessionError, SessionSummary, TIMESTAMPS_FILE, TIMESTAMPS_HEADER, TRUTH_DIR, io_error,
-    joints_header,
+    EVENTS_FILE, FRAMES_FILE, INDEX_FILE, JOINTS_FILE, META_FILE, PAIRS_FILE, PAIRS_HEADER, Result, SessionError,
+    SessionSummary, TIMESTAMPS_FILE, TIMESTAMPS_HEADER, TRUTH_DIR, io_error, joints_header,
 };
 use crate::frame::{ColorFrame, DepthFrame, Stamp};
 use crate::pose::JointPositions;
@@ -56,12 +55,11 @@ impl StreamWriter {
         let sub = dir.join(role.name());
         fs::create_dir(&sub).map_err(io_error(&sub, "create directory"))?;
         let store = RecordWriter::create(sub.join(FRAMES_FILE), role.store_kind())?;
-        let encoder =
-            FrameEncoder::new(codec, level).map_err(|source| SessionError::Compression {
-                path: store.path().to_path_buf(),
-                level,
-                source,
-            })?;
+        let encoder = FrameEncoder::new(codec, level).map_err(|source| SessionError::Compression {
+            path: store.path().to_path_buf(),
+            level,
+            source,
+        })?;
         let timestamps = LineWriter::create(sub.join(TIMESTAMPS_FILE), Some(TIMESTAMPS_HEADER))?;
         Ok(Self {
             store,
@@ -77,10 +75,8 @@ impl StreamWriter {
         let offset = self.store.append(payload)?;
         self.store.flush()?;
         self.index.push((stamp.seq, offset));
-        self.timestamps.write_line(&format!(
-            "{},{},{}",
-            stamp.seq, stamp.device_ns, stamp.host_ns
-        ))
+        self.timestamps
+            .write_line(&format!("{},{},{}", stamp.seq, stamp.device_ns, stamp.host_ns))
     }
 
     fn write_index(&mut self) -> Result<()> {
@@ -138,11 +134,7 @@ impl SessionWriter {
     /// the metadata is not valid for this format version ([`SessionMeta::problem`]);
     /// [`SessionError::Io`] when a file can not be created; [`SessionError::Compression`]
     /// when zstd rejects a compression level.
-    pub fn create_with(
-        dir: impl AsRef<Path>,
-        meta: &SessionMeta,
-        options: WriterOptions,
-    ) -> Result<Self> {
+    pub fn create_with(dir: impl AsRef<Path>, meta: &SessionMeta, options: WriterOptions) -> Result<Self> {
         let dir = dir.as_ref();
         let mut entries = fs::read_dir(dir).map_err(io_error(dir, "read directory"))?;
         if entries.next().is_some() {
@@ -166,8 +158,7 @@ impl SessionWriter {
             .create_new(true)
             .open(&meta_path)
             .map_err(io_error(&meta_path, "create"))?;
-        file.write_all(text.as_bytes())
-            .map_err(io_error(&meta_path, "write"))?;
+        file.write_all(text.as_bytes()).map_err(io_error(&meta_path, "write"))?;
         file.sync_all().map_err(io_error(&meta_path, "sync"))?;
 
         let mut depth = None;
@@ -226,15 +217,14 @@ impl SessionWriter {
     /// [`SessionError::Store`] or [`SessionError::Io`] when writing fails.
     pub fn write_depth(&mut self, frame: &DepthFrame) -> Result<()> {
         let stream = self.stream(CameraRole::Depth)?;
-        let payload =
-            stream
-                .encoder
-                .encode_depth(frame)
-                .map_err(|source| SessionError::Encode {
-                    path: stream.store.path().to_path_buf(),
-                    seq: frame.stamp.seq,
-                    source,
-                })?;
+        let payload = stream
+            .encoder
+            .encode_depth(frame)
+            .map_err(|source| SessionError::Encode {
+                path: stream.store.path().to_path_buf(),
+                seq: frame.stamp.seq,
+                source,
+            })?;
         stream.append(frame.stamp, &payload)?;
         self.last_host_ns = self.last_host_ns.max(frame.stamp.host_ns);
         Ok(())
@@ -246,15 +236,14 @@ impl SessionWriter {
     /// As [`SessionWriter::write_depth`], for the colour camera.
     pub fn write_color(&mut self, frame: &ColorFrame) -> Result<()> {
         let stream = self.stream(CameraRole::Color)?;
-        let payload =
-            stream
-                .encoder
-                .encode_color(frame)
-                .map_err(|source| SessionError::Encode {
-                    path: stream.store.path().to_path_buf(),
-                    seq: frame.stamp.seq,
-                    source,
-                })?;
+        let payload = stream
+            .encoder
+            .encode_color(frame)
+            .map_err(|source| SessionError::Encode {
+                path: stream.store.path().to_path_buf(),
+                seq: frame.stamp.seq,
+                source,
+            })?;
         stream.append(frame.stamp, &payload)?;
         self.last_host_ns = self.last_host_ns.max(frame.stamp.host_ns);
         Ok(())
@@ -297,12 +286,7 @@ impl SessionWriter {
     ///
     /// # Errors
     /// [`SessionError::Io`] when a truth file can not be created or written.
-    pub fn write_truth(
-        &mut self,
-        depth_seq: u64,
-        time_ns: u64,
-        joints: &JointPositions,
-    ) -> Result<()> {
+    pub fn write_truth(&mut self, depth_seq: u64, time_ns: u64, joints: &JointPositions) -> Result<()> {
         let mut line = format!("{depth_seq},{time_ns}");
         for p in joints {
             // Writing into a String can not fail.

@@ -150,13 +150,17 @@ impl Animator {
         // Gait cycle: a stride of about 30 mm walking and 45 mm running; activity cycles (head
         // bobbing, grooming strokes) at a few hertz when standing still.
         let stride = if self.behaviour == Behaviour::Run { 45.0 } else { 30.0 };
-        let cycle_hz = if self.speed_mm_s > 5.0 { self.speed_mm_s / stride } else { 2.5 };
+        let cycle_hz = if self.speed_mm_s > 5.0 {
+            self.speed_mm_s / stride
+        } else {
+            2.5
+        };
         self.phase = (self.phase + cycle_hz * dt).rem_euclid(1.0);
 
         // Move along the heading; the body's bend turns it.
         let turn_rate = self.bend * 1.6;
-        self.placement.heading = (self.placement.heading + turn_rate * dt * (0.3 + self.speed_mm_s / 120.0).min(2.0))
-            .rem_euclid(TAU);
+        self.placement.heading =
+            (self.placement.heading + turn_rate * dt * (0.3 + self.speed_mm_s / 120.0).min(2.0)).rem_euclid(TAU);
         self.placement.x_mm += self.speed_mm_s * dt * self.placement.heading.cos();
         self.placement.y_mm += self.speed_mm_s * dt * self.placement.heading.sin();
         let hx = CAGE_X_MM / 2.0 - WALL_MARGIN_MM * 0.6;

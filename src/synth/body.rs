@@ -60,9 +60,12 @@ impl Labeller {
     pub fn label(&self, p: &Point3<f64>) -> Part {
         match *self {
             Labeller::Fixed(part) => part,
-            Labeller::Trunk { mid, forward, centre, left } => {
-                Part::trunk((p - mid).dot(&forward) > 0.0, side_of(p, &centre, &left))
-            }
+            Labeller::Trunk {
+                mid,
+                forward,
+                centre,
+                left,
+            } => Part::trunk((p - mid).dot(&forward) > 0.0, side_of(p, &centre, &left)),
             Labeller::Neck { origin, forward, left } => {
                 if (p - origin).dot(&forward) > 0.0 {
                     Part::Head
@@ -77,7 +80,12 @@ impl Labeller {
     pub fn transformed(&self, iso: &nalgebra::Isometry3<f64>) -> Labeller {
         match *self {
             Labeller::Fixed(part) => Labeller::Fixed(part),
-            Labeller::Trunk { mid, forward, centre, left } => Labeller::Trunk {
+            Labeller::Trunk {
+                mid,
+                forward,
+                centre,
+                left,
+            } => Labeller::Trunk {
                 mid: iso * mid,
                 forward: iso * forward,
                 centre: iso * centre,
@@ -93,7 +101,11 @@ impl Labeller {
 }
 
 fn side_of(p: &Point3<f64>, origin: &Point3<f64>, left: &Vector3<f64>) -> Side {
-    if (p - origin).dot(left) >= 0.0 { Side::Left } else { Side::Right }
+    if (p - origin).dot(left) >= 0.0 {
+        Side::Left
+    } else {
+        Side::Right
+    }
 }
 
 /// One piece of skin.
@@ -162,7 +174,11 @@ pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
     let head_frame = *m.frame(Joint::Head);
     let muzzle_len = (snout - head).norm();
     out.push(Primitive {
-        shape: ellipsoid(head - head_frame * Vector3::new(1.0 * s, 0.0, 0.0), head_frame, [8.5 * s, 7.2 * s * g, 6.6 * s]),
+        shape: ellipsoid(
+            head - head_frame * Vector3::new(1.0 * s, 0.0, 0.0),
+            head_frame,
+            [8.5 * s, 7.2 * s * g, 6.6 * s],
+        ),
         labeller: Labeller::Fixed(Part::Head),
         material: Material::Fur,
     });
@@ -190,7 +206,13 @@ pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
     // width and height following a mouse's profile (widest over the hips, narrowing to the
     // neck), so the outline from above is smooth. Centres sit a little below the spine, which
     // runs along the back.
-    let spine = [Joint::TailBase, Joint::Rump, Joint::MidBack, Joint::Withers, Joint::Neck];
+    let spine = [
+        Joint::TailBase,
+        Joint::Rump,
+        Joint::MidBack,
+        Joint::Withers,
+        Joint::Neck,
+    ];
     let lengths: Vec<f64> = spine.windows(2).map(|w| (j(w[1]) - j(w[0])).norm()).collect();
     let total: f64 = lengths.iter().sum();
     let mid_back = j(Joint::MidBack);
@@ -215,7 +237,11 @@ pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
     }
     let neck_frame = *m.frame(Joint::Neck);
     out.push(Primitive {
-        shape: ellipsoid(j(Joint::Neck) - neck_frame * Vector3::new(-1.0 * s, 0.0, 1.6 * s), neck_frame, [8.0 * s, 8.6 * s * g, 7.8 * s]),
+        shape: ellipsoid(
+            j(Joint::Neck) - neck_frame * Vector3::new(-s, 0.0, 1.6 * s),
+            neck_frame,
+            [8.0 * s, 8.6 * s * g, 7.8 * s],
+        ),
         labeller: Labeller::Neck {
             origin: j(Joint::Neck),
             forward: neck_frame * Vector3::x(),
@@ -249,7 +275,11 @@ fn along(spine: &[Joint], lengths: &[f64], at: f64, m: &MouseInstance) -> (Point
             let (a, b) = (m.joint(spine[k]), m.joint(spine[k + 1]));
             let t = if len > 1e-9 { (left / len).clamp(0.0, 1.0) } else { 0.0 };
             // The segment's frame is stored at its anterior joint (the rump's for the pelvis).
-            let frame = if spine[k] == Joint::TailBase { *m.frame(Joint::Rump) } else { *m.frame(spine[k + 1]) };
+            let frame = if spine[k] == Joint::TailBase {
+                *m.frame(Joint::Rump)
+            } else {
+                *m.frame(spine[k + 1])
+            };
             return (a + (b - a) * t, frame);
         }
         left -= len;

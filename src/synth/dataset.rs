@@ -103,7 +103,15 @@ pub fn render_sample(rig: &Rig, spec: &DatasetSpec, library: &[super::mouse::Pos
     let mut m = pose_mouse(&params, &placement);
     fit_in_cage(&mut m, 3.0);
     let skin = skin(&m);
-    let top = render_top(&rig.depth, &Cage::new(&rig.depth), &skin, None, TOP_MARGIN_PX, &spec.noise, &mut rng);
+    let top = render_top(
+        &rig.depth,
+        &Cage::new(&rig.depth),
+        &skin,
+        None,
+        TOP_MARGIN_PX,
+        &spec.noise,
+        &mut rng,
+    );
     let bottom = spec
         .bottom_views
         .then(|| render_bottom(&rig.color, &m, &skin, BOTTOM_MARGIN_PX, &mut rng));
@@ -123,7 +131,12 @@ pub fn render_sample(rig: &Rig, spec: &DatasetSpec, library: &[super::mouse::Pos
 ///
 /// # Errors
 /// When a file cannot be written.
-pub fn write_dataset(dir: &Path, rig: &Rig, spec: &DatasetSpec, mut progress: impl FnMut(u64)) -> Result<DatasetMeta, DatasetError> {
+pub fn write_dataset(
+    dir: &Path,
+    rig: &Rig,
+    spec: &DatasetSpec,
+    mut progress: impl FnMut(u64),
+) -> Result<DatasetMeta, DatasetError> {
     let library = pose_library();
     let mut writer = RecordWriter::create(dir.join(SAMPLES_FILE), Kind::DatasetSamples)?;
     const CHUNK: u64 = 256;
@@ -292,7 +305,11 @@ pub fn decode_sample(payload: &[u8]) -> Result<Sample, String> {
         *p = Point3::new(f64::from(c.f32()?), f64::from(c.f32()?), f64::from(c.f32()?));
     }
     let region = c.region()?;
-    let depth = c.take(region.len() * 2)?.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect();
+    let depth = c
+        .take(region.len() * 2)?
+        .chunks_exact(2)
+        .map(|b| u16::from_le_bytes([b[0], b[1]]))
+        .collect();
     let label = c.take(region.len())?.to_vec();
     let top = TopView { region, depth, label };
     let bottom = if has_bottom {
@@ -371,7 +388,10 @@ impl Dataset {
             )));
         }
         if meta.skeleton_version != SKELETON_VERSION {
-            return Err(format_error(format!("it uses skeleton version {}", meta.skeleton_version)));
+            return Err(format_error(format!(
+                "it uses skeleton version {}",
+                meta.skeleton_version
+            )));
         }
         Ok(Self {
             dir: dir.to_owned(),

@@ -18,8 +18,8 @@ pub mod views;
 use crate::geometry::{CAGE_X_MM, CAGE_Y_MM};
 use mouse::{Placement, PoseParams};
 use rand::Rng;
-use rand_chacha::ChaCha8Rng;
 use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
 
 /// Version of the synthesis engine's model and renderers; data files record it so a dataset
 /// made by another version is recognised as such.

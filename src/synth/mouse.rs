@@ -121,7 +121,8 @@ pub struct Placement {
     pub y_mm: f64,
     /// Heading: the direction the mouse faces, counter-clockwise from world +x.
     pub heading: f64,
-    /// Small whole-body tilts (the paper's random pitch and roll), applied about the rump.
+    /// Small body tilts (the paper's random pitch and roll): added to the trunk's pitch and the
+    /// body's roll, with the paws kept on the floor.
     pub pitch: f64,
     pub roll: f64,
     /// Overall size (0.85-1.15 in datasets).
@@ -195,6 +196,13 @@ fn rot_yaw_pitch(yaw: f64, pitch: f64) -> Rotation3<f64> {
 
 /// Poses the mouse: forward kinematics in the mouse frame, then the placement into the world.
 pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
+    // The placement's pitch and roll tilt the body; the paws stay planted and the legs
+    // follow by inverse kinematics, so the mouse still stands on the glass.
+    let params = &PoseParams {
+        trunk_pitch: params.trunk_pitch + placement.pitch,
+        roll: params.roll + placement.roll,
+        ..*params
+    };
     let b = placement.bones.scaled(placement.scale);
     let s = placement.scale;
     let mut joints = [Point3::origin(); crate::skeleton::JOINT_COUNT];
@@ -244,7 +252,13 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
     let run = (b.rump_tail_base.powi(2) - drop.powi(2)).max(0.0).sqrt();
     let tail_base = rump + back_dir * run - Vector3::z() * drop;
     let tail_heading = back_dir.y.atan2(back_dir.x) + params.tail_yaw * 0.5;
-    set(&mut joints, &mut frames, Joint::TailBase, tail_base, rot_yaw_pitch(tail_heading + PI, 0.0));
+    set(
+        &mut joints,
+        &mut frames,
+        Joint::TailBase,
+        tail_base,
+        rot_yaw_pitch(tail_heading + PI, 0.0),
+    );
 
     // Tail: an arc of constant curvature lying on the floor, lifted near its base.
     let mut tail = [tail_base; TAIL_POINTS];
@@ -264,7 +278,13 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
             z,
         );
     }
-    set(&mut joints, &mut frames, Joint::TailTip, tail[TAIL_POINTS - 1], rot_yaw_pitch(heading + PI, 0.0));
+    set(
+        &mut joints,
+        &mut frames,
+        Joint::TailTip,
+        tail[TAIL_POINTS - 1],
+        rot_yaw_pitch(heading + PI, 0.0),
+    );
 
     // Ears on the head, hips on the rump.
     let head = joints[Joint::Head.index()];
@@ -289,14 +309,17 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
         let [dx, dy, dz] = params.paw_offsets[k];
         let sign = limb.side.sign();
         let (root, fwd) = if limb.fore {
-            (shoulders[usize::from(limb.side == Side::Right)], flat_heading(&withers_frame))
+            (
+                shoulders[usize::from(limb.side == Side::Right)],
+                flat_heading(&withers_frame),
+            )
         } else {
             (joints[limb.root.index()], flat_heading(&rump_frame))
         };
         let left = Vector3::z().cross(&fwd);
         let lengths = limb.lengths_in(&b);
         let mut paw = Point3::new(root.x, root.y, PAW_SOLE_MM * s)
-            + fwd * (dx * s + if limb.fore { 1.0 * s } else { -1.0 * s })
+            + fwd * (dx * s + if limb.fore { s } else { -s })
             + left * sign * (dy + 2.0) * s
             + Vector3::z() * dz.max(0.0) * s;
         if limb.fore && (params.fore_raise > 0.0 || params.fore_to_face > 0.0) {
@@ -310,7 +333,13 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
             // The wrist sits behind and above the paw; the elbow bends backwards.
             let wrist_dir = (-fwd * 0.55 + Vector3::z()).normalize();
             let wrist_target = paw + wrist_dir * lengths[2];
-            let (elbow, wrist) = two_bone(&root, &wrist_target, lengths[0], lengths[1], &(-fwd - Vector3::z() * 0.2));
+            let (elbow, wrist) = two_bone(
+                &root,
+                &wrist_target,
+                lengths[0],
+                lengths[1],
+                &(-fwd + Vector3::z() * 0.3),
+            );
             (elbow, wrist)
         } else {
             hind_limb(&root, &paw, lengths, params.ankle_angle, &fwd, &Vector3::z())
@@ -321,15 +350,18 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
         set(&mut joints, &mut frames, limb.paw, paw, limb_frame);
     }
 
-    place(MouseInstance {
-        joints,
-        frames,
-        tail,
-        shoulders,
-        scale: s,
-        girth: placement.girth,
-        behaviour: params.behaviour,
-    }, placement)
+    place(
+        MouseInstance {
+            joints,
+            frames,
+            tail,
+            shoulders,
+            scale: s,
+            girth: placement.girth,
+            behaviour: params.behaviour,
+        },
+        placement,
+    )
 }
 
 impl crate::skeleton::LimbChain {
@@ -339,13 +371,10 @@ impl crate::skeleton::LimbChain {
     }
 }
 
-/// Moves a mouse built in its own frame into the world: tilt about the rump's floor point,
-/// turn to the heading, translate, and set it back on the floor.
+/// Moves a mouse built in its own frame into the world: turn to the heading, translate, and
+/// set it on the floor.
 fn place(mut m: MouseInstance, placement: &Placement) -> MouseInstance {
-    let tilt = Rotation3::from_axis_angle(&Vector3::x_axis(), placement.roll)
-        * Rotation3::from_axis_angle(&Vector3::y_axis(), -placement.pitch);
-    let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), placement.heading);
-    let r = turn * tilt;
+    let r = Rotation3::from_axis_angle(&Vector3::z_axis(), placement.heading);
     let world_from_mouse = Isometry3::from_parts(
         Translation3::new(placement.x_mm, placement.y_mm, 0.0),
         UnitQuaternion::from_rotation_matrix(&r),
@@ -357,9 +386,12 @@ fn place(mut m: MouseInstance, placement: &Placement) -> MouseInstance {
     for f in &mut m.frames {
         *f = r * *f;
     }
-    // Tilting lifts or sinks the paws: set the lowest paw (or tail point) back on the glass.
-    let lowest = Joint::PAWS
+    // Set the lowest paw (or tail point) on the glass.
+    // Paws rest on their soles, the tail on its thinnest radius; no other joint may sink below
+    // the skin of a leg (about 1.5 mm).
+    let lowest = Joint::ALL
         .iter()
+        .filter(|j| j.group() != crate::skeleton::JointGroup::Tail)
         .map(|j| m.joints[j.index()].z - PAW_SOLE_MM * m.scale)
         .chain(m.tail.iter().map(|p| p.z - 0.8 * m.scale))
         .fold(f64::INFINITY, f64::min);
@@ -450,10 +482,17 @@ pub fn behaviour_params(behaviour: Behaviour, phase: f64, bend: f64, head: f64, 
             p.yaw = spread(bend * (0.35 + 0.25 * amount), [0.8, 1.0, 0.9, 0.8, 0.4]);
             p.yaw[3] += head * 0.3;
             p.roll = 0.1 * bend;
+            p.rump_height = 14.5 + 2.5 * amount;
         }
         Behaviour::Rear => {
             p.trunk_pitch = 0.55 + 0.75 * amount;
-            p.pitch = [-0.1 * amount, -0.15, -0.25 - 0.2 * amount, -0.3 + look * 0.35, -0.35 + look * 0.25];
+            p.pitch = [
+                -0.1 * amount,
+                -0.15,
+                -0.25 - 0.2 * amount,
+                -0.3 + look * 0.35,
+                -0.35 + look * 0.25,
+            ];
             p.rump_height = 11.0;
             p.fore_raise = 0.55 + 0.45 * amount;
             p.paw_offsets[2] = [6.0, 1.0, 0.0];
@@ -515,7 +554,14 @@ pub fn pose_library() -> Vec<PoseParams> {
                         for look in [-0.8, 0.0, 0.8] {
                             for amount in [0.2, 0.9] {
                                 let phase: f64 = (bend + head + look) * 0.37;
-                                out.push(behaviour_params(behaviour, phase.rem_euclid(1.0), bend, head, look, amount));
+                                out.push(behaviour_params(
+                                    behaviour,
+                                    phase.rem_euclid(1.0),
+                                    bend,
+                                    head,
+                                    look,
+                                    amount,
+                                ));
                             }
                         }
                     }
@@ -553,7 +599,9 @@ impl PoseParams {
             tail_yaw: l(self.tail_yaw, other.tail_yaw),
             tail_curl: l(self.tail_curl, other.tail_curl),
             tail_lift: l(self.tail_lift, other.tail_lift),
-            paw_offsets: std::array::from_fn(|k| std::array::from_fn(|c| l(self.paw_offsets[k][c], other.paw_offsets[k][c]))),
+            paw_offsets: std::array::from_fn(|k| {
+                std::array::from_fn(|c| l(self.paw_offsets[k][c], other.paw_offsets[k][c]))
+            }),
             fore_raise: l(self.fore_raise, other.fore_raise),
             fore_to_face: l(self.fore_to_face, other.fore_to_face),
             ankle_angle: l(self.ankle_angle, other.ankle_angle),

@@ -50,7 +50,9 @@ impl FromStr for NoiseModel {
             "none" => Ok(NoiseModel::None),
             "structured-light" => Ok(NoiseModel::StructuredLight),
             "tof" => Ok(NoiseModel::Tof),
-            other => Err(format!("unknown noise model {other:?} (expected none, structured-light or tof)")),
+            other => Err(format!(
+                "unknown noise model {other:?} (expected none, structured-light or tof)"
+            )),
         }
     }
 }
@@ -93,7 +95,13 @@ impl DepthNoise {
 pub fn quantise(depth: &[f32]) -> Vec<u16> {
     depth
         .iter()
-        .map(|&z| if z > 0.0 && z.is_finite() { z.round().min(65535.0) as u16 } else { 0 })
+        .map(|&z| {
+            if z > 0.0 && z.is_finite() {
+                z.round().min(65535.0) as u16
+            } else {
+                0
+            }
+        })
         .collect()
 }
 

@@ -22,7 +22,13 @@ pub fn bone_colour(kind: BoneKind) -> [u8; 3] {
 
 /// Draws the skeleton of `m` as seen by `camera` onto `img`, whose pixel (0, 0) is the
 /// camera's pixel `origin`, magnified `zoom` times.
-pub fn draw_skeleton(img: &mut RgbImage, camera: &Camera, joints: &crate::pose::JointPositions, origin: (f64, f64), zoom: f64) {
+pub fn draw_skeleton(
+    img: &mut RgbImage,
+    camera: &Camera,
+    joints: &crate::pose::JointPositions,
+    origin: (f64, f64),
+    zoom: f64,
+) {
     let to_img = |p: &nalgebra::Point3<f64>| {
         camera
             .project_world(p)
@@ -58,7 +64,13 @@ pub fn preview(rig: &Rig, m: &MouseInstance, noise: &DepthNoise, rng: &mut impl 
     let zoom = 3;
     let floor = f64::from(top.depth.iter().copied().max().unwrap_or(600));
     let mut depth_img = depth_to_rgb(&top.depth, w, h, floor - 60.0, floor + 5.0).upscale(zoom);
-    draw_skeleton(&mut depth_img, &rig.depth, &m.joints, (f64::from(window.x0), f64::from(window.y0)), f64::from(zoom));
+    draw_skeleton(
+        &mut depth_img,
+        &rig.depth,
+        &m.joints,
+        (f64::from(window.x0), f64::from(window.y0)),
+        f64::from(zoom),
+    );
 
     let mut labels = RgbImage::new(w, h, [20, 20, 20]);
     for (k, &l) in top.label.iter().enumerate() {
@@ -79,8 +91,14 @@ pub fn preview(rig: &Rig, m: &MouseInstance, noise: &DepthNoise, rng: &mut impl 
     for paw in &bottom.paws {
         let c = if paw.contact { [80, 255, 80] } else { [255, 200, 40] };
         bottom_img.rect(
-            (f64::from(paw.x0) - f64::from(bottom.region.x0), f64::from(paw.y0) - f64::from(bottom.region.y0)),
-            (f64::from(paw.x1) - f64::from(bottom.region.x0), f64::from(paw.y1) - f64::from(bottom.region.y0)),
+            (
+                f64::from(paw.x0) - f64::from(bottom.region.x0),
+                f64::from(paw.y0) - f64::from(bottom.region.y0),
+            ),
+            (
+                f64::from(paw.x1) - f64::from(bottom.region.x0),
+                f64::from(paw.y1) - f64::from(bottom.region.y0),
+            ),
             c,
             1.0,
         );

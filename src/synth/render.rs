@@ -152,9 +152,7 @@ fn to_camera(prim: &Primitive, iso: &Isometry3<f64>, intrinsics: &Intrinsics) ->
             let to_unit = inv_r * m.transpose();
             let origin = to_unit * -c.coords;
             // Axis-aligned half extents of the rotated ellipsoid.
-            let half = Vector3::from_fn(|i, _| {
-                (0..3).map(|k| (m[(i, k)] * radii[k]).powi(2)).sum::<f64>().sqrt()
-            });
+            let half = Vector3::from_fn(|i, _| (0..3).map(|k| (m[(i, k)] * radii[k]).powi(2)).sum::<f64>().sqrt());
             (
                 CamShape::Ellipsoid {
                     to_unit,
@@ -421,7 +419,9 @@ impl Cage {
             }
             for sign in [-1.0, 1.0] {
                 let t = (sign * half - o[axis]) / d[axis];
-                try_plane(t, &|p| p[1 - axis].abs() <= other_half && p.z >= 0.0 && p.z <= CAGE_WALL_MM);
+                try_plane(t, &|p| {
+                    p[1 - axis].abs() <= other_half && p.z >= 0.0 && p.z <= CAGE_WALL_MM
+                });
             }
         }
         // t is in units of d, whose camera-frame z is 1.

@@ -13,14 +13,14 @@ use super::{ENGINE_VERSION, item_rng, random_placement};
 use crate::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
 use crate::geometry::Rig;
 use crate::session::{
-    Backend, CameraMeta, CameraRole, FrameFormat, SessionError, SessionEvent, SessionMeta, SessionSource, SessionSummary,
-    SessionWriter,
+    Backend, CameraMeta, CameraRole, FrameFormat, SessionError, SessionEvent, SessionMeta, SessionSource,
+    SessionSummary, SessionWriter,
 };
-use std::path::PathBuf;
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 use std::path::Path;
+use std::path::PathBuf;
 
 /// The `created` time written into synthetic sessions: fixed, so a seed gives byte-identical
 /// output.
@@ -194,7 +194,11 @@ fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
         }
         shots.push(Shot {
             role,
-            stamp: Stamp { seq, device_ns, host_ns },
+            stamp: Stamp {
+                seq,
+                device_ns,
+                host_ns,
+            },
             time_s: t,
             dropped,
             mouse,
@@ -267,7 +271,11 @@ pub enum SynthSessionError {
 ///
 /// # Errors
 /// When the session cannot be written.
-pub fn write_session(dir: &Path, spec: &SessionSpec, mut progress: impl FnMut(u64, u64)) -> Result<SessionSummary, SynthSessionError> {
+pub fn write_session(
+    dir: &Path,
+    spec: &SessionSpec,
+    mut progress: impl FnMut(u64, u64),
+) -> Result<SessionSummary, SynthSessionError> {
     let rig = Rig::default_rig().with_color_binning(spec.color_binning);
     let mut meta = SessionMeta::new(SYNTHETIC_CREATED, SessionSource::Synthetic, cameras(&rig, spec));
     meta.rig = Some(rig);
@@ -276,9 +284,15 @@ pub fn write_session(dir: &Path, spec: &SessionSpec, mut progress: impl FnMut(u6
     table.insert("seed".into(), toml::Value::Integer(spec.seed as i64));
     table.insert("seconds".into(), toml::Value::Float(spec.seconds));
     table.insert("fps".into(), toml::Value::Float(spec.fps));
-    table.insert("noise_model".into(), toml::Value::String(spec.noise.model.name().to_owned()));
+    table.insert(
+        "noise_model".into(),
+        toml::Value::String(spec.noise.model.name().to_owned()),
+    );
     table.insert("noise_mm".into(), toml::Value::Float(spec.noise.gaussian_mm));
-    table.insert("color_binning".into(), toml::Value::Integer(i64::from(spec.color_binning)));
+    table.insert(
+        "color_binning".into(),
+        toml::Value::Integer(i64::from(spec.color_binning)),
+    );
     table.insert("engine_version".into(), toml::Value::Integer(i64::from(ENGINE_VERSION)));
     meta.synthetic = Some(table);
 
@@ -334,7 +348,11 @@ pub fn write_session(dir: &Path, spec: &SessionSpec, mut progress: impl FnMut(u6
     }
     let summary = writer.finish_at(end_host)?;
     // A picture of the instant half-way through.
-    if let Some(mid) = shots.iter().filter(|s| s.role == CameraRole::Depth).nth((spec.seconds * spec.fps / 2.0) as usize) {
+    if let Some(mid) = shots
+        .iter()
+        .filter(|s| s.role == CameraRole::Depth)
+        .nth((spec.seconds * spec.fps / 2.0) as usize)
+    {
         let mut rng = item_rng(spec.seed, STREAM_DEPTH, u64::MAX);
         let path = dir.join(PREVIEW_FILE);
         super::preview::preview(&rig, &mid.mouse, &spec.noise, &mut rng)

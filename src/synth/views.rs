@@ -110,7 +110,8 @@ fn shade(camera: &Camera, scene: &Scene, hits: &Hits) -> Vec<[f32; 3]> {
             let light = (-p).normalize();
             let diffuse = n.dot(&light).max(0.0) as f32;
             let height = (world * nalgebra::Point3::from(p)).z.max(0.0) as f32;
-            let mut gain = (0.3 + 0.7 * diffuse) / (1.0 + height / 30.0);
+            // The LEDs light what is close to the glass; fur a finger's width up is dim.
+            let mut gain = (0.3 + 0.7 * diffuse) / (1.0 + height / 12.0);
             if material == Material::Paw && f64::from(height) < PAW_SOLE_MM * 2.0 + CONTACT_MM {
                 gain *= 1.15;
             }
@@ -157,6 +158,13 @@ fn paw_boxes(m: &MouseInstance, scene: &Scene, hits: &Hits) -> [PawBox; 4] {
         let contact = m.joint(joint).z - PAW_SOLE_MM * m.scale <= CONTACT_MM;
         let extent = scene.primitive_extent(k);
         let [x0, y0, x1, y1] = extent.unwrap_or([0.0; 4]).map(|v| v as f32);
+        // Seen when at least a third of the ellipse inscribed in its box shows.
+        let area = std::f32::consts::FRAC_PI_4 * (x1 - x0) * (y1 - y0);
+        let shown = if k < PAW_PRIMITIVES {
+            scene.pixels_of(hits, k)
+        } else {
+            0
+        };
         PawBox {
             joint,
             x0,
@@ -164,13 +172,19 @@ fn paw_boxes(m: &MouseInstance, scene: &Scene, hits: &Hits) -> [PawBox; 4] {
             x1,
             y1,
             contact,
-            visible: k < PAW_PRIMITIVES && scene.pixels_of(hits, k) > 0,
+            visible: shown > 0 && shown as f32 >= area / 3.0,
         }
     })
 }
 
 /// Renders the bottom view of the mouse's own pixels grown by `margin`, as 8-bit RGB.
-pub fn render_bottom(camera: &Camera, m: &MouseInstance, skin: &[Primitive], margin: u32, rng: &mut impl Rng) -> BottomView {
+pub fn render_bottom(
+    camera: &Camera,
+    m: &MouseInstance,
+    skin: &[Primitive],
+    margin: u32,
+    rng: &mut impl Rng,
+) -> BottomView {
     let scene = Scene::new(camera, skin);
     let i = &camera.intrinsics;
     let region = scene.bounds.grown(margin, i.width, i.height);
