@@ -48,12 +48,14 @@ pub fn draw_skeleton(
 pub fn preview(rig: &Rig, m: &MouseInstance, noise: &DepthNoise, rng: &mut impl Rng) -> RgbImage {
     let skin = skin(m);
     let cage = Cage::new(&rig.depth);
-    // A fixed-size window of the top image centred on the mouse.
-    let probe = render_top(&rig.depth, &cage, &skin, None, 0, &DepthNoise::default(), rng);
-    let (w, h) = (150u32, 120u32);
+    // A fixed-size window of the top image centred on the mouse's back.
+    let (w, h) = (190u32, 150u32);
     let i = &rig.depth.intrinsics;
-    let cx = probe.region.x0 + probe.region.width / 2;
-    let cy = probe.region.y0 + probe.region.height / 2;
+    let centre = rig
+        .depth
+        .project_world(&m.joint(crate::skeleton::Joint::MidBack))
+        .unwrap_or(nalgebra::Point2::new(i.cx, i.cy));
+    let (cx, cy) = (centre.x.max(0.0) as u32, centre.y.max(0.0) as u32);
     let window = Region {
         x0: cx.saturating_sub(w / 2).min(i.width - w),
         y0: cy.saturating_sub(h / 2).min(i.height - h),
@@ -81,30 +83,23 @@ pub fn preview(rig: &Rig, m: &MouseInstance, noise: &DepthNoise, rng: &mut impl 
     }
     let labels = labels.upscale(zoom);
 
-    // The bottom view, cropped to the same on-screen size.
-    let bottom = render_bottom(&rig.color, m, &skin, 40, rng);
-    let mut bottom_img = RgbImage {
+    // The bottom view around the mouse (20 mm of margin), magnified to the same height, with
+    // the paws' boxes: green on the glass, amber lifted.
+    let margin = (20.0 * rig.color.intrinsics.fx / Rig::CAMERA_DISTANCE_MM).round() as u32;
+    let bottom = render_bottom(&rig.color, m, &skin, margin, rng);
+    let bottom_img = RgbImage {
         width: bottom.region.width,
         height: bottom.region.height,
         data: bottom.rgb.clone(),
     };
+    let k = ((h * zoom) / bottom_img.height.max(1)).max(1);
+    let mut bottom_img = bottom_img.upscale(k);
+    let kf = f64::from(k);
     for paw in &bottom.paws {
         let c = if paw.contact { [80, 255, 80] } else { [255, 200, 40] };
-        bottom_img.rect(
-            (
-                f64::from(paw.x0) - f64::from(bottom.region.x0),
-                f64::from(paw.y0) - f64::from(bottom.region.y0),
-            ),
-            (
-                f64::from(paw.x1) - f64::from(bottom.region.x0),
-                f64::from(paw.y1) - f64::from(bottom.region.y0),
-            ),
-            c,
-            1.0,
-        );
+        let x = |v: f32| (f64::from(v) - f64::from(bottom.region.x0)) * kf;
+        let y = |v: f32| (f64::from(v) - f64::from(bottom.region.y0)) * kf;
+        bottom_img.rect((x(paw.x0) - 1.0, y(paw.y0) - 1.0), (x(paw.x1) + 1.0, y(paw.y1) + 1.0), c, 1.0);
     }
-    let target_h = h * zoom;
-    let k = (target_h / bottom_img.height.max(1)).max(1);
-    let bottom_img = bottom_img.upscale(k);
     RgbImage::hstack(&[depth_img, labels, bottom_img], 6, [255, 255, 255])
 }

@@ -151,7 +151,7 @@ fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
         0
     };
     // One guaranteed drop per camera in longer sessions, and a rare random one.
-    let forced = |rng: &mut rand_chacha::ChaCha8Rng, n: u64| (n >= 40).then(|| rng.gen_range(n / 4..3 * n / 4));
+    let forced = |rng: &mut rand_chacha::ChaCha8Rng, n: u64| (n >= 20).then(|| rng.gen_range(n / 4..3 * n / 4));
     let forced_depth = forced(&mut clocks_rng, depth_count);
     let forced_color = forced(&mut clocks_rng, color_count);
 

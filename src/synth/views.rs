@@ -113,7 +113,7 @@ fn shade(camera: &Camera, scene: &Scene, hits: &Hits) -> Vec<[f32; 3]> {
             // The LEDs light what is close to the glass; fur a finger's width up is dim.
             let mut gain = (0.3 + 0.7 * diffuse) / (1.0 + height / 12.0);
             if material == Material::Paw && f64::from(height) < PAW_SOLE_MM * 2.0 + CONTACT_MM {
-                gain *= 1.15;
+                gain *= 1.4;
             }
             let a = albedo(material);
             out.push([a[0] * gain, a[1] * gain, a[2] * gain]);
