@@ -99,7 +99,12 @@ pub fn preview(rig: &Rig, m: &MouseInstance, noise: &DepthNoise, rng: &mut impl 
         let c = if paw.contact { [80, 255, 80] } else { [255, 200, 40] };
         let x = |v: f32| (f64::from(v) - f64::from(bottom.region.x0)) * kf;
         let y = |v: f32| (f64::from(v) - f64::from(bottom.region.y0)) * kf;
-        bottom_img.rect((x(paw.x0) - 1.0, y(paw.y0) - 1.0), (x(paw.x1) + 1.0, y(paw.y1) + 1.0), c, 1.0);
+        bottom_img.rect(
+            (x(paw.x0) - 1.0, y(paw.y0) - 1.0),
+            (x(paw.x1) + 1.0, y(paw.y1) + 1.0),
+            c,
+            1.0,
+        );
     }
     RgbImage::hstack(&[depth_img, labels, bottom_img], 6, [255, 255, 255])
 }
