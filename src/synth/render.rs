@@ -281,6 +281,17 @@ impl CamShape {
         }
     }
 
+    /// Whether the point `p` (camera frame) lies inside the solid.
+    fn contains(&self, p: &Vector3<f64>) -> bool {
+        match *self {
+            CamShape::Ellipsoid { to_unit, origin, .. } => (to_unit * p + origin).norm_squared() <= 1.0,
+            CamShape::Capsule { a, ba, baba, radius } => {
+                let t = ((p - a).dot(&ba) / baba).clamp(0.0, 1.0);
+                (p - (a + ba * t)).norm_squared() <= radius * radius
+            }
+        }
+    }
+
     /// Outward surface normal at a surface point `p` (camera frame).
     fn normal(&self, p: &Vector3<f64>) -> Vector3<f64> {
         match *self {
@@ -298,10 +309,17 @@ impl CamShape {
 }
 
 /// The skin of one mouse prepared for one camera.
+///
+/// The glass floor clips the skin: nothing lies below it, and a solid that reaches through it
+/// shows its flat contact patch to the camera underneath.
 #[derive(Clone, Debug)]
 pub struct Scene {
     primitives: Vec<CamPrimitive>,
     intrinsics: Intrinsics,
+    /// World up in the camera frame and the camera centre's height: a camera-frame point
+    /// `p` lies `up . p + height` above the floor.
+    up: Vector3<f64>,
+    height: f64,
     /// Index of each input primitive in `primitives` (`None` when it is out of view).
     pub visible: Vec<Option<usize>>,
     /// The pixels any primitive can cover.
@@ -328,9 +346,32 @@ impl Scene {
         Self {
             primitives,
             intrinsics: camera.intrinsics,
+            up: iso.rotation * Vector3::z(),
+            height: camera.centre().z,
             visible,
             bounds,
         }
+    }
+
+    #[inline]
+    fn height_of(&self, p: &Vector3<f64>) -> f64 {
+        self.up.dot(p) + self.height
+    }
+
+    /// The first hit of ray `d` on a primitive, clipped by the floor.
+    #[inline]
+    fn hit(&self, prim: &CamPrimitive, d: &Vector3<f64>) -> Option<f64> {
+        let t = prim.shape.intersect(d)?;
+        if self.height_of(&(d * t)) >= 0.0 {
+            return Some(t);
+        }
+        // The entry is under the glass: seen from below, the solid's cut by the floor plane.
+        let rate = self.up.dot(d);
+        if rate <= 1e-12 {
+            return None;
+        }
+        let t_floor = -self.height / rate;
+        (t_floor > t && prim.shape.contains(&(d * t_floor))).then_some(t_floor)
     }
 
     /// Casts every primitive over its pixels inside `region`, nearest hit wins.
@@ -343,7 +384,7 @@ impl Scene {
                 let row = (y - region.y0) as usize * stride;
                 for x in r.x0..r.x0 + r.width {
                     let d = self.intrinsics.ray(&Point2::new(f64::from(x), f64::from(y)));
-                    let Some(t) = prim.shape.intersect(&d) else {
+                    let Some(t) = self.hit(prim, &d) else {
                         continue;
                     };
                     // With d.z == 1, t is the depth along the optical axis.
@@ -366,7 +407,13 @@ impl Scene {
         let prim = self.primitives.get(usize::from(*hits.primitive.get(i)?))?;
         let d = self.intrinsics.ray(&Point2::new(f64::from(x), f64::from(y)));
         let p = d * f64::from(hits.z[i]);
-        Some((p, prim.shape.normal(&p), prim.material))
+        // On the floor's cut the surface faces straight down.
+        let normal = if self.height_of(&p) < 1e-3 {
+            -self.up
+        } else {
+            prim.shape.normal(&p)
+        };
+        Some((p, normal, prim.material))
     }
 
     /// The bounds `[u0, v0, u1, v1]` (pixels) of input primitive `index`'s projected bounding
