@@ -30,8 +30,111 @@ enum Command {
     /// Render synthetic training data and sessions.
     #[command(subcommand)]
     Synth(SynthCommand),
+    /// Train a forest on synthetic datasets.
+    Train(TrainArgs),
+    /// Evaluate a trained model on a held-back dataset.
+    Eval(EvalArgs),
+    /// Reproducible experiments from the paper.
+    #[command(subcommand)]
+    Experiment(ExperimentCommand),
     /// Measure the speed of mousepose's parts on this machine.
     Bench(BenchArgs),
+}
+
+/// What `train` and `eval` work on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModelTarget {
+    /// The body forest: joints 1-12 from the top depth image.
+    Body,
+    /// The part forest: six body-part labels per depth pixel.
+    Parts,
+}
+
+#[derive(Debug, Args)]
+pub struct TrainArgs {
+    /// Which model.
+    #[arg(value_enum)]
+    pub target: ModelTarget,
+    /// The training dataset (D_t).
+    #[arg(long, value_name = "DIR")]
+    pub data: PathBuf,
+    /// The model file to write.
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// Trees in the forest.
+    #[arg(long, default_value_t = 7, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub trees: u32,
+    /// Maximum tree depth (L).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=40))]
+    pub depth: u32,
+    /// Random tests per split node (m).
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub tests: u32,
+    /// Fewest samples to split a node (l_n).
+    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(2..=1_000_000))]
+    pub leaf: u32,
+    /// A second dataset (D_d) for the paper's discriminative training of the trained forest.
+    #[arg(long, value_name = "DIR")]
+    pub discriminative: Option<PathBuf>,
+    /// Passes of discriminative training.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=20))]
+    pub iterations: u32,
+    /// Tree level where discriminative training starts.
+    #[arg(long, default_value_t = 0)]
+    pub start_level: u32,
+    /// Mouse pixels drawn per training image.
+    #[arg(long, default_value_t = 150, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub pixels: u32,
+    /// Seed of the pixel draws and the random tests.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Replace the model file if it exists.
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// Which model.
+    #[arg(value_enum)]
+    pub target: ModelTarget,
+    /// The model file.
+    #[arg(long, value_name = "FILE")]
+    pub model: PathBuf,
+    /// The held-back test dataset.
+    #[arg(long, value_name = "DIR")]
+    pub data: PathBuf,
+    /// Write tables and PNG charts into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
+    /// A baseline model to compare against in the report (body).
+    #[arg(long, value_name = "FILE")]
+    pub baseline: Option<PathBuf>,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Subcommand)]
+enum ExperimentCommand {
+    /// The paper's running example: 2D Gaussians, baseline vs discriminative training.
+    Gauss2d(Gauss2dArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct Gauss2dArgs {
+    /// A tenth of the data and shorter sweeps (under a minute).
+    #[arg(long)]
+    pub quick: bool,
+    /// Seed of the Gaussians and all draws.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Write tables and PNG plots of the sweeps into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
+    /// Print one JSON object instead of tables.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -204,7 +307,7 @@ fn exit_code(e: &anyhow::Error) -> u8 {
         matches!(
             c.downcast_ref::<crate::output::OutputError>(),
             Some(crate::output::OutputError::NotEmpty(_) | crate::output::OutputError::NotADirectory(_))
-        )
+        ) || c.is::<crate::commands::Exists>()
     });
     if usage { 1 } else { 2 }
 }
@@ -213,6 +316,9 @@ fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Synth(SynthCommand::Dataset(args)) => synth_dataset(&args),
         Command::Synth(SynthCommand::Session(args)) => synth_session(&args),
+        Command::Train(args) => crate::commands::train(&args),
+        Command::Eval(args) => crate::commands::eval(&args),
+        Command::Experiment(ExperimentCommand::Gauss2d(args)) => crate::commands::gauss2d(&args),
         Command::Bench(args) => run_bench(&args),
     }
 }

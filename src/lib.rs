@@ -2,11 +2,16 @@
 //! camera under its glass floor. See `docs/ARCHITECTURE.md` for how the parts fit.
 
 pub mod bench;
+pub mod chart;
 pub mod cli;
+pub mod commands;
+pub mod experiment;
+pub mod forest;
 pub mod frame;
 pub mod geometry;
 pub mod image;
 pub mod kinematics;
+pub mod learn;
 pub mod output;
 pub mod pose;
 pub mod progress;

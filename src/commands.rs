@@ -1,0 +1,517 @@
+//! The offline commands that train, evaluate and experiment: `train`, `eval` and
+//! `experiment gauss2d`. Argument parsing is in [`crate::cli`].
+
+use crate::chart::{bar_chart, confusion_chart, line_chart};
+use crate::cli::{EvalArgs, Gauss2dArgs, ModelTarget, TrainArgs};
+use crate::experiment::gauss2d::{self, Setup};
+use crate::forest::discriminative::{DiscriminativeParams, Scoring};
+use crate::forest::infer::{BodyEstimator, VoteSettings};
+use crate::forest::model::{self, Model, ModelKind};
+use crate::forest::{Forest, TrainParams};
+use crate::learn::{self, PixelParams, Target, TrainJob, TrainProgress};
+use crate::progress;
+use anyhow::{Context, Result, bail};
+use indicatif::ProgressBar;
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::io::Write;
+use std::path::Path;
+
+/// Refused to overwrite a file; an argument problem (exit code 1).
+#[derive(Debug, thiserror::Error)]
+#[error("{0:?} exists (use --force to replace it)")]
+pub struct Exists(pub std::path::PathBuf);
+
+struct Bar(ProgressBar);
+
+impl TrainProgress for Bar {
+    fn stage(&self, what: &str, total: u64) {
+        self.0.set_message(what.to_owned());
+        self.0.set_length(total);
+        self.0.set_position(0);
+    }
+
+    fn tick(&self) {
+        self.0.inc(1);
+    }
+}
+
+fn print(text: &str) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_bytes())?;
+    out.flush()?;
+    Ok(())
+}
+
+fn print_json(value: &impl Serialize) -> Result<()> {
+    print(&format!("{}\n", serde_json::to_string_pretty(value)?))
+}
+
+fn write_report_file(dir: &Path, name: &str, bytes: &[u8]) -> Result<()> {
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).with_context(|| format!("writing {path:?}"))
+}
+
+fn report_dir(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating report directory {dir:?}"))
+}
+
+/// `mousepose train body|parts`.
+pub fn train(args: &TrainArgs) -> Result<()> {
+    if args.out.exists() && !args.force {
+        return Err(Exists(args.out.clone()).into());
+    }
+    let params = TrainParams {
+        trees: args.trees as usize,
+        max_depth: args.depth,
+        tests: args.tests as usize,
+        min_leaf: args.leaf as usize,
+        seed: args.seed,
+    };
+    let job = TrainJob {
+        target: match args.target {
+            ModelTarget::Body => Target::Body,
+            ModelTarget::Parts => Target::Parts,
+        },
+        train: &args.data,
+        discriminative: args.discriminative.as_deref(),
+        params,
+        disc: DiscriminativeParams {
+            tests: params.tests,
+            min_leaf: params.min_leaf,
+            start_level: args.start_level,
+            iterations: args.iterations as usize,
+            subset: 0.5,
+            scoring: Scoring::SubtreeError,
+            max_depth: params.max_depth,
+            seed: args.seed ^ 0xD15C,
+        },
+        pixels: PixelParams {
+            per_image: args.pixels as usize,
+            thresholds: 12,
+            seed: args.seed,
+        },
+    };
+    let bar = Bar(progress::bar(0, "loading"));
+    let (model, passes) = learn::train(&job, &bar).context("training")?;
+    bar.0.finish_and_clear();
+    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
+    }
+    model::save(&model, &args.out)?;
+    let info = model.info();
+    let (trees, nodes, leaves) = match &model {
+        Model::Body(_, f) => counts(f),
+        Model::Parts(_, f) => counts(f),
+    };
+    let changed: usize = passes.iter().map(|p| p.tests_changed).sum();
+    tracing::info!(
+        message = "Model written.",
+        path = %args.out.display(),
+        kind = info.kind.name(),
+        trees,
+        nodes,
+        leaves,
+        seconds = format!("{:.0}", info.training_seconds),
+        discriminative_tests_changed = changed,
+    );
+    Ok(())
+}
+
+fn counts<F, L>(f: &Forest<F, L>) -> (usize, usize, usize) {
+    (
+        f.trees.len(),
+        f.trees.iter().map(|t| t.nodes.len()).sum(),
+        f.trees.iter().map(|t| t.leaves.len()).sum(),
+    )
+}
+
+/// `mousepose eval body|parts`.
+pub fn eval(args: &EvalArgs) -> Result<()> {
+    let kind = match args.target {
+        ModelTarget::Body => ModelKind::Body,
+        ModelTarget::Parts => ModelKind::Parts,
+    };
+    let model = model::load(&args.model, Some(kind))?;
+    let (ds, samples) = learn::load(&args.data).with_context(|| format!("reading test dataset {:?}", args.data))?;
+    if samples.is_empty() {
+        bail!("test dataset {:?} has no images", args.data);
+    }
+    let rig = ds.meta.rig.unwrap_or_else(crate::geometry::Rig::default_rig);
+    if let Some(train_seed) = model.info().data.iter().find(|d| d.seed == ds.meta.seed) {
+        tracing::warn!(
+            message = "The test dataset has the seed of a training dataset; its figures are not held-back figures.",
+            seed = train_seed.seed,
+        );
+    }
+    match model {
+        Model::Body(_, forest) => eval_body(args, forest, &samples, &rig),
+        Model::Parts(_, forest) => eval_parts(args, &forest, &samples, &rig),
+    }
+}
+
+fn eval_body(
+    args: &EvalArgs,
+    forest: Forest<[f32; 2], crate::forest::depth::JointLeaf>,
+    samples: &[crate::synth::dataset::Sample],
+    rig: &crate::geometry::Rig,
+) -> Result<()> {
+    let estimator = BodyEstimator::new(forest, VoteSettings::default());
+    let report = learn::eval_body(&estimator, samples, rig, 0.0);
+    if let Some(dir) = &args.report {
+        report_dir(dir)?;
+        let names: Vec<String> = report.per_joint_mm.keys().cloned().collect();
+        let ours: Vec<f64> = report.per_joint_mm.values().copied().collect();
+        let mut series = Vec::new();
+        let baseline = match &args.baseline {
+            Some(path) => match model::load(path, Some(ModelKind::Body))? {
+                Model::Body(_, f) => Some(learn::eval_body(
+                    &BodyEstimator::new(f, VoteSettings::default()),
+                    samples,
+                    rig,
+                    0.0,
+                )),
+                Model::Parts(..) => None,
+            },
+            None => None,
+        };
+        let base_values: Vec<f64> = baseline
+            .as_ref()
+            .map(|b| b.per_joint_mm.values().copied().collect())
+            .unwrap_or_default();
+        if baseline.is_some() {
+            series.push(("baseline", [120, 120, 120], base_values.as_slice()));
+        }
+        series.push(("this model", [40, 90, 220], ours.as_slice()));
+        let chart = bar_chart("joint error per joint (mm)", "mm", &names, &series);
+        chart.write_png(&dir.join("joint_error.png"))?;
+        // Error against added Gaussian noise.
+        let sigmas = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0];
+        let noisy: Vec<f64> = sigmas
+            .iter()
+            .map(|&s| learn::eval_body(&estimator, samples, rig, s).mean_error_mm)
+            .collect();
+        line_chart(
+            "mean joint error vs depth noise",
+            "noise sigma (mm)",
+            "mm",
+            &sigmas,
+            &[("mean error", [200, 40, 40], &noisy)],
+        )
+        .write_png(&dir.join("error_vs_noise.png"))?;
+        let mut table = String::from("joint,error_mm");
+        if baseline.is_some() {
+            table.push_str(",baseline_mm");
+        }
+        table.push('\n');
+        for (k, name) in names.iter().enumerate() {
+            let _ = write!(table, "{name},{:.3}", ours[k]);
+            if let Some(b) = base_values.get(k) {
+                let _ = write!(table, ",{b:.3}");
+            }
+            table.push('\n');
+        }
+        write_report_file(dir, "joint_error.csv", table.as_bytes())?;
+        let mut noise_table = String::from("noise_mm,mean_error_mm\n");
+        for (s, e) in sigmas.iter().zip(&noisy) {
+            let _ = writeln!(noise_table, "{s},{e:.3}");
+        }
+        write_report_file(dir, "error_vs_noise.csv", noise_table.as_bytes())?;
+        write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    if args.json {
+        return print_json(&report);
+    }
+    let mut t = String::new();
+    let _ = writeln!(t, "{:<16} {:>9}", "joint", "error mm");
+    for (name, e) in &report.per_joint_mm {
+        let _ = writeln!(t, "{name:<16} {e:>9.2}");
+    }
+    let _ = writeln!(t, "{:<16} {:>9.2}", "mean (1-12)", report.mean_error_mm);
+    let _ = writeln!(t, "{} images, {} without a mouse found", report.images, report.no_mouse);
+    print(&t)
+}
+
+fn eval_parts(
+    args: &EvalArgs,
+    forest: &Forest<[f32; 2], Vec<f32>>,
+    samples: &[crate::synth::dataset::Sample],
+    rig: &crate::geometry::Rig,
+) -> Result<()> {
+    let report = learn::eval_parts(forest, samples, rig);
+    if let Some(dir) = &args.report {
+        report_dir(dir)?;
+        confusion_chart(
+            "part labels: confusion (% of true class)",
+            &report.classes,
+            &report.confusion,
+        )
+        .write_png(&dir.join("confusion.png"))?;
+        let mut table = String::from("truth\\predicted");
+        for c in &report.classes {
+            let _ = write!(table, ",{c}");
+        }
+        table.push('\n');
+        for (c, row) in report.classes.iter().zip(&report.confusion) {
+            let _ = write!(table, "{c}");
+            for v in row {
+                let _ = write!(table, ",{v}");
+            }
+            table.push('\n');
+        }
+        write_report_file(dir, "confusion.csv", table.as_bytes())?;
+        write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    if args.json {
+        return print_json(&report);
+    }
+    let mut t = String::new();
+    let _ = writeln!(t, "{:<12} {:>9}", "class", "accuracy");
+    for (name, a) in &report.per_class_accuracy {
+        let _ = writeln!(t, "{name:<12} {:>8.1}%", 100.0 * a);
+    }
+    let _ = writeln!(t, "{:<12} {:>8.1}%", "mean", 100.0 * report.mean_class_accuracy);
+    let _ = writeln!(t, "{:<12} {:>8.1}%", "all pixels", 100.0 * report.pixel_accuracy);
+    print(&t)
+}
+
+/// One point of a sweep.
+#[derive(Clone, Debug, Serialize)]
+struct SweepPoint {
+    value: f64,
+    baseline_accuracy: f64,
+    discriminative_accuracy: f64,
+}
+
+/// What `experiment gauss2d --json` prints.
+#[derive(Clone, Debug, Serialize)]
+struct Gauss2dReport {
+    setup: Setup,
+    bayes_accuracy: f64,
+    baseline_accuracy: f64,
+    union_baseline_accuracy: f64,
+    discriminative_gain_accuracy: f64,
+    discriminative_accuracy: f64,
+    paper: PaperFigures,
+    sweeps: std::collections::BTreeMap<String, Vec<SweepPoint>>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+struct PaperFigures {
+    baseline_accuracy: f64,
+    union_baseline_accuracy: f64,
+    discriminative_gain_accuracy: f64,
+    discriminative_accuracy: f64,
+}
+
+const PAPER: PaperFigures = PaperFigures {
+    baseline_accuracy: 0.794,
+    union_baseline_accuracy: 0.796,
+    discriminative_gain_accuracy: 0.804,
+    discriminative_accuracy: 0.812,
+};
+
+/// `mousepose experiment gauss2d`.
+pub fn gauss2d(args: &Gauss2dArgs) -> Result<()> {
+    let setup = Setup::new(args.quick, args.seed);
+    let steps = if args.quick { 26 } else { 36 };
+    let bar = progress::bar(steps, "gauss2d");
+    let blobs = gauss2d::blobs(setup.seed);
+    let d_t = gauss2d::sample(&blobs, setup.points, setup.seed, 0);
+    let d_d = gauss2d::sample(&blobs, setup.points, setup.seed, 1);
+    let d_e = gauss2d::sample(&blobs, setup.points, setup.seed, 2);
+    let acc = |f: &gauss2d::AxisForest| gauss2d::accuracy(f, &d_e);
+    let base = gauss2d::baseline(&d_t, &setup.train_params());
+    bar.inc(1);
+    let mut union_params = setup.train_params();
+    union_params.min_leaf *= 2;
+    let union = gauss2d::baseline(&d_t.union(&d_d), &union_params);
+    bar.inc(1);
+    let (disc_gain, _) = gauss2d::discriminative(&base, &d_d, &setup.discriminative_params(Scoring::Gain));
+    bar.inc(1);
+    let disc_params = setup.discriminative_params(Scoring::SubtreeError);
+    let (disc, _) = gauss2d::discriminative(&base, &d_d, &disc_params);
+    bar.inc(1);
+    let base_acc = acc(&base);
+    let mut sweeps = std::collections::BTreeMap::new();
+
+    // Forest size: trees are independent, so a k-tree forest is the first k of a larger one.
+    let sizes: Vec<usize> = if args.quick {
+        vec![1, 3, 5, 9]
+    } else {
+        vec![1, 3, 5, 7, 9, 13, 17]
+    };
+    let max_trees = sizes.iter().copied().max().unwrap_or(5);
+    let big = gauss2d::baseline(
+        &d_t,
+        &TrainParams {
+            trees: max_trees,
+            ..setup.train_params()
+        },
+    );
+    let (big_disc, _) = gauss2d::discriminative(&big, &d_d, &disc_params);
+    let first = |f: &gauss2d::AxisForest, k: usize| Forest {
+        trees: f.trees[..k].to_vec(),
+    };
+    sweeps.insert(
+        "forest_size".to_owned(),
+        sizes
+            .iter()
+            .map(|&k| {
+                bar.inc(1);
+                SweepPoint {
+                    value: k as f64,
+                    baseline_accuracy: acc(&first(&big, k)),
+                    discriminative_accuracy: acc(&first(&big_disc, k)),
+                }
+            })
+            .collect(),
+    );
+    let mut sweep = |name: &str, values: &[f64], set: &dyn Fn(&mut DiscriminativeParams, f64)| {
+        let points = values
+            .iter()
+            .map(|&v| {
+                let mut p = disc_params;
+                set(&mut p, v);
+                let (f, _) = gauss2d::discriminative(&base, &d_d, &p);
+                bar.inc(1);
+                SweepPoint {
+                    value: v,
+                    baseline_accuracy: base_acc,
+                    discriminative_accuracy: acc(&f),
+                }
+            })
+            .collect();
+        sweeps.insert(name.to_owned(), points);
+    };
+    let ms: &[f64] = if args.quick {
+        &[10.0, 50.0, 200.0, 640.0]
+    } else {
+        &[10.0, 20.0, 50.0, 100.0, 200.0, 320.0, 640.0]
+    };
+    sweep("m", ms, &|p, v| p.tests = v as usize);
+    let lns: &[f64] = if args.quick {
+        &[10.0, 60.0, 1000.0, 10000.0]
+    } else {
+        &[10.0, 30.0, 60.0, 250.0, 1000.0, 2500.0, 10000.0]
+    };
+    sweep("l_n", lns, &|p, v| p.min_leaf = v as usize);
+    let levels: &[f64] = if args.quick {
+        &[0.0, 4.0, 8.0, 12.0]
+    } else {
+        &[0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0]
+    };
+    sweep("start_level", levels, &|p, v| p.start_level = v as u32);
+    // Iterations: each pass refines the previous pass's forest with a fresh subset.
+    let iterations = if args.quick { 3 } else { 5 };
+    let mut forest = base.clone();
+    let mut points = vec![SweepPoint {
+        value: 0.0,
+        baseline_accuracy: base_acc,
+        discriminative_accuracy: base_acc,
+    }];
+    for it in 0..iterations {
+        forest = gauss2d::discriminative_from(
+            &forest,
+            &d_d,
+            &DiscriminativeParams {
+                iterations: 1,
+                ..disc_params
+            },
+            it,
+        )
+        .0;
+        bar.inc(1);
+        points.push(SweepPoint {
+            value: (it + 1) as f64,
+            baseline_accuracy: base_acc,
+            discriminative_accuracy: acc(&forest),
+        });
+    }
+    sweeps.insert("iterations".to_owned(), points);
+    bar.finish_and_clear();
+
+    let report = Gauss2dReport {
+        setup,
+        bayes_accuracy: gauss2d::bayes_accuracy(&blobs, &d_e),
+        baseline_accuracy: base_acc,
+        union_baseline_accuracy: acc(&union),
+        discriminative_gain_accuracy: acc(&disc_gain),
+        discriminative_accuracy: acc(&disc),
+        paper: PAPER,
+        sweeps,
+    };
+    if let Some(dir) = &args.report {
+        report_dir(dir)?;
+        write_report_file(dir, "gauss2d.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
+        write_report_file(dir, "gauss2d.txt", gauss2d_tables(&report).as_bytes())?;
+        for (name, points) in &report.sweeps {
+            let x: Vec<f64> = points.iter().map(|p| p.value).collect();
+            let b: Vec<f64> = points.iter().map(|p| p.baseline_accuracy).collect();
+            let d: Vec<f64> = points.iter().map(|p| p.discriminative_accuracy).collect();
+            line_chart(
+                &format!("gauss2d: accuracy vs {name}"),
+                name,
+                "accuracy",
+                &x,
+                &[("baseline", [120, 120, 120], &b), ("discriminative", [40, 90, 220], &d)],
+            )
+            .write_png(&dir.join(format!("sweep_{name}.png")))?;
+        }
+    }
+    if args.json {
+        return print_json(&report);
+    }
+    print(&gauss2d_tables(&report))
+}
+
+fn gauss2d_tables(r: &Gauss2dReport) -> String {
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "gauss2d: {} points per set, {} trees, L = {}, m = {}, l_n = {}, seed {}",
+        r.setup.points, r.setup.trees, r.setup.max_depth, r.setup.tests, r.setup.min_leaf, r.setup.seed
+    );
+    let _ = writeln!(t, "{:<44} {:>8} {:>8}", "forest", "ours", "paper");
+    let rows = [
+        ("baseline on D_t", r.baseline_accuracy, r.paper.baseline_accuracy),
+        (
+            "baseline on D_t u D_d, l_n doubled",
+            r.union_baseline_accuracy,
+            r.paper.union_baseline_accuracy,
+        ),
+        (
+            "discriminative, nodes scored by gain I",
+            r.discriminative_gain_accuracy,
+            r.paper.discriminative_gain_accuracy,
+        ),
+        (
+            "discriminative, subtrees scored by E",
+            r.discriminative_accuracy,
+            r.paper.discriminative_accuracy,
+        ),
+    ];
+    for (name, ours, paper) in rows {
+        let _ = writeln!(t, "{name:<44} {ours:>8.4} {paper:>8.3}");
+    }
+    let _ = writeln!(
+        t,
+        "{:<44} {:>8.4} {:>8}",
+        "Bayes-optimal (true densities)", r.bayes_accuracy, "-"
+    );
+    for (name, points) in &r.sweeps {
+        let _ = writeln!(
+            t,
+            "\nsweep {name}\n{:>10} {:>10} {:>15}",
+            name, "baseline", "discriminative"
+        );
+        for p in points {
+            let _ = writeln!(
+                t,
+                "{:>10} {:>10.4} {:>15.4}",
+                p.value, p.baseline_accuracy, p.discriminative_accuracy
+            );
+        }
+    }
+    t
+}

@@ -1,0 +1,3 @@
+//! Reproducible experiments from the paper.
+
+pub mod gauss2d;

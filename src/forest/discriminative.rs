@@ -1,0 +1,259 @@
+//! The paper's discriminative training (sec. 2): re-choose each split node's test of a trained
+//! tree, root first, among the current test and `m` fresh random tests, keeping the one under
+//! which the subtree rooted at the node does best on a second data set. A split node reached by
+//! at most `l_n` samples shrinks to a leaf; a leaf reached by more grows a subtree; other
+//! leaves are refitted to the samples that reach them.
+//!
+//! Scoring a candidate needs each sample's error under the existing subtrees: every sample's
+//! error is computed once through the left subtree and once through the right one, and a
+//! candidate's total error is then one pass choosing, per sample, the side its test sends it
+//! to. The current test is always a candidate and wins ties, so a node's error on its own
+//! samples never rises at the moment its test is chosen.
+
+use super::train::{Grower, best_split, partition};
+use super::{NOT_LEAF, Node, Objective, SplitSpace, TrainParams, Tree, node_rng};
+use serde::{Deserialize, Serialize};
+
+/// How a node's candidate tests are compared.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Scoring {
+    /// The paper's method: the real performance E of the subtree rooted at the node.
+    SubtreeError,
+    /// The weaker variant: the node's own gain I on the new samples.
+    Gain,
+}
+
+/// Parameters of discriminative training.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DiscriminativeParams {
+    /// Fresh random tests tried at each split node (m).
+    pub tests: usize,
+    /// The largest sample count that makes a leaf (l_n).
+    pub min_leaf: usize,
+    /// Nodes above this level keep their tests.
+    pub start_level: u32,
+    /// Passes over the tree, each with a fresh subset of the data set.
+    pub iterations: usize,
+    /// Fraction of D_d each tree sees per pass (D'_d).
+    pub subset: f64,
+    pub scoring: Scoring,
+    /// Depth limit for subtrees grown at leaves.
+    pub max_depth: u32,
+    pub seed: u64,
+}
+
+impl Default for DiscriminativeParams {
+    fn default() -> Self {
+        Self {
+            tests: 100,
+            min_leaf: 60,
+            start_level: 0,
+            iterations: 1,
+            subset: 0.5,
+            scoring: Scoring::SubtreeError,
+            max_depth: 20,
+            seed: 1,
+        }
+    }
+}
+
+/// What one pass changed, for reports and tests.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PassStats {
+    pub nodes_visited: usize,
+    pub tests_changed: usize,
+    pub shrunk: usize,
+    pub grown: usize,
+    /// Summed error of the samples at the nodes whose tests were re-chosen, before and after
+    /// the choice (after <= before at every node).
+    pub error_before: f64,
+    pub error_after: f64,
+}
+
+struct Refiner<'a, S: SplitSpace, O: Objective> {
+    space: &'a S,
+    objective: &'a O,
+    params: DiscriminativeParams,
+    tree_index: usize,
+    iteration: usize,
+    stats: PassStats,
+}
+
+impl<S: SplitSpace, O: Objective> Refiner<'_, S, O> {
+    /// The error of `sample` under the subtree rooted at `node`.
+    fn subtree_error(&self, tree: &Tree<S::Feature, O::Leaf>, node: usize, sample: u32) -> f64 {
+        let mut i = node;
+        loop {
+            let n = &tree.nodes[i];
+            if n.is_leaf() {
+                return self.objective.error(&tree.leaves[n.leaf as usize], sample);
+            }
+            i = n.left as usize + usize::from(self.space.value(sample, &n.feature) <= n.threshold);
+        }
+    }
+
+    fn grower(&self) -> Grower<'_, S, O> {
+        Grower {
+            space: self.space,
+            objective: self.objective,
+            params: TrainParams {
+                trees: 1,
+                max_depth: self.params.max_depth,
+                tests: self.params.tests,
+                min_leaf: self.params.min_leaf,
+                seed: self.params.seed ^ (self.iteration as u64).wrapping_mul(0x5851_F42D),
+            },
+            tree_index: self.tree_index,
+        }
+    }
+
+    fn refine(
+        &mut self,
+        tree: &mut Tree<S::Feature, O::Leaf>,
+        node: usize,
+        samples: &mut [u32],
+        depth: u32,
+        path: u64,
+    ) {
+        let current = tree.nodes[node];
+        if current.is_leaf() {
+            if samples.len() > self.params.min_leaf && depth < self.params.max_depth {
+                // Grow a subtree in the leaf's place (its old payload stays, unreachable).
+                self.grower().grow(tree, node, samples, depth, path);
+                self.stats.grown += 1;
+            } else if !samples.is_empty() && depth >= self.params.start_level {
+                let leaf = current.leaf as usize;
+                tree.leaves[leaf] = self.objective.refit(&tree.leaves[leaf], samples);
+            }
+            return;
+        }
+        if samples.is_empty() {
+            // Nothing here to learn from: the subtree keeps what the first data set taught it.
+            return;
+        }
+        if depth >= self.params.start_level {
+            if samples.len() <= self.params.min_leaf {
+                let leaf = tree.leaves.len() as u32;
+                tree.leaves.push(self.objective.leaf(samples));
+                tree.nodes[node] = Node {
+                    feature: current.feature,
+                    threshold: 0.0,
+                    left: 0,
+                    leaf,
+                };
+                self.stats.shrunk += 1;
+                return;
+            }
+            self.choose_test(tree, node, samples, depth, path);
+        }
+        let chosen = tree.nodes[node];
+        let n_left = partition(self.space, samples, &chosen.feature, chosen.threshold);
+        let (l, r) = samples.split_at_mut(n_left);
+        let left = chosen.left as usize;
+        self.refine(tree, left, l, depth + 1, path.wrapping_mul(2));
+        self.refine(tree, left + 1, r, depth + 1, path.wrapping_mul(2).wrapping_add(1));
+    }
+
+    fn choose_test(
+        &mut self,
+        tree: &mut Tree<S::Feature, O::Leaf>,
+        node: usize,
+        samples: &[u32],
+        depth: u32,
+        path: u64,
+    ) {
+        let current = tree.nodes[node];
+        let seed = self.params.seed ^ (self.iteration as u64 + 1).wrapping_mul(0x9E37_79B9);
+        let mut rng = node_rng(seed, self.tree_index, path);
+        let fresh = self.space.candidates(depth, samples, self.params.tests, &mut rng);
+        self.stats.nodes_visited += 1;
+        let (feature, threshold) = match self.params.scoring {
+            Scoring::SubtreeError => {
+                let left = current.left as usize;
+                let (err_l, err_r): (Vec<f64>, Vec<f64>) = samples
+                    .iter()
+                    .map(|&s| (self.subtree_error(tree, left, s), self.subtree_error(tree, left + 1, s)))
+                    .unzip();
+                let total = |feature: &S::Feature, threshold: f32| -> f64 {
+                    samples
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &s)| {
+                            if self.space.value(s, feature) > threshold {
+                                err_l[i]
+                            } else {
+                                err_r[i]
+                            }
+                        })
+                        .sum()
+                };
+                let before = total(&current.feature, current.threshold);
+                let mut best = (before, current.feature, current.threshold);
+                // Up to m fresh tests in all, spread over the drawn features.
+                let per_feature = (self.params.tests / fresh.len().max(1)).max(1);
+                for (f, thresholds) in &fresh {
+                    for &t in thresholds.iter().take(per_feature) {
+                        let e = total(f, t);
+                        if e < best.0 {
+                            best = (e, *f, t);
+                        }
+                    }
+                }
+                self.stats.error_before += before;
+                self.stats.error_after += best.0;
+                (best.1, best.2)
+            }
+            Scoring::Gain => {
+                let mut all = fresh;
+                all.insert(0, (current.feature, vec![current.threshold]));
+                match best_split(self.space, self.objective, samples, &all) {
+                    Some((f, t, _)) => (f, t),
+                    None => (current.feature, current.threshold),
+                }
+            }
+        };
+        if current.threshold.to_bits() != threshold.to_bits() || current.feature != feature {
+            self.stats.tests_changed += 1;
+        }
+        tree.nodes[node] = Node {
+            feature,
+            threshold,
+            left: current.left,
+            leaf: NOT_LEAF,
+        };
+    }
+}
+
+/// One pass of discriminative training of one tree on `samples` (reordered in place).
+pub fn refine_tree<S: SplitSpace, O: Objective>(
+    space: &S,
+    objective: &O,
+    tree: &mut Tree<S::Feature, O::Leaf>,
+    samples: &mut [u32],
+    params: &DiscriminativeParams,
+    tree_index: usize,
+    iteration: usize,
+) -> PassStats {
+    let mut refiner = Refiner {
+        space,
+        objective,
+        params: *params,
+        tree_index,
+        iteration,
+        stats: PassStats::default(),
+    };
+    refiner.refine(tree, 0, samples, 0, 1);
+    tree.compact();
+    refiner.stats
+}
+
+/// Draws tree `t`'s subset D'_d of `pool` for pass `iteration`.
+pub fn subset(pool: &[u32], fraction: f64, seed: u64, tree: usize, iteration: usize) -> Vec<u32> {
+    use rand::Rng;
+    let mut rng = node_rng(seed ^ 0xD15C, tree, iteration as u64 + 1);
+    pool.iter()
+        .copied()
+        .filter(|_| rng.gen_bool(fraction.clamp(0.0, 1.0)))
+        .collect()
+}

@@ -1,0 +1,273 @@
+//! The forest library: training, discriminative training, model files and determinism.
+
+use crate::util::repo_root;
+use mousepose::forest::classify::{ClassObjective, argmax};
+use mousepose::forest::discriminative::{DiscriminativeParams, Scoring, refine_tree};
+use mousepose::forest::model::{self, Model, ModelError, ModelKind};
+use mousepose::forest::train::{train_forest, train_tree};
+use mousepose::forest::{SplitSpace, TrainParams};
+use mousepose::learn::{PixelParams, Target, TrainJob, TrainProgress};
+use rand::Rng;
+
+/// Points in the unit square; features are the two coordinates, thresholds uniform.
+struct Xy<'a>(&'a [[f32; 2]]);
+
+impl SplitSpace for Xy<'_> {
+    type Feature = u8;
+    fn value(&self, s: u32, f: &u8) -> f32 {
+        self.0[s as usize][usize::from(*f)]
+    }
+    fn candidates(&self, _depth: u32, s: &[u32], m: usize, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<(u8, Vec<f32>)> {
+        (0..m)
+            .map(|_| {
+                let f = rng.gen_range(0..2u8);
+                let values = s.iter().map(|&i| self.value(i, &f));
+                let lo = values.clone().fold(f32::INFINITY, f32::min);
+                let hi = values.fold(f32::NEG_INFINITY, f32::max);
+                (f, mousepose::forest::uniform_thresholds(lo, hi, 4, rng))
+            })
+            .collect()
+    }
+}
+
+fn points(n: usize, seed: u64) -> Vec<[f32; 2]> {
+    let mut rng = mousepose::synth::item_rng(seed, 0, 0);
+    (0..n)
+        .map(|_| [rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0)])
+        .collect()
+}
+
+#[test]
+fn a_tree_separates_separable_data() {
+    let xy = points(4000, 1);
+    // Two classes split by a diagonal staircase: separable by axis-aligned cuts.
+    let labels: Vec<u8> = xy
+        .iter()
+        .map(|p| u8::from(p[0] > 0.3 && p[1] > 0.6 || p[0] > 0.7))
+        .collect();
+    let space = Xy(&xy);
+    let objective = ClassObjective {
+        labels: &labels,
+        classes: 2,
+    };
+    let params = TrainParams {
+        trees: 1,
+        max_depth: 20,
+        tests: 50,
+        min_leaf: 2,
+        seed: 3,
+    };
+    let mut all: Vec<u32> = (0..xy.len() as u32).collect();
+    let tree = train_tree(&space, &objective, &mut all, &params, 0, 0);
+    for (i, &l) in labels.iter().enumerate() {
+        let predicted = argmax(tree.leaf(|f| space.value(i as u32, f)));
+        assert_eq!(predicted, usize::from(l), "point {:?}", xy[i]);
+    }
+}
+
+#[test]
+fn discriminative_training_never_raises_a_nodes_error() {
+    let xy = points(6000, 2);
+    let noisy =
+        |p: &[f32; 2], k: usize| u8::from((p[0] - 0.5).powi(2) + (p[1] - 0.5).powi(2) < 0.1) ^ u8::from(k % 7 == 0);
+    let labels: Vec<u8> = xy.iter().enumerate().map(|(k, p)| noisy(p, k)).collect();
+    let space = Xy(&xy);
+    let objective = ClassObjective {
+        labels: &labels,
+        classes: 2,
+    };
+    let params = TrainParams {
+        trees: 1,
+        max_depth: 10,
+        tests: 10,
+        min_leaf: 20,
+        seed: 5,
+    };
+    let mut train: Vec<u32> = (0..3000).collect();
+    let mut tree = train_tree(&space, &objective, &mut train, &params, 0, 0);
+    for scoring in [Scoring::SubtreeError, Scoring::Gain] {
+        let disc = DiscriminativeParams {
+            tests: 10,
+            min_leaf: 20,
+            scoring,
+            max_depth: 10,
+            ..DiscriminativeParams::default()
+        };
+        let mut second: Vec<u32> = (3000..6000).collect();
+        let stats = refine_tree(&space, &objective, &mut tree, &mut second, &disc, 0, 0);
+        assert!(stats.error_after <= stats.error_before, "{stats:?}");
+        if scoring == Scoring::SubtreeError {
+            assert!(stats.nodes_visited > 0);
+        }
+        // The tree is still whole after shrinking and growing.
+        for i in 0..6000u32 {
+            let _ = tree.leaf(|f| space.value(i, f));
+        }
+    }
+}
+
+struct Quiet;
+impl TrainProgress for Quiet {
+    fn stage(&self, _: &str, _: u64) {}
+    fn tick(&self) {}
+}
+
+fn small_job(target: Target, discriminative: bool) -> TrainJob<'static> {
+    let data: &'static std::path::Path = Box::leak(repo_root().join("fixtures/datasets/small").into_boxed_path());
+    TrainJob {
+        target,
+        train: data,
+        discriminative: discriminative.then_some(data),
+        params: TrainParams {
+            trees: 3,
+            max_depth: 8,
+            tests: 20,
+            min_leaf: 20,
+            seed: 9,
+        },
+        disc: DiscriminativeParams {
+            tests: 20,
+            min_leaf: 20,
+            max_depth: 8,
+            ..DiscriminativeParams::default()
+        },
+        pixels: PixelParams {
+            per_image: 60,
+            thresholds: 6,
+            seed: 9,
+        },
+    }
+}
+
+fn encoded(target: Target, discriminative: bool, threads: usize) -> Vec<u8> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("pool");
+    let (model, _) = pool
+        .install(|| mousepose::learn::train(&small_job(target, discriminative), &Quiet))
+        .expect("trains");
+    let mut bytes = model::encode(&model).expect("encodes");
+    // The description records the training time (and the checksum covers it): compare the
+    // trees only.
+    let desc_len = u32::from_le_bytes(bytes[16..20].try_into().expect("4 bytes")) as usize;
+    bytes.truncate(bytes.len() - 4);
+    bytes.drain(..20 + desc_len);
+    bytes
+}
+
+#[test]
+fn training_is_reproducible_whatever_the_thread_count() {
+    for (target, disc) in [(Target::Body, false), (Target::Body, true), (Target::Parts, false)] {
+        let one = encoded(target, disc, 1);
+        assert!(
+            one == encoded(target, disc, 1),
+            "{target:?} {disc}: differs between runs"
+        );
+        assert!(
+            one == encoded(target, disc, 2),
+            "{target:?} {disc}: differs with two threads"
+        );
+    }
+}
+
+#[test]
+fn a_regression_forest_recovers_a_constant_offset() {
+    use mousepose::forest::depth::{DepthImage, DepthSpace, JointObjective, JointTargets, PixelSet};
+    use mousepose::synth::render::Region;
+    // One flat image; every pixel is 5 mm from every joint, in the same direction.
+    let region = Region {
+        x0: 100,
+        y0: 100,
+        width: 40,
+        height: 30,
+    };
+    let image = DepthImage {
+        region,
+        depth: vec![550.0; region.len()],
+    };
+    let mut set = PixelSet {
+        images: vec![image],
+        ..PixelSet::default()
+    };
+    let mut targets = JointTargets::default();
+    for y in 100..130 {
+        for x in 100..140 {
+            set.image.push(0);
+            set.x.push(x as f32);
+            set.y.push(y as f32);
+            set.depth.push(550.0);
+            targets.offsets.push([[3.0, -4.0, 0.0]; 12]);
+            targets.near.push(0x0FFF);
+        }
+    }
+    let space = DepthSpace {
+        pixels: &set,
+        thresholds: 4,
+    };
+    let objective = JointObjective { targets: &targets };
+    let params = TrainParams {
+        trees: 2,
+        max_depth: 6,
+        tests: 10,
+        min_leaf: 10,
+        seed: 1,
+    };
+    let all: Vec<u32> = (0..set.len() as u32).collect();
+    let forest = train_forest(&space, &objective, vec![all; 2], &params, [0.0; 2], &|| {});
+    for t in &forest.trees {
+        for leaf in &t.leaves {
+            for v in leaf {
+                assert!(
+                    (v.offset[0] - 3.0).abs() < 1e-4 && (v.offset[1] + 4.0).abs() < 1e-4 && v.offset[2].abs() < 1e-4
+                );
+                assert!((v.weight - 1.0).abs() < 1e-6);
+            }
+        }
+    }
+}
+
+#[test]
+fn model_files_round_trip_and_damage_is_refused() {
+    let (model, _) = mousepose::learn::train(&small_job(Target::Body, false), &Quiet).expect("trains");
+    let dir = tempfile::tempdir().expect("tmp");
+    let path = dir.path().join("body.forest");
+    model::save(&model, &path).expect("saves");
+    let back = model::load(&path, Some(ModelKind::Body)).expect("loads");
+    assert_eq!(back, model);
+    assert!(matches!(
+        model::load(&path, Some(ModelKind::Parts)),
+        Err(ModelError::WrongKind { .. })
+    ));
+
+    let bytes = std::fs::read(&path).expect("read");
+    let check = |bytes: &[u8]| model::decode(bytes, &path, None);
+    // Truncated anywhere: an error, never a panic.
+    for cut in [0, 7, 8, 12, 20, 40, bytes.len() / 2, bytes.len() - 1] {
+        let e = check(&bytes[..cut]).expect_err("truncated");
+        assert!(
+            matches!(e, ModelError::Corrupt { .. } | ModelError::Foreign { .. }),
+            "{e}"
+        );
+    }
+    // A flipped byte in the description or the trees.
+    for at in [30, bytes.len() / 2, bytes.len() - 10] {
+        let mut b = bytes.clone();
+        b[at] ^= 0x40;
+        assert!(matches!(check(&b), Err(ModelError::Corrupt { .. })), "byte {at}");
+    }
+    // A foreign file and a newer version.
+    assert!(matches!(
+        check(b"\x89PNG\r\n\x1a\nnot a model"),
+        Err(ModelError::Foreign { .. })
+    ));
+    let mut newer = bytes.clone();
+    newer[8] = 99;
+    assert!(matches!(check(&newer), Err(ModelError::Version { version: 99, .. })));
+    let message = check(&bytes[..100]).expect_err("short").to_string();
+    assert!(
+        message.contains("body.forest") && message.contains("damaged"),
+        "{message}"
+    );
+    let _: Option<&Model> = None;
+}
