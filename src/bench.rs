@@ -24,6 +24,23 @@ pub struct BenchReport {
     pub mean_region_px: f64,
     /// Dataset samples with bottom views per second on all cores, encoded and compressed.
     pub dataset_samples_per_s: f64,
+    /// Body forest training throughput on all cores: training pixels times trees per second.
+    pub train_pixel_trees_per_s: f64,
+    /// Body forest inference with the bundled model (when present), one core.
+    pub forest: Option<ForestBench>,
+}
+
+/// Speed of the bundled body forest on one core.
+#[derive(Clone, Debug, Serialize)]
+pub struct ForestBench {
+    pub model: String,
+    pub trees: usize,
+    /// Mouse pixels per frame in the measurement.
+    pub pixels_per_frame: f64,
+    /// All of a frame's mouse pixels through every tree to a leaf, ms.
+    pub traverse_ms_per_frame: f64,
+    /// The run-time estimate (sampled pixels, votes, aggregation), ms.
+    pub estimate_ms_per_frame: f64,
 }
 
 impl BenchReport {
@@ -35,6 +52,7 @@ impl BenchReport {
             ("render depth images/s, all cores", self.render_depth_images_per_s),
             ("mean rendered region, pixels", self.mean_region_px),
             ("dataset samples/s with bottom views", self.dataset_samples_per_s),
+            ("training pixel-trees/s, all cores", self.train_pixel_trees_per_s),
         ];
         let _ = writeln!(
             s,
@@ -44,6 +62,29 @@ impl BenchReport {
         );
         for (name, v) in rows {
             let _ = writeln!(s, "{name:<40} {v:>12.1}");
+        }
+        match &self.forest {
+            Some(f) => {
+                let _ = writeln!(
+                    s,
+                    "{:<40} {:>12.1}",
+                    format!("mouse pixels per frame ({} trees)", f.trees),
+                    f.pixels_per_frame
+                );
+                let _ = writeln!(
+                    s,
+                    "{:<40} {:>12.3}",
+                    "forest traversal ms/frame, 1 core", f.traverse_ms_per_frame
+                );
+                let _ = writeln!(
+                    s,
+                    "{:<40} {:>12.3}",
+                    "body estimate ms/frame, 1 core", f.estimate_ms_per_frame
+                );
+            }
+            None => {
+                let _ = writeln!(s, "(no bundled body model found: forest inference not measured)");
+            }
         }
         s
     }
@@ -94,11 +135,130 @@ pub fn run(quick: bool) -> BenchReport {
             .into_par_iter()
             .for_each(|i| drop(encode_sample(&render_sample(&rig, &with_bottom, &library, i))));
     });
+    let train_pixel_trees_per_s = bench_training(&rig, &library, quick);
+    let forest = bench_forest(&rig, &library, quick);
     BenchReport {
+        train_pixel_trees_per_s,
+        forest,
         threads: rayon::current_num_threads(),
         render_depth_images_per_s_one_core: one,
         render_depth_images_per_s: all,
         mean_region_px: pixels as f64 / (n / 2).max(1) as f64,
         dataset_samples_per_s: samples,
     }
+}
+
+/// Trains a small body forest on freshly rendered images and returns pixel-trees per second.
+fn bench_training(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: bool) -> f64 {
+    use crate::forest::TrainParams;
+    use crate::forest::depth::{DepthSpace, JointObjective};
+    use crate::learn::{PixelParams, draw_pixels, joint_targets};
+    let images = if quick { 100 } else { 600 };
+    let spec = DatasetSpec {
+        count: images,
+        seed: 0x7EA1,
+        noise: DepthNoise {
+            model: NoiseModel::StructuredLight,
+            gaussian_mm: 0.0,
+        },
+        bottom_views: false,
+    };
+    let samples: Vec<_> = (0..images)
+        .into_par_iter()
+        .map(|i| render_sample(rig, &spec, library, i))
+        .collect();
+    let pixels = PixelParams::default();
+    let set = draw_pixels(&samples, rig, &pixels);
+    let targets = joint_targets(&set, &samples, rig);
+    let params = TrainParams {
+        trees: 2,
+        ..TrainParams::default()
+    };
+    let all: Vec<u32> = (0..set.len() as u32).collect();
+    let space = DepthSpace {
+        pixels: &set,
+        thresholds: pixels.thresholds,
+    };
+    let objective = JointObjective { targets: &targets };
+    rate((set.len() * params.trees) as u64, || {
+        drop(crate::forest::train::train_forest(
+            &space,
+            &objective,
+            vec![all; params.trees],
+            &params,
+            [0.0; 2],
+            &|| {},
+        ));
+    })
+}
+
+/// Where the bundled body model is looked for: the checkout's fixtures.
+pub fn bundled_body_model() -> Option<std::path::PathBuf> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/models/body.forest");
+    path.exists().then_some(path)
+}
+
+fn bench_forest(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: bool) -> Option<ForestBench> {
+    use crate::forest::infer::{BodyEstimator, Pixel, VoteSettings, sample_pixels};
+    use crate::forest::model::{Model, ModelKind, load};
+    let path = bundled_body_model()?;
+    let Ok(Model::Body(_, forest)) = load(&path, Some(ModelKind::Body)) else {
+        return None;
+    };
+    let spec = DatasetSpec {
+        count: 50,
+        seed: 0xB0D1,
+        noise: DepthNoise {
+            model: NoiseModel::StructuredLight,
+            gaussian_mm: 0.0,
+        },
+        bottom_views: false,
+    };
+    let frames: Vec<_> = (0..50)
+        .map(|i| {
+            let s = render_sample(rig, &spec, library, i);
+            crate::learn::depth_image(&s, rig, 0.0, 0)
+        })
+        .collect();
+    let trees = forest.trees.len();
+    let mut estimator = BodyEstimator::new(forest, VoteSettings::default());
+    let all: Vec<Vec<Pixel>> = frames
+        .iter()
+        .map(|f| {
+            let mut p = Vec::new();
+            sample_pixels(f, usize::MAX, &mut p);
+            p
+        })
+        .collect();
+    let rounds = if quick { 2 } else { 10 };
+    let mut sink = 0usize;
+    let traverse = Instant::now();
+    for _ in 0..rounds {
+        for (f, pixels) in frames.iter().zip(&all) {
+            for px in pixels {
+                for t in &estimator.forest.trees {
+                    sink = sink.wrapping_add(t.leaf_index(|u| f.feature(px.x, px.y, px.depth, u)));
+                }
+            }
+        }
+    }
+    let traverse_ms = traverse.elapsed().as_secs_f64() * 1000.0 / (rounds * frames.len()) as f64;
+    let mut buffer = Vec::new();
+    let estimate = Instant::now();
+    for _ in 0..rounds {
+        for f in &frames {
+            sample_pixels(f, crate::learn::VOTE_BUDGET, &mut buffer);
+            let guesses = estimator.estimate(f, &buffer, &rig.depth.intrinsics);
+            sink = sink.wrapping_add(guesses.iter().flatten().count());
+        }
+    }
+    let estimate_ms = estimate.elapsed().as_secs_f64() * 1000.0 / (rounds * frames.len()) as f64;
+    std::hint::black_box(sink);
+    Some(ForestBench {
+        model: path.display().to_string(),
+        trees,
+        pixels_per_frame: all.iter().map(Vec::len).sum::<usize>() as f64 / all.len() as f64,
+        traverse_ms_per_frame: traverse_ms,
+        estimate_ms_per_frame: estimate_ms,
+    })
 }

@@ -73,7 +73,7 @@ type ImagePixels = (DepthImage, Vec<(f32, f32, f32)>);
 
 /// Training pixels of a set of samples, with what each pixel's targets need: the image index,
 /// its pixel, and the sample it came from.
-fn draw_pixels(samples: &[Sample], rig: &Rig, params: &PixelParams) -> PixelSet {
+pub fn draw_pixels(samples: &[Sample], rig: &Rig, params: &PixelParams) -> PixelSet {
     let per: Vec<ImagePixels> = samples
         .par_iter()
         .map(|s| {
@@ -110,7 +110,7 @@ fn draw_pixels(samples: &[Sample], rig: &Rig, params: &PixelParams) -> PixelSet 
 }
 
 /// The offsets of every training pixel to the main-body joints (camera frame).
-fn joint_targets(set: &PixelSet, samples: &[Sample], rig: &Rig) -> JointTargets {
+pub fn joint_targets(set: &PixelSet, samples: &[Sample], rig: &Rig) -> JointTargets {
     let cam = rig.depth.camera_from_world();
     let joints_cam: Vec<[nalgebra::Point3<f64>; BODY_JOINTS]> = samples
         .iter()

@@ -296,3 +296,101 @@ fn an_interrupted_run_leaves_nothing_that_looks_complete() {
         "{leftovers:?}"
     );
 }
+
+#[test]
+fn train_and_eval_body_and_parts_on_the_fixture_dataset() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let data = crate::util::repo_root().join("fixtures/datasets/small");
+    let data = data.to_str().expect("utf-8");
+    let body = tmp.path().join("body.forest");
+    let small = ["--trees", "2", "--depth", "6", "--tests", "10", "--pixels", "30"];
+    let o = run(&[
+        &["train", "body", "--data", data, "--out", body.to_str().unwrap()][..],
+        &small,
+    ]
+    .concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    // A model is never overwritten silently.
+    let o = run(&[
+        &["train", "body", "--data", data, "--out", body.to_str().unwrap()][..],
+        &small,
+    ]
+    .concat());
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--force"));
+
+    let report = tmp.path().join("report");
+    let o = run(&[
+        "eval",
+        "body",
+        "--model",
+        body.to_str().unwrap(),
+        "--data",
+        data,
+        "--json",
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert!(v["mean_error_mm"].as_f64().is_some_and(|e| e > 0.0 && e < 100.0), "{v}");
+    let per_joint = v["per_joint_mm"].as_object().expect("per_joint_mm");
+    assert_eq!(per_joint.len(), 12);
+    assert!(per_joint.contains_key("snout") && per_joint.contains_key("right_hip"));
+    assert!(report.join("joint_error.png").exists() && report.join("error_vs_noise.png").exists());
+
+    let parts = tmp.path().join("parts.forest");
+    let o = run(&[
+        &[
+            "train",
+            "parts",
+            "--data",
+            data,
+            "--out",
+            parts.to_str().unwrap(),
+            "--discriminative",
+            data,
+        ][..],
+        &small,
+    ]
+    .concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run(&[
+        "eval",
+        "parts",
+        "--model",
+        parts.to_str().unwrap(),
+        "--data",
+        data,
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert_eq!(
+        v["per_class_accuracy"].as_object().expect("per_class_accuracy").len(),
+        6
+    );
+
+    // The wrong kind of model, a damaged one and a foreign file: one clear sentence each.
+    let o = run(&["eval", "parts", "--model", body.to_str().unwrap(), "--data", data]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("holds a body forest, expected a part forest"),
+        "{}",
+        stderr(&o)
+    );
+    let damaged = tmp.path().join("damaged.forest");
+    let mut bytes = fs::read(&body).expect("read");
+    bytes.truncate(bytes.len() / 2);
+    fs::write(&damaged, bytes).expect("write");
+    let o = run(&["eval", "body", "--model", damaged.to_str().unwrap(), "--data", data]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("damaged.forest") && stderr(&o).contains("damaged"),
+        "{}",
+        stderr(&o)
+    );
+    let o = run(&["eval", "body", "--model", data, "--data", data]);
+    assert_ne!(o.status.code(), Some(0));
+    assert!(!stderr(&o).contains("panicked"));
+}

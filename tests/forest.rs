@@ -271,3 +271,40 @@ fn model_files_round_trip_and_damage_is_refused() {
     );
     let _: Option<&Model> = None;
 }
+
+#[test]
+fn gauss2d_runs_end_to_end_at_small_scale() {
+    use mousepose::experiment::gauss2d::{accuracy, baseline, bayes_accuracy, blobs, discriminative, sample};
+    let b = blobs(1);
+    let (d_t, d_d, d_e) = (
+        sample(&b, 20_000, 1, 0),
+        sample(&b, 20_000, 1, 1),
+        sample(&b, 20_000, 1, 2),
+    );
+    let params = TrainParams {
+        trees: 3,
+        max_depth: 20,
+        tests: 50,
+        min_leaf: 60,
+        seed: 1,
+    };
+    let base = baseline(&d_t, &params);
+    let disc = DiscriminativeParams {
+        tests: 50,
+        min_leaf: 60,
+        max_depth: 20,
+        ..DiscriminativeParams::default()
+    };
+    let (refined, stats) = discriminative(&base, &d_d, &disc);
+    let (a, r, bayes) = (
+        accuracy(&base, &d_e),
+        accuracy(&refined, &d_e),
+        bayes_accuracy(&b, &d_e),
+    );
+    assert!(a > 0.6 && r > 0.6, "baseline {a}, discriminative {r}");
+    assert!(
+        a <= bayes + 0.01 && r <= bayes + 0.01,
+        "no classifier beats Bayes: {a} {r} {bayes}"
+    );
+    assert!(stats.error_after <= stats.error_before);
+}

@@ -43,8 +43,8 @@ pub struct VoteSettings {
 impl Default for VoteSettings {
     fn default() -> Self {
         Self {
-            max_spread_mm2: 400.0,
-            bandwidth_mm: 8.0,
+            max_spread_mm2: 200.0,
+            bandwidth_mm: 6.0,
             iterations: 8,
         }
     }

@@ -11,8 +11,9 @@
 //! ..  4  CRC-32 of every byte before it
 //! ```
 //! Trees: u32 tree count; per tree u32 node count, nodes (f32 ux, f32 uy, f32 threshold, u32
-//! left, u32 leaf), u32 leaf count, leaves (body: 12 x (3 f32 offset, f32 weight, f32 spread);
-//! parts: 6 f32 class probabilities). All little-endian.
+//! left, u32 leaf), u32 leaf count, leaves (body: u16 mask of the joints the leaf votes for,
+//! then per voted joint 3 f32 offset, f32 weight, f32 spread; parts: 6 f32 class
+//! probabilities). All little-endian.
 //!
 //! Reading checks everything a damaged or foreign file could break: the magic, the version,
 //! the kind, the checksum, every length against what is left, and every child and leaf index
@@ -175,7 +176,14 @@ pub fn encode(model: &Model) -> Result<Vec<u8>, String> {
         Model::Body(info, f) => (
             info,
             encode_trees(f, |out, leaf: &JointLeaf| {
-                for v in leaf {
+                // Sparse: a bit mask of the joints the leaf votes for, then their votes.
+                let mask = leaf
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, v)| v.weight > 0.0)
+                    .fold(0u16, |m, (j, _)| m | (1 << j));
+                out.extend_from_slice(&mask.to_le_bytes());
+                for v in leaf.iter().filter(|v| v.weight > 0.0) {
                     for c in v.offset {
                         put_f32(out, c);
                     }
@@ -386,14 +394,23 @@ pub fn decode(bytes: &[u8], path: &Path, expected: Option<ModelKind>) -> Result<
         .map_err(|e| corrupt(format!("its trees do not decompress: {e}")))?;
     match kind {
         ModelKind::Body => {
-            let forest = decode_trees(&trees, BODY_JOINTS * 20, |r| {
+            let forest = decode_trees(&trees, 2, |r| {
                 let mut leaf = [JointVote::default(); BODY_JOINTS];
-                for v in &mut leaf {
+                let m = r.take(2, "leaf")?;
+                let mask = u16::from_le_bytes([m[0], m[1]]);
+                if mask >> BODY_JOINTS != 0 {
+                    return Err(format!("a leaf votes for joints that do not exist (mask {mask:#06x})"));
+                }
+                for (j, v) in leaf.iter_mut().enumerate().filter(|(j, _)| mask & (1 << j) != 0) {
                     *v = JointVote {
                         offset: [r.f32("leaf")?, r.f32("leaf")?, r.f32("leaf")?],
                         weight: r.f32("leaf")?,
                         spread: r.f32("leaf")?,
                     };
+                    if !(v.offset.iter().all(|c| c.is_finite()) && v.weight > 0.0 && v.weight <= 1.0 && v.spread >= 0.0)
+                    {
+                        return Err(format!("a leaf's vote for joint {} is not valid", j + 1));
+                    }
                 }
                 Ok(leaf)
             })
