@@ -10,6 +10,7 @@ pub mod kinematics;
 pub mod output;
 pub mod pose;
 pub mod progress;
+pub mod segment;
 pub mod session;
 pub mod skeleton;
 pub mod store;
