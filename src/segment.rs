@@ -274,6 +274,9 @@ impl SegmenterConfig {
     /// [`SegmentError::Config`] when a setting is out of range.
     pub fn build(&self, background: Background) -> Result<Segmenter, SegmentError> {
         self.validate()?;
+        // The segmenter runs on its pipeline stage's one thread: OpenCV is not to start
+        // worker threads of its own (this setting is the process's).
+        cv::set_num_threads(1).map_err(cv_err("setNumThreads"))?;
         let n = background.region.len();
         let padded = (background.region.width as usize + 2) * (background.region.height as usize + 2);
         let mut segmenter = Segmenter {
@@ -288,6 +291,7 @@ impl SegmenterConfig {
                 jump_span: 0..0,
                 mask: vec![0; n],
                 tiles: Vec::new(),
+                column_counts: Vec::new(),
                 tile_cluster: Vec::new(),
                 labels: vec![0; padded],
                 local: vec![0; padded],
@@ -295,6 +299,9 @@ impl SegmenterConfig {
                 core: vec![0; padded],
                 stack: Vec::new(),
                 grown: Vec::new(),
+                refused: Vec::new(),
+                column_first: Vec::new(),
+                column_last: Vec::new(),
                 branch: Vec::new(),
                 stats: Mat::default(),
                 centroids: Mat::default(),
@@ -734,6 +741,7 @@ struct Scratch {
     mask: Vec<u8>,
     /// Strong pixels per tile, and the tiles' cluster numbers.
     tiles: Vec<u32>,
+    column_counts: Vec<u8>,
     tile_cluster: Vec<u32>,
     /// Connected-component labels (a box's worth at a time).
     labels: Vec<i32>,
@@ -744,7 +752,11 @@ struct Scratch {
     stack: Vec<u32>,
     /// Pixels grown from the seed component, and one branch of them.
     grown: Vec<u32>,
+    refused: Vec<u32>,
     branch: Vec<u32>,
+    /// Per column of the local image: its first and last row in the mask.
+    column_first: Vec<usize>,
+    column_last: Vec<usize>,
     stats: Mat,
     centroids: Mat,
     /// The body core's structuring element and its radius in pixels.
@@ -944,11 +956,11 @@ impl Segmenter {
             bg_w: bg_region.width as usize,
         };
         self.classify(depth, &grid);
-        let Some(search) = self.densest_tiles(&grid) else {
+        let Some((search, around)) = self.densest_tiles(&grid) else {
             return Ok(None);
         };
-        self.mark_jumps(depth, &grid, search);
-        let sigma = self.floor_noise(depth, &grid, search);
+        self.mark_jumps(depth, &grid, around);
+        let sigma = self.floor_noise(depth, &grid, around);
         let cfg = &self.config;
         let grow_mm = (GROW_SIGMAS * sigma).clamp(cfg.grow_height_mm, cfg.min_height_mm);
         let ridge_mm = (RIDGE_SIGMAS * sigma).max(cfg.ridge_height_mm);
@@ -967,26 +979,36 @@ impl Segmenter {
         let s = &mut self.scratch;
         s.tiles.clear();
         s.tiles.resize(tiles_x * tiles_y, 0);
+        s.column_counts.clear();
+        s.column_counts.resize(g.w, 0);
         for y in 0..g.h {
             let src = &depth[y * g.w..(y + 1) * g.w];
             let at = (g.oy + y) * g.bg_w + g.ox;
             let lo = &self.lo[at..at + g.w];
             let hs = &self.hi_strong[at..at + g.w];
             let strong = &mut s.strong[y * g.w..(y + 1) * g.w];
-            for i in 0..g.w {
-                let d = src[i];
-                strong[i] = u8::from((d >= lo[i]) & (d <= hs[i]));
+            for (((o, &d), &l), &h) in strong.iter_mut().zip(src).zip(lo).zip(hs) {
+                *o = u8::from((d >= l) & (d <= h));
             }
-            let row = &mut s.tiles[(y / TILE) * tiles_x..(y / TILE + 1) * tiles_x];
-            for (t, chunk) in row.iter_mut().zip(strong.chunks(TILE)) {
-                *t += chunk.iter().map(|&v| u32::from(v)).sum::<u32>();
+            // Column counts over a row of tiles (at most 16 each, so bytes do), summed per
+            // tile at its last row.
+            for (c, &v) in s.column_counts.iter_mut().zip(strong.iter()) {
+                *c += v;
+            }
+            if y % TILE == TILE - 1 || y + 1 == g.h {
+                let row = &mut s.tiles[(y / TILE) * tiles_x..(y / TILE + 1) * tiles_x];
+                for (t, chunk) in row.iter_mut().zip(s.column_counts.chunks(TILE)) {
+                    *t = chunk.iter().map(|&v| u32::from(v)).sum();
+                }
+                s.column_counts.fill(0);
             }
         }
     }
 
     /// The box (region pixels) of the 8-connected cluster of dense tiles holding the most
-    /// strong pixels, grown by one tile; `None` when no tile is dense.
-    fn densest_tiles(&mut self, g: &Grid) -> Option<Bounds> {
+    /// strong pixels, and that box grown by one tile; `None` when no tile is dense. (Strong
+    /// pixels of the mouse outside the first box join it when it grows.)
+    fn densest_tiles(&mut self, g: &Grid) -> Option<(Bounds, Bounds)> {
         let tiles_x = g.w.div_ceil(TILE);
         let tiles_y = g.h.div_ceil(TILE);
         let s = &mut self.scratch;
@@ -1009,8 +1031,9 @@ impl Segmenter {
                 let (tx, ty) = (t % tiles_x, t / tiles_x);
                 sum += s.tiles[t];
                 b.add(tx, ty);
-                for (nx, ny) in neighbours8(tx, ty, tiles_x, tiles_y) {
-                    let n = ny * tiles_x + nx;
+                let mut around = [0; 8];
+                let count = neighbours8(t, tiles_x, tiles_y, &mut around);
+                for &n in &around[..count] {
                     if s.tiles[n] >= DENSE_TILE_PX && s.tile_cluster[n] == 0 {
                         s.tile_cluster[n] = next;
                         s.stack.push(n as u32);
@@ -1022,12 +1045,19 @@ impl Segmenter {
             }
         }
         let (_, t) = best?;
-        Some(Bounds {
+        let core = Bounds {
+            x0: t.x0 * TILE,
+            y0: t.y0 * TILE,
+            x1: (t.x1 * TILE).min(g.w),
+            y1: (t.y1 * TILE).min(g.h),
+        };
+        let around = Bounds {
             x0: t.x0.saturating_sub(1) * TILE,
             y0: t.y0.saturating_sub(1) * TILE,
             x1: ((t.x1 + 1) * TILE).min(g.w),
             y1: ((t.y1 + 1) * TILE).min(g.h),
-        })
+        };
+        Some((core, around))
     }
 
     /// Marks (`scratch.jump`) the pixels inside `search` on a depth jump: their reading may
@@ -1038,17 +1068,22 @@ impl Segmenter {
             old.fill(0);
         }
         s.jump_span = search.y0 * g.w..search.y1 * g.w;
+        let (x0, x1) = (search.x0.max(1), search.x1.min(g.w.saturating_sub(1)));
+        if x0 >= x1 {
+            return;
+        }
         for y in search.y0.max(1)..search.y1.min(g.h.saturating_sub(1)) {
-            for x in search.x0.max(1)..search.x1.min(g.w.saturating_sub(1)) {
-                let i = y * g.w + x;
-                let d = depth[i];
-                if d != 0
-                    && [i - 1, i + 1, i - g.w, i + g.w]
-                        .iter()
-                        .any(|&j| depth[j] != 0 && depth[j].abs_diff(d) > JUMP_MM)
-                {
-                    s.jump[i] = 1;
-                }
+            let row = y * g.w;
+            let up = &depth[row - g.w + x0..row - g.w + x1];
+            let down = &depth[row + g.w + x0..row + g.w + x1];
+            let left = &depth[row + x0 - 1..row + x1 - 1];
+            let right = &depth[row + x0 + 1..row + x1 + 1];
+            let centre = &depth[row + x0..row + x1];
+            let out = &mut s.jump[row + x0..row + x1];
+            let cells = out.iter_mut().zip(centre).zip(left).zip(right).zip(up).zip(down);
+            for (((((o, &d), &l), &r), &u), &w) in cells {
+                let far = |v: u16| (v != 0) & (v.abs_diff(d) > JUMP_MM);
+                *o = u8::from((d != 0) & (far(l) | far(r) | far(u) | far(w)));
             }
         }
     }
@@ -1061,23 +1096,24 @@ impl Segmenter {
         // Readings below the floor are floor and noise, never the mouse: with the noise
         // symmetric, `sigma^2 = 2 * sum(h^2, h < 0) / floor readings`. (Depths come in whole
         // millimetres, so this, not a median, is what measures a noise of a millimetre or two.)
+        // Every other row is enough.
         let (mut sum, mut below, mut level) = (0f64, 0usize, 0usize);
-        for y in search.y0..search.y1 {
+        for y in (search.y0..search.y1).step_by(2) {
             let at = (g.oy + y) * g.bg_w + g.ox;
             let rays = &self.background.rays[at + search.x0..at + search.x1];
             let row = &depth[y * g.w + search.x0..y * g.w + search.x1];
+            let (mut row_sum, mut row_below, mut row_level) = (0f32, 0u32, 0u32);
             for (&d, r) in row.iter().zip(rays) {
-                if d == 0 {
-                    continue;
-                }
                 let h = (nx * r[0] + ny * r[1] + nz) * f32::from(d) + c;
-                if h < -0.5 && h > -top {
-                    sum += f64::from(h * h);
-                    below += 1;
-                } else if h.abs() <= 0.5 {
-                    level += 1;
-                }
+                let read = d != 0;
+                let under = read & (h < -0.5) & (h > -top);
+                row_sum += if under { h * h } else { 0.0 };
+                row_below += u32::from(under);
+                row_level += u32::from(read & (h.abs() <= 0.5));
             }
+            sum += f64::from(row_sum);
+            below += row_below as usize;
+            level += row_level as usize;
         }
         let floor = 2 * below + level;
         if floor < 100 {
@@ -1200,18 +1236,28 @@ impl Segmenter {
                 }
             }
         }
+        // Mask values while growing: 1 seed, 2 grown, 4 tried and refused.
         s.grown.clear();
+        s.refused.clear();
         while let Some(i) = s.stack.pop() {
-            let i = i as usize;
-            let (x, y) = (i % g.w, i / g.w);
-            for (nx, ny) in neighbours8(x, y, g.w, g.h) {
-                let n = ny * g.w + nx;
-                if s.mask[n] == 0 && accept(n, &s.strong, &s.jump) {
+            let mut around = [0; 8];
+            let count = neighbours8(i as usize, g.w, g.h, &mut around);
+            for &n in &around[..count] {
+                if s.mask[n] != 0 {
+                    continue;
+                }
+                if accept(n, &s.strong, &s.jump) {
                     s.mask[n] = 2;
                     s.stack.push(n as u32);
                     s.grown.push(n as u32);
+                } else {
+                    s.mask[n] = 4;
+                    s.refused.push(n as u32);
                 }
             }
+        }
+        for &i in &s.refused {
+            s.mask[i as usize] = 0;
         }
         // Grown pixels form branches (8-connected among themselves); the small ones are noise
         // along the body's edge, the long ones the tail.
@@ -1226,9 +1272,9 @@ impl Segmenter {
             let mut next = 0;
             while let Some(&i) = s.branch.get(next) {
                 next += 1;
-                let i = i as usize;
-                for (nx, ny) in neighbours8(i % g.w, i / g.w, g.w, g.h) {
-                    let n = ny * g.w + nx;
+                let mut around = [0; 8];
+                let count = neighbours8(i as usize, g.w, g.h, &mut around);
+                for &n in &around[..count] {
                     if s.mask[n] == 2 {
                         s.mask[n] = 3;
                         s.branch.push(n as u32);
@@ -1267,6 +1313,8 @@ impl Segmenter {
             let y = (b.y0 + ly).checked_sub(1)?;
             (x < g.w && y < g.h).then_some(y * g.w + x)
         };
+        // An inner pixel of the local image (not its border) is always in the region.
+        let inner = |lx: usize, ly: usize| (b.y0 + ly - 1) * g.w + b.x0 + lx - 1;
         let fx = self.background.intrinsics.fx;
         let fy = self.background.intrinsics.fy;
         // The mouse's typical depth sets the size of a pixel.
@@ -1275,7 +1323,7 @@ impl Segmenter {
         for ly in 1..lh - 1 {
             for lx in 1..lw - 1 {
                 if s.local[ly * lw + lx] != 0
-                    && let Some(i) = to_region(lx, ly)
+                    && let i = inner(lx, ly)
                     && depth[i] > 0
                 {
                     sum_z += f64::from(depth[i]);
@@ -1297,9 +1345,7 @@ impl Segmenter {
         for ly in 1..lh - 1 {
             for lx in 1..lw - 1 {
                 let l = ly * lw + lx;
-                let Some(i) = to_region(lx, ly) else {
-                    continue;
-                };
+                let i = inner(lx, ly);
                 let on_jump = s.jump[i] != 0;
                 if !on_jump && (s.before[l] != 0 || depth[i] != 0) {
                     continue;
@@ -1337,52 +1383,87 @@ impl Segmenter {
             }
         }
 
-        // Holes: background components (4-connected) not reaching the border.
-        let max_hole_px = (f64::from(self.config.max_hole_mm2) / pixel_mm2).floor() as i32;
-        if max_hole_px > 0 {
-            for (c, &m) in s.before[..lw * lh].iter_mut().zip(&s.local[..lw * lh]) {
-                *c = u8::from(m == 0);
-            }
-            let src = mat_over(&s.before, lh, lw)?;
-            let labels_ptr = s.labels.as_ptr();
-            let mut labels = mat_over_mut(&mut s.labels, lh, lw)?;
-            let count = imgproc::connected_components_with_stats(
-                &src,
-                &mut labels,
-                &mut s.stats,
-                &mut s.centroids,
-                4,
-                cv::CV_32S,
-            )
-            .map_err(cv_err("connectedComponentsWithStats"))?;
-            same_buffer(&labels, labels_ptr, "connectedComponentsWithStats")?;
-            drop(labels);
-            drop(src);
-            if count > 2 {
-                let outside = s.labels[0];
-                let mut fill = vec![false; count as usize];
-                for (label, f) in fill.iter_mut().enumerate().skip(1) {
-                    let area = *s
-                        .stats
-                        .at_2d::<i32>(label as i32, imgproc::CC_STAT_AREA)
-                        .map_err(cv_err("Mat::at_2d"))?;
-                    *f = label as i32 != outside && area <= max_hole_px;
+        // Holes: background (4-connected) that the border of the local image does not reach.
+        // Background with mask on both sides along its row and along its column may be in a
+        // hole; anything else sees the border along a row or a column. A group of such
+        // candidates is a hole when none of it touches other background. `before` marks: 0
+        // background, 1 mask, 2 a candidate, 3 a candidate already looked at.
+        let max_hole = (f64::from(self.config.max_hole_mm2) / pixel_mm2).floor() as usize;
+        if max_hole > 0 {
+            s.before[..lw * lh].fill(0);
+            for ly in 1..lh - 1 {
+                let row = &s.local[ly * lw..(ly + 1) * lw];
+                if let (Some(first), Some(last)) = (row.iter().position(|&v| v != 0), row.iter().rposition(|&v| v != 0))
+                {
+                    for (b, &m) in s.before[ly * lw + first..=ly * lw + last]
+                        .iter_mut()
+                        .zip(&row[first..=last])
+                    {
+                        *b = if m != 0 { 1 } else { 2 };
+                    }
                 }
-                for (m, &l) in s.local[..lw * lh].iter_mut().zip(&s.labels[..lw * lh]) {
-                    if fill.get(l as usize).copied().unwrap_or(false) {
-                        *m = 1;
+            }
+            // Column limits, one row at a time: the first and last mask row of each column.
+            s.column_first.clear();
+            s.column_first.resize(lw, usize::MAX);
+            s.column_last.clear();
+            s.column_last.resize(lw, 0);
+            for ly in 1..lh - 1 {
+                for (lx, &m) in s.local[ly * lw..(ly + 1) * lw].iter().enumerate() {
+                    if m != 0 {
+                        s.column_first[lx] = s.column_first[lx].min(ly);
+                        s.column_last[lx] = ly;
+                    }
+                }
+            }
+            for ly in 1..lh - 1 {
+                for lx in 1..lw - 1 {
+                    let b = &mut s.before[ly * lw + lx];
+                    if *b == 2 && !(s.column_first[lx] < ly && ly < s.column_last[lx]) {
+                        *b = 0;
+                    }
+                }
+            }
+            for start in 0..lw * lh {
+                if s.before[start] != 2 {
+                    continue;
+                }
+                s.before[start] = 3;
+                s.stack.clear();
+                s.stack.push(start as u32);
+                s.branch.clear();
+                let mut closed = true;
+                while let Some(l) = s.stack.pop() {
+                    let l = l as usize;
+                    s.branch.push(l as u32);
+                    // Candidates never lie on the local image's border.
+                    for n in [l - 1, l + 1, l - lw, l + lw] {
+                        match s.before[n] {
+                            0 => closed = false,
+                            2 => {
+                                s.before[n] = 3;
+                                s.stack.push(n as u32);
+                            }
+                            _ => {}
+                        }
+                    }
+                }
+                if closed && s.branch.len() <= max_hole {
+                    for &l in &s.branch {
+                        s.local[l as usize] = 1;
                     }
                 }
             }
         }
 
-        // The body core: the mask opened by a disc, for the body's figures only.
+        // The body core: the mask opened by a square (separable, so fast), for the body's
+        // figures only.
         let radius = (f64::from(self.config.body_core_mm) * fx / mean_z).round() as i32;
         let mut core_empty = true;
         if radius > 0 {
             if s.core_kernel.as_ref().is_none_or(|(r, _)| *r != radius) {
                 let k = imgproc::get_structuring_element(
-                    imgproc::MORPH_ELLIPSE,
+                    imgproc::MORPH_RECT,
                     cv::Size::new(2 * radius + 1, 2 * radius + 1),
                     cv::Point::new(-1, -1),
                 )
@@ -1441,9 +1522,7 @@ impl Segmenter {
                     continue;
                 }
                 pixel_count += 1;
-                let Some(i) = to_region(lx, ly) else {
-                    continue;
-                };
+                let i = inner(lx, ly);
                 let z = depth[i];
                 if z == 0 {
                     missing += 1;
@@ -1560,12 +1639,33 @@ fn morphology(
     .map_err(cv_err("morphologyEx"))
 }
 
-/// The 8 neighbours of `(x, y)` inside a `w` x `h` grid.
-fn neighbours8(x: usize, y: usize, w: usize, h: usize) -> impl Iterator<Item = (usize, usize)> {
-    const OFFSETS: [(isize, isize); 8] = [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)];
-    OFFSETS.into_iter().filter_map(move |(dx, dy)| {
-        let nx = x.checked_add_signed(dx)?;
-        let ny = y.checked_add_signed(dy)?;
-        (nx < w && ny < h).then_some((nx, ny))
-    })
+/// The indices of the neighbours of cell `i` of a row-major `w` x `h` grid: fills `out` and
+/// returns how many there are (8 inside, fewer along the edges).
+#[inline]
+fn neighbours8(i: usize, w: usize, h: usize, out: &mut [usize; 8]) -> usize {
+    let (x, y) = (i % w, i / w);
+    if x > 0 && y > 0 && x + 1 < w && y + 1 < h {
+        *out = [i - w - 1, i - w, i - w + 1, i - 1, i + 1, i + w - 1, i + w, i + w + 1];
+        return 8;
+    }
+    let mut n = 0;
+    for (dx, dy) in [
+        (-1isize, -1isize),
+        (0, -1),
+        (1, -1),
+        (-1, 0),
+        (1, 0),
+        (-1, 1),
+        (0, 1),
+        (1, 1),
+    ] {
+        if let (Some(nx), Some(ny)) = (x.checked_add_signed(dx), y.checked_add_signed(dy))
+            && nx < w
+            && ny < h
+        {
+            out[n] = ny * w + nx;
+            n += 1;
+        }
+    }
+    n
 }
