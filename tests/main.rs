@@ -2,6 +2,7 @@
 //! built `mousepose` binary.
 
 mod cli;
+mod segment;
 mod session;
 mod synth;
 mod util;
