@@ -31,8 +31,8 @@
 //!    width.
 //!
 //! Missing readings (0) are never foreground, but holes of them inside the mouse are filled.
-//! `segment` is pure: no threads of its own, no clock, no I/O; the buffers it needs live in the
-//! [`Segmenter`] and are reused from frame to frame.
+//! `segment` is pure: no threads (OpenCV is told to use none of its own), no clock, no I/O;
+//! the buffers it needs live in the [`Segmenter`] and are reused from frame to frame.
 
 use crate::frame::DepthFrame;
 use crate::geometry::Intrinsics;
@@ -268,7 +268,9 @@ impl SegmenterConfig {
         Ok(())
     }
 
-    /// Checks the settings and makes a segmenter for `background`.
+    /// Checks the settings and makes a segmenter for `background`. It also tells OpenCV to
+    /// run on the calling thread only (a setting of the whole process): a pipeline stage has
+    /// one thread and OpenCV's own workers would compete with the other stages.
     ///
     /// # Errors
     /// [`SegmentError::Config`] when a setting is out of range.
@@ -373,8 +375,9 @@ impl Background {
         intrinsics: &Intrinsics,
         config: &SegmenterConfig,
     ) -> Result<Self, SegmentError> {
-        let first = frames.first().ok_or(SegmentError::NoFrames)?;
-        let _ = first;
+        if frames.is_empty() {
+            return Err(SegmentError::NoFrames);
+        }
         let region = Region::full(intrinsics);
         for f in frames {
             check_frame(f, region)?;
