@@ -1,10 +1,16 @@
 //! `mousepose bench`: measures the speed of mousepose's parts on this machine. Speed figures
 //! come from here, never from timed tests.
 
+use crate::frame::{DepthFrame, Stamp};
 use crate::geometry::Rig;
+use crate::segment::{Background, SegmentError, SegmenterConfig};
+use crate::synth::body::skin;
 use crate::synth::dataset::{DatasetSpec, encode_sample, render_sample};
-use crate::synth::mouse::pose_library;
+use crate::synth::mouse::{fit_in_cage, pose_library, pose_mouse};
 use crate::synth::noise::{DepthNoise, NoiseModel};
+use crate::synth::render::{Cage, Region};
+use crate::synth::views::render_top_frame;
+use crate::synth::{item_rng, random_placement};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -24,6 +30,10 @@ pub struct BenchReport {
     pub mean_region_px: f64,
     /// Dataset samples with bottom views per second on all cores, encoded and compressed.
     pub dataset_samples_per_s: f64,
+    /// Milliseconds to segment one 640x480 depth frame with a mouse (structured-light noise),
+    /// on one core: the mean over the fastest of ten batches; NaN when the segmenter could not
+    /// be set up.
+    pub segment_ms_per_frame: f64,
     /// Body forest training throughput on all cores: training pixels times trees per second.
     pub train_pixel_trees_per_s: f64,
     /// Body forest inference with the bundled model (when present), one core.
@@ -53,6 +63,7 @@ impl BenchReport {
             ("mean rendered region, pixels", self.mean_region_px),
             ("dataset samples/s with bottom views", self.dataset_samples_per_s),
             ("training pixel-trees/s, all cores", self.train_pixel_trees_per_s),
+            ("segment one depth frame, ms", self.segment_ms_per_frame),
         ];
         let _ = writeln!(
             s,
@@ -61,7 +72,8 @@ impl BenchReport {
             "value"
         );
         for (name, v) in rows {
-            let _ = writeln!(s, "{name:<40} {v:>12.1}");
+            let digits = if v.abs() < 10.0 { 3 } else { 1 };
+            let _ = writeln!(s, "{name:<40} {v:>12.digits$}");
         }
         match &self.forest {
             Some(f) => {
@@ -137,6 +149,10 @@ pub fn run(quick: bool) -> BenchReport {
     });
     let train_pixel_trees_per_s = bench_training(&rig, &library, quick);
     let forest = bench_forest(&rig, &library, quick);
+    let segment_ms_per_frame = segment_ms(&rig, if quick { 300 } else { 3000 }).unwrap_or_else(|e| {
+        tracing::warn!(error = %e, "cannot measure the segmenter");
+        f64::NAN
+    });
     BenchReport {
         train_pixel_trees_per_s,
         forest,
@@ -145,6 +161,7 @@ pub fn run(quick: bool) -> BenchReport {
         render_depth_images_per_s: all,
         mean_region_px: pixels as f64 / (n / 2).max(1) as f64,
         dataset_samples_per_s: samples,
+        segment_ms_per_frame,
     }
 }
 
@@ -168,7 +185,7 @@ fn bench_training(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick:
         .map(|i| render_sample(rig, &spec, library, i))
         .collect();
     let pixels = PixelParams::default();
-    let set = draw_pixels(&samples, rig, &pixels);
+    let set = draw_pixels(&samples, &pixels);
     let targets = joint_targets(&set, &samples, rig);
     let params = TrainParams {
         trees: 2,
@@ -217,7 +234,7 @@ fn bench_forest(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: b
     let frames: Vec<_> = (0..50)
         .map(|i| {
             let s = render_sample(rig, &spec, library, i);
-            crate::learn::depth_image(&s, rig, 0.0, 0)
+            crate::learn::depth_image(&s)
         })
         .collect();
     let trees = forest.trees.len();
@@ -261,4 +278,45 @@ fn bench_forest(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: b
         traverse_ms_per_frame: traverse_ms,
         estimate_ms_per_frame: estimate_ms,
     })
+}
+
+/// Mean time (ms) to segment one full depth frame: the cage with a mouse in it and
+/// structured-light noise, against the noiseless cage as background.
+fn segment_ms(rig: &Rig, iterations: u32) -> Result<f64, SegmentError> {
+    let i = &rig.depth.intrinsics;
+    let full = Region::full(i);
+    let mut rng = item_rng(0xBE7C, 7, 0);
+    let library = pose_library();
+    let pose = library.get(library.len() / 3).copied().unwrap_or_default();
+    let mut mouse = pose_mouse(&pose, &random_placement(&mut rng));
+    fit_in_cage(&mut mouse, 3.0);
+    let background = Cage::new(&rig.depth).depth(full);
+    let noise = DepthNoise {
+        model: NoiseModel::StructuredLight,
+        gaussian_mm: 0.0,
+    };
+    let frame = DepthFrame {
+        stamp: Stamp::default(),
+        width: i.width,
+        height: i.height,
+        data: render_top_frame(&rig.depth, &background, &skin(&mouse), &noise, &mut rng),
+    };
+    let config = SegmenterConfig::default();
+    let mut segmenter = config
+        .build(Background::from_depth(&background, full, i, &config)?)?
+        .with_world(rig.depth.world_from_camera);
+    for _ in 0..20 {
+        std::hint::black_box(segmenter.segment(&frame)?);
+    }
+    // The fastest of ten batches: other work on the machine should not count.
+    let batch = (iterations / 10).max(1);
+    let mut best = f64::INFINITY;
+    for _ in 0..10 {
+        let t = Instant::now();
+        for _ in 0..batch {
+            std::hint::black_box(segmenter.segment(std::hint::black_box(&frame))?);
+        }
+        best = best.min(t.elapsed().as_secs_f64() * 1e3 / f64::from(batch));
+    }
+    Ok(best)
 }

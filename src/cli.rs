@@ -76,6 +76,9 @@ pub struct TrainArgs {
     /// A second dataset (D_d) for the paper's discriminative training of the trained forest.
     #[arg(long, value_name = "DIR")]
     pub discriminative: Option<PathBuf>,
+    /// Refine this trained baseline (trained on --data) instead of training one first.
+    #[arg(long, value_name = "FILE", requires = "discriminative")]
+    pub from: Option<PathBuf>,
     /// Passes of discriminative training.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=20))]
     pub iterations: u32,

@@ -91,6 +91,16 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             thresholds: 12,
             seed: args.seed,
         },
+        from: match &args.from {
+            Some(path) => {
+                let kind = match args.target {
+                    ModelTarget::Body => ModelKind::Body,
+                    ModelTarget::Parts => ModelKind::Parts,
+                };
+                Some(model::load(path, Some(kind))?)
+            }
+            None => None,
+        },
     };
     let bar = Bar(progress::bar(0, "loading"));
     let (model, passes) = learn::train(&job, &bar).context("training")?;
@@ -146,7 +156,7 @@ pub fn eval(args: &EvalArgs) -> Result<()> {
     }
     match model {
         Model::Body(_, forest) => eval_body(args, forest, &samples, &rig),
-        Model::Parts(_, forest) => eval_parts(args, &forest, &samples, &rig),
+        Model::Parts(_, forest) => eval_parts(args, &forest, &samples),
     }
 }
 
@@ -157,11 +167,21 @@ fn eval_body(
     rig: &crate::geometry::Rig,
 ) -> Result<()> {
     let estimator = BodyEstimator::new(forest, VoteSettings::default());
-    let report = learn::eval_body(&estimator, samples, rig, 0.0);
+    let report = learn::eval_body(&estimator, samples, rig, 0.0)?;
     if let Some(dir) = &args.report {
         report_dir(dir)?;
-        let names: Vec<String> = report.per_joint_mm.keys().cloned().collect();
-        let ours: Vec<f64> = report.per_joint_mm.values().copied().collect();
+        // In the paper's joint order, not the map's alphabetical one.
+        let in_order = |r: &learn::BodyReport| -> Vec<f64> {
+            crate::skeleton::Joint::MAIN_BODY
+                .iter()
+                .map(|j| r.per_joint_mm.get(j.name()).copied().unwrap_or(f64::NAN))
+                .collect()
+        };
+        let names: Vec<String> = crate::skeleton::Joint::MAIN_BODY
+            .iter()
+            .map(|j| j.name().to_owned())
+            .collect();
+        let ours = in_order(&report);
         let mut series = Vec::new();
         let baseline = match &args.baseline {
             Some(path) => match model::load(path, Some(ModelKind::Body))? {
@@ -170,15 +190,12 @@ fn eval_body(
                     samples,
                     rig,
                     0.0,
-                )),
+                )?),
                 Model::Parts(..) => None,
             },
             None => None,
         };
-        let base_values: Vec<f64> = baseline
-            .as_ref()
-            .map(|b| b.per_joint_mm.values().copied().collect())
-            .unwrap_or_default();
+        let base_values: Vec<f64> = baseline.as_ref().map(in_order).unwrap_or_default();
         if baseline.is_some() {
             series.push(("baseline", [120, 120, 120], base_values.as_slice()));
         }
@@ -189,8 +206,8 @@ fn eval_body(
         let sigmas = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0];
         let noisy: Vec<f64> = sigmas
             .iter()
-            .map(|&s| learn::eval_body(&estimator, samples, rig, s).mean_error_mm)
-            .collect();
+            .map(|&s| learn::eval_body(&estimator, samples, rig, s).map(|r| r.mean_error_mm))
+            .collect::<Result<_, _>>()?;
         line_chart(
             "mean joint error vs depth noise",
             "noise sigma (mm)",
@@ -236,9 +253,8 @@ fn eval_parts(
     args: &EvalArgs,
     forest: &Forest<[f32; 2], Vec<f32>>,
     samples: &[crate::synth::dataset::Sample],
-    rig: &crate::geometry::Rig,
 ) -> Result<()> {
-    let report = learn::eval_parts(forest, samples, rig);
+    let report = learn::eval_parts(forest, samples);
     if let Some(dir) = &args.report {
         report_dir(dir)?;
         confusion_chart(

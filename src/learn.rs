@@ -12,9 +12,11 @@ use crate::forest::model::{DataProvenance, Model, ModelInfo, ModelKind};
 use crate::forest::train::train_forest;
 use crate::forest::{Forest, Objective, SplitSpace, TrainParams};
 use crate::geometry::Rig;
+use crate::segment::{Background, SegmentError, Segmenter, SegmenterConfig};
 use crate::skeleton::{BACKGROUND_LABEL, Joint, PART_COUNT, Part, SKELETON_VERSION};
 use crate::synth::dataset::{Dataset, DatasetError, Sample};
 use crate::synth::item_rng;
+use crate::synth::render::{Cage, Region};
 use rand::seq::SliceRandom;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
@@ -43,29 +45,89 @@ impl Default for PixelParams {
     }
 }
 
-/// The mouse's pixels in a sample's top view, as a boolean mask over its region.
-///
-/// This is where training and evaluation agree on what "the mouse" is.
-pub fn mouse_mask(sample: &Sample, _rig: &Rig) -> Vec<bool> {
+/// The mouse's true pixels in a sample's top view (the rendered labels), as a mask over its
+/// region. Training uses them; evaluation of the body forest uses the segmenter instead.
+pub fn true_mask(sample: &Sample) -> Vec<bool> {
     sample.top.label.iter().map(|&l| l != BACKGROUND_LABEL).collect()
 }
 
-/// A sample's depth image for the features, with optional extra Gaussian noise.
-pub fn depth_image(sample: &Sample, rig: &Rig, extra_noise_mm: f64, seed: u64) -> DepthImage {
-    let mask = mouse_mask(sample, rig);
-    let mut image = DepthImage::from_mask(sample.top.region, &sample.top.depth, &mask);
-    if extra_noise_mm > 0.0 {
-        let mut rng = item_rng(seed, 0xE0, sample.index);
-        for d in image
-            .depth
-            .iter_mut()
-            .filter(|d| **d < crate::forest::depth::BACKGROUND_MM)
-        {
-            let n: f64 = StandardNormal.sample(&mut rng);
-            *d = (f64::from(*d) + extra_noise_mm * n).max(1.0) as f32;
-        }
+/// A sample's depth image for the features, on its true mask.
+pub fn depth_image(sample: &Sample) -> DepthImage {
+    DepthImage::from_mask(sample.top.region, &sample.top.depth, &true_mask(sample))
+}
+
+/// A sample's top-view depth crop with extra Gaussian noise (readings only; 0 stays 0).
+pub fn noisy_depth(sample: &Sample, noise_mm: f64, seed: u64) -> Vec<u16> {
+    if noise_mm <= 0.0 {
+        return sample.top.depth.clone();
     }
-    image
+    let mut rng = item_rng(seed, 0xE0, sample.index);
+    sample
+        .top
+        .depth
+        .iter()
+        .map(|&d| {
+            if d == 0 {
+                return 0;
+            }
+            let n: f64 = StandardNormal.sample(&mut rng);
+            (f64::from(d) + noise_mm * n).round().clamp(1.0, 65535.0) as u16
+        })
+        .collect()
+}
+
+/// The segmenter set up for a rig's empty cage, ready to hand out one segmenter per thread.
+#[derive(Debug)]
+pub struct MaskSource {
+    config: SegmenterConfig,
+    background: Background,
+}
+
+impl MaskSource {
+    /// The segmenter's background: the noiseless empty cage over the whole depth image.
+    ///
+    /// # Errors
+    /// When the cage gives no usable background (no floor in view).
+    pub fn for_rig(rig: &Rig) -> Result<Self, SegmentError> {
+        let config = SegmenterConfig::default();
+        let full = Region::full(&rig.depth.intrinsics);
+        let cage = Cage::new(&rig.depth).depth(full);
+        let background = Background::from_depth(&cage, full, &rig.depth.intrinsics, &config)?;
+        let source = Self { config, background };
+        source.segmenter()?;
+        Ok(source)
+    }
+
+    /// A segmenter of its own (they hold per-frame buffers).
+    ///
+    /// # Errors
+    /// As [`SegmenterConfig::build`].
+    pub fn segmenter(&self) -> Result<Segmenter, SegmentError> {
+        self.config.build(self.background.clone())
+    }
+}
+
+/// Segments a depth crop at `region` and returns the mouse as a depth image for the forest,
+/// `None` when the segmenter finds no mouse.
+///
+/// # Errors
+/// As [`Segmenter::segment_region`].
+pub fn segmented_image(
+    segmenter: &mut Segmenter,
+    depth: &[u16],
+    region: Region,
+) -> Result<Option<DepthImage>, SegmentError> {
+    let Some(mouse) = segmenter.segment_region(depth, region)? else {
+        return Ok(None);
+    };
+    let mask: Vec<bool> = (0..region.len())
+        .map(|k| {
+            let x = region.x0 + (k % region.width as usize) as u32;
+            let y = region.y0 + (k / region.width as usize) as u32;
+            mouse.contains(x, y)
+        })
+        .collect();
+    Ok(Some(DepthImage::from_mask(region, depth, &mask)))
 }
 
 /// An image and the `(x, y, depth)` of its drawn mouse pixels.
@@ -73,11 +135,11 @@ type ImagePixels = (DepthImage, Vec<(f32, f32, f32)>);
 
 /// Training pixels of a set of samples, with what each pixel's targets need: the image index,
 /// its pixel, and the sample it came from.
-pub fn draw_pixels(samples: &[Sample], rig: &Rig, params: &PixelParams) -> PixelSet {
+pub fn draw_pixels(samples: &[Sample], params: &PixelParams) -> PixelSet {
     let per: Vec<ImagePixels> = samples
         .par_iter()
         .map(|s| {
-            let image = depth_image(s, rig, 0.0, params.seed);
+            let image = depth_image(s);
             let r = image.region;
             let mut on: Vec<(f32, f32, f32)> = image
                 .depth
@@ -194,6 +256,9 @@ pub struct TrainJob<'a> {
     pub params: TrainParams,
     pub disc: DiscriminativeParams,
     pub pixels: PixelParams,
+    /// A trained baseline to refine instead of training one (it must have been trained on
+    /// `train` with these parameters; only discriminative training runs).
+    pub from: Option<Model>,
 }
 
 /// Progress callbacks of training.
@@ -210,13 +275,12 @@ pub fn train(job: &TrainJob<'_>, progress: &dyn TrainProgress) -> Result<(Model,
     let start = Instant::now();
     let (ds_t, samples_t) = load(job.train)?;
     let rig = rig_of(&ds_t);
-    let set_t = draw_pixels(&samples_t, &rig, &job.pixels);
+    let set_t = draw_pixels(&samples_t, &job.pixels);
     let dd = match job.discriminative {
         Some(dir) => {
             let (ds, samples) = load(dir)?;
             let set = draw_pixels(
                 &samples,
-                &rig,
                 &PixelParams {
                     seed: job.pixels.seed ^ 0xDD,
                     ..job.pixels
@@ -241,7 +305,7 @@ pub fn train(job: &TrainJob<'_>, progress: &dyn TrainProgress) -> Result<(Model,
         software_version: env!("CARGO_PKG_VERSION").to_owned(),
         skeleton_version: SKELETON_VERSION,
         engine_version: ds_t.meta.engine_version,
-        train: job.params,
+        train: job.from.as_ref().map_or(job.params, |m| m.info().train),
         discriminative: dd.as_ref().map(|_| job.disc),
         data: std::iter::once(provenance("train", &ds_t))
             .chain(dd.as_ref().map(|(ds, ..)| provenance("discriminative", ds)))
@@ -255,14 +319,17 @@ pub fn train(job: &TrainJob<'_>, progress: &dyn TrainProgress) -> Result<(Model,
         Target::Body => {
             let targets = joint_targets(&set_t, &samples_t, &rig);
             let objective = JointObjective { targets: &targets };
-            let mut forest = train_forest(
-                &space_t,
-                &objective,
-                vec![all_t; job.params.trees],
-                &job.params,
-                [0.0; 2],
-                &tick,
-            );
+            let mut forest = match &job.from {
+                Some(Model::Body(_, f)) => f.clone(),
+                _ => train_forest(
+                    &space_t,
+                    &objective,
+                    vec![all_t; job.params.trees],
+                    &job.params,
+                    [0.0; 2],
+                    &tick,
+                ),
+            };
             if let Some((_, samples_d, set_d)) = &dd {
                 let targets_d = joint_targets(set_d, samples_d, &rig);
                 let space_d = DepthSpace {
@@ -287,14 +354,17 @@ pub fn train(job: &TrainJob<'_>, progress: &dyn TrainProgress) -> Result<(Model,
                 labels: &labels,
                 classes: PART_COUNT,
             };
-            let mut forest = train_forest(
-                &space_t,
-                &objective,
-                vec![all_t; job.params.trees],
-                &job.params,
-                [0.0; 2],
-                &tick,
-            );
+            let mut forest = match &job.from {
+                Some(Model::Parts(_, f)) => f.clone(),
+                _ => train_forest(
+                    &space_t,
+                    &objective,
+                    vec![all_t; job.params.trees],
+                    &job.params,
+                    [0.0; 2],
+                    &tick,
+                ),
+            };
             if let Some((_, samples_d, set_d)) = &dd {
                 let labels_d = part_labels(set_d, samples_d);
                 let space_d = DepthSpace {
@@ -365,41 +435,69 @@ pub struct BodyReport {
 /// Pixels voting per image at evaluation and run time.
 pub const VOTE_BUDGET: usize = 1200;
 
-/// Evaluates a body forest on samples, with `noise_mm` of extra Gaussian noise.
-pub fn eval_body(estimator: &BodyEstimator, samples: &[Sample], rig: &Rig, noise_mm: f64) -> BodyReport {
+/// Evaluates a body forest on samples, with `noise_mm` of extra Gaussian noise: each image is
+/// segmented as at run time, so the error includes segmentation.
+///
+/// # Errors
+/// When the segmenter cannot be set up or fails on an image.
+pub fn eval_body(
+    estimator: &BodyEstimator,
+    samples: &[Sample],
+    rig: &Rig,
+    noise_mm: f64,
+) -> Result<BodyReport, SegmentError> {
     let cam_to_world = rig.depth.world_from_camera;
+    let masks = MaskSource::for_rig(rig)?;
+    // One segmenter per thread (they hold buffers), each over a contiguous share of the images.
+    let threads = rayon::current_num_threads().max(1);
+    let mut segmenters: Vec<Segmenter> = (0..threads).map(|_| masks.segmenter()).collect::<Result<_, _>>()?;
+    let share = samples.len().div_ceil(threads).max(1);
     let start = Instant::now();
-    let results: Vec<Option<[f64; BODY_JOINTS]>> = samples
-        .par_iter()
-        .map_init(
-            || (estimator.clone(), Vec::<Pixel>::new()),
-            |(est, pixels), s| {
-                let image = depth_image(s, rig, noise_mm, 0xE7A1);
-                sample_pixels(&image, VOTE_BUDGET, pixels);
-                if pixels.is_empty() {
-                    return None;
-                }
-                let guesses = est.estimate(&image, pixels, &rig.depth.intrinsics);
-                Some(std::array::from_fn(|j| {
-                    let truth = s.joints[Joint::MAIN_BODY[j].index()];
-                    match guesses[j] {
-                        Some(g) => {
-                            let p = nalgebra::Point3::from(g.position_mm.cast::<f64>());
-                            (cam_to_world * p - truth).norm()
-                        }
-                        // No vote at all: as far off as the mouse is long.
-                        None => 100.0,
+    let results: Vec<Result<Vec<Option<[f64; BODY_JOINTS]>>, SegmentError>> = samples
+        .par_chunks(share)
+        .zip(segmenters.par_iter_mut())
+        .map(|(chunk, segmenter)| {
+            let mut est = estimator.clone();
+            let mut pixels = Vec::<Pixel>::new();
+            chunk
+                .iter()
+                .map(|s| {
+                    let depth = noisy_depth(s, noise_mm, 0xE7A1);
+                    let Some(image) = segmented_image(segmenter, &depth, s.top.region)? else {
+                        return Ok(None);
+                    };
+                    sample_pixels(&image, VOTE_BUDGET, &mut pixels);
+                    if pixels.is_empty() {
+                        return Ok(None);
                     }
-                }))
-            },
-        )
+                    let guesses = est.estimate(&image, &pixels, &rig.depth.intrinsics);
+                    Ok(Some(std::array::from_fn(|j| {
+                        let truth = s.joints[Joint::MAIN_BODY[j].index()];
+                        match guesses[j] {
+                            Some(g) => {
+                                let p = nalgebra::Point3::from(g.position_mm.cast::<f64>());
+                                (cam_to_world * p - truth).norm()
+                            }
+                            // No vote at all: as far off as the mouse is long.
+                            None => 100.0,
+                        }
+                    })))
+                })
+                .collect()
+        })
+        .collect();
+    let results: Vec<Option<[f64; BODY_JOINTS]>> = results
+        .into_iter()
+        .collect::<Result<Vec<_>, _>>()?
+        .into_iter()
+        .flatten()
         .collect();
     let elapsed = start.elapsed().as_secs_f64();
     let found: Vec<&[f64; BODY_JOINTS]> = results.iter().flatten().collect();
     let per_joint: Vec<f64> = (0..BODY_JOINTS)
         .map(|j| found.iter().map(|e| e[j]).sum::<f64>() / found.len().max(1) as f64)
         .collect();
-    BodyReport {
+    Ok(BodyReport {
         images: samples.len(),
         no_mouse: results.iter().filter(|r| r.is_none()).count(),
         per_joint_mm: Joint::MAIN_BODY
@@ -410,7 +508,7 @@ pub fn eval_body(estimator: &BodyEstimator, samples: &[Sample], rig: &Rig, noise
         mean_error_mm: per_joint.iter().sum::<f64>() / BODY_JOINTS as f64,
         noise_mm,
         ms_per_image: elapsed * 1000.0 * rayon::current_num_threads() as f64 / samples.len().max(1) as f64,
-    }
+    })
 }
 
 /// Per-class accuracy of the part forest on a test set.
@@ -429,11 +527,11 @@ pub struct PartsReport {
 
 /// Evaluates a part forest on every mouse pixel of the samples: each pixel's class is the
 /// argmax of the trees' averaged histograms.
-pub fn eval_parts(forest: &Forest<[f32; 2], Vec<f32>>, samples: &[Sample], rig: &Rig) -> PartsReport {
+pub fn eval_parts(forest: &Forest<[f32; 2], Vec<f32>>, samples: &[Sample]) -> PartsReport {
     let confusions: Vec<Vec<Vec<u64>>> = samples
         .par_iter()
         .map(|s| {
-            let image = depth_image(s, rig, 0.0, 0);
+            let image = depth_image(s);
             let r = image.region;
             let mut c = vec![vec![0u64; PART_COUNT]; PART_COUNT];
             let mut hist = [0f32; PART_COUNT];

@@ -15,6 +15,7 @@ pub mod learn;
 pub mod output;
 pub mod pose;
 pub mod progress;
+pub mod segment;
 pub mod session;
 pub mod skeleton;
 pub mod store;

@@ -3,6 +3,7 @@
 
 mod cli;
 mod forest;
+mod segment;
 mod session;
 mod synth;
 mod util;

@@ -178,13 +178,7 @@ pub fn discriminative_from(
             let mut total = PassStats::default();
             for it in first..first + params.iterations {
                 let mut s = subset(&all, params.subset, params.seed, t, it);
-                let p = refine_tree(&space, &objective, &mut tree, &mut s, params, t, it);
-                total.nodes_visited += p.nodes_visited;
-                total.tests_changed += p.tests_changed;
-                total.shrunk += p.shrunk;
-                total.grown += p.grown;
-                total.error_before += p.error_before;
-                total.error_after += p.error_after;
+                total += refine_tree(&space, &objective, &mut tree, &mut s, params, t, it);
             }
             (tree, total)
         })
@@ -193,12 +187,7 @@ pub fn discriminative_from(
     let mut trees = Vec::with_capacity(results.len());
     for (tree, p) in results {
         trees.push(tree);
-        stats.nodes_visited += p.nodes_visited;
-        stats.tests_changed += p.tests_changed;
-        stats.shrunk += p.shrunk;
-        stats.grown += p.grown;
-        stats.error_before += p.error_before;
-        stats.error_after += p.error_after;
+        stats += p;
     }
     (AxisForest { trees }, stats)
 }

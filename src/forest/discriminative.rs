@@ -71,6 +71,17 @@ pub struct PassStats {
     pub error_after: f64,
 }
 
+impl std::ops::AddAssign for PassStats {
+    fn add_assign(&mut self, p: PassStats) {
+        self.nodes_visited += p.nodes_visited;
+        self.tests_changed += p.tests_changed;
+        self.shrunk += p.shrunk;
+        self.grown += p.grown;
+        self.error_before += p.error_before;
+        self.error_after += p.error_after;
+    }
+}
+
 struct Refiner<'a, S: SplitSpace, O: Objective> {
     space: &'a S,
     objective: &'a O,

@@ -12,8 +12,9 @@
 //! ```
 //! Trees: u32 tree count; per tree u32 node count, nodes (f32 ux, f32 uy, f32 threshold, u32
 //! left, u32 leaf), u32 leaf count, leaves (body: u16 mask of the joints the leaf votes for,
-//! then per voted joint 3 f32 offset, f32 weight, f32 spread; parts: 6 f32 class
-//! probabilities). All little-endian.
+//! then per voted joint 3 i16 offsets in units of 0.05 mm, u16 weight in units of 1/65535 and
+//! u16 spread in units of 0.25 mm^2 (version 1: 5 f32); parts: 6 f32 class probabilities).
+//! All little-endian.
 //!
 //! Reading checks everything a damaged or foreign file could break: the magic, the version,
 //! the kind, the checksum, every length against what is left, and every child and leaf index
@@ -26,8 +27,21 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 const MAGIC: &[u8; 8] = b"MPFOREST";
-/// The model format version this build reads and writes.
-pub const FORMAT_VERSION: u32 = 1;
+/// The model format version this build writes; it also reads version 1 (votes as f32).
+pub const FORMAT_VERSION: u32 = 2;
+/// Resolution of stored vote offsets (mm) and spreads (mm^2) in version 2.
+const OFFSET_UNIT_MM: f32 = 0.05;
+const SPREAD_UNIT_MM2: f32 = 0.25;
+
+/// `v / unit` rounded to the nearest `i16`, saturating.
+fn quantise_i16(v: f32, unit: f32) -> i16 {
+    (v / unit).round().clamp(f32::from(i16::MIN), f32::from(i16::MAX)) as i16
+}
+
+/// `v / unit` rounded into `[lo, u16::MAX]`.
+fn quantise_u16(v: f32, unit: f32, lo: u16) -> u16 {
+    (v / unit).round().clamp(f32::from(lo), f32::from(u16::MAX)) as u16
+}
 /// The largest decompressed tree section accepted (far above any real model).
 const MAX_TREES_BYTES: usize = 1 << 30;
 
@@ -185,10 +199,10 @@ pub fn encode(model: &Model) -> Result<Vec<u8>, String> {
                 out.extend_from_slice(&mask.to_le_bytes());
                 for v in leaf.iter().filter(|v| v.weight > 0.0) {
                     for c in v.offset {
-                        put_f32(out, c);
+                        out.extend_from_slice(&quantise_i16(c, OFFSET_UNIT_MM).to_le_bytes());
                     }
-                    put_f32(out, v.weight);
-                    put_f32(out, v.spread);
+                    out.extend_from_slice(&quantise_u16(v.weight, 1.0 / 65535.0, 1).to_le_bytes());
+                    out.extend_from_slice(&quantise_u16(v.spread, SPREAD_UNIT_MM2, 0).to_le_bytes());
                 }
             }),
         ),
@@ -349,7 +363,7 @@ pub fn decode(bytes: &[u8], path: &Path, expected: Option<ModelKind>) -> Result<
     }
     let mut r = Reader { bytes, at: 8 };
     let version = r.u32("header").map_err(corrupt)?;
-    if version != FORMAT_VERSION {
+    if version != FORMAT_VERSION && version != 1 {
         return Err(ModelError::Version {
             path: path.to_owned(),
             version,
@@ -402,10 +416,21 @@ pub fn decode(bytes: &[u8], path: &Path, expected: Option<ModelKind>) -> Result<
                     return Err(format!("a leaf votes for joints that do not exist (mask {mask:#06x})"));
                 }
                 for (j, v) in leaf.iter_mut().enumerate().filter(|(j, _)| mask & (1 << j) != 0) {
-                    *v = JointVote {
-                        offset: [r.f32("leaf")?, r.f32("leaf")?, r.f32("leaf")?],
-                        weight: r.f32("leaf")?,
-                        spread: r.f32("leaf")?,
+                    *v = if version == 1 {
+                        JointVote {
+                            offset: [r.f32("leaf")?, r.f32("leaf")?, r.f32("leaf")?],
+                            weight: r.f32("leaf")?,
+                            spread: r.f32("leaf")?,
+                        }
+                    } else {
+                        let b = r.take(10, "leaf")?;
+                        let i = |k: usize| i16::from_le_bytes([b[k], b[k + 1]]);
+                        let u = |k: usize| u16::from_le_bytes([b[k], b[k + 1]]);
+                        JointVote {
+                            offset: [0, 2, 4].map(|k| f32::from(i(k)) * OFFSET_UNIT_MM),
+                            weight: f32::from(u(6)) / 65535.0,
+                            spread: f32::from(u(8)) * SPREAD_UNIT_MM2,
+                        }
                     };
                     if !(v.offset.iter().all(|c| c.is_finite()) && v.weight > 0.0 && v.weight <= 1.0 && v.spread >= 0.0)
                     {

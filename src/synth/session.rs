@@ -6,9 +6,9 @@
 use super::animate::Animator;
 use super::body::skin;
 use super::mouse::{MouseInstance, fit_in_cage, pose_mouse};
-use super::noise::{DepthNoise, quantise};
-use super::render::{Cage, Region, Scene};
-use super::views::render_bottom_frame;
+use super::noise::DepthNoise;
+use super::render::{Cage, Region};
+use super::views::{render_bottom_frame, render_top_frame};
 use super::{ENGINE_VERSION, item_rng, random_placement};
 use crate::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
 use crate::geometry::Rig;
@@ -211,26 +211,12 @@ fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
 /// Renders a full depth frame: the cage, the mouse, the sensor's noise.
 fn depth_frame(rig: &Rig, background: &[f32], shot: &Shot, noise: &DepthNoise, seed: u64) -> DepthFrame {
     let i = &rig.depth.intrinsics;
-    let scene = Scene::new(&rig.depth, &skin(&shot.mouse));
-    let region = scene.bounds.grown(2, i.width, i.height);
-    let hits = scene.cast(region);
-    let mut depth = background.to_vec();
-    let w = i.width as usize;
-    for y in 0..region.height as usize {
-        for x in 0..region.width as usize {
-            let z = hits.z[y * region.width as usize + x];
-            if z.is_finite() {
-                depth[(region.y0 as usize + y) * w + region.x0 as usize + x] = z;
-            }
-        }
-    }
     let mut rng = item_rng(seed, STREAM_DEPTH, shot.stamp.seq);
-    noise.apply(&mut depth, Region::full(i), i, &mut rng);
     DepthFrame {
         stamp: shot.stamp,
         width: i.width,
         height: i.height,
-        data: quantise(&depth),
+        data: render_top_frame(&rig.depth, background, &skin(&shot.mouse), noise, &mut rng),
     }
 }
 

@@ -50,6 +50,33 @@ pub fn render_top(
     }
 }
 
+/// A full top frame: `background` (the cage's depth over the whole image, mm) with the mouse
+/// drawn in, then the sensor's noise, as the camera's u16 millimetres.
+pub fn render_top_frame(
+    camera: &Camera,
+    background: &[f32],
+    skin: &[Primitive],
+    noise: &DepthNoise,
+    rng: &mut impl Rng,
+) -> Vec<u16> {
+    let i = &camera.intrinsics;
+    let scene = Scene::new(camera, skin);
+    let region = scene.bounds.grown(2, i.width, i.height);
+    let hits = scene.cast(region);
+    let mut depth = background.to_vec();
+    let w = i.width as usize;
+    for y in 0..region.height as usize {
+        for x in 0..region.width as usize {
+            let z = hits.z[y * region.width as usize + x];
+            if z.is_finite() {
+                depth[(region.y0 as usize + y) * w + region.x0 as usize + x] = z;
+            }
+        }
+    }
+    noise.apply(&mut depth, Region::full(i), i, rng);
+    quantise(&depth)
+}
+
 /// A paw's box in the bottom colour image.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PawBox {
