@@ -294,9 +294,6 @@ pub fn train(job: &TrainJob<'_>, progress: &dyn TrainProgress) -> Result<(Model,
         pixels: &set_t,
         thresholds: job.pixels.thresholds,
     };
-    let all_t: Vec<u32> = (0..set_t.len() as u32).collect();
-    let tick = || progress.tick();
-    let mut passes = Vec::new();
     let mut info = ModelInfo {
         kind: match job.target {
             Target::Body => ModelKind::Body,
@@ -315,73 +312,91 @@ pub fn train(job: &TrainJob<'_>, progress: &dyn TrainProgress) -> Result<(Model,
         training_seconds: 0.0,
     };
     progress.stage("training", job.params.trees as u64);
-    let model = match job.target {
+    let (model, passes) = match job.target {
         Target::Body => {
             let targets = joint_targets(&set_t, &samples_t, &rig);
-            let objective = JointObjective { targets: &targets };
-            let mut forest = match &job.from {
-                Some(Model::Body(_, f)) => f.clone(),
-                _ => train_forest(
-                    &space_t,
-                    &objective,
-                    vec![all_t; job.params.trees],
-                    &job.params,
-                    [0.0; 2],
-                    &tick,
-                ),
+            let targets_d = dd
+                .as_ref()
+                .map(|(_, samples_d, set_d)| joint_targets(set_d, samples_d, &rig));
+            let from = match &job.from {
+                Some(Model::Body(_, f)) => Some(f.clone()),
+                _ => None,
             };
-            if let Some((_, samples_d, set_d)) = &dd {
-                let targets_d = joint_targets(set_d, samples_d, &rig);
-                let space_d = DepthSpace {
-                    pixels: set_d,
-                    thresholds: job.pixels.thresholds,
-                };
-                passes = refine(
-                    &space_d,
-                    &JointObjective { targets: &targets_d },
-                    &mut forest,
-                    set_d.len(),
-                    &job.disc,
-                    progress,
-                );
-            }
+            let second = dd
+                .as_ref()
+                .zip(targets_d.as_ref())
+                .map(|((_, _, set), t)| (set, JointObjective { targets: t }));
+            let (forest, passes) = fit_forest(
+                &space_t,
+                &JointObjective { targets: &targets },
+                from,
+                second,
+                job,
+                progress,
+            );
             info.training_seconds = start.elapsed().as_secs_f64();
-            Model::Body(info, forest)
+            (Model::Body(info, forest), passes)
         }
         Target::Parts => {
             let labels = part_labels(&set_t, &samples_t);
+            let labels_d = dd.as_ref().map(|(_, samples_d, set_d)| part_labels(set_d, samples_d));
+            let from = match &job.from {
+                Some(Model::Parts(_, f)) => Some(f.clone()),
+                _ => None,
+            };
+            let second = dd.as_ref().zip(labels_d.as_ref()).map(|((_, _, set), l)| {
+                (
+                    set,
+                    ClassObjective {
+                        labels: l,
+                        classes: PART_COUNT,
+                    },
+                )
+            });
             let objective = ClassObjective {
                 labels: &labels,
                 classes: PART_COUNT,
             };
-            let mut forest = match &job.from {
-                Some(Model::Parts(_, f)) => f.clone(),
-                _ => train_forest(
-                    &space_t,
-                    &objective,
-                    vec![all_t; job.params.trees],
-                    &job.params,
-                    [0.0; 2],
-                    &tick,
-                ),
-            };
-            if let Some((_, samples_d, set_d)) = &dd {
-                let labels_d = part_labels(set_d, samples_d);
-                let space_d = DepthSpace {
-                    pixels: set_d,
-                    thresholds: job.pixels.thresholds,
-                };
-                let objective_d = ClassObjective {
-                    labels: &labels_d,
-                    classes: PART_COUNT,
-                };
-                passes = refine(&space_d, &objective_d, &mut forest, set_d.len(), &job.disc, progress);
-            }
+            let (forest, passes) = fit_forest(&space_t, &objective, from, second, job, progress);
             info.training_seconds = start.elapsed().as_secs_f64();
-            Model::Parts(info, forest)
+            (Model::Parts(info, forest), passes)
         }
     };
     Ok((model, passes))
+}
+
+/// Trains the baseline on D_t (or takes `from`) and, given D_d, refines it discriminatively.
+fn fit_forest<O: Objective>(
+    space_t: &DepthSpace<'_>,
+    objective_t: &O,
+    from: Option<Forest<[f32; 2], O::Leaf>>,
+    second: Option<(&PixelSet, O)>,
+    job: &TrainJob<'_>,
+    progress: &dyn TrainProgress,
+) -> (Forest<[f32; 2], O::Leaf>, Vec<PassStats>) {
+    let tick = || progress.tick();
+    let mut forest = from.unwrap_or_else(|| {
+        let all: Vec<u32> = (0..space_t.pixels.len() as u32).collect();
+        train_forest(
+            space_t,
+            objective_t,
+            vec![all; job.params.trees],
+            &job.params,
+            [0.0; 2],
+            &tick,
+        )
+    });
+    let passes = match second {
+        Some((set_d, objective_d)) => {
+            let space_d = DepthSpace {
+                pixels: set_d,
+                thresholds: job.pixels.thresholds,
+            };
+            refine(&space_d, &objective_d, &mut forest, set_d.len(), &job.disc, progress)
+        }
+        None => Vec::new(),
+    };
+    (forest, passes)
 }
 
 /// Discriminative training of every tree, trees in parallel, `params.iterations` passes each.
