@@ -1,7 +1,7 @@
 //! Writing a session: metadata first, then frames, events and truth as they come, each handed
 //! to the operating system at once; indexes and the closing event at [`SessionWriter::finish`].
 
-use super::codec::{Codec, FrameEncoder};
+use super::codec::{Codec, CodecError, FrameEncoder};
 use super::events::SessionEvent;
 use super::meta::{CameraRole, SessionMeta};
 use super::text::LineWriter;
@@ -216,18 +216,7 @@ impl SessionWriter {
     /// [`SessionError::Encode`] when the frame's data does not match its size;
     /// [`SessionError::Store`] or [`SessionError::Io`] when writing fails.
     pub fn write_depth(&mut self, frame: &DepthFrame) -> Result<()> {
-        let stream = self.stream(CameraRole::Depth)?;
-        let payload = stream
-            .encoder
-            .encode_depth(frame)
-            .map_err(|source| SessionError::Encode {
-                path: stream.store.path().to_path_buf(),
-                seq: frame.stamp.seq,
-                source,
-            })?;
-        stream.append(frame.stamp, &payload)?;
-        self.last_host_ns = self.last_host_ns.max(frame.stamp.host_ns);
-        Ok(())
+        self.write_frame(CameraRole::Depth, frame.stamp, |e| e.encode_depth(frame))
     }
 
     /// Appends a colour frame and its `timestamps.csv` row.
@@ -235,17 +224,24 @@ impl SessionWriter {
     /// # Errors
     /// As [`SessionWriter::write_depth`], for the colour camera.
     pub fn write_color(&mut self, frame: &ColorFrame) -> Result<()> {
-        let stream = self.stream(CameraRole::Color)?;
-        let payload = stream
-            .encoder
-            .encode_color(frame)
-            .map_err(|source| SessionError::Encode {
-                path: stream.store.path().to_path_buf(),
-                seq: frame.stamp.seq,
-                source,
-            })?;
-        stream.append(frame.stamp, &payload)?;
-        self.last_host_ns = self.last_host_ns.max(frame.stamp.host_ns);
+        self.write_frame(CameraRole::Color, frame.stamp, |e| e.encode_color(frame))
+    }
+
+    /// Encodes a frame with the camera's encoder and appends it with its stamp.
+    fn write_frame(
+        &mut self,
+        role: CameraRole,
+        stamp: Stamp,
+        encode: impl FnOnce(&mut FrameEncoder) -> std::result::Result<Vec<u8>, CodecError>,
+    ) -> Result<()> {
+        let stream = self.stream(role)?;
+        let payload = encode(&mut stream.encoder).map_err(|source| SessionError::Encode {
+            path: stream.store.path().to_path_buf(),
+            seq: stamp.seq,
+            source,
+        })?;
+        stream.append(stamp, &payload)?;
+        self.last_host_ns = self.last_host_ns.max(stamp.host_ns);
         Ok(())
     }
 
