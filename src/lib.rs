@@ -20,4 +20,5 @@ pub mod segment;
 pub mod session;
 pub mod skeleton;
 pub mod store;
+pub mod sync;
 pub mod synth;
