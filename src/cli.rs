@@ -39,6 +39,33 @@ enum Command {
     Experiment(ExperimentCommand),
     /// Measure the speed of mousepose's parts on this machine.
     Bench(BenchArgs),
+    /// Run a recorded or synthetic session through the pipeline: poses.csv and summary.json.
+    Replay(ReplayArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// The session directory (written by `record`, `run` or `synth session`).
+    #[arg(value_name = "SESSION")]
+    pub session: PathBuf,
+    /// The directory to write poses.csv and summary.json into.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// The models directory (body.forest); the bundled models by default.
+    #[arg(long, value_name = "DIR")]
+    pub models: Option<PathBuf>,
+    /// Deliver the frames at the pace they were recorded instead of as fast as possible.
+    #[arg(long)]
+    pub realtime: bool,
+    /// Body-forest worker threads (0: one per core).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=64))]
+    pub workers: u32,
+    /// Print the summary as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// What `train` and `eval` work on.
@@ -323,6 +350,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Eval(args) => crate::commands::eval(&args),
         Command::Experiment(ExperimentCommand::Gauss2d(args)) => crate::commands::gauss2d(&args),
         Command::Bench(args) => run_bench(&args),
+        Command::Replay(args) => crate::commands::replay(&args),
     }
 }
 

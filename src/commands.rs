@@ -531,3 +531,55 @@ fn gauss2d_tables(r: &Gauss2dReport) -> String {
     }
     t
 }
+
+/// `mousepose replay`.
+pub fn replay(args: &crate::cli::ReplayArgs) -> Result<()> {
+    use crate::replay::{ReplayOptions, replay};
+    let options = ReplayOptions {
+        session: args.session.clone(),
+        out: args.out.clone(),
+        models: args.models.clone(),
+        realtime: args.realtime,
+        workers: args.workers as usize,
+        force: args.force,
+    };
+    let summary = replay(&options).with_context(|| format!("replaying {:?}", args.session))?;
+    if args.json {
+        return print_json(&summary);
+    }
+    let mut text = String::new();
+    let _ = writeln!(
+        text,
+        "{} pairs in {:.2} s ({:.0} pairs/s); poses in {:?}",
+        summary.pairs,
+        summary.elapsed_s,
+        summary.throughput_pairs_per_s,
+        args.out.join(crate::sink::poses::POSES_FILE)
+    );
+    for (name, c) in &summary.cameras {
+        let _ = writeln!(
+            text,
+            "{name:>6}: captured {}, paired {}, unpaired {}, dropped {} {:?}, lost before capture {:?}",
+            c.captured, c.paired, c.unpaired, c.dropped_total, c.dropped, c.lost_before_capture
+        );
+    }
+    for s in &summary.stages {
+        let _ = writeln!(
+            text,
+            "{:>8}: {} in, {} out, p50 {:.2} ms, p99 {:.2} ms",
+            s.name, s.items_in, s.items_out, s.latency.p50_ms, s.latency.p99_ms
+        );
+    }
+    let _ = writeln!(
+        text,
+        "end to end: p50 {:.2} ms, p99 {:.2} ms",
+        summary.end_to_end_latency.p50_ms, summary.end_to_end_latency.p99_ms
+    );
+    if let Some(p) = &summary.pairing {
+        let _ = writeln!(text, "pairing vs truth: {} of {} pairs match", p.matched, p.truth_pairs);
+    }
+    if let Some(mean) = summary.mean_error_mm {
+        let _ = writeln!(text, "mean joint error vs truth: {mean:.2} mm");
+    }
+    print(&text)
+}

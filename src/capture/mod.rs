@@ -7,6 +7,7 @@
 //! device counter are counted by the runner, not here.
 
 pub mod clock;
+pub mod session;
 
 pub use clock::Clock;
 
@@ -52,6 +53,22 @@ pub enum CaptureError {
         #[source]
         source: Box<dyn std::error::Error + Send + Sync>,
     },
+}
+
+/// A frame from either camera of the rig, as the synchroniser takes them.
+#[derive(Debug)]
+pub enum Captured {
+    Depth(DepthFrame),
+    Color(ColorFrame),
+}
+
+impl Stamped for Captured {
+    fn stamp(&self) -> Stamp {
+        match self {
+            Captured::Depth(f) => f.stamp,
+            Captured::Color(f) => f.stamp,
+        }
+    }
 }
 
 /// What every frame type a source can produce has: its stamp.

@@ -1,0 +1,285 @@
+//! The runner: starts one named thread per source, stage worker and sink, joins them in
+//! order, and reports which one failed.
+//!
+//! Stages and sinks are plain objects ([`Stage`], [`Sink`]); the runner owns the channels,
+//! the timing and the counters. Items travel wrapped in [`Tracked`], which carries the pair's
+//! index and the instant it entered the pipeline, so the sink can measure end-to-end latency
+//! and restore order behind a stage with several workers.
+
+use super::edge::{EdgeSender, Sent};
+use super::metrics::{Histogram, LatencySummary};
+use crossbeam_channel::Receiver;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+/// Why a stage, sink or source failed: the component's own error, kept as the cause.
+pub type StageError = Box<dyn std::error::Error + Send + Sync>;
+
+/// A processing step: a function from one input to any number of outputs.
+pub trait Stage: Send + 'static {
+    type In: Send + 'static;
+    type Out: Send + 'static;
+    /// Pushes 0..n outputs for `input`.
+    ///
+    /// # Errors
+    /// A failure that must stop the run (a bad frame is an output with a status, not an error).
+    fn process(&mut self, input: Self::In, out: &mut Vec<Self::Out>) -> Result<(), StageError>;
+}
+
+/// The end of the pipeline: writes what reaches it.
+pub trait Sink: Send + 'static {
+    type In: Send + 'static;
+    /// # Errors
+    /// The item cannot be written.
+    fn write(&mut self, item: Self::In) -> Result<(), StageError>;
+    /// # Errors
+    /// What was written cannot be made durable.
+    fn flush(&mut self) -> Result<(), StageError>;
+}
+
+/// An item with its place in the run and the instant it entered the pipeline.
+#[derive(Debug)]
+pub struct Tracked<T> {
+    pub index: u64,
+    pub entered: Instant,
+    pub item: T,
+}
+
+impl<T> Tracked<T> {
+    pub fn new(index: u64, item: T) -> Self {
+        Self {
+            index,
+            entered: Instant::now(),
+            item,
+        }
+    }
+}
+
+/// Counters of one stage (all its workers) or sink.
+#[derive(Debug, Default)]
+pub struct StageStats {
+    pub items_in: AtomicU64,
+    pub items_out: AtomicU64,
+    /// Time spent in `process` or `write` per item.
+    pub latency: Histogram,
+}
+
+/// What a stage did, for summaries.
+#[derive(Clone, Debug, Serialize)]
+pub struct StageReport {
+    pub name: String,
+    pub items_in: u64,
+    pub items_out: u64,
+    pub latency: LatencySummary,
+}
+
+/// A component that stopped the run.
+#[derive(Debug, thiserror::Error)]
+#[error("{name} failed")]
+pub struct PipelineError {
+    pub name: String,
+    #[source]
+    pub source: StageError,
+}
+
+/// The stop signal sources check between frames.
+#[derive(Clone, Debug, Default)]
+pub struct Shutdown(Arc<AtomicBool>);
+
+impl Shutdown {
+    pub fn request(&self) {
+        self.0.store(true, Ordering::Release);
+    }
+
+    pub fn requested(&self) -> bool {
+        self.0.load(Ordering::Acquire)
+    }
+}
+
+/// Items a sink holds back while waiting for an earlier index (from a stage with several
+/// workers) before it writes the earliest it has anyway.
+const REORDER_WINDOW: usize = 256;
+
+/// The threads of a running pipeline.
+#[derive(Debug, Default)]
+pub struct Runner {
+    threads: Vec<(String, JoinHandle<Result<(), StageError>>)>,
+    stages: Vec<(String, Arc<StageStats>)>,
+    shutdown: Shutdown,
+}
+
+impl Runner {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The signal that stops the sources.
+    pub fn shutdown(&self) -> Shutdown {
+        self.shutdown.clone()
+    }
+
+    /// Starts a thread named `name` running `body`. Start threads in topological order
+    /// (sources first): [`Runner::join`] joins them in that order.
+    ///
+    /// # Errors
+    /// The thread cannot be created.
+    pub fn spawn(
+        &mut self,
+        name: &str,
+        body: impl FnOnce() -> Result<(), StageError> + Send + 'static,
+    ) -> std::io::Result<()> {
+        let shutdown = self.shutdown.clone();
+        let handle = std::thread::Builder::new().name(name.to_owned()).spawn(move || {
+            let result = body();
+            if result.is_err() {
+                shutdown.request();
+            }
+            result
+        })?;
+        self.threads.push((name.to_owned(), handle));
+        Ok(())
+    }
+
+    /// Starts a stage with one thread per worker (`name-0`, `name-1`, ... when several), all
+    /// reading `input` and sending to `output`.
+    ///
+    /// # Errors
+    /// A thread cannot be created.
+    pub fn stage<S: Stage>(
+        &mut self,
+        name: &str,
+        workers: Vec<S>,
+        input: &Receiver<Tracked<S::In>>,
+        output: &EdgeSender<Tracked<S::Out>>,
+    ) -> std::io::Result<Arc<StageStats>> {
+        let stats = Arc::new(StageStats::default());
+        let several = workers.len() > 1;
+        for (k, mut stage) in workers.into_iter().enumerate() {
+            let thread = if several { format!("{name}-{k}") } else { name.to_owned() };
+            let (rx, tx, stats) = (input.clone(), output.clone(), Arc::clone(&stats));
+            self.spawn(&thread, move || {
+                let mut out = Vec::new();
+                for tracked in rx.iter() {
+                    stats.items_in.fetch_add(1, Ordering::Relaxed);
+                    let start = Instant::now();
+                    let (index, entered) = (tracked.index, tracked.entered);
+                    stage.process(tracked.item, &mut out)?;
+                    stats.latency.record(start.elapsed());
+                    for item in out.drain(..) {
+                        stats.items_out.fetch_add(1, Ordering::Relaxed);
+                        if tx.send(Tracked { index, entered, item }) == Sent::Closed {
+                            // Downstream stopped (it failed and says so): stop quietly.
+                            return Ok(());
+                        }
+                    }
+                }
+                Ok(())
+            })?;
+        }
+        self.stages.push((name.to_owned(), Arc::clone(&stats)));
+        Ok(stats)
+    }
+
+    /// Starts a sink thread. Items are written in index order (see [`REORDER_WINDOW`]);
+    /// `end_to_end` gets each item's time from entering the pipeline to written.
+    ///
+    /// # Errors
+    /// The thread cannot be created.
+    pub fn sink<K: Sink>(
+        &mut self,
+        name: &str,
+        mut sink: K,
+        input: Receiver<Tracked<K::In>>,
+        end_to_end: Arc<Histogram>,
+    ) -> std::io::Result<Arc<StageStats>> {
+        let stats = Arc::new(StageStats::default());
+        let st = Arc::clone(&stats);
+        self.spawn(name, move || {
+            let mut held: BTreeMap<u64, Tracked<K::In>> = BTreeMap::new();
+            let mut next = 0u64;
+            let write = |t: Tracked<K::In>, sink: &mut K| -> Result<(), StageError> {
+                let start = Instant::now();
+                sink.write(t.item)?;
+                st.latency.record(start.elapsed());
+                end_to_end.record(t.entered.elapsed());
+                st.items_out.fetch_add(1, Ordering::Relaxed);
+                Ok(())
+            };
+            for t in input.iter() {
+                st.items_in.fetch_add(1, Ordering::Relaxed);
+                held.insert(t.index, t);
+                loop {
+                    let full = held.len() > REORDER_WINDOW;
+                    let Some(entry) = held.first_entry() else {
+                        break;
+                    };
+                    if *entry.key() != next && !full {
+                        break;
+                    }
+                    let t = entry.remove();
+                    next = t.index + 1;
+                    write(t, &mut sink)?;
+                }
+            }
+            while let Some((_, t)) = held.pop_first() {
+                write(t, &mut sink)?;
+            }
+            sink.flush()
+        })?;
+        self.stages.push((name.to_owned(), Arc::clone(&stats)));
+        Ok(stats)
+    }
+
+    /// Per stage and sink: items in and out, time per item.
+    pub fn reports(&self) -> Vec<StageReport> {
+        self.stages
+            .iter()
+            .map(|(name, s)| StageReport {
+                name: name.clone(),
+                items_in: s.items_in.load(Ordering::Relaxed),
+                items_out: s.items_out.load(Ordering::Relaxed),
+                latency: s.latency.summary(),
+            })
+            .collect()
+    }
+
+    /// Waits for every thread in start order and returns the stage reports.
+    ///
+    /// # Errors
+    /// The first component (in start order) that failed or panicked.
+    pub fn join(self) -> Result<Vec<StageReport>, PipelineError> {
+        let reports_of = |stages: &[(String, Arc<StageStats>)]| {
+            Runner {
+                threads: Vec::new(),
+                stages: stages.to_vec(),
+                shutdown: Shutdown::default(),
+            }
+            .reports()
+        };
+        let mut first: Option<PipelineError> = None;
+        for (name, handle) in self.threads {
+            let result = match handle.join() {
+                Ok(r) => r,
+                Err(panic) => {
+                    let what = panic
+                        .downcast_ref::<&str>()
+                        .map(|s| (*s).to_owned())
+                        .or_else(|| panic.downcast_ref::<String>().cloned())
+                        .unwrap_or_else(|| "unknown panic".to_owned());
+                    Err(format!("panicked: {what}").into())
+                }
+            };
+            if let (Err(source), None) = (result, &first) {
+                first = Some(PipelineError { name, source });
+            }
+        }
+        match first {
+            Some(e) => Err(e),
+            None => Ok(reports_of(&self.stages)),
+        }
+    }
+}

@@ -1,0 +1,517 @@
+//! `mousepose replay`: a recorded or synthetic session through the same pipeline the daemon
+//! runs, with the cameras swapped for the session reader.
+//!
+//! ```text
+//!  replay (session reader, both cameras in host order) ─Captured─▶ sync ─FramePair─▶ segment
+//!      ─Segmented─▶ body (one worker per core) ─PoseRecord─▶ poses (poses.csv, in order)
+//! ```
+//!
+//! Every frame is accounted for: per camera, captured = paired + unpaired + dropped (by
+//! reason); frames lost before capture (gaps in the camera's sequence numbers, records that
+//! do not decode) are counted apart. `summary.json` holds those counts, the per-stage latency,
+//! the throughput and, for synthetic sessions, the error against the ground truth.
+
+use crate::capture::session::SessionSource;
+use crate::capture::{Captured, Clock, FrameSource};
+use crate::forest::infer::{BodyEstimator, VoteSettings};
+use crate::forest::model::{self, Model, ModelError, ModelKind};
+use crate::frame::DepthFrame;
+use crate::geometry::Rig;
+use crate::output::{OutputError, Staging};
+use crate::pipeline::{
+    EdgeConfig, EdgeSender, EdgeStats, Histogram, LatencySummary, PipelineError, Runner, Sent, Shutdown, StageError,
+    StageReport, Tracked, edge,
+};
+use crate::segment::{Background, SegmentError, SegmenterConfig};
+use crate::session::{CameraRole, SessionError, SessionReader, SessionSource};
+use crate::sink::poses::{PoseTally, PoseWriter};
+use crate::stages::body::BodyStage;
+use crate::stages::segment::SegmentStage;
+use crate::sync::{Role, SyncConfig, SyncOutput, Synchronizer};
+use crossbeam_channel::Receiver;
+use serde::Serialize;
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+/// The file with the run's summary.
+pub const SUMMARY_FILE: &str = "summary.json";
+/// The body forest's file name in a models directory.
+pub const BODY_MODEL: &str = "body.forest";
+
+/// What to replay and how.
+#[derive(Clone, Debug)]
+pub struct ReplayOptions {
+    pub session: PathBuf,
+    pub out: PathBuf,
+    /// The models directory; `None`: the bundled defaults (see [`default_models_dir`]).
+    pub models: Option<PathBuf>,
+    pub realtime: bool,
+    /// Body-forest workers; 0: one per core.
+    pub workers: usize,
+    pub force: bool,
+}
+
+/// Why a replay failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    #[error("cannot open the session")]
+    Session(#[from] SessionError),
+    #[error("the session {0:?} has no depth frames")]
+    Empty(PathBuf),
+    #[error("no models directory given and no bundled models found (looked in {0})")]
+    NoModels(String),
+    #[error("cannot load the model {path:?}")]
+    Model {
+        path: PathBuf,
+        #[source]
+        source: ModelError,
+    },
+    #[error("cannot model the empty cage from the session's depth frames")]
+    Background(#[source] SegmentError),
+    #[error(transparent)]
+    Output(#[from] OutputError),
+    #[error("cannot write {path:?}")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("cannot start the pipeline's threads")]
+    Threads(#[source] std::io::Error),
+    #[error("the pipeline stopped")]
+    Pipeline(#[from] PipelineError),
+}
+
+/// Where the bundled models are: `$MOUSEPOSE_MODELS`, then beside an installed binary
+/// (`<prefix>/share/mousepose/models`), then the source checkout the binary was built from.
+pub fn default_models_dir() -> Result<PathBuf, ReplayError> {
+    let mut candidates = Vec::new();
+    if let Some(dir) = std::env::var_os("MOUSEPOSE_MODELS") {
+        candidates.push(PathBuf::from(dir));
+    }
+    if let Ok(exe) = std::env::current_exe() {
+        if let Some(prefix) = exe.parent().and_then(Path::parent) {
+            candidates.push(prefix.join("share/mousepose/models"));
+        }
+    }
+    candidates.push(Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/models"));
+    candidates
+        .iter()
+        .find(|d| d.join(BODY_MODEL).is_file())
+        .cloned()
+        .ok_or_else(|| {
+            ReplayError::NoModels(
+                candidates
+                    .iter()
+                    .map(|d| format!("{d:?}"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            )
+        })
+}
+
+/// Loads the body forest of a models directory.
+///
+/// # Errors
+/// The file is missing, damaged, or not a body forest.
+pub fn load_body(models: &Path) -> Result<BodyEstimator, ReplayError> {
+    let path = models.join(BODY_MODEL);
+    match model::load(&path, Some(ModelKind::Body)) {
+        Ok(Model::Body(_, forest)) => Ok(BodyEstimator::new(forest, VoteSettings::default())),
+        Ok(Model::Parts(..)) => Err(ReplayError::Model {
+            source: ModelError::WrongKind {
+                path: path.clone(),
+                found: "parts",
+                expected: "body",
+            },
+            path,
+        }),
+        Err(source) => Err(ReplayError::Model { path, source }),
+    }
+}
+
+/// Frames per camera, by what became of them.
+#[derive(Debug, Default)]
+pub struct CameraCounters {
+    /// Frames the source delivered.
+    pub captured: AtomicU64,
+    /// In a pair with a frame of the other camera.
+    pub paired: AtomicU64,
+    /// Processed without a partner (depth-only pairs; colour frames no depth frame claimed).
+    pub unpaired: AtomicU64,
+    /// Delivered but not processed, by reason.
+    pub dropped: Mutex<BTreeMap<String, u64>>,
+    /// Never delivered, by reason (`camera_gap`: missing sequence numbers; the source's own
+    /// losses such as damaged buffers or records).
+    pub lost: Mutex<BTreeMap<String, u64>>,
+}
+
+fn bump(map: &Mutex<BTreeMap<String, u64>>, reason: &str, n: u64) {
+    if n > 0 {
+        *map.lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .entry(reason.to_owned())
+            .or_default() += n;
+    }
+}
+
+/// Both cameras' counters.
+#[derive(Debug, Default)]
+pub struct Accounting {
+    pub depth: CameraCounters,
+    pub color: CameraCounters,
+}
+
+impl Accounting {
+    pub fn camera(&self, role: CameraRole) -> &CameraCounters {
+        match role {
+            CameraRole::Depth => &self.depth,
+            CameraRole::Color => &self.color,
+        }
+    }
+}
+
+fn role_of(c: &Captured) -> CameraRole {
+    match c {
+        Captured::Depth(_) => CameraRole::Depth,
+        Captured::Color(_) => CameraRole::Color,
+    }
+}
+
+/// The body of a capture thread: runs `source` until it ends, fails or `shutdown` is
+/// requested, sending each frame (as `wrap` makes it) to `tx` and counting what happens to it.
+///
+/// # Errors
+/// The source failed to start, deliver or stop.
+pub fn run_source<S: FrameSource>(
+    mut source: S,
+    clock: &Clock,
+    wrap: fn(S::Frame) -> Captured,
+    tx: &EdgeSender<Captured>,
+    acct: &Accounting,
+    shutdown: &Shutdown,
+) -> Result<(), StageError> {
+    let own_role = source.meta().role;
+    source.start(clock)?;
+    let mut last_seq: [Option<u64>; 2] = [None, None];
+    while !shutdown.requested() && !source.finished() {
+        let Some(frame) = source.next_frame(Duration::from_millis(100))? else {
+            continue;
+        };
+        let frame = wrap(frame);
+        let role = role_of(&frame);
+        let counters = acct.camera(role);
+        counters.captured.fetch_add(1, Ordering::Relaxed);
+        let seq = crate::capture::Stamped::stamp(&frame).seq;
+        let slot = usize::from(role == CameraRole::Color);
+        if let Some(last) = last_seq[slot] {
+            bump(&counters.lost, "camera_gap", seq.saturating_sub(last).saturating_sub(1));
+        }
+        last_seq[slot] = Some(last_seq[slot].map_or(seq, |l| l.max(seq)));
+        match tx.send(frame) {
+            Sent::Delivered => {}
+            Sent::DroppedFull => bump(&counters.dropped, "queue_full", 1),
+            Sent::Closed => break,
+        }
+    }
+    for (reason, n) in source.losses() {
+        let (role, reason) = match reason.split_once('_') {
+            Some(("depth", r)) => (CameraRole::Depth, r),
+            Some(("color", r)) => (CameraRole::Color, r),
+            _ => (own_role, reason),
+        };
+        bump(&acct.camera(role).lost, reason, n);
+    }
+    source.stop()?;
+    Ok(())
+}
+
+/// The body of the sync thread: pairs what arrives on `rx` and sends the pairs on, numbered.
+///
+/// # Errors
+/// Never, today; the signature leaves room for a synchroniser that can fail.
+pub fn run_sync(
+    config: SyncConfig,
+    rx: &Receiver<Captured>,
+    tx: &EdgeSender<Tracked<crate::frame::FramePair>>,
+    acct: &Accounting,
+) -> Result<(), StageError> {
+    let mut sync = Synchronizer::new(config);
+    let mut out = Vec::new();
+    let mut index = 0u64;
+    let mut emit = |out: &mut Vec<SyncOutput>| -> bool {
+        for o in out.drain(..) {
+            match o {
+                SyncOutput::Pair(pair) => {
+                    if pair.color.is_some() {
+                        acct.depth.paired.fetch_add(1, Ordering::Relaxed);
+                        acct.color.paired.fetch_add(1, Ordering::Relaxed);
+                    } else {
+                        acct.depth.unpaired.fetch_add(1, Ordering::Relaxed);
+                    }
+                    if tx.send(Tracked::new(index, pair)) == Sent::Closed {
+                        return false;
+                    }
+                    index += 1;
+                }
+                SyncOutput::UnpairedColor(_) => {
+                    acct.color.unpaired.fetch_add(1, Ordering::Relaxed);
+                }
+                SyncOutput::Rejected { role, reason, .. } => {
+                    let counters = match role {
+                        Role::Depth => &acct.depth,
+                        Role::Color => &acct.color,
+                    };
+                    bump(&counters.dropped, reason.name(), 1);
+                }
+            }
+        }
+        true
+    };
+    for captured in rx.iter() {
+        match captured {
+            Captured::Depth(f) => sync.push_depth(f, &mut out),
+            Captured::Color(f) => sync.push_color(f, &mut out),
+        }
+        if !emit(&mut out) {
+            return Ok(());
+        }
+    }
+    sync.flush(&mut out);
+    emit(&mut out);
+    Ok(())
+}
+
+/// One camera in the summary. `captured = paired + unpaired + dropped_total`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct CameraSummary {
+    pub captured: u64,
+    pub paired: u64,
+    pub unpaired: u64,
+    pub dropped: BTreeMap<String, u64>,
+    pub dropped_total: u64,
+    pub lost_before_capture: BTreeMap<String, u64>,
+}
+
+impl CameraSummary {
+    fn of(c: &CameraCounters) -> Self {
+        let dropped = c.dropped.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        Self {
+            captured: c.captured.load(Ordering::Relaxed),
+            paired: c.paired.load(Ordering::Relaxed),
+            unpaired: c.unpaired.load(Ordering::Relaxed),
+            dropped_total: dropped.values().sum(),
+            dropped,
+            lost_before_capture: c.lost.lock().unwrap_or_else(PoisonError::into_inner).clone(),
+        }
+    }
+
+    /// Whether every captured frame is accounted for.
+    pub fn adds_up(&self) -> bool {
+        self.captured == self.paired + self.unpaired + self.dropped_total
+    }
+}
+
+/// An edge in the summary.
+#[derive(Clone, Debug, Serialize)]
+pub struct EdgeSummary {
+    pub capacity: usize,
+    pub max_depth: u64,
+    pub dropped_full: u64,
+}
+
+fn edge_summary(config: EdgeConfig, stats: &EdgeStats) -> EdgeSummary {
+    EdgeSummary {
+        capacity: config.capacity.get(),
+        max_depth: stats.max_depth.load(Ordering::Relaxed),
+        dropped_full: stats.dropped_full.load(Ordering::Relaxed),
+    }
+}
+
+/// How the pairs compare with a synthetic session's true pairs.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct PairingCheck {
+    pub truth_pairs: u64,
+    pub matched: u64,
+    pub mismatched: u64,
+}
+
+/// `summary.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReplaySummary {
+    pub session: PathBuf,
+    pub software_version: &'static str,
+    pub body_model: PathBuf,
+    pub realtime: bool,
+    pub pairs: u64,
+    pub statuses: BTreeMap<&'static str, u64>,
+    pub elapsed_s: f64,
+    pub throughput_pairs_per_s: f64,
+    pub cameras: BTreeMap<&'static str, CameraSummary>,
+    pub stages: Vec<StageReport>,
+    /// From a pair leaving the synchroniser to its row written.
+    pub end_to_end_latency: LatencySummary,
+    pub edges: BTreeMap<&'static str, EdgeSummary>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pairing: Option<PairingCheck>,
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub per_joint_error_mm: BTreeMap<&'static str, f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_error_mm: Option<f64>,
+}
+
+/// Frames the background model is built from, spread over the session.
+const BACKGROUND_FRAMES: usize = 31;
+
+/// The empty cage: for a synthetic session the rendered empty cage; otherwise the per-pixel
+/// median of frames spread over the session (a mouse that moves drops out of the median, as
+/// in MoSeq's extraction).
+fn background(reader: &SessionReader, rig: &Rig) -> Result<Background, ReplayError> {
+    let n = reader.depth_count();
+    if n == 0 {
+        return Err(ReplayError::Empty(reader.dir().to_path_buf()));
+    }
+    if reader.meta().source == SessionSource::Synthetic && reader.meta().rig.is_some() {
+        // The generator's empty cage is known exactly: the reference a rig records before the
+        // mouse goes in.
+        let full = crate::synth::render::Region::full(&rig.depth.intrinsics);
+        let cage = crate::synth::render::Cage::new(&rig.depth).depth(full);
+        return Background::from_depth(&cage, full, &rig.depth.intrinsics, &SegmenterConfig::default())
+            .map_err(ReplayError::Background);
+    }
+    let picks = BACKGROUND_FRAMES.min(n);
+    let frames: Vec<DepthFrame> = (0..picks)
+        .filter_map(|k| reader.depth_frame(k * n / picks).ok())
+        .collect();
+    let mut intrinsics = rig.depth.intrinsics;
+    if let Some(f) = frames.first() {
+        intrinsics.width = f.width;
+        intrinsics.height = f.height;
+    }
+    Background::from_frames(&frames, &intrinsics, &SegmenterConfig::default()).map_err(ReplayError::Background)
+}
+
+/// Runs the replay and writes `poses.csv` and `summary.json` into `options.out`.
+///
+/// # Errors
+/// See [`ReplayError`]; nothing is left at `options.out` on failure.
+pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
+    let reader = SessionReader::open(&options.session)?;
+    let models = match &options.models {
+        Some(dir) => dir.clone(),
+        None => default_models_dir()?,
+    };
+    let estimator = load_body(&models)?;
+    let rig = reader.meta().rig.unwrap_or_else(Rig::default_rig);
+    let background = background(&reader, &rig)?;
+    let segmenter = SegmenterConfig::default()
+        .build(background)
+        .map_err(ReplayError::Background)?
+        .with_world(rig.depth.world_from_camera);
+    let truth = reader.truth()?;
+    let staging = Staging::new(&options.out, options.force)?;
+    let truth_joints: HashMap<u64, _> = truth
+        .as_ref()
+        .map(|t| t.joints.iter().map(|(seq, _, j)| (*seq, *j)).collect())
+        .unwrap_or_default();
+    let writer = PoseWriter::create(staging.path(), truth_joints).map_err(|source| ReplayError::Write {
+        path: staging.path().join(crate::sink::poses::POSES_FILE),
+        source,
+    })?;
+    let tally = writer.tally();
+
+    let workers = match options.workers {
+        0 => std::thread::available_parallelism().map_or(1, usize::from),
+        n => n,
+    };
+    let capture_edge = EdgeConfig::block(64);
+    let stage_edge = EdgeConfig::block(8);
+    let (cap_tx, cap_rx, cap_stats) = edge::<Captured>(capture_edge);
+    let (pair_tx, pair_rx, pair_stats) = edge(stage_edge);
+    let (seg_tx, seg_rx, seg_stats) = edge(stage_edge);
+    let (pose_tx, pose_rx, pose_stats) = edge(stage_edge);
+    let acct = Arc::new(Accounting::default());
+    let end_to_end = Arc::new(Histogram::default());
+    let sync_config = SyncConfig {
+        color: reader.meta().camera(CameraRole::Color).is_some(),
+        ..SyncConfig::default()
+    };
+
+    let mut runner = Runner::new();
+    let start = Instant::now();
+    let source = SessionSource::new(&reader, options.realtime);
+    let clock = Clock::replay(0);
+    let (acct_src, shutdown) = (Arc::clone(&acct), runner.shutdown());
+    let threads = |e| ReplayError::Threads(e);
+    runner
+        .spawn("replay", move || {
+            run_source(source, &clock, |c| c, &cap_tx, &acct_src, &shutdown)
+        })
+        .map_err(threads)?;
+    let acct_sync = Arc::clone(&acct);
+    runner
+        .spawn("sync", move || run_sync(sync_config, &cap_rx, &pair_tx, &acct_sync))
+        .map_err(threads)?;
+    runner
+        .stage("segment", vec![SegmentStage::new(segmenter)], &pair_rx, &seg_tx)
+        .map_err(threads)?;
+    drop((pair_rx, seg_tx));
+    let body = BodyStage::new(estimator, rig.depth);
+    runner
+        .stage("body", vec![body; workers], &seg_rx, &pose_tx)
+        .map_err(threads)?;
+    drop((seg_rx, pose_tx));
+    runner
+        .sink("poses", writer, pose_rx, Arc::clone(&end_to_end))
+        .map_err(threads)?;
+    let stages = runner.join()?;
+    let elapsed_s = start.elapsed().as_secs_f64();
+
+    let tally: PoseTally = tally.lock().unwrap_or_else(PoisonError::into_inner).clone();
+    let mut cameras = BTreeMap::new();
+    cameras.insert("depth", CameraSummary::of(&acct.depth));
+    if sync_config.color {
+        cameras.insert("color", CameraSummary::of(&acct.color));
+    }
+    let pairing = truth.as_ref().map(|t| {
+        let ours: HashMap<u64, Option<u64>> = tally.pairs.iter().copied().collect();
+        let matched = t.pairs.iter().filter(|(d, c)| ours.get(d) == Some(c)).count() as u64;
+        PairingCheck {
+            truth_pairs: t.pairs.len() as u64,
+            matched,
+            mismatched: t.pairs.len() as u64 - matched,
+        }
+    });
+    let edges = BTreeMap::from([
+        ("capture", edge_summary(capture_edge, &cap_stats)),
+        ("sync->segment", edge_summary(stage_edge, &pair_stats)),
+        ("segment->body", edge_summary(stage_edge, &seg_stats)),
+        ("body->poses", edge_summary(stage_edge, &pose_stats)),
+    ]);
+    let summary = ReplaySummary {
+        session: options.session.clone(),
+        software_version: env!("CARGO_PKG_VERSION"),
+        body_model: models.join(BODY_MODEL),
+        realtime: options.realtime,
+        pairs: tally.rows,
+        statuses: tally.statuses.clone(),
+        elapsed_s,
+        throughput_pairs_per_s: tally.rows as f64 / elapsed_s.max(1e-9),
+        cameras,
+        stages,
+        end_to_end_latency: end_to_end.summary(),
+        edges,
+        pairing,
+        per_joint_error_mm: tally.per_joint_error_mm(),
+        mean_error_mm: tally.mean_error_mm(),
+    };
+    let path = staging.path().join(SUMMARY_FILE);
+    let json = serde_json::to_vec_pretty(&summary).map_err(std::io::Error::from);
+    json.and_then(|j| std::fs::write(&path, j))
+        .map_err(|source| ReplayError::Write { path, source })?;
+    staging.commit()?;
+    Ok(summary)
+}

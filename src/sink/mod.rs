@@ -1,0 +1,3 @@
+//! Sinks: where the pipeline's results go.
+
+pub mod poses;

@@ -1,0 +1,144 @@
+//! `poses.csv`: one row per frame pair, written as the poses arrive, and a tally of what was
+//! written (statuses, pairs, and the error against ground truth when there is one).
+//!
+//! Columns: `frame, depth_seq, color_seq, host_ns, depth_device_ns, color_device_ns, skew_ns,
+//! status`, then per joint in joint order `{name}_x, {name}_y, {name}_z` (mm, world frame),
+//! `{name}_score` and `{name}_source` (Anipose's per-joint convention). A joint without an
+//! estimate has empty coordinates and score, and source `missing`; a depth-only pair has an
+//! empty `color_seq` and `color_device_ns`.
+
+use crate::pipeline::{Sink, StageError};
+use crate::pose::{JointPositions, JointSource};
+use crate::skeleton::{JOINT_COUNT, Joint};
+use crate::stages::PoseRecord;
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write as _;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+use std::sync::{Arc, Mutex, PoisonError};
+
+/// The name of the file.
+pub const POSES_FILE: &str = "poses.csv";
+
+/// The header line of `poses.csv`.
+pub fn header() -> String {
+    let mut h =
+        String::from("frame,depth_seq,color_seq,host_ns,depth_device_ns,color_device_ns,skew_ns,status");
+    for joint in Joint::ALL {
+        for col in ["x", "y", "z", "score", "source"] {
+            let _ = write!(h, ",{}_{col}", joint.name());
+        }
+    }
+    h
+}
+
+/// What the sink has written.
+#[derive(Clone, Debug, Default)]
+pub struct PoseTally {
+    pub rows: u64,
+    pub statuses: BTreeMap<&'static str, u64>,
+    /// `(depth_seq, color_seq)` of every row, in order.
+    pub pairs: Vec<(u64, Option<u64>)>,
+    /// Per joint: summed error (mm) and count, over rows with truth and an estimate.
+    pub error_sum_mm: [f64; JOINT_COUNT],
+    pub error_count: [u64; JOINT_COUNT],
+}
+
+impl PoseTally {
+    /// Mean error per joint (mm), for joints that were ever compared.
+    pub fn per_joint_error_mm(&self) -> BTreeMap<&'static str, f64> {
+        Joint::ALL
+            .iter()
+            .filter(|j| self.error_count[j.index()] > 0)
+            .map(|j| (j.name(), self.error_sum_mm[j.index()] / self.error_count[j.index()] as f64))
+            .collect()
+    }
+
+    /// Mean of the per-joint errors, `None` without any.
+    pub fn mean_error_mm(&self) -> Option<f64> {
+        let per = self.per_joint_error_mm();
+        (!per.is_empty()).then(|| per.values().sum::<f64>() / per.len() as f64)
+    }
+}
+
+/// Writes `poses.csv` and keeps the tally.
+#[derive(Debug)]
+pub struct PoseWriter {
+    out: BufWriter<File>,
+    line: String,
+    truth: HashMap<u64, JointPositions>,
+    tally: Arc<Mutex<PoseTally>>,
+}
+
+impl PoseWriter {
+    /// Creates `dir/poses.csv` and writes the header. `truth` maps depth sequence numbers to
+    /// the true joints (empty for recorded sessions).
+    ///
+    /// # Errors
+    /// The file cannot be created or written.
+    pub fn create(dir: &Path, truth: HashMap<u64, JointPositions>) -> std::io::Result<Self> {
+        let mut out = BufWriter::new(File::create(dir.join(POSES_FILE))?);
+        writeln!(out, "{}", header())?;
+        Ok(Self {
+            out,
+            line: String::new(),
+            truth,
+            tally: Arc::default(),
+        })
+    }
+
+    /// The tally, readable while and after the writer runs.
+    pub fn tally(&self) -> Arc<Mutex<PoseTally>> {
+        Arc::clone(&self.tally)
+    }
+}
+
+impl Sink for PoseWriter {
+    type In = PoseRecord;
+
+    fn write(&mut self, r: PoseRecord) -> Result<(), StageError> {
+        let mut tally = self.tally.lock().unwrap_or_else(PoisonError::into_inner);
+        let line = &mut self.line;
+        line.clear();
+        let opt = |v: Option<u64>| v.map(|v| v.to_string()).unwrap_or_default();
+        let _ = write!(
+            line,
+            "{},{},{},{},{},{},{},{}",
+            tally.rows,
+            r.depth.seq,
+            opt(r.color.map(|c| c.seq)),
+            r.depth.host_ns,
+            r.depth.device_ns,
+            opt(r.color.map(|c| c.device_ns)),
+            r.skew_ns,
+            r.status.name()
+        );
+        let truth = self.truth.get(&r.depth.seq);
+        for (k, j) in r.pose.joints.iter().enumerate() {
+            if j.source == JointSource::Missing {
+                let _ = write!(line, ",,,,,{}", j.source);
+                continue;
+            }
+            let p = j.position_mm;
+            let _ = write!(line, ",{:.2},{:.2},{:.2},{:.3},{}", p.x, p.y, p.z, j.score, j.source);
+            if let Some(t) = truth.and_then(|t| t.get(k)) {
+                tally.error_sum_mm[k] += (p - t).norm();
+                tally.error_count[k] += 1;
+            }
+        }
+        line.push('\n');
+        self.out.write_all(line.as_bytes())?;
+        tally.rows += 1;
+        *tally.statuses.entry(r.status.name()).or_default() += 1;
+        tally.pairs.push((r.depth.seq, r.color.map(|c| c.seq)));
+        drop(tally);
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<(), StageError> {
+        self.out.flush()?;
+        self.out.get_ref().sync_all()?;
+        Ok(())
+    }
+}

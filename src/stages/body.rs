@@ -1,0 +1,82 @@
+//! The body stage: the body forest on the segmented mouse, joints 1-12 in the world frame.
+
+use super::{PoseRecord, PoseStatus, Segmented};
+use crate::forest::depth::DepthImage;
+use crate::forest::infer::{BodyEstimator, Pixel, sample_pixels};
+use crate::geometry::Camera;
+use crate::pipeline::{Stage, StageError};
+use crate::pose::{JointEstimate, JointSource, Pose};
+use crate::skeleton::Joint;
+use nalgebra::Point3;
+
+/// Pixels of the mouse run through the forest per frame, at most.
+pub const VOTE_BUDGET: usize = 1200;
+
+/// Runs a [`BodyEstimator`] on each segmented mouse.
+#[derive(Debug, Clone)]
+pub struct BodyStage {
+    estimator: BodyEstimator,
+    camera: Camera,
+    pixels: Vec<Pixel>,
+    mask: Vec<bool>,
+    crop: Vec<u16>,
+}
+
+impl BodyStage {
+    /// A stage for the depth camera `camera` (its intrinsics and pose in the world).
+    pub fn new(estimator: BodyEstimator, camera: Camera) -> Self {
+        Self {
+            estimator,
+            camera,
+            pixels: Vec::new(),
+            mask: Vec::new(),
+            crop: Vec::new(),
+        }
+    }
+}
+
+impl Stage for BodyStage {
+    type In = Segmented;
+    type Out = PoseRecord;
+
+    fn process(&mut self, input: Segmented, out: &mut Vec<PoseRecord>) -> Result<(), StageError> {
+        let Segmented { pair, mouse } = input;
+        let mut record = PoseRecord {
+            depth: pair.depth.stamp,
+            color: pair.color.as_ref().map(|c| c.stamp),
+            skew_ns: pair.skew_ns,
+            status: PoseStatus::NoMouse,
+            pose: Pose::default(),
+        };
+        if let Some(mouse) = mouse {
+            let r = mouse.region;
+            self.crop.clear();
+            self.mask.clear();
+            let width = pair.depth.width as usize;
+            for y in r.y0..r.y0 + r.height {
+                let row = y as usize * width + r.x0 as usize;
+                self.crop
+                    .extend_from_slice(pair.depth.data.get(row..row + r.width as usize).unwrap_or_default());
+            }
+            self.mask.extend(mouse.mask.iter().map(|&m| m != 0));
+            if self.crop.len() == self.mask.len() {
+                let image = DepthImage::from_mask(r, &self.crop, &self.mask);
+                sample_pixels(&image, VOTE_BUDGET, &mut self.pixels);
+                let guesses = self.estimator.estimate(&image, &self.pixels, &self.camera.intrinsics);
+                for (joint, guess) in Joint::MAIN_BODY.iter().zip(guesses) {
+                    if let Some(g) = guess {
+                        let p = Point3::from(g.position_mm.cast::<f64>());
+                        *record.pose.joint_mut(*joint) = JointEstimate {
+                            position_mm: self.camera.world_from_camera * p,
+                            score: f64::from(g.score),
+                            source: JointSource::Depth,
+                        };
+                    }
+                }
+                record.status = PoseStatus::Ok;
+            }
+        }
+        out.push(record);
+        Ok(())
+    }
+}

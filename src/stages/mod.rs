@@ -1,0 +1,46 @@
+//! The processing stages of the pipeline, one per file. Each is a plain object with a
+//! `process` function the runner calls on its own thread and a unit test can call directly.
+
+pub mod body;
+pub mod segment;
+
+use crate::frame::FramePair;
+use crate::pose::Pose;
+use crate::segment::Mouse;
+
+/// A frame pair and the mouse found in its depth frame (`None`: no mouse).
+#[derive(Debug)]
+pub struct Segmented {
+    pub pair: FramePair,
+    pub mouse: Option<Mouse>,
+}
+
+/// What the pipeline says of one frame pair.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PoseStatus {
+    /// The mouse was found and its joints estimated.
+    Ok,
+    /// No mouse in the depth frame (an empty cage, or the mouse hidden).
+    NoMouse,
+}
+
+impl PoseStatus {
+    /// The value of the `status` column.
+    pub fn name(self) -> &'static str {
+        match self {
+            PoseStatus::Ok => "ok",
+            PoseStatus::NoMouse => "no_mouse",
+        }
+    }
+}
+
+/// The pose of one frame pair, with the frames' metadata (the frames themselves are dropped
+/// once the pose is known).
+#[derive(Clone, Debug)]
+pub struct PoseRecord {
+    pub depth: crate::frame::Stamp,
+    pub color: Option<crate::frame::Stamp>,
+    pub skew_ns: i64,
+    pub status: PoseStatus,
+    pub pose: Pose,
+}
