@@ -11,7 +11,7 @@
 //! do not decode) are counted apart. `summary.json` holds those counts, the per-stage latency,
 //! the throughput and, for synthetic sessions, the error against the ground truth.
 
-use crate::capture::session::SessionSource;
+use crate::capture::session::SessionPlayer;
 use crate::capture::{Captured, Clock, FrameSource};
 use crate::forest::infer::{BodyEstimator, VoteSettings};
 use crate::forest::model::{self, Model, ModelError, ModelKind};
@@ -442,7 +442,7 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
 
     let mut runner = Runner::new();
     let start = Instant::now();
-    let source = SessionSource::new(&reader, options.realtime);
+    let source = SessionPlayer::new(&reader, options.realtime);
     let clock = Clock::replay(0);
     let (acct_src, shutdown) = (Arc::clone(&acct), runner.shutdown());
     let threads = |e| ReplayError::Threads(e);

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 /// Both cameras of a session, merged by host arrival time.
 #[derive(Debug)]
-pub struct SessionSource {
+pub struct SessionPlayer {
     dir: PathBuf,
     meta: Vec<CameraMeta>,
     depth: DepthFrames,
@@ -29,7 +29,7 @@ pub struct SessionSource {
     done: bool,
 }
 
-impl SessionSource {
+impl SessionPlayer {
     /// A source over an open session. With `realtime`, frames come out at the pace they were
     /// recorded; otherwise as fast as they can be read.
     pub fn new(reader: &SessionReader, realtime: bool) -> Self {
@@ -94,7 +94,7 @@ impl SessionSource {
     }
 }
 
-impl FrameSource for SessionSource {
+impl FrameSource for SessionPlayer {
     type Frame = Captured;
 
     fn meta(&self) -> CameraMeta {
