@@ -6,6 +6,7 @@ pub mod capture;
 pub mod chart;
 pub mod cli;
 pub mod commands;
+pub mod config;
 pub mod experiment;
 pub mod forest;
 pub mod frame;

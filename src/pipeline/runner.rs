@@ -159,7 +159,11 @@ impl Runner {
         let stats = Arc::new(StageStats::default());
         let several = workers.len() > 1;
         for (k, mut stage) in workers.into_iter().enumerate() {
-            let thread = if several { format!("{name}-{k}") } else { name.to_owned() };
+            let thread = if several {
+                format!("{name}-{k}")
+            } else {
+                name.to_owned()
+            };
             let (rx, tx, stats) = (input.clone(), output.clone(), Arc::clone(&stats));
             self.spawn(&thread, move || {
                 let mut out = Vec::new();

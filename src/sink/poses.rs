@@ -23,8 +23,7 @@ pub const POSES_FILE: &str = "poses.csv";
 
 /// The header line of `poses.csv`.
 pub fn header() -> String {
-    let mut h =
-        String::from("frame,depth_seq,color_seq,host_ns,depth_device_ns,color_device_ns,skew_ns,status");
+    let mut h = String::from("frame,depth_seq,color_seq,host_ns,depth_device_ns,color_device_ns,skew_ns,status");
     for joint in Joint::ALL {
         for col in ["x", "y", "z", "score", "source"] {
             let _ = write!(h, ",{}_{col}", joint.name());
@@ -51,7 +50,12 @@ impl PoseTally {
         Joint::ALL
             .iter()
             .filter(|j| self.error_count[j.index()] > 0)
-            .map(|j| (j.name(), self.error_sum_mm[j.index()] / self.error_count[j.index()] as f64))
+            .map(|j| {
+                (
+                    j.name(),
+                    self.error_sum_mm[j.index()] / self.error_count[j.index()] as f64,
+                )
+            })
             .collect()
     }
 
