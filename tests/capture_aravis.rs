@@ -59,7 +59,10 @@ fn read_frames(source: &mut AravisColor, n: usize, limit: Duration) -> Vec<Color
     let deadline = Instant::now() + limit;
     let mut frames = Vec::new();
     while frames.len() < n && Instant::now() < deadline {
-        if let Some(frame) = source.next_frame(Duration::from_millis(200)).unwrap() {
+        if let Some(frame) = source
+            .next_frame(Duration::from_millis(200))
+            .expect("the camera stays reachable")
+        {
             frames.push(frame);
         }
     }
@@ -70,7 +73,12 @@ fn assert_pattern(frame: &ColorFrame) {
     let width = frame.width as usize;
     assert_eq!(frame.data.len(), width * frame.height as usize);
     for (i, &byte) in frame.data.iter().enumerate() {
-        assert_eq!(byte, pattern(frame.stamp.seq, i % width, i / width), "pixel {i} of {:?}", frame.stamp);
+        assert_eq!(
+            byte,
+            pattern(frame.stamp.seq, i % width, i / width),
+            "pixel {i} of {:?}",
+            frame.stamp
+        );
     }
 }
 
@@ -123,7 +131,9 @@ fn settings_are_applied_or_refused_with_the_camera_range() {
     let _port = take_port();
     // A camera model without RGB8, from Aravis's own description of the fake camera.
     let xml = aravis_ext::default_genicam_xml();
-    let start = xml.find("<EnumEntry Name=\"RGB8\"").expect("the fake camera offers RGB8");
+    let start = xml
+        .find("<EnumEntry Name=\"RGB8\"")
+        .expect("the fake camera offers RGB8");
     let end = start + xml[start..].find("</EnumEntry>").unwrap() + "</EnumEntry>".len();
     let dir = tempfile::tempdir().unwrap();
     let genicam = dir.path().join("no-rgb8.xml");
@@ -172,7 +182,10 @@ fn settings_are_applied_or_refused_with_the_camera_range() {
     assert!(message.contains("allows 10 to 10000000 us"), "{message}");
 
     let message = refusal(config(Some((0, 0, 4096, 16))));
-    assert!(message.contains("region") && message.contains("width 4096"), "{message}");
+    assert!(
+        message.contains("region") && message.contains("width 4096"),
+        "{message}"
+    );
     assert!(message.contains("2048"), "{message}");
 
     let message = refusal(AravisConfig {
@@ -249,11 +262,17 @@ fn a_lossy_camera_program_gives_only_whole_frames_and_counts_the_rest() {
     source.stop().unwrap();
     drop(child);
 
-    assert!(frames.len() >= 5, "only {} whole frames; losses {losses:?}", frames.len());
+    assert!(
+        frames.len() >= 5,
+        "only {} whole frames; losses {losses:?}",
+        frames.len()
+    );
     let lost: u64 = losses.iter().map(|(_, n)| n).sum();
     assert!(lost >= 3, "losses {losses:?}");
     assert!(
-        losses.iter().all(|(reason, _)| ["incomplete", "timeout"].contains(reason)),
+        losses
+            .iter()
+            .all(|(reason, _)| ["incomplete", "timeout"].contains(reason)),
         "{losses:?}"
     );
     // Aravis's own test pattern: a diagonal ramp shifted by the frame id. Every frame passed
@@ -297,13 +316,17 @@ fn a_missing_camera_is_a_clear_error_not_a_hang() {
             let _ = tx.send((nothing, no_address, nothing_named));
         })
         .unwrap();
-    let (nothing, no_address, nothing_named) =
-        rx.recv_timeout(Duration::from_secs(60)).expect("opening a missing camera hangs");
+    let (nothing, no_address, nothing_named) = rx
+        .recv_timeout(Duration::from_secs(60))
+        .expect("opening a missing camera hangs");
 
     let error = nothing.unwrap_err();
     let message = format!("{error}");
     assert!(matches!(error, CaptureError::Driver { .. }), "{error:?}");
-    assert!(message.contains("no GigE Vision camera answers at 127.0.0.1"), "{message}");
+    assert!(
+        message.contains("no GigE Vision camera answers at 127.0.0.1"),
+        "{message}"
+    );
     assert!(std::error::Error::source(&error).is_some());
 
     let message = no_address.unwrap_err().to_string();

@@ -307,7 +307,12 @@ impl AravisColor {
         let mut data = buffer.image_data();
         if x_padding > 0 {
             let stride = row_len + x_padding as usize;
-            data = data.chunks(stride).take(height as usize).flat_map(|row| row.iter().take(row_len)).copied().collect();
+            data = data
+                .chunks(stride)
+                .take(height as usize)
+                .flat_map(|row| row.iter().take(row_len))
+                .copied()
+                .collect();
         }
         if data.len() < expected {
             return Err("size_mismatch");
@@ -337,7 +342,12 @@ fn apply_settings(camera: &Camera, id: &str, config: &AravisConfig) -> Result<Pi
 
     // Trigger.
     match &config.trigger {
-        Trigger::FreeRun => camera.clear_triggers().map_err(driver(id, "switching triggers off"))?,
+        Trigger::FreeRun => {
+            // A camera without trigger control always runs free.
+            if camera.is_feature_available("TriggerMode").unwrap_or(false) {
+                camera.clear_triggers().map_err(driver(id, "switching triggers off"))?;
+            }
+        }
         Trigger::Line(line) => {
             let sources = camera.dup_available_trigger_sources().unwrap_or_default();
             if !sources.iter().any(|s| s.as_str() == line) {
@@ -348,7 +358,9 @@ fn apply_settings(camera: &Camera, id: &str, config: &AravisConfig) -> Result<Pi
                     format!("the camera's trigger sources are [{}]", offered.join(", ")),
                 ));
             }
-            camera.set_trigger(line).map_err(driver(id, format!("setting trigger source {line}")))?;
+            camera
+                .set_trigger(line)
+                .map_err(driver(id, format!("setting trigger source {line}")))?;
         }
     }
 
@@ -418,7 +430,9 @@ fn apply_settings(camera: &Camera, id: &str, config: &AravisConfig) -> Result<Pi
         if !camera.is_exposure_time_available().unwrap_or(false) {
             return Err(refused(id, what, "the camera has no exposure time control"));
         }
-        let (min, max) = camera.exposure_time_bounds().map_err(driver(id, "reading the exposure range"))?;
+        let (min, max) = camera
+            .exposure_time_bounds()
+            .map_err(driver(id, "reading the exposure range"))?;
         if !(min..=max).contains(&exposure_us) {
             return Err(refused(id, what, format!("the camera allows {min} to {max} us")));
         }
@@ -427,7 +441,9 @@ fn apply_settings(camera: &Camera, id: &str, config: &AravisConfig) -> Result<Pi
                 .set_exposure_time_auto(aravis::Auto::Off)
                 .map_err(driver(id, "switching auto exposure off"))?;
         }
-        camera.set_exposure_time(exposure_us).map_err(driver(id, format!("setting {what}")))?;
+        camera
+            .set_exposure_time(exposure_us)
+            .map_err(driver(id, format!("setting {what}")))?;
     }
 
     // Gain.
@@ -441,9 +457,13 @@ fn apply_settings(camera: &Camera, id: &str, config: &AravisConfig) -> Result<Pi
             return Err(refused(id, what, format!("the camera allows {min} to {max} dB")));
         }
         if camera.is_gain_auto_available().unwrap_or(false) {
-            camera.set_gain_auto(aravis::Auto::Off).map_err(driver(id, "switching auto gain off"))?;
+            camera
+                .set_gain_auto(aravis::Auto::Off)
+                .map_err(driver(id, "switching auto gain off"))?;
         }
-        camera.set_gain(gain_db).map_err(driver(id, format!("setting {what}")))?;
+        camera
+            .set_gain(gain_db)
+            .map_err(driver(id, format!("setting {what}")))?;
     }
 
     // Frame rate.
@@ -452,11 +472,15 @@ fn apply_settings(camera: &Camera, id: &str, config: &AravisConfig) -> Result<Pi
         if !camera.is_frame_rate_available().unwrap_or(false) {
             return Err(refused(id, what, "the camera has no frame rate control"));
         }
-        let (min, max) = camera.frame_rate_bounds().map_err(driver(id, "reading the frame rate range"))?;
+        let (min, max) = camera
+            .frame_rate_bounds()
+            .map_err(driver(id, "reading the frame rate range"))?;
         if !(min..=max).contains(&fps) {
             return Err(refused(id, what, format!("the camera allows {min} to {max} fps")));
         }
-        camera.set_frame_rate(fps).map_err(driver(id, format!("setting {what}")))?;
+        camera
+            .set_frame_rate(fps)
+            .map_err(driver(id, format!("setting {what}")))?;
     }
     Ok(wanted)
 }
@@ -516,7 +540,9 @@ impl FrameSource for AravisColor {
         for _ in 0..self.buffers {
             stream.push_buffer(aravis::Buffer::new_allocate(self.payload));
         }
-        camera.start_acquisition().map_err(driver(&id, "starting acquisition"))?;
+        camera
+            .start_acquisition()
+            .map_err(driver(&id, "starting acquisition"))?;
         self.stream = Some(stream);
         self.losses.clear();
         self.frame_ids = FrameIdExtender::default();
@@ -586,9 +612,10 @@ impl FrameSource for AravisColor {
 
 impl Drop for AravisColor {
     fn drop(&mut self) {
-        if let (Some(camera), Some(_)) = (&self.camera, &self.stream)
-            && let Err(error) = camera.stop_acquisition()
-        {
+        let (Some(camera), Some(_)) = (&self.camera, &self.stream) else {
+            return;
+        };
+        if let Err(error) = camera.stop_acquisition() {
             tracing::warn!(message = "Aravis acquisition not stopped on drop.", camera = %self.id, %error);
         }
     }
@@ -612,13 +639,19 @@ impl FrameIdExtender {
         if raw > Self::PERIOD {
             return raw;
         }
-        if let Some(last) = self.last_raw
-            && raw < last
-            && last - raw > Self::PERIOD / 2
-        {
+        const HALF: u64 = FrameIdExtender::PERIOD / 2;
+        let Some(last) = self.last_raw else {
+            self.last_raw = Some(raw);
+            return raw;
+        };
+        if raw < last && last - raw > HALF {
+            // Went round: 65535 is followed by 1.
             self.wraps += 1;
-        }
-        if self.last_raw.is_none_or(|last| raw > last || last - raw > Self::PERIOD / 2) {
+            self.last_raw = Some(raw);
+        } else if raw > last && raw - last > HALF && self.wraps > 0 {
+            // A late id from before the last wrap.
+            return (self.wraps - 1) * Self::PERIOD + raw;
+        } else if raw > last {
             self.last_raw = Some(raw);
         }
         self.wraps * Self::PERIOD + raw
@@ -692,11 +725,23 @@ mod tests {
     }
 
     #[test]
+    fn a_late_id_from_before_the_wrap_does_not_count_a_second_wrap() {
+        let mut ids = FrameIdExtender::default();
+        assert_eq!(ids.extend(65_534), Some(65_534));
+        assert_eq!(ids.extend(2), Some(65_537));
+        assert_eq!(ids.observe(65_535), 65_535);
+        assert_eq!(ids.extend(3), Some(65_538));
+    }
+
+    #[test]
     fn pixel_formats_map_both_ways() {
         for format in PixelFormat::ALL {
             assert!(!genicam_names(format).is_empty());
         }
-        assert_eq!(pixel_format_from_aravis(aravis::PixelFormat::BAYER_RG_8), Some(PixelFormat::BayerRg8));
+        assert_eq!(
+            pixel_format_from_aravis(aravis::PixelFormat::BAYER_RG_8),
+            Some(PixelFormat::BayerRg8)
+        );
         assert_eq!(pixel_format_from_aravis(aravis::PixelFormat::MONO_16), None);
     }
 }

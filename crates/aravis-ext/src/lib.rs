@@ -205,10 +205,7 @@ impl FakeCamera {
     pub fn start(config: &FakeCameraConfig, fill: FillFn) -> Result<Self, FakeCameraError> {
         let address = Ipv4Addr::LOCALHOST;
         // Aravis does not report a failed bind, so find out first whether the port is free.
-        drop(
-            UdpSocket::bind((address, GVCP_PORT))
-                .map_err(|source| FakeCameraError::PortInUse { address, source })?,
-        );
+        drop(UdpSocket::bind((address, GVCP_PORT)).map_err(|source| FakeCameraError::PortInUse { address, source })?);
         let genicam = match &config.genicam_file {
             Some(path) => Some(
                 path.to_str()
@@ -218,11 +215,7 @@ impl FakeCamera {
             None => None,
         };
         let address_text = address.to_string();
-        let camera = aravis::GvFakeCamera::new_full(
-            Some(&address_text),
-            Some(&config.serial),
-            genicam.as_deref(),
-        );
+        let camera = aravis::GvFakeCamera::new_full(Some(&address_text), Some(&config.serial), genicam.as_deref());
         if !camera.is_running() {
             return Err(FakeCameraError::NotRunning { address });
         }

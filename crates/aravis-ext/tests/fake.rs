@@ -25,7 +25,9 @@ fn fake_camera_streams_what_the_closure_draws() {
     camera.start_acquisition().unwrap();
     let mut got = 0;
     for _ in 0..50 {
-        let Some(buffer) = stream.timeout_pop_buffer(1_000_000) else { continue };
+        let Some(buffer) = stream.timeout_pop_buffer(1_000_000) else {
+            continue;
+        };
         if buffer.status() == aravis::BufferStatus::Success {
             let data = buffer.image_data();
             let id = buffer.frame_id();
