@@ -6,6 +6,7 @@
 //! it saw but could not pass on (a GigE buffer with missing packets, a timeout). Gaps in the
 //! device counter are counted by the runner, not here.
 
+pub mod aravis;
 pub mod clock;
 pub mod session;
 
