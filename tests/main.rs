@@ -5,6 +5,7 @@ mod capture_aravis;
 mod cli;
 mod forest;
 mod segment;
+mod replay;
 mod session;
 mod synth;
 mod util;

@@ -1,0 +1,216 @@
+//! Replay end to end: sessions through the real pipeline (threads, edges, synchroniser,
+//! segmentation, body forest, pose writer), checked against the sessions' ground truth.
+
+use crate::util::{mousepose, repo_root};
+use mousepose::replay::{ReplayOptions, ReplaySummary, replay};
+use mousepose::session::{SessionReader, SessionWriter};
+use mousepose::synth::noise::{DepthNoise, NoiseModel};
+use mousepose::synth::session::{SessionSpec, write_session};
+use std::path::{Path, PathBuf};
+
+fn fixture() -> PathBuf {
+    repo_root().join("fixtures/sessions/synthetic-small")
+}
+
+fn options(session: &Path, out: &Path, workers: usize) -> ReplayOptions {
+    ReplayOptions {
+        session: session.to_owned(),
+        out: out.to_owned(),
+        models: Some(repo_root().join("fixtures/models")),
+        realtime: false,
+        workers,
+        force: false,
+    }
+}
+
+/// Every captured frame is paired, unpaired or dropped, per camera.
+fn assert_accounted(s: &ReplaySummary) {
+    for (name, c) in &s.cameras {
+        assert!(c.adds_up(), "{name}: {c:?}");
+    }
+    let depth = &s.cameras["depth"];
+    assert_eq!(s.pairs, depth.paired + depth.unpaired);
+}
+
+fn synth(dir: &Path, seconds: f64, seed: u64, color: bool) {
+    let spec = SessionSpec {
+        seconds,
+        seed,
+        color_binning: 4,
+        color,
+        noise: DepthNoise {
+            model: NoiseModel::StructuredLight,
+            gaussian_mm: 0.0,
+        },
+        ..SessionSpec::default()
+    };
+    std::fs::create_dir_all(dir).unwrap();
+    write_session(dir, &spec, |_, _| {}).unwrap();
+}
+
+#[test]
+fn the_fixture_session_replays_with_its_true_pairs_and_joints() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let s = replay(&options(&fixture(), &out, 2)).unwrap();
+    let reader = SessionReader::open(fixture()).unwrap();
+    assert_eq!(s.pairs as usize, reader.depth_count());
+    let pairing = s.pairing.clone().unwrap();
+    assert_eq!(pairing.mismatched, 0, "{pairing:?}");
+    assert_eq!(pairing.matched as usize, reader.depth_count());
+    assert_accounted(&s);
+    // The session's forced camera drop shows as a gap in each camera's sequence numbers.
+    assert_eq!(s.cameras["depth"].lost_before_capture.get("camera_gap"), Some(&1));
+    assert_eq!(s.per_joint_error_mm.len(), 12);
+    let mean = s.mean_error_mm.unwrap();
+    assert!(mean < 6.0, "mean joint error {mean} mm");
+    // poses.csv: the header, then one row per pair.
+    let csv = std::fs::read_to_string(out.join("poses.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(lines.next().unwrap(), mousepose::sink::poses::header());
+    let rows: Vec<&str> = lines.collect();
+    assert_eq!(rows.len() as u64, s.pairs);
+    let columns = mousepose::sink::poses::header().split(',').count();
+    assert!(rows.iter().all(|r| r.split(',').count() == columns));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    for key in ["per_joint_error_mm", "mean_error_mm", "cameras", "stages", "throughput_pairs_per_s"] {
+        assert!(summary.get(key).is_some(), "summary.json lacks {key}");
+    }
+    for stage in summary["stages"].as_array().unwrap() {
+        assert!(stage["latency"]["p99_ms"].as_f64().is_some());
+    }
+}
+
+#[test]
+fn replay_is_deterministic_whatever_the_worker_count() {
+    let tmp = tempfile::tempdir().unwrap();
+    let a = tmp.path().join("a");
+    let b = tmp.path().join("b");
+    replay(&options(&fixture(), &a, 1)).unwrap();
+    replay(&options(&fixture(), &b, 3)).unwrap();
+    assert_eq!(
+        std::fs::read(a.join("poses.csv")).unwrap(),
+        std::fs::read(b.join("poses.csv")).unwrap()
+    );
+}
+
+#[test]
+fn drifting_jittery_clocks_with_drops_pair_exactly_as_the_truth() {
+    let tmp = tempfile::tempdir().unwrap();
+    for seed in [21, 22] {
+        let session = tmp.path().join(format!("s{seed}"));
+        synth(&session, 3.0, seed, true);
+        let s = replay(&options(&session, &tmp.path().join(format!("o{seed}")), 2)).unwrap();
+        let pairing = s.pairing.clone().unwrap();
+        assert_eq!(pairing.mismatched, 0, "seed {seed}: {pairing:?}");
+        assert_accounted(&s);
+    }
+}
+
+#[test]
+fn a_depth_only_session_gives_depth_only_pairs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let session = tmp.path().join("s");
+    synth(&session, 1.0, 5, false);
+    let s = replay(&options(&session, &tmp.path().join("o"), 2)).unwrap();
+    assert!(!s.cameras.contains_key("color"));
+    assert_eq!(s.cameras["depth"].paired, 0);
+    assert_eq!(s.cameras["depth"].unpaired, s.pairs);
+    assert_eq!(s.pairing.unwrap().mismatched, 0);
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let dest = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &dest);
+        } else {
+            std::fs::copy(e.path(), dest).unwrap();
+        }
+    }
+}
+
+#[test]
+fn damaged_and_truncated_frames_are_counted_not_fatal() {
+    let tmp = tempfile::tempdir().unwrap();
+    let session = tmp.path().join("s");
+    copy_dir(&fixture(), &session);
+    let frames = session.join("depth/frames.mpstore");
+    let mut bytes = std::fs::read(&frames).unwrap();
+    let full = bytes.len();
+    // Damage the middle of the file, and cut its last record short.
+    for b in &mut bytes[full / 2..full / 2 + 64] {
+        *b ^= 0x5a;
+    }
+    bytes.truncate(full - 1000);
+    std::fs::write(&frames, &bytes).unwrap();
+    std::fs::remove_file(session.join("depth/index.mpindex")).unwrap();
+    let s = replay(&options(&session, &tmp.path().join("o"), 2)).unwrap();
+    assert_accounted(&s);
+    let reader = SessionReader::open(fixture()).unwrap();
+    assert!((s.pairs as usize) < reader.depth_count());
+    let lost: u64 = s.cameras["depth"].lost_before_capture.values().sum();
+    assert!(lost >= 2, "{:?}", s.cameras["depth"]);
+}
+
+#[test]
+fn bad_sessions_give_one_clear_error_and_no_output() {
+    let tmp = tempfile::tempdir().unwrap();
+    // An empty session.
+    let empty = tmp.path().join("empty");
+    let reader = SessionReader::open(fixture()).unwrap();
+    std::fs::create_dir(&empty).unwrap();
+    SessionWriter::create(&empty, reader.meta()).unwrap().finish_at(1).unwrap();
+    // Not a session at all.
+    let missing = tmp.path().join("missing");
+    for (session, expect) in [(&empty, "no depth frames"), (&missing, "missing")] {
+        let out = tmp.path().join("out");
+        let o = mousepose()
+            .arg("replay")
+            .arg(session)
+            .arg("--out")
+            .arg(&out)
+            .arg("--models")
+            .arg(repo_root().join("fixtures/models"))
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.starts_with("error: ") && err.contains(expect), "{err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(!err.contains("panicked"));
+        assert!(!out.exists());
+    }
+    // A models directory without a body forest.
+    let o = mousepose()
+        .arg("replay")
+        .arg(fixture())
+        .arg("--out")
+        .arg(tmp.path().join("o2"))
+        .arg("--models")
+        .arg(tmp.path())
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("body.forest"));
+}
+
+#[test]
+fn replay_json_prints_the_summary() {
+    let tmp = tempfile::tempdir().unwrap();
+    let o = mousepose()
+        .arg("replay")
+        .arg(fixture())
+        .arg("--out")
+        .arg(tmp.path().join("o"))
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(v["mean_error_mm"].as_f64().is_some());
+    assert_eq!(v["per_joint_error_mm"].as_object().unwrap().len(), 12);
+}
