@@ -7,6 +7,8 @@
 //! device counter are counted by the runner, not here.
 
 pub mod clock;
+pub mod moseq;
+pub mod v4l2;
 
 pub use clock::Clock;
 
