@@ -240,3 +240,296 @@ mod moseq {
         assert!(matches!(moseq_error(&err), MoseqError::Resolution { .. }), "{}", chain(&err));
     }
 }
+
+mod v4l2 {
+    use super::chain;
+    use mousepose::capture::v4l2::{
+        BUF_FLAG_ERROR, BufferDecoder, BufferMeta, BufferProblem, Chosen, Conversion, LOSS_ERROR_FLAG,
+        LOSS_SHORT_BUFFER, OfferedFormat, OfferedSize, V4l2Color, V4l2Config, choose_format, list_devices,
+        list_devices_in, stamp_from_buffer, yuv_to_rgb,
+    };
+    use mousepose::capture::{CaptureError, Clock};
+    use mousepose::frame::PixelFormat;
+    use std::path::PathBuf;
+
+    fn fixtures() -> PathBuf {
+        crate::util::repo_root().join("fixtures/v4l2")
+    }
+
+    fn webcam() -> Vec<OfferedFormat> {
+        let text = std::fs::read_to_string(fixtures().join("uvc_webcam_formats.json")).unwrap();
+        serde_json::from_str(&text).unwrap()
+    }
+
+    fn config(width: u32, height: u32, fps: f64, format: Option<&str>) -> V4l2Config {
+        V4l2Config {
+            device: PathBuf::from("/dev/video0"),
+            width,
+            height,
+            fps,
+            format: format.map(str::to_owned),
+        }
+    }
+
+    #[derive(serde::Deserialize)]
+    struct Recorded {
+        width: u32,
+        height: u32,
+        bytes_per_line: u32,
+        buffers: Vec<RecordedBuffer>,
+    }
+
+    #[derive(serde::Deserialize)]
+    struct RecordedBuffer {
+        file: String,
+        sequence: u32,
+        timestamp_sec: i64,
+        timestamp_usec: i64,
+        flags: u32,
+        bytesused: u32,
+    }
+
+    impl RecordedBuffer {
+        fn meta(&self) -> BufferMeta {
+            BufferMeta {
+                sequence: self.sequence,
+                timestamp_sec: self.timestamp_sec,
+                timestamp_usec: self.timestamp_usec,
+                flags: self.flags,
+                bytesused: self.bytesused,
+            }
+        }
+
+        fn data(&self) -> Vec<u8> {
+            std::fs::read(fixtures().join(&self.file)).unwrap()
+        }
+    }
+
+    fn recorded() -> Recorded {
+        let text = std::fs::read_to_string(fixtures().join("buffers.json")).unwrap();
+        serde_json::from_str(&text).unwrap()
+    }
+
+    fn yuyv(width: u32, height: u32, conversion: Conversion) -> Chosen {
+        Chosen {
+            fourcc: "YUYV".into(),
+            width,
+            height,
+            interval: [1, 30],
+            output: match conversion {
+                Conversion::YuyvToMono8 => PixelFormat::Mono8,
+                _ => PixelFormat::Rgb8,
+            },
+            conversion,
+        }
+    }
+
+    #[test]
+    fn negotiation_prefers_yuyv_over_mjpg_at_the_same_mode() {
+        let chosen = choose_format(&webcam(), &config(640, 480, 30.0, None)).unwrap();
+        assert_eq!(chosen.fourcc, "YUYV");
+        assert_eq!((chosen.width, chosen.height, chosen.interval), (640, 480, [1, 30]));
+        assert_eq!((chosen.output, chosen.conversion), (PixelFormat::Rgb8, Conversion::YuyvToRgb8));
+        let slow = choose_format(&webcam(), &config(1280, 720, 7.5, None)).unwrap();
+        assert_eq!((slow.fourcc.as_str(), slow.interval), ("YUYV", [2, 15]));
+        assert!((slow.fps() - 7.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn negotiation_prefers_lossless_formats() {
+        let size = |intervals: Vec<[u32; 2]>| OfferedSize {
+            width: 640,
+            height: 480,
+            intervals,
+        };
+        let offered = vec![
+            OfferedFormat {
+                fourcc: "YUYV".into(),
+                description: String::new(),
+                sizes: vec![size(vec![[1, 30]])],
+            },
+            OfferedFormat {
+                fourcc: "GREY".into(),
+                description: String::new(),
+                sizes: vec![size(vec![[1001, 30000]])],
+            },
+            OfferedFormat {
+                fourcc: "GRBG".into(),
+                description: String::new(),
+                sizes: vec![size(vec![[1, 30]])],
+            },
+        ];
+        // 29.97 frames/s is within 1 % of 30.
+        let chosen = choose_format(&offered, &config(640, 480, 30.0, None)).unwrap();
+        assert_eq!((chosen.fourcc.as_str(), chosen.output), ("GREY", PixelFormat::Mono8));
+        let chosen = choose_format(&offered, &config(640, 480, 30.0, Some("GRBG"))).unwrap();
+        assert_eq!((chosen.output, chosen.conversion), (PixelFormat::BayerGr8, Conversion::Copy));
+    }
+
+    #[test]
+    fn negotiation_refuses_clearly() {
+        // 1280x720 at 30 frames/s exists only as MJPG, which is not decoded.
+        let err = choose_format(&webcam(), &config(1280, 720, 30.0, None)).unwrap_err().to_string();
+        assert!(err.starts_with("no offered mode fits 1280x720@30 (only in MJPG"), "{err}");
+        assert!(err.contains("YUYV 640x480@30/24/20/15/10/7.500/5"), "{err}");
+        assert!(err.contains("MJPG 1280x720@30"), "{err}");
+        let err = choose_format(&webcam(), &config(640, 480, 30.0, Some("MJPG"))).unwrap_err().to_string();
+        assert!(err.contains("cannot convert MJPG"), "{err}");
+        let err = choose_format(&webcam(), &config(640, 480, 30.0, Some("GREY"))).unwrap_err().to_string();
+        assert!(err.contains("does not offer GREY"), "{err}");
+        let err = choose_format(&webcam(), &config(640, 480, 60.0, None)).unwrap_err().to_string();
+        assert!(err.contains("640x480@60 (no format offers that size and rate)"), "{err}");
+        let err = choose_format(&[], &config(640, 480, 30.0, None)).unwrap_err().to_string();
+        assert!(err.ends_with("the device offers nothing"), "{err}");
+    }
+
+    #[test]
+    fn monotonic_timestamps_map_directly_others_use_the_host_clock() {
+        let buffers = recorded().buffers;
+        let monotonic = buffers[0].meta();
+        let stamp = stamp_from_buffer(&monotonic, &Clock::Monotonic);
+        assert_eq!(stamp.seq, 100);
+        assert_eq!(stamp.device_ns, 5_231_400_000_000);
+        assert_eq!(stamp.host_ns, 5_231_400_000_000);
+        // A copied timestamp is not on the host clock: the clock at dequeue is used.
+        let copied = buffers[5].meta();
+        let clock = Clock::replay(77_000);
+        let stamp = stamp_from_buffer(&copied, &clock);
+        assert_eq!((stamp.seq, stamp.device_ns, stamp.host_ns), (106, 1_000_250_000, 77_000));
+        // Unknown clock (no flag) likewise; a replay clock is never mixed with kernel time.
+        let unknown = BufferMeta { flags: 0, ..monotonic };
+        assert_eq!(stamp_from_buffer(&unknown, &clock).host_ns, 77_000);
+        assert_eq!(stamp_from_buffer(&monotonic, &clock).host_ns, 77_000);
+        // A malformed timestamp gives device_ns 0 and the host clock.
+        let bad = BufferMeta { timestamp_usec: 2_000_000, ..monotonic };
+        let stamp = stamp_from_buffer(&bad, &Clock::Monotonic);
+        assert_eq!(stamp.device_ns, 0);
+        assert!(stamp.host_ns > 0);
+    }
+
+    #[test]
+    fn yuyv_converts_to_the_hand_computed_pixels() {
+        // Y 81, U 90, V 240: C = 65, D = -38, E = 112;
+        // R = (298*65 + 409*112 + 128) >> 8 = 255, G = (19370 + 3800 - 23296 + 128) >> 8 = 0,
+        // B = (19370 - 19608 + 128) >> 8 < 0 -> 0.
+        assert_eq!(yuv_to_rgb(81, 90, 240), [255, 0, 0]);
+        // Black and white of the limited range.
+        assert_eq!(yuv_to_rgb(16, 128, 128), [0, 0, 0]);
+        assert_eq!(yuv_to_rgb(235, 128, 128), [255, 255, 255]);
+        // Y 100, U 150, V 60: C 84, D 22, E -68: R = (25032 - 27812 + 128) >> 8 = -11 -> 0,
+        // G = (25032 - 2200 + 14144 + 128) >> 8 = 144, B = (25032 + 11352 + 128) >> 8 = 142.
+        assert_eq!(yuv_to_rgb(100, 150, 60), [0, 144, 142]);
+
+        let rec = recorded();
+        let buffer = &rec.buffers[0];
+        let data = buffer.data();
+        let rgb = BufferDecoder::new(yuyv(rec.width, rec.height, Conversion::YuyvToRgb8), rec.bytes_per_line).unwrap();
+        let mut out = Vec::new();
+        rgb.convert_into(&data, &buffer.meta(), &mut out).unwrap();
+        assert_eq!(out.len(), 32 * 24 * 3);
+        assert_eq!(&out[..6], &[255, 0, 0, 255, 0, 0]);
+        // Pixel (3, 1): the second pixel of the second pair of row 1.
+        let quad = &data[64 + 4..64 + 8];
+        assert_eq!(&out[(32 + 3) * 3..(32 + 4) * 3], &yuv_to_rgb(quad[2], quad[1], quad[3]));
+
+        let mono = BufferDecoder::new(yuyv(rec.width, rec.height, Conversion::YuyvToMono8), rec.bytes_per_line).unwrap();
+        mono.convert_into(&data, &buffer.meta(), &mut out).unwrap();
+        let luma: Vec<u8> = data.iter().step_by(2).copied().collect();
+        assert_eq!(out, luma);
+    }
+
+    #[test]
+    fn conversion_reuses_the_buffer_and_honours_the_stride() {
+        let rec = recorded();
+        let buffer = &rec.buffers[1];
+        let data = buffer.data();
+        let decoder = BufferDecoder::new(yuyv(rec.width, rec.height, Conversion::YuyvToRgb8), rec.bytes_per_line).unwrap();
+        let mut out = Vec::with_capacity(32 * 24 * 3);
+        let before = out.as_ptr();
+        for _ in 0..3 {
+            decoder.convert_into(&data, &buffer.meta(), &mut out).unwrap();
+            assert_eq!(out.as_ptr(), before, "no reallocation");
+        }
+        // GREY 6x2 with 8-byte rows: the padding is dropped; the last row needs no padding.
+        let grey = Chosen {
+            fourcc: "GREY".into(),
+            width: 6,
+            height: 2,
+            interval: [1, 30],
+            output: PixelFormat::Mono8,
+            conversion: Conversion::Copy,
+        };
+        let decoder = BufferDecoder::new(grey.clone(), 8).unwrap();
+        let data = [1, 2, 3, 4, 5, 6, 0xEE, 0xEE, 7, 8, 9, 10, 11, 12, 0xEE, 0xEE];
+        let meta = BufferMeta { bytesused: 14, ..BufferMeta::default() };
+        decoder.convert_into(&data, &meta, &mut out).unwrap();
+        assert_eq!(out, [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]);
+        let short = BufferMeta { bytesused: 13, ..meta };
+        assert_eq!(
+            decoder.convert_into(&data, &short, &mut out),
+            Err(BufferProblem::Short { bytesused: 13, needed: 14 })
+        );
+        assert!(out.is_empty());
+        let overlong = BufferMeta { bytesused: 17, ..meta };
+        assert!(matches!(decoder.convert_into(&data, &overlong, &mut out), Err(BufferProblem::Overlong { .. })));
+        let err = BufferDecoder::new(grey, 5).unwrap_err().to_string();
+        assert_eq!(err, "stride of 5 bytes is shorter than a 6-pixel GREY row");
+    }
+
+    #[test]
+    fn short_and_erroneous_buffers_are_counted_never_returned() {
+        let rec = recorded();
+        let mut decoder = BufferDecoder::new(yuyv(rec.width, rec.height, Conversion::YuyvToRgb8), rec.bytes_per_line).unwrap();
+        let clock = Clock::replay(9);
+        let frames: Vec<_> = rec
+            .buffers
+            .iter()
+            .filter_map(|b| decoder.decode(&b.data(), &b.meta(), &clock))
+            .collect();
+        let seqs: Vec<u64> = frames.iter().map(|f| f.stamp.seq).collect();
+        // 102 was dropped by the kernel (a gap the runner counts), 104 short, 105 flagged.
+        assert_eq!(seqs, [100, 101, 103, 106]);
+        assert!(rec.buffers[4].flags & BUF_FLAG_ERROR != 0);
+        assert_eq!(decoder.losses(), [(LOSS_SHORT_BUFFER, 1), (LOSS_ERROR_FLAG, 1)]);
+        for frame in &frames {
+            assert_eq!((frame.width, frame.height, frame.format), (32, 24, PixelFormat::Rgb8));
+            assert_eq!(frame.data.len(), 32 * 24 * 3);
+        }
+    }
+
+    #[test]
+    fn opening_a_missing_device_says_so() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = dir.path().join("video9");
+        let err = V4l2Color::open(V4l2Config {
+            device: missing.clone(),
+            ..config(640, 480, 30.0, None)
+        })
+        .unwrap_err();
+        assert!(matches!(err, CaptureError::NotFound { backend: "v4l2", .. }), "{err}");
+        assert_eq!(err.to_string(), format!("no v4l2 camera {:?} found", missing.display().to_string()));
+
+        // A file that is not a device: the driver error says what failed.
+        std::fs::write(&missing, b"not a camera").unwrap();
+        let err = V4l2Color::open(V4l2Config {
+            device: missing.clone(),
+            ..config(640, 480, 30.0, None)
+        })
+        .unwrap_err();
+        let text = chain(&err);
+        assert!(text.contains("not a V4L2 device (VIDIOC_QUERYCAP failed)"), "{text}");
+    }
+
+    #[test]
+    fn listing_devices_without_cameras_is_empty_not_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("video0"), b"").unwrap();
+        std::fs::write(dir.path().join("null"), b"").unwrap();
+        assert!(list_devices_in(dir.path()).is_empty());
+        assert!(list_devices_in(&dir.path().join("absent")).is_empty());
+        // On a machine with cameras this lists them; here it must simply not fail.
+        for device in list_devices() {
+            assert_eq!(device.backend, "v4l2");
+        }
+    }
+}
