@@ -41,37 +41,43 @@ mod moseq {
 
     fn write_dat(dir: &Path, frames: &[Vec<u16>]) {
         let bytes: Vec<u8> = frames.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
-        std::fs::write(dir.join("depth.dat"), bytes).unwrap();
+        std::fs::write(dir.join("depth.dat"), bytes).expect("writes depth.dat");
     }
 
     fn write_metadata(dir: &Path) {
         let json = format!(r#"{{"SubjectName": "m1", "DepthResolution": [{W}, {H}], "IsLittleEndian": true}}"#);
-        std::fs::write(dir.join("metadata.json"), json).unwrap();
+        std::fs::write(dir.join("metadata.json"), json).expect("writes metadata.json");
     }
 
     /// Two columns: device time and system time, in milliseconds.
     fn write_ts(dir: &Path, n: usize) {
         let text: String = (0..n)
-            .map(|i| format!("{:.4} {}\n", 1000.0 + i as f64 * 33.3333, 1_700_000_000_000u64 + i as u64 * 33))
+            .map(|i| {
+                format!(
+                    "{:.4} {}\n",
+                    1000.0 + i as f64 * 33.3333,
+                    1_700_000_000_000u64 + i as u64 * 33
+                )
+            })
             .collect();
-        std::fs::write(dir.join("depth_ts.txt"), text).unwrap();
+        std::fs::write(dir.join("depth_ts.txt"), text).expect("writes depth_ts.txt");
     }
 
     fn read_all(source: &mut MoseqDepth) -> Vec<DepthFrame> {
-        source.start(&Clock::replay(0)).unwrap();
+        source.start(&Clock::replay(0)).expect("starts");
         let mut out = Vec::new();
         // Bounded so that a bug cannot hang the test.
         for _ in 0..100 {
             if source.finished() {
                 break;
             }
-            if let Some(frame) = source.next_frame(Duration::from_secs(10)).unwrap() {
+            if let Some(frame) = source.next_frame(Duration::from_secs(10)).expect("reads a frame") {
                 out.push(frame);
             }
         }
         assert!(source.finished());
-        assert!(source.next_frame(Duration::from_millis(10)).unwrap().is_none());
-        source.stop().unwrap();
+        assert!(source.next_frame(Duration::from_millis(10)).expect("reads").is_none());
+        source.stop().expect("stops");
         out
     }
 
@@ -134,7 +140,9 @@ mod moseq {
         let bytes: Vec<u8> = frames().iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
         std::fs::write(&raw, bytes).unwrap();
         let status = Command::new("ffmpeg")
-            .args(["-nostdin", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "gray16le"])
+            .args([
+                "-nostdin", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "gray16le",
+            ])
             .args(["-s", &format!("{W}x{H}"), "-r", "30", "-i"])
             .arg(&raw)
             .args(["-c:v", "ffv1", "-pix_fmt", "gray16le"])
@@ -179,14 +187,20 @@ mod moseq {
         write_dat(dir.path(), &frames());
         write_metadata(dir.path());
         write_ts(dir.path(), FRAMES);
-        let file = std::fs::OpenOptions::new().write(true).open(dir.path().join("depth.dat")).unwrap();
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .open(dir.path().join("depth.dat"))
+            .unwrap();
         let len = (W * H * 2) as u64 * 3 + 100;
         file.set_len(len).unwrap();
         let err = MoseqDepth::open(MoseqConfig::new(dir.path())).unwrap_err();
         let text = chain(&err);
         assert!(matches!(moseq_error(&err), MoseqError::Truncated { .. }), "{text}");
         assert!(text.contains("depth.dat"), "{text}");
-        assert!(text.contains(&len.to_string()) && text.contains("6144-byte frame of 64x48"), "{text}");
+        assert!(
+            text.contains(&len.to_string()) && text.contains("6144-byte frame of 64x48"),
+            "{text}"
+        );
     }
 
     #[test]
@@ -197,7 +211,10 @@ mod moseq {
         std::fs::write(dir.path().join("depth_ts.txt"), "100 5000\n133 5033\n120 5066\n").unwrap();
         let err = MoseqDepth::open(MoseqConfig::new(dir.path())).unwrap_err();
         let text = chain(&err);
-        assert!(matches!(moseq_error(&err), MoseqError::OutOfOrder { line: 3, .. }), "{text}");
+        assert!(
+            matches!(moseq_error(&err), MoseqError::OutOfOrder { line: 3, .. }),
+            "{text}"
+        );
         assert!(text.contains("depth_ts.txt\" line 3"), "{text}");
         assert!(text.contains("120") && text.contains("133"), "{text}");
     }
@@ -210,7 +227,10 @@ mod moseq {
         let err = MoseqDepth::open(MoseqConfig::new(dir.path())).unwrap_err();
         let text = chain(&err);
         assert!(matches!(moseq_error(&err), MoseqError::NoTimestamps { .. }), "{text}");
-        assert!(text.contains("no timestamp file") && text.contains("depth_ts.txt"), "{text}");
+        assert!(
+            text.contains("no timestamp file") && text.contains("depth_ts.txt"),
+            "{text}"
+        );
     }
 
     #[test]
@@ -222,22 +242,40 @@ mod moseq {
         let err = MoseqDepth::open(MoseqConfig::new(dir.path())).unwrap_err();
         let text = chain(&err);
         assert!(
-            matches!(moseq_error(&err), MoseqError::CountMismatch { frames: 5, stamps: 6, .. }),
+            matches!(
+                moseq_error(&err),
+                MoseqError::CountMismatch {
+                    frames: 5,
+                    stamps: 6,
+                    ..
+                }
+            ),
             "{text}"
         );
-        assert!(text.contains("holds 5 frames but") && text.contains("6 timestamps"), "{text}");
+        assert!(
+            text.contains("holds 5 frames but") && text.contains("6 timestamps"),
+            "{text}"
+        );
     }
 
     #[test]
     fn empty_directory_and_bad_metadata_are_errors() {
         let dir = tempfile::tempdir().unwrap();
         let err = MoseqDepth::open(MoseqConfig::new(dir.path())).unwrap_err();
-        assert!(matches!(moseq_error(&err), MoseqError::NoDepthFile { .. }), "{}", chain(&err));
+        assert!(
+            matches!(moseq_error(&err), MoseqError::NoDepthFile { .. }),
+            "{}",
+            chain(&err)
+        );
         write_dat(dir.path(), &frames());
         write_ts(dir.path(), FRAMES);
         std::fs::write(dir.path().join("metadata.json"), r#"{"DepthResolution": [64]}"#).unwrap();
         let err = MoseqDepth::open(MoseqConfig::new(dir.path())).unwrap_err();
-        assert!(matches!(moseq_error(&err), MoseqError::Resolution { .. }), "{}", chain(&err));
+        assert!(
+            matches!(moseq_error(&err), MoseqError::Resolution { .. }),
+            "{}",
+            chain(&err)
+        );
     }
 }
 
@@ -257,8 +295,9 @@ mod v4l2 {
     }
 
     fn webcam() -> Vec<OfferedFormat> {
-        let text = std::fs::read_to_string(fixtures().join("uvc_webcam_formats.json")).unwrap();
-        serde_json::from_str(&text).unwrap()
+        let text =
+            std::fs::read_to_string(fixtures().join("uvc_webcam_formats.json")).expect("reads the formats fixture");
+        serde_json::from_str(&text).expect("parses the formats fixture")
     }
 
     fn config(width: u32, height: u32, fps: f64, format: Option<&str>) -> V4l2Config {
@@ -301,13 +340,13 @@ mod v4l2 {
         }
 
         fn data(&self) -> Vec<u8> {
-            std::fs::read(fixtures().join(&self.file)).unwrap()
+            std::fs::read(fixtures().join(&self.file)).expect("reads a buffer fixture")
         }
     }
 
     fn recorded() -> Recorded {
-        let text = std::fs::read_to_string(fixtures().join("buffers.json")).unwrap();
-        serde_json::from_str(&text).unwrap()
+        let text = std::fs::read_to_string(fixtures().join("buffers.json")).expect("reads buffers.json");
+        serde_json::from_str(&text).expect("parses buffers.json")
     }
 
     fn yuyv(width: u32, height: u32, conversion: Conversion) -> Chosen {
@@ -329,7 +368,10 @@ mod v4l2 {
         let chosen = choose_format(&webcam(), &config(640, 480, 30.0, None)).unwrap();
         assert_eq!(chosen.fourcc, "YUYV");
         assert_eq!((chosen.width, chosen.height, chosen.interval), (640, 480, [1, 30]));
-        assert_eq!((chosen.output, chosen.conversion), (PixelFormat::Rgb8, Conversion::YuyvToRgb8));
+        assert_eq!(
+            (chosen.output, chosen.conversion),
+            (PixelFormat::Rgb8, Conversion::YuyvToRgb8)
+        );
         let slow = choose_format(&webcam(), &config(1280, 720, 7.5, None)).unwrap();
         assert_eq!((slow.fourcc.as_str(), slow.interval), ("YUYV", [2, 15]));
         assert!((slow.fps() - 7.5).abs() < 1e-9);
@@ -363,23 +405,42 @@ mod v4l2 {
         let chosen = choose_format(&offered, &config(640, 480, 30.0, None)).unwrap();
         assert_eq!((chosen.fourcc.as_str(), chosen.output), ("GREY", PixelFormat::Mono8));
         let chosen = choose_format(&offered, &config(640, 480, 30.0, Some("GRBG"))).unwrap();
-        assert_eq!((chosen.output, chosen.conversion), (PixelFormat::BayerGr8, Conversion::Copy));
+        assert_eq!(
+            (chosen.output, chosen.conversion),
+            (PixelFormat::BayerGr8, Conversion::Copy)
+        );
     }
 
     #[test]
     fn negotiation_refuses_clearly() {
         // 1280x720 at 30 frames/s exists only as MJPG, which is not decoded.
-        let err = choose_format(&webcam(), &config(1280, 720, 30.0, None)).unwrap_err().to_string();
-        assert!(err.starts_with("no offered mode fits 1280x720@30 (only in MJPG"), "{err}");
+        let err = choose_format(&webcam(), &config(1280, 720, 30.0, None))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.starts_with("no offered mode fits 1280x720@30 (only in MJPG"),
+            "{err}"
+        );
         assert!(err.contains("YUYV 640x480@30/24/20/15/10/7.500/5"), "{err}");
         assert!(err.contains("MJPG 1280x720@30"), "{err}");
-        let err = choose_format(&webcam(), &config(640, 480, 30.0, Some("MJPG"))).unwrap_err().to_string();
+        let err = choose_format(&webcam(), &config(640, 480, 30.0, Some("MJPG")))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("cannot convert MJPG"), "{err}");
-        let err = choose_format(&webcam(), &config(640, 480, 30.0, Some("GREY"))).unwrap_err().to_string();
+        let err = choose_format(&webcam(), &config(640, 480, 30.0, Some("GREY")))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("does not offer GREY"), "{err}");
-        let err = choose_format(&webcam(), &config(640, 480, 60.0, None)).unwrap_err().to_string();
-        assert!(err.contains("640x480@60 (no format offers that size and rate)"), "{err}");
-        let err = choose_format(&[], &config(640, 480, 30.0, None)).unwrap_err().to_string();
+        let err = choose_format(&webcam(), &config(640, 480, 60.0, None))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("640x480@60 (no format offers that size and rate)"),
+            "{err}"
+        );
+        let err = choose_format(&[], &config(640, 480, 30.0, None))
+            .unwrap_err()
+            .to_string();
         assert!(err.ends_with("the device offers nothing"), "{err}");
     }
 
@@ -395,13 +456,19 @@ mod v4l2 {
         let copied = buffers[5].meta();
         let clock = Clock::replay(77_000);
         let stamp = stamp_from_buffer(&copied, &clock);
-        assert_eq!((stamp.seq, stamp.device_ns, stamp.host_ns), (106, 1_000_250_000, 77_000));
+        assert_eq!(
+            (stamp.seq, stamp.device_ns, stamp.host_ns),
+            (106, 1_000_250_000, 77_000)
+        );
         // Unknown clock (no flag) likewise; a replay clock is never mixed with kernel time.
         let unknown = BufferMeta { flags: 0, ..monotonic };
         assert_eq!(stamp_from_buffer(&unknown, &clock).host_ns, 77_000);
         assert_eq!(stamp_from_buffer(&monotonic, &clock).host_ns, 77_000);
         // A malformed timestamp gives device_ns 0 and the host clock.
-        let bad = BufferMeta { timestamp_usec: 2_000_000, ..monotonic };
+        let bad = BufferMeta {
+            timestamp_usec: 2_000_000,
+            ..monotonic
+        };
         let stamp = stamp_from_buffer(&bad, &Clock::Monotonic);
         assert_eq!(stamp.device_ns, 0);
         assert!(stamp.host_ns > 0);
@@ -432,7 +499,8 @@ mod v4l2 {
         let quad = &data[64 + 4..64 + 8];
         assert_eq!(&out[(32 + 3) * 3..(32 + 4) * 3], &yuv_to_rgb(quad[2], quad[1], quad[3]));
 
-        let mono = BufferDecoder::new(yuyv(rec.width, rec.height, Conversion::YuyvToMono8), rec.bytes_per_line).unwrap();
+        let mono =
+            BufferDecoder::new(yuyv(rec.width, rec.height, Conversion::YuyvToMono8), rec.bytes_per_line).unwrap();
         mono.convert_into(&data, &buffer.meta(), &mut out).unwrap();
         let luma: Vec<u8> = data.iter().step_by(2).copied().collect();
         assert_eq!(out, luma);
@@ -443,7 +511,8 @@ mod v4l2 {
         let rec = recorded();
         let buffer = &rec.buffers[1];
         let data = buffer.data();
-        let decoder = BufferDecoder::new(yuyv(rec.width, rec.height, Conversion::YuyvToRgb8), rec.bytes_per_line).unwrap();
+        let decoder =
+            BufferDecoder::new(yuyv(rec.width, rec.height, Conversion::YuyvToRgb8), rec.bytes_per_line).unwrap();
         let mut out = Vec::with_capacity(32 * 24 * 3);
         let before = out.as_ptr();
         for _ in 0..3 {
@@ -461,17 +530,26 @@ mod v4l2 {
         };
         let decoder = BufferDecoder::new(grey.clone(), 8).unwrap();
         let data = [1, 2, 3, 4, 5, 6, 0xEE, 0xEE, 7, 8, 9, 10, 11, 12, 0xEE, 0xEE];
-        let meta = BufferMeta { bytesused: 14, ..BufferMeta::default() };
+        let meta = BufferMeta {
+            bytesused: 14,
+            ..BufferMeta::default()
+        };
         decoder.convert_into(&data, &meta, &mut out).unwrap();
         assert_eq!(out, [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]);
         let short = BufferMeta { bytesused: 13, ..meta };
         assert_eq!(
             decoder.convert_into(&data, &short, &mut out),
-            Err(BufferProblem::Short { bytesused: 13, needed: 14 })
+            Err(BufferProblem::Short {
+                bytesused: 13,
+                needed: 14
+            })
         );
         assert!(out.is_empty());
         let overlong = BufferMeta { bytesused: 17, ..meta };
-        assert!(matches!(decoder.convert_into(&data, &overlong, &mut out), Err(BufferProblem::Overlong { .. })));
+        assert!(matches!(
+            decoder.convert_into(&data, &overlong, &mut out),
+            Err(BufferProblem::Overlong { .. })
+        ));
         let err = BufferDecoder::new(grey, 5).unwrap_err().to_string();
         assert_eq!(err, "stride of 5 bytes is shorter than a 6-pixel GREY row");
     }
@@ -479,7 +557,8 @@ mod v4l2 {
     #[test]
     fn short_and_erroneous_buffers_are_counted_never_returned() {
         let rec = recorded();
-        let mut decoder = BufferDecoder::new(yuyv(rec.width, rec.height, Conversion::YuyvToRgb8), rec.bytes_per_line).unwrap();
+        let mut decoder =
+            BufferDecoder::new(yuyv(rec.width, rec.height, Conversion::YuyvToRgb8), rec.bytes_per_line).unwrap();
         let clock = Clock::replay(9);
         let frames: Vec<_> = rec
             .buffers
@@ -507,7 +586,10 @@ mod v4l2 {
         })
         .unwrap_err();
         assert!(matches!(err, CaptureError::NotFound { backend: "v4l2", .. }), "{err}");
-        assert_eq!(err.to_string(), format!("no v4l2 camera {:?} found", missing.display().to_string()));
+        assert_eq!(
+            err.to_string(),
+            format!("no v4l2 camera {:?} found", missing.display().to_string())
+        );
 
         // A file that is not a device: the driver error says what failed.
         std::fs::write(&missing, b"not a camera").unwrap();

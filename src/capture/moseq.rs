@@ -97,9 +97,7 @@ pub enum MoseqError {
     },
     #[error("{path:?}: DepthResolution {value} is not [width, height] of positive integers")]
     Resolution { path: PathBuf, value: String },
-    #[error(
-        "{path:?} is {len} bytes, not a multiple of the {frame_bytes}-byte frame of {width}x{height} u16 depths"
-    )]
+    #[error("{path:?} is {len} bytes, not a multiple of the {frame_bytes}-byte frame of {width}x{height} u16 depths")]
     Truncated {
         path: PathBuf,
         len: u64,
@@ -459,15 +457,12 @@ impl MoseqDepth {
                 program: self.config.ffmpeg.clone(),
                 source,
             })?;
-        let (stdout, stderr) = match (child.stdout.take(), child.stderr.take()) {
-            (Some(stdout), Some(stderr)) => (stdout, stderr),
-            _ => {
-                kill_and_reap(&mut child);
-                return Err(MoseqError::Spawn {
-                    program: self.config.ffmpeg.clone(),
-                    source: io::Error::other("no pipe to the child"),
-                });
-            }
+        let (Some(stdout), Some(stderr)) = (child.stdout.take(), child.stderr.take()) else {
+            kill_and_reap(&mut child);
+            return Err(MoseqError::Spawn {
+                program: self.config.ffmpeg.clone(),
+                source: io::Error::other("no pipe to the child"),
+            });
         };
         let (sender, receiver) = mpsc::sync_channel(2);
         let samples = self.frame_samples();
@@ -607,7 +602,11 @@ fn probe(ffprobe: &Path, path: &Path) -> Result<(u32, u32, Option<u64>), MoseqEr
         return Err(MoseqError::Tool {
             program: ffprobe.to_owned(),
             path: path.to_owned(),
-            stderr: String::from_utf8_lossy(&output.stderr).trim().chars().take(1000).collect(),
+            stderr: String::from_utf8_lossy(&output.stderr)
+                .trim()
+                .chars()
+                .take(1000)
+                .collect(),
         });
     }
     let text = String::from_utf8_lossy(&output.stdout).into_owned();
@@ -779,7 +778,13 @@ mod tests {
         let path = Path::new("depth_ts.txt");
         let one = parse_timestamps("10\n43.5\n\n77\n", path).unwrap();
         assert_eq!(one.len(), 3);
-        assert_eq!(one[1], MoseqTimestamp { device_ns: 43_500_000, system_ns: None });
+        assert_eq!(
+            one[1],
+            MoseqTimestamp {
+                device_ns: 43_500_000,
+                system_ns: None
+            }
+        );
         let two = parse_timestamps("10 1000.25\n43 1033\n", path).unwrap();
         assert_eq!(two[0].system_ns, Some(1_000_250_000));
         let err = parse_timestamps("10 1\n20\n", path).unwrap_err();

@@ -146,11 +146,7 @@ impl Chosen {
 }
 
 fn fps_of([num, den]: [u32; 2]) -> f64 {
-    if num == 0 {
-        0.0
-    } else {
-        f64::from(den) / f64::from(num)
-    }
+    if num == 0 { 0.0 } else { f64::from(den) / f64::from(num) }
 }
 
 /// No offered mode fits the config.
@@ -359,7 +355,11 @@ impl BufferDecoder {
     /// The stride is shorter than a row.
     pub fn new(chosen: Chosen, bytes_per_line: u32) -> Result<Self, BadStride> {
         let row_in = chosen.width as usize * chosen.conversion.input_bytes_per_pixel(chosen.output);
-        let stride = if bytes_per_line == 0 { row_in } else { bytes_per_line as usize };
+        let stride = if bytes_per_line == 0 {
+            row_in
+        } else {
+            bytes_per_line as usize
+        };
         if stride < row_in {
             return Err(BadStride {
                 bytes_per_line,
@@ -412,7 +412,11 @@ impl BufferDecoder {
             return Err(BufferProblem::Short { bytesused, needed });
         }
         let used = data.get(..bytesused).unwrap_or_default();
-        out.reserve(ColorFrame::expected_len(self.chosen.width, self.chosen.height, self.chosen.output));
+        out.reserve(ColorFrame::expected_len(
+            self.chosen.width,
+            self.chosen.height,
+            self.chosen.output,
+        ));
         for row in used.chunks(self.bytes_per_line).take(self.chosen.height as usize) {
             let row = row.get(..self.row_in).unwrap_or(row);
             match self.chosen.conversion {
@@ -458,10 +462,13 @@ impl BufferDecoder {
 
     /// Buffers refused so far, by reason (only reasons that occurred).
     pub fn losses(&self) -> Vec<(&'static str, u64)> {
-        [(LOSS_SHORT_BUFFER, self.short_buffers), (LOSS_ERROR_FLAG, self.error_flags)]
-            .into_iter()
-            .filter(|&(_, n)| n > 0)
-            .collect()
+        [
+            (LOSS_SHORT_BUFFER, self.short_buffers),
+            (LOSS_ERROR_FLAG, self.error_flags),
+        ]
+        .into_iter()
+        .filter(|&(_, n)| n > 0)
+        .collect()
     }
 }
 
@@ -554,7 +561,10 @@ fn enumerate(device: &Device, wanted: &V4l2Config) -> io::Result<Vec<OfferedForm
                 match interval.interval {
                     FrameIntervalEnum::Discrete(f) => intervals.push([f.numerator, f.denominator]),
                     FrameIntervalEnum::Stepwise(s) => {
-                        let (fast, slow) = (fps_of([s.min.numerator, s.min.denominator]), fps_of([s.max.numerator, s.max.denominator]));
+                        let (fast, slow) = (
+                            fps_of([s.min.numerator, s.min.denominator]),
+                            fps_of([s.max.numerator, s.max.denominator]),
+                        );
                         if wanted.fps > 0.0 && wanted.fps <= fast * 1.01 && wanted.fps >= slow * 0.99 {
                             // The wanted rate as a fraction of microseconds.
                             intervals.push([(1e6 / wanted.fps).round() as u32, 1_000_000]);
@@ -562,7 +572,11 @@ fn enumerate(device: &Device, wanted: &V4l2Config) -> io::Result<Vec<OfferedForm
                     }
                 }
             }
-            sizes.push(OfferedSize { width, height, intervals });
+            sizes.push(OfferedSize {
+                width,
+                height,
+                intervals,
+            });
         }
         offered.push(OfferedFormat {
             fourcc,
@@ -639,7 +653,8 @@ impl V4l2Color {
             what,
             reason,
         };
-        let chosen = choose_format(&offered, &config).map_err(|e| refused(format!("mode {}", e.wanted), e.to_string()))?;
+        let chosen =
+            choose_format(&offered, &config).map_err(|e| refused(format!("mode {}", e.wanted), e.to_string()))?;
         let mut fourcc = [0u8; 4];
         for (slot, byte) in fourcc.iter_mut().zip(chosen.fourcc.bytes()) {
             *slot = byte;
@@ -679,7 +694,8 @@ impl V4l2Color {
             output = %chosen.output,
             bytes_per_line = set.stride,
         );
-        let decoder = BufferDecoder::new(chosen, set.stride).map_err(|e| refused("stride".to_owned(), e.to_string()))?;
+        let decoder =
+            BufferDecoder::new(chosen, set.stride).map_err(|e| refused("stride".to_owned(), e.to_string()))?;
         Ok(Self {
             config,
             id,
@@ -744,7 +760,9 @@ impl FrameSource for V4l2Color {
                 return Err(self.driver_error("VIDIOC_QBUF failed", e));
             }
         }
-        stream.start().map_err(|e| self.driver_error("VIDIOC_STREAMON failed", e))?;
+        stream
+            .start()
+            .map_err(|e| self.driver_error("VIDIOC_STREAMON failed", e))?;
         self.stream = Some(stream);
         Ok(())
     }
@@ -787,7 +805,9 @@ impl FrameSource for V4l2Color {
 
     fn stop(&mut self) -> Result<(), CaptureError> {
         if let Some(mut stream) = self.stream.take() {
-            stream.stop().map_err(|e| self.driver_error("VIDIOC_STREAMOFF failed", e))?;
+            stream
+                .stop()
+                .map_err(|e| self.driver_error("VIDIOC_STREAMOFF failed", e))?;
         }
         Ok(())
     }
