@@ -2,10 +2,11 @@
 //! built `mousepose` binary.
 
 mod capture_aravis;
+mod capture_v4l2;
 mod cli;
 mod forest;
-mod segment;
 mod replay;
+mod segment;
 mod session;
 mod synth;
 mod util;

@@ -8,7 +8,12 @@
 
 pub mod aravis;
 pub mod clock;
+<<<<<<< HEAD
 pub mod session;
+=======
+pub mod moseq;
+pub mod v4l2;
+>>>>>>> v4l2
 
 pub use clock::Clock;
 

@@ -61,6 +61,8 @@ pub enum Backend {
     Aravis,
     V4l2,
     Synthetic,
+    /// A MoSeq-layout depth recording (`depth.dat` or `depth.avi` with `depth_ts.txt`) read as a camera.
+    Moseq,
 }
 
 /// Whether a session was generated or recorded from cameras.
