@@ -8,12 +8,9 @@
 
 pub mod aravis;
 pub mod clock;
-<<<<<<< HEAD
-pub mod session;
-=======
 pub mod moseq;
+pub mod session;
 pub mod v4l2;
->>>>>>> v4l2
 
 pub use clock::Clock;
 
