@@ -7,8 +7,10 @@
 //! device counter are counted by the runner, not here.
 
 pub mod clock;
+pub mod openni;
 
 pub use clock::Clock;
+pub use openni::{OpenNiConfig, OpenNiDepth};
 
 use crate::frame::{ColorFrame, DepthFrame, Stamp};
 use crate::session::meta::CameraMeta;
