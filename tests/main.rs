@@ -2,6 +2,7 @@
 //! built `mousepose` binary.
 
 mod capture_aravis;
+mod capture_openni;
 mod capture_v4l2;
 mod cli;
 mod forest;

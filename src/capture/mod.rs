@@ -9,10 +9,12 @@
 pub mod aravis;
 pub mod clock;
 pub mod moseq;
+pub mod openni;
 pub mod session;
 pub mod v4l2;
 
 pub use clock::Clock;
+pub use openni::{OpenNiConfig, OpenNiDepth};
 
 use crate::frame::{ColorFrame, DepthFrame, Stamp};
 use crate::session::meta::CameraMeta;
