@@ -41,6 +41,39 @@ enum Command {
     Bench(BenchArgs),
     /// Run a recorded or synthetic session through the pipeline: poses.csv and summary.json.
     Replay(ReplayArgs),
+    /// Record the rig's cameras to a session (lossless), until --seconds or Ctrl-C/SIGTERM.
+    Record(RecordArgs),
+    /// List the cameras each backend sees (GigE cameras only at configured addresses).
+    Devices(DevicesArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct RecordArgs {
+    /// The rig configuration.
+    #[arg(long, value_name = "FILE")]
+    pub config: PathBuf,
+    /// The session directory to write.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Stop after this many seconds (otherwise at Ctrl-C or SIGTERM).
+    #[arg(long, value_name = "N", value_parser = parse_seconds, allow_negative_numbers = true)]
+    pub seconds: Option<f64>,
+    /// Print the summary as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    pub force: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct DevicesArgs {
+    /// A rig configuration: GigE Vision cameras are probed at its addresses.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Args)]
@@ -338,6 +371,11 @@ fn exit_code(e: &anyhow::Error) -> u8 {
             c.downcast_ref::<crate::output::OutputError>(),
             Some(crate::output::OutputError::NotEmpty(_) | crate::output::OutputError::NotADirectory(_))
         ) || c.is::<crate::commands::Exists>()
+            || c.is::<crate::config::ConfigError>()
+            || matches!(
+                c.downcast_ref::<crate::record::RecordError>(),
+                Some(crate::record::RecordError::NotEmpty(_))
+            )
     });
     if usage { 1 } else { 2 }
 }
@@ -351,6 +389,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Experiment(ExperimentCommand::Gauss2d(args)) => crate::commands::gauss2d(&args),
         Command::Bench(args) => run_bench(&args),
         Command::Replay(args) => crate::commands::replay(&args),
+        Command::Record(args) => crate::commands::record(&args),
+        Command::Devices(args) => crate::commands::devices(&args),
     }
 }
 

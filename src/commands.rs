@@ -583,3 +583,58 @@ pub fn replay(args: &crate::cli::ReplayArgs) -> Result<()> {
     }
     print(&text)
 }
+
+/// `mousepose record`.
+pub fn record(args: &crate::cli::RecordArgs) -> Result<()> {
+    let config = crate::config::Config::load(&args.config)?;
+    let stop = crate::pipeline::Shutdown::default();
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, stop.flag()).context("installing the signal handlers")?;
+    }
+    let summary = crate::record::record(&config, &args.out, args.seconds, args.force, &stop)
+        .with_context(|| format!("recording to {:?}", args.out))?;
+    if args.json {
+        return print_json(&summary);
+    }
+    let mut text = format!(
+        "recorded {:.1} s to {:?}: {} depth frames ({:.1} MB), {} colour frames ({:.1} MB), {:.2} cores\n",
+        summary.seconds,
+        summary.dir,
+        summary.depth_frames,
+        summary.depth_bytes as f64 / 1e6,
+        summary.color_frames,
+        summary.color_bytes as f64 / 1e6,
+        summary.cpu_cores
+    );
+    for (name, c) in &summary.cameras {
+        let _ = writeln!(
+            text,
+            "{name:>6}: captured {}, recorded {}, dropped {} {:?}, lost before capture {:?}",
+            c.captured, c.paired, c.dropped_total, c.dropped, c.lost_before_capture
+        );
+    }
+    print(&text)
+}
+
+/// `mousepose devices`.
+pub fn devices(args: &crate::cli::DevicesArgs) -> Result<()> {
+    let config = args.config.as_deref().map(crate::config::Config::load).transpose()?;
+    let found = crate::devices::list(config.as_ref());
+    if args.json {
+        return print_json(&serde_json::json!({ "backends": found }));
+    }
+    let mut text = String::new();
+    for b in &found {
+        let _ = writeln!(text, "{} ({}):", b.backend, b.scope);
+        if let Some(e) = &b.error {
+            let _ = writeln!(text, "  cannot list: {e}");
+        }
+        if b.devices.is_empty() && b.error.is_none() {
+            let _ = writeln!(text, "  none");
+        }
+        for d in &b.devices {
+            let _ = writeln!(text, "  {:<24} {} serial {:?} {}", d.id, d.model, d.serial, d.details);
+        }
+    }
+    print(&text)
+}

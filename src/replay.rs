@@ -297,7 +297,7 @@ pub struct CameraSummary {
 }
 
 impl CameraSummary {
-    fn of(c: &CameraCounters) -> Self {
+    pub fn of(c: &CameraCounters) -> Self {
         let dropped = c.dropped.lock().unwrap_or_else(PoisonError::into_inner).clone();
         Self {
             captured: c.captured.load(Ordering::Relaxed),

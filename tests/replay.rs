@@ -74,7 +74,13 @@ fn the_fixture_session_replays_with_its_true_pairs_and_joints() {
     assert!(rows.iter().all(|r| r.split(',').count() == columns));
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
-    for key in ["per_joint_error_mm", "mean_error_mm", "cameras", "stages", "throughput_pairs_per_s"] {
+    for key in [
+        "per_joint_error_mm",
+        "mean_error_mm",
+        "cameras",
+        "stages",
+        "throughput_pairs_per_s",
+    ] {
         assert!(summary.get(key).is_some(), "summary.json lacks {key}");
     }
     for stage in summary["stages"].as_array().unwrap() {
@@ -163,7 +169,10 @@ fn bad_sessions_give_one_clear_error_and_no_output() {
     let empty = tmp.path().join("empty");
     let reader = SessionReader::open(fixture()).unwrap();
     std::fs::create_dir(&empty).unwrap();
-    SessionWriter::create(&empty, reader.meta()).unwrap().finish_at(1).unwrap();
+    SessionWriter::create(&empty, reader.meta())
+        .unwrap()
+        .finish_at(1)
+        .unwrap();
     // Not a session at all.
     let missing = tmp.path().join("missing");
     for (session, expect) in [(&empty, "no depth frames"), (&missing, "missing")] {

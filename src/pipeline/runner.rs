@@ -98,6 +98,11 @@ impl Shutdown {
     pub fn requested(&self) -> bool {
         self.0.load(Ordering::Acquire)
     }
+
+    /// The flag itself, for a signal handler to set.
+    pub fn flag(&self) -> Arc<AtomicBool> {
+        Arc::clone(&self.0)
+    }
 }
 
 /// Items a sink holds back while waiting for an earlier index (from a stage with several

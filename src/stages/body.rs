@@ -11,6 +11,12 @@ use nalgebra::Point3;
 
 /// Pixels of the mouse run through the forest per frame, at most.
 pub const VOTE_BUDGET: usize = 1200;
+fn budget() -> usize {
+    std::env::var("MP_BUDGET")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(VOTE_BUDGET)
+}
 
 /// Runs a [`BodyEstimator`] on each segmented mouse.
 #[derive(Debug, Clone)]
@@ -61,7 +67,7 @@ impl Stage for BodyStage {
             self.mask.extend(mouse.mask.iter().map(|&m| m != 0));
             if self.crop.len() == self.mask.len() {
                 let image = DepthImage::from_mask(r, &self.crop, &self.mask);
-                sample_pixels(&image, VOTE_BUDGET, &mut self.pixels);
+                sample_pixels(&image, budget(), &mut self.pixels);
                 let guesses = self.estimator.estimate(&image, &self.pixels, &self.camera.intrinsics);
                 for (joint, guess) in Joint::MAIN_BODY.iter().zip(guesses) {
                     if let Some(g) = guess {
