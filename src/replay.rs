@@ -25,7 +25,7 @@ use crate::pipeline::{
 use crate::segment::{Background, SegmentError, SegmenterConfig};
 use crate::session::{CameraRole, SessionError, SessionReader, SessionSource};
 use crate::sink::poses::{PoseTally, PoseWriter};
-use crate::stages::body::BodyStage;
+use crate::stages::body::{BodyStage, PIPELINE_VOTE_BUDGET};
 use crate::stages::segment::SegmentStage;
 use crate::sync::{Role, SyncConfig, SyncOutput, Synchronizer};
 use crossbeam_channel::Receiver;
@@ -459,7 +459,7 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         .stage("segment", vec![SegmentStage::new(segmenter)], &pair_rx, &seg_tx)
         .map_err(threads)?;
     drop((pair_rx, seg_tx));
-    let body = BodyStage::new(estimator, rig.depth);
+    let body = BodyStage::new(estimator, rig.depth, PIPELINE_VOTE_BUDGET);
     runner
         .stage("body", vec![body; workers], &seg_rx, &pose_tx)
         .map_err(threads)?;

@@ -20,7 +20,7 @@ use aravis_ext::{FakeCamera, FakeCameraConfig, GVCP_PORT, use_only_interfaces};
 static FAKE_PORT: Mutex<()> = Mutex::new(());
 
 /// One test at a time on the fake camera's port, with Aravis's discovery switched off.
-fn take_port() -> MutexGuard<'static, ()> {
+pub(crate) fn take_port() -> MutexGuard<'static, ()> {
     let guard = FAKE_PORT.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
     use_only_interfaces(&[]);
     guard
@@ -31,7 +31,7 @@ fn pattern(frame_id: u64, x: usize, y: usize) -> u8 {
     ((frame_id as usize * 7 + x + 3 * y) % 251) as u8
 }
 
-fn start_fake(config: &FakeCameraConfig) -> FakeCamera {
+pub(crate) fn start_fake(config: &FakeCameraConfig) -> FakeCamera {
     let fill = Box::new(|frame: &mut [u8], width: u32, height: u32, frame_id: u64| {
         let width = width as usize;
         let bpp = frame.len() / (width * height as usize).max(1);

@@ -16,7 +16,7 @@ use std::time::Duration;
 static OPENNI: Mutex<()> = Mutex::new(());
 
 /// Holds OpenNI2 for one test.
-fn serial() -> MutexGuard<'static, ()> {
+pub(crate) fn serial() -> MutexGuard<'static, ()> {
     OPENNI.lock().unwrap_or_else(PoisonError::into_inner)
 }
 

@@ -1,0 +1,129 @@
+//! `record` against real camera software: OpenNI2's Dummy depth device and Aravis's own fake
+//! GigE Vision camera on 127.0.0.1; a recorder killed with SIGKILL.
+
+use crate::util::mousepose;
+use aravis_ext::FakeCameraConfig;
+use mousepose::config::Config;
+use mousepose::pipeline::Shutdown;
+use mousepose::record::record;
+use mousepose::session::{Backend, CameraRole, SessionReader};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+const DUMMY_DEPTH: &str = "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\nwidth = 320\nheight = 240\nfps = 30\n";
+
+fn config(text: &str) -> Config {
+    Config::parse(text, Path::new("rig.toml")).unwrap()
+}
+
+#[test]
+fn depth_and_gige_colour_are_recorded_with_their_metadata() {
+    let _openni = crate::capture_openni::serial();
+    let _port = crate::capture_aravis::take_port();
+    let _camera = crate::capture_aravis::start_fake(&FakeCameraConfig::default());
+    let text = format!(
+        "{DUMMY_DEPTH}[color]\nbackend = \"aravis\"\naddress = \"127.0.0.1\"\npixel_format = \"mono8\"\nfps = 30.0\n"
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("session");
+    let summary = record(&config(&text), &out, Some(1.5), false, &Shutdown::default()).unwrap();
+    for (name, c) in &summary.cameras {
+        assert!(c.captured >= 20, "{name}: {c:?}");
+        assert_eq!(c.captured, c.paired + c.dropped_total, "{name}: {c:?}");
+    }
+    let r = SessionReader::open(&out).unwrap();
+    assert!(r.complete());
+    assert_eq!(r.depth_count() as u64, summary.depth_frames);
+    assert_eq!(r.color_count() as u64, summary.color_frames);
+    let meta = r.meta();
+    assert_eq!(meta.software_version, env!("CARGO_PKG_VERSION"));
+    let depth = meta.camera(CameraRole::Depth).unwrap();
+    assert_eq!((depth.backend, depth.width, depth.height), (Backend::Openni2, 320, 240));
+    let color = meta.camera(CameraRole::Color).unwrap();
+    assert_eq!(color.backend, Backend::Aravis);
+    assert!(!color.serial.is_empty() && !color.model.is_empty());
+    // Every frame decodes, in order.
+    let seqs: Vec<u64> = r.depth_frames().map(|f| f.unwrap().stamp.seq).collect();
+    assert!(seqs.windows(2).all(|w| w[0] < w[1]));
+    assert_eq!(r.color_frames().unwrap().filter(|f| f.is_ok()).count(), r.color_count());
+}
+
+#[test]
+fn a_recorder_killed_with_sigkill_leaves_a_readable_session() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = tmp.path().join("rig.toml");
+    std::fs::write(&rig, DUMMY_DEPTH).unwrap();
+    let out = tmp.path().join("session");
+    let mut child = mousepose()
+        .args(["record", "--seconds", "60", "--config"])
+        .arg(&rig)
+        .arg("--out")
+        .arg(&out)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Wait until about two seconds of frames are on disk.
+    let start = Instant::now();
+    let timestamps = out.join("depth/timestamps.csv");
+    while std::fs::read_to_string(&timestamps).map_or(0, |t| t.lines().count()) < 60 {
+        assert!(start.elapsed() < Duration::from_secs(30), "the recorder wrote nothing");
+        assert!(child.try_wait().unwrap().is_none(), "the recorder exited early");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let r = SessionReader::open(&out).unwrap();
+    assert!(!r.complete());
+    assert!(r.depth_count() >= 58, "{} frames", r.depth_count());
+    assert_eq!(r.depth_frames().filter(|f| f.is_ok()).count(), r.depth_count());
+    assert_eq!(r.meta().camera(CameraRole::Depth).unwrap().backend, Backend::Openni2);
+}
+
+#[test]
+fn bad_configs_and_missing_cameras_are_clear_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = tmp.path().join("rig.toml");
+    let cases = [
+        (format!("{DUMMY_DEPTH}exposure = 3\n"), 1, "exposure"),
+        (
+            "[depth]\nbackend = \"openni2\"\nuri = \"no-such-camera\"\n".to_owned(),
+            2,
+            "no-such-camera",
+        ),
+        (
+            format!("{DUMMY_DEPTH}[color]\nbackend = \"v4l2\"\ndevice = \"/dev/video99\"\n"),
+            2,
+            "video99",
+        ),
+    ];
+    for (text, code, expect) in cases {
+        std::fs::write(&rig, text).unwrap();
+        let out = tmp.path().join("out");
+        let o = mousepose()
+            .args(["record", "--seconds", "1", "--config"])
+            .arg(&rig)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(code), "{err}");
+        assert!(err.contains("error: ") && err.contains(expect), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+        let _ = std::fs::remove_dir_all(&out);
+    }
+}
+
+#[test]
+fn devices_lists_every_backend_as_json() {
+    let o = mousepose().args(["devices", "--json"]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let names: Vec<&str> = v["backends"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| b["backend"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["openni2", "aravis", "v4l2"]);
+}
