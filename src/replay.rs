@@ -363,6 +363,47 @@ pub struct ReplaySummary {
     pub mean_error_mm: Option<f64>,
 }
 
+/// The picture of one frame with its skeleton.
+pub const PICTURE_FILE: &str = "frame.png";
+
+/// The depth frame of `pose` around the mouse, magnified, with the estimated skeleton drawn
+/// in the paper's colours; `None` when the frame cannot be read again.
+fn picture(reader: &SessionReader, rig: &Rig, pose: &crate::stages::PoseRecord) -> Option<crate::image::RgbImage> {
+    let index = reader
+        .seqs(CameraRole::Depth)
+        .iter()
+        .position(|&s| s == pose.depth.seq)?;
+    let frame = reader.depth_frame(index).ok()?;
+    let joints = pose
+        .pose
+        .joints
+        .map(|j| (j.source != crate::pose::JointSource::Missing).then_some(j.position_mm));
+    let projected: Vec<_> = joints
+        .iter()
+        .flatten()
+        .filter_map(|p| rig.depth.project_world(p))
+        .collect();
+    let cx = projected.iter().map(|p| p.x).sum::<f64>() / projected.len().max(1) as f64;
+    let cy = projected.iter().map(|p| p.y).sum::<f64>() / projected.len().max(1) as f64;
+    let (w, h) = (160u32, 120u32);
+    let x0 = (cx - f64::from(w) / 2.0).clamp(0.0, f64::from(frame.width.saturating_sub(w))) as u32;
+    let y0 = (cy - f64::from(h) / 2.0).clamp(0.0, f64::from(frame.height.saturating_sub(h))) as u32;
+    let zoom = 4u32;
+    let near = rig.depth.world_from_camera.translation.vector.z - 120.0;
+    let far = near + 140.0;
+    let mut img = crate::image::depth_to_rgb(&frame.data, frame.width, frame.height, near, far)
+        .crop(x0, y0, w.min(frame.width), h.min(frame.height))
+        .upscale(zoom);
+    crate::synth::preview::draw_joints(
+        &mut img,
+        &rig.depth,
+        &joints,
+        (f64::from(x0), f64::from(y0)),
+        f64::from(zoom),
+    );
+    Some(img)
+}
+
 /// Frames the background model is built from, spread over the session.
 const BACKGROUND_FRAMES: usize = 31;
 
@@ -417,10 +458,13 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         .as_ref()
         .map(|t| t.joints.iter().map(|(seq, _, j)| (*seq, *j)).collect())
         .unwrap_or_default();
-    let writer = PoseWriter::create(staging.path(), truth_joints).map_err(|source| ReplayError::Write {
-        path: staging.path().join(crate::sink::poses::POSES_FILE),
-        source,
-    })?;
+    let writer =
+        PoseWriter::create(staging.path(), truth_joints, reader.depth_count() as u64 / 2).map_err(|source| {
+            ReplayError::Write {
+                path: staging.path().join(crate::sink::poses::POSES_FILE),
+                source,
+            }
+        })?;
     let tally = writer.tally();
 
     let workers = match options.workers {
@@ -508,6 +552,15 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         per_joint_error_mm: tally.per_joint_error_mm(),
         mean_error_mm: tally.mean_error_mm(),
     };
+    if let Some(pose) = &tally.snapshot {
+        let path = staging.path().join(PICTURE_FILE);
+        picture(&reader, &rig, pose)
+            .and_then(|img| img.write_png(&path).ok())
+            .ok_or_else(|| ReplayError::Write {
+                path: path.clone(),
+                source: std::io::Error::other("cannot draw or write the picture"),
+            })?;
+    }
     let path = staging.path().join(SUMMARY_FILE);
     let json = serde_json::to_vec_pretty(&summary).map_err(std::io::Error::from);
     json.and_then(|j| std::fs::write(&path, j))

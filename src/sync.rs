@@ -384,6 +384,7 @@ mod tests {
     use proptest::prelude::*;
 
     /// A camera stream: `(true capture time s, stamp)` with its own clock and latency.
+    #[allow(clippy::too_many_arguments)]
     fn stream(
         n: usize,
         period_s: f64,

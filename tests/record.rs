@@ -1,5 +1,6 @@
 //! `record` against real camera software: OpenNI2's Dummy depth device and Aravis's own fake
 //! GigE Vision camera on 127.0.0.1; a recorder killed with SIGKILL.
+#![allow(clippy::unwrap_used)] // the helpers below are test code too
 
 use crate::util::mousepose;
 use aravis_ext::FakeCameraConfig;

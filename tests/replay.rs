@@ -1,5 +1,6 @@
 //! Replay end to end: sessions through the real pipeline (threads, edges, synchroniser,
 //! segmentation, body forest, pose writer), checked against the sessions' ground truth.
+#![allow(clippy::unwrap_used)] // the helpers below are test code too
 
 use crate::util::{mousepose, repo_root};
 use mousepose::replay::{ReplayOptions, ReplaySummary, replay};

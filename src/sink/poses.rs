@@ -10,7 +10,7 @@
 use crate::pipeline::{Sink, StageError};
 use crate::pose::{JointPositions, JointSource};
 use crate::skeleton::{JOINT_COUNT, Joint};
-use crate::stages::PoseRecord;
+use crate::stages::{PoseRecord, PoseStatus};
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::fs::File;
@@ -42,6 +42,8 @@ pub struct PoseTally {
     /// Per joint: summed error (mm) and count, over rows with truth and an estimate.
     pub error_sum_mm: [f64; JOINT_COUNT],
     pub error_count: [u64; JOINT_COUNT],
+    /// The first pose with a mouse at or after the snapshot row (for a picture).
+    pub snapshot: Option<PoseRecord>,
 }
 
 impl PoseTally {
@@ -72,6 +74,7 @@ pub struct PoseWriter {
     out: BufWriter<File>,
     line: String,
     truth: HashMap<u64, JointPositions>,
+    snapshot_row: u64,
     tally: Arc<Mutex<PoseTally>>,
 }
 
@@ -81,13 +84,15 @@ impl PoseWriter {
     ///
     /// # Errors
     /// The file cannot be created or written.
-    pub fn create(dir: &Path, truth: HashMap<u64, JointPositions>) -> std::io::Result<Self> {
+    /// The tally keeps the first pose with a mouse from row `snapshot_row` on.
+    pub fn create(dir: &Path, truth: HashMap<u64, JointPositions>, snapshot_row: u64) -> std::io::Result<Self> {
         let mut out = BufWriter::new(File::create(dir.join(POSES_FILE))?);
         writeln!(out, "{}", header())?;
         Ok(Self {
             out,
             line: String::new(),
             truth,
+            snapshot_row,
             tally: Arc::default(),
         })
     }
@@ -136,6 +141,9 @@ impl Sink for PoseWriter {
         tally.rows += 1;
         *tally.statuses.entry(r.status.name()).or_default() += 1;
         tally.pairs.push((r.depth.seq, r.color.map(|c| c.seq)));
+        if tally.snapshot.is_none() && tally.rows > self.snapshot_row && r.status == PoseStatus::Ok {
+            tally.snapshot = Some(r);
+        }
         drop(tally);
         Ok(())
     }

@@ -29,9 +29,21 @@ pub fn draw_skeleton(
     origin: (f64, f64),
     zoom: f64,
 ) {
-    let to_img = |p: &nalgebra::Point3<f64>| {
-        camera
-            .project_world(p)
+    draw_joints(img, camera, &joints.map(Some), origin, zoom);
+}
+
+/// As [`draw_skeleton`], for joints that may be unknown (`None`): only bones with both ends
+/// known are drawn.
+pub fn draw_joints(
+    img: &mut RgbImage,
+    camera: &Camera,
+    joints: &[Option<nalgebra::Point3<f64>>; crate::skeleton::JOINT_COUNT],
+    origin: (f64, f64),
+    zoom: f64,
+) {
+    let to_img = |p: &Option<nalgebra::Point3<f64>>| {
+        p.as_ref()
+            .and_then(|p| camera.project_world(p))
             .map(|q| ((q.x - origin.0 + 0.5) * zoom, (q.y - origin.1 + 0.5) * zoom))
     };
     for (a, b, kind) in BONES {
