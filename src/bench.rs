@@ -38,6 +38,25 @@ pub struct BenchReport {
     pub train_pixel_trees_per_s: f64,
     /// Body forest inference with the bundled model (when present), one core.
     pub forest: Option<ForestBench>,
+    /// The replay pipeline and the recorder on a synthetic session (with the bundled models).
+    pub pipeline: Option<PipelineBench>,
+}
+
+/// The pipeline end to end.
+#[derive(Clone, Debug, Serialize)]
+pub struct PipelineBench {
+    /// Length of the synthetic session (30 fps, full-size 640x480 depth and 1280x1024 Bayer
+    /// colour frames).
+    pub session_seconds: f64,
+    /// `replay` as fast as possible, all stages, default workers.
+    pub replay_pairs_per_s: f64,
+    /// `replay --realtime` (paced at the recorded 30 fps): from a pair leaving the
+    /// synchroniser to its row written.
+    pub paced_latency_p50_ms: f64,
+    pub paced_latency_p99_ms: f64,
+    /// Writing the session's frames as the recorder does (zstd, checksums, timestamps): CPU
+    /// seconds per second of footage (1.0 = one core busy).
+    pub record_cores: f64,
 }
 
 /// Speed of the bundled body forest on one core.
@@ -98,6 +117,17 @@ impl BenchReport {
                 let _ = writeln!(s, "(no bundled body model found: forest inference not measured)");
             }
         }
+        if let Some(p) = &self.pipeline {
+            let rows = [
+                ("replay pairs/s (all stages, all cores)", p.replay_pairs_per_s),
+                ("paced 30 fps latency p50, ms", p.paced_latency_p50_ms),
+                ("paced 30 fps latency p99, ms", p.paced_latency_p99_ms),
+                ("recording, cores used at 30 fps", p.record_cores),
+            ];
+            for (name, v) in rows {
+                let _ = writeln!(s, "{name:<40} {v:>12.3}");
+            }
+        }
         s
     }
 }
@@ -153,9 +183,13 @@ pub fn run(quick: bool) -> BenchReport {
         tracing::warn!(error = %e, "cannot measure the segmenter");
         f64::NAN
     });
+    let pipeline = bench_pipeline(quick)
+        .map_err(|e| tracing::warn!(error = %e, "cannot measure the pipeline"))
+        .ok();
     BenchReport {
         train_pixel_trees_per_s,
         forest,
+        pipeline,
         threads: rayon::current_num_threads(),
         render_depth_images_per_s_one_core: one,
         render_depth_images_per_s: all,
@@ -319,4 +353,69 @@ fn segment_ms(rig: &Rig, iterations: u32) -> Result<f64, SegmentError> {
         best = best.min(t.elapsed().as_secs_f64() * 1e3 / f64::from(batch));
     }
     Ok(best)
+}
+
+/// Replays a synthetic session fast and paced, and rewrites its frames as the recorder does.
+fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Error>> {
+    use crate::replay::{ReplayOptions, replay};
+    use crate::session::{SessionReader, SessionWriter};
+    use crate::synth::session::{SessionSpec, write_session};
+    let root = std::env::temp_dir().join(format!(".mousepose-bench-{}", std::process::id()));
+    let _cleanup = RemoveOnDrop(root.clone());
+    let session = root.join("session");
+    std::fs::create_dir_all(&session)?;
+    let seconds = if quick { 3.0 } else { 10.0 };
+    let spec = SessionSpec {
+        seconds,
+        seed: 0xBE7C,
+        ..SessionSpec::default()
+    };
+    write_session(&session, &spec, |_, _| {})?;
+    let options = |out: &str, realtime: bool| ReplayOptions {
+        session: session.clone(),
+        out: root.join(out),
+        models: None,
+        realtime,
+        workers: 0,
+        force: true,
+    };
+    let fast = replay(&options("fast", false))?;
+    let paced = replay(&options("paced", true))?;
+    // The recorder's work: every frame encoded, checksummed and written, on one thread.
+    let reader = SessionReader::open(&session)?;
+    let copy = root.join("copy");
+    std::fs::create_dir_all(&copy)?;
+    let depth: Vec<_> = reader.depth_frames().collect::<Result<_, _>>()?;
+    let color: Vec<_> = reader.color_frames().into_iter().flatten().collect::<Result<_, _>>()?;
+    let cpu0 = thread_cpu_s();
+    let mut writer = SessionWriter::create(&copy, reader.meta())?;
+    for (d, c) in depth.iter().zip(color.iter()) {
+        writer.write_depth(d)?;
+        writer.write_color(c)?;
+    }
+    writer.finish()?;
+    let record_cores = (thread_cpu_s() - cpu0) / (depth.len().min(color.len()) as f64 / spec.fps);
+    Ok(PipelineBench {
+        session_seconds: seconds,
+        replay_pairs_per_s: fast.throughput_pairs_per_s,
+        paced_latency_p50_ms: paced.end_to_end_latency.p50_ms,
+        paced_latency_p99_ms: paced.end_to_end_latency.p99_ms,
+        record_cores,
+    })
+}
+
+/// CPU seconds the calling thread has used.
+fn thread_cpu_s() -> f64 {
+    let t = rustix::time::clock_gettime(rustix::time::ClockId::ThreadCPUTime);
+    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+}
+
+/// Removes a scratch directory when dropped.
+struct RemoveOnDrop(std::path::PathBuf);
+
+impl Drop for RemoveOnDrop {
+    fn drop(&mut self) {
+        // Best effort: a leftover scratch directory in the temporary directory is harmless.
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }

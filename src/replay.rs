@@ -11,6 +11,7 @@
 //! do not decode) are counted apart. `summary.json` holds those counts, the per-stage latency,
 //! the throughput and, for synthetic sessions, the error against the ground truth.
 
+use crate::capture::moseq::{MoseqConfig, MoseqDepth};
 use crate::capture::session::SessionPlayer;
 use crate::capture::{Captured, Clock, FrameSource};
 use crate::forest::infer::{BodyEstimator, VoteSettings};
@@ -69,6 +70,8 @@ pub enum ReplayError {
         #[source]
         source: ModelError,
     },
+    #[error("cannot read the MoSeq recording")]
+    Moseq(#[source] crate::capture::CaptureError),
     #[error("cannot model the empty cage from the session's depth frames")]
     Background(#[source] SegmentError),
     #[error(transparent)]
@@ -368,12 +371,8 @@ pub const PICTURE_FILE: &str = "frame.png";
 
 /// The depth frame of `pose` around the mouse, magnified, with the estimated skeleton drawn
 /// in the paper's colours; `None` when the frame cannot be read again.
-fn picture(reader: &SessionReader, rig: &Rig, pose: &crate::stages::PoseRecord) -> Option<crate::image::RgbImage> {
-    let index = reader
-        .seqs(CameraRole::Depth)
-        .iter()
-        .position(|&s| s == pose.depth.seq)?;
-    let frame = reader.depth_frame(index).ok()?;
+fn picture(input: &Input, rig: &Rig, pose: &crate::stages::PoseRecord) -> Option<crate::image::RgbImage> {
+    let frame = input.depth_frame(pose.depth.seq)?;
     let joints = pose
         .pose
         .joints
@@ -410,23 +409,24 @@ const BACKGROUND_FRAMES: usize = 31;
 /// The empty cage: for a synthetic session the rendered empty cage; otherwise the per-pixel
 /// median of frames spread over the session (a mouse that moves drops out of the median, as
 /// in MoSeq's extraction).
-fn background(reader: &SessionReader, rig: &Rig) -> Result<Background, ReplayError> {
-    let n = reader.depth_count();
-    if n == 0 {
-        return Err(ReplayError::Empty(reader.dir().to_path_buf()));
+fn background(input: &Input, rig: &Rig) -> Result<Background, ReplayError> {
+    if input.depth_count()? == 0 {
+        return Err(ReplayError::Empty(match input {
+            Input::Session(r) => r.dir().to_path_buf(),
+            Input::Moseq(c) => c.dir.clone(),
+        }));
     }
-    if reader.meta().source == SessionSource::Synthetic && reader.meta().rig.is_some() {
-        // The generator's empty cage is known exactly: the reference a rig records before the
-        // mouse goes in.
-        let full = crate::synth::render::Region::full(&rig.depth.intrinsics);
-        let cage = crate::synth::render::Cage::new(&rig.depth).depth(full);
-        return Background::from_depth(&cage, full, &rig.depth.intrinsics, &SegmenterConfig::default())
-            .map_err(ReplayError::Background);
+    if let Input::Session(reader) = input {
+        if reader.meta().source == SessionSource::Synthetic && reader.meta().rig.is_some() {
+            // The generator's empty cage is known exactly: the reference a rig records before
+            // the mouse goes in.
+            let full = crate::synth::render::Region::full(&rig.depth.intrinsics);
+            let cage = crate::synth::render::Cage::new(&rig.depth).depth(full);
+            return Background::from_depth(&cage, full, &rig.depth.intrinsics, &SegmenterConfig::default())
+                .map_err(ReplayError::Background);
+        }
     }
-    let picks = BACKGROUND_FRAMES.min(n);
-    let frames: Vec<DepthFrame> = (0..picks)
-        .filter_map(|k| reader.depth_frame(k * n / picks).ok())
-        .collect();
+    let frames = input.sample_depth(BACKGROUND_FRAMES)?;
     let mut intrinsics = rig.depth.intrinsics;
     if let Some(f) = frames.first() {
         intrinsics.width = f.width;
@@ -440,26 +440,137 @@ fn background(reader: &SessionReader, rig: &Rig) -> Result<Background, ReplayErr
 /// # Errors
 /// See [`ReplayError`]; nothing is left at `options.out` on failure.
 pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
-    let reader = SessionReader::open(&options.session)?;
+    if is_moseq(&options.session) {
+        return replay_input(options, &Input::Moseq(MoseqConfig::new(&options.session)));
+    }
+    replay_input(
+        options,
+        &Input::Session(Box::new(SessionReader::open(&options.session)?)),
+    )
+}
+
+/// Whether `dir` holds a MoSeq-layout recording rather than a session.
+fn is_moseq(dir: &Path) -> bool {
+    !dir.join(crate::session::META_FILE).exists()
+        && (dir.join("depth.dat").is_file() || dir.join("depth.avi").is_file())
+}
+
+/// What a replay reads.
+enum Input {
+    Session(Box<SessionReader>),
+    /// A depth-only recording in MoSeq's layout.
+    Moseq(MoseqConfig),
+}
+
+impl Input {
+    fn moseq(config: &MoseqConfig) -> Result<MoseqDepth, ReplayError> {
+        MoseqDepth::open(config.clone()).map_err(ReplayError::Moseq)
+    }
+
+    /// The rig: the session's calibration, or the default rig (for MoSeq recordings with the
+    /// intrinsics of their frame size: Kinect v2's for 512x424, the default's scaled otherwise).
+    fn rig(&self) -> Result<Rig, ReplayError> {
+        let mut rig = Rig::default_rig();
+        match self {
+            Input::Session(r) => Ok(r.meta().rig.unwrap_or(rig)),
+            Input::Moseq(c) => {
+                let (w, h) = Self::moseq(c)?.size();
+                let i = &mut rig.depth.intrinsics;
+                let f = if (w, h) == (512, 424) {
+                    365.0
+                } else {
+                    i.fx * f64::from(w) / f64::from(i.width)
+                };
+                (i.width, i.height, i.fx, i.fy) = (w, h, f, f);
+                (i.cx, i.cy) = (f64::from(w) / 2.0, f64::from(h) / 2.0);
+                Ok(rig)
+            }
+        }
+    }
+
+    fn depth_count(&self) -> Result<usize, ReplayError> {
+        match self {
+            Input::Session(r) => Ok(r.depth_count()),
+            Input::Moseq(c) => Ok(Self::moseq(c)?.frame_count()),
+        }
+    }
+
+    /// Up to `n` depth frames spread over the session (MoSeq: over its first frames).
+    fn sample_depth(&self, n: usize) -> Result<Vec<DepthFrame>, ReplayError> {
+        let count = self.depth_count()?;
+        let picks = n.min(count);
+        match self {
+            Input::Session(r) => Ok((0..picks)
+                .filter_map(|k| r.depth_frame(k * count / picks).ok())
+                .collect()),
+            Input::Moseq(c) => {
+                // One frame in ten of the first ones: a pass over the whole file would cost a
+                // full decode of a long video.
+                let mut source = Self::moseq(c)?;
+                source.start(&Clock::replay(0)).map_err(ReplayError::Moseq)?;
+                let mut frames = Vec::new();
+                let mut k = 0usize;
+                while frames.len() < picks && k < count && !source.finished() {
+                    if let Some(f) = source.next_frame(Duration::from_secs(5)).map_err(ReplayError::Moseq)? {
+                        if k % 10 == 0 {
+                            frames.push(f);
+                        }
+                        k += 1;
+                    }
+                }
+                source.stop().map_err(ReplayError::Moseq)?;
+                Ok(frames)
+            }
+        }
+    }
+
+    /// The depth frame with sequence number `seq`.
+    fn depth_frame(&self, seq: u64) -> Option<DepthFrame> {
+        match self {
+            Input::Session(r) => {
+                let index = r.seqs(CameraRole::Depth).iter().position(|&s| s == seq)?;
+                r.depth_frame(index).ok()
+            }
+            Input::Moseq(c) => {
+                let mut source = Self::moseq(c).ok()?;
+                source.start(&Clock::replay(0)).ok()?;
+                while !source.finished() {
+                    if let Some(f) = source.next_frame(Duration::from_secs(5)).ok()? {
+                        if f.stamp.seq >= seq {
+                            let _ = source.stop();
+                            return (f.stamp.seq == seq).then_some(f);
+                        }
+                    }
+                }
+                None
+            }
+        }
+    }
+}
+
+fn replay_input(options: &ReplayOptions, input: &Input) -> Result<ReplaySummary, ReplayError> {
     let models = match &options.models {
         Some(dir) => dir.clone(),
         None => default_models_dir()?,
     };
     let estimator = load_body(&models)?;
-    let rig = reader.meta().rig.unwrap_or_else(Rig::default_rig);
-    let background = background(&reader, &rig)?;
+    let rig = input.rig()?;
+    let background = background(input, &rig)?;
     let segmenter = SegmenterConfig::default()
         .build(background)
         .map_err(ReplayError::Background)?
         .with_world(rig.depth.world_from_camera);
-    let truth = reader.truth()?;
+    let truth = match input {
+        Input::Session(reader) => reader.truth()?,
+        Input::Moseq(_) => None,
+    };
     let staging = Staging::new(&options.out, options.force)?;
     let truth_joints: HashMap<u64, _> = truth
         .as_ref()
         .map(|t| t.joints.iter().map(|(seq, _, j)| (*seq, *j)).collect())
         .unwrap_or_default();
     let writer =
-        PoseWriter::create(staging.path(), truth_joints, reader.depth_count() as u64 / 2).map_err(|source| {
+        PoseWriter::create(staging.path(), truth_joints, input.depth_count()? as u64 / 2).map_err(|source| {
             ReplayError::Write {
                 path: staging.path().join(crate::sink::poses::POSES_FILE),
                 source,
@@ -480,21 +591,30 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
     let acct = Arc::new(Accounting::default());
     let end_to_end = Arc::new(Histogram::default());
     let sync_config = SyncConfig {
-        color: reader.meta().camera(CameraRole::Color).is_some(),
+        color: matches!(&input, Input::Session(r) if r.meta().camera(CameraRole::Color).is_some()),
         ..SyncConfig::default()
     };
 
     let mut runner = Runner::new();
     let start = Instant::now();
-    let source = SessionPlayer::new(&reader, options.realtime);
     let clock = Clock::replay(0);
     let (acct_src, shutdown) = (Arc::clone(&acct), runner.shutdown());
-    let threads = |e| ReplayError::Threads(e);
-    runner
-        .spawn("replay", move || {
-            run_source(source, &clock, |c| c, &cap_tx, &acct_src, &shutdown)
-        })
-        .map_err(threads)?;
+    let threads = ReplayError::Threads;
+    match input {
+        Input::Session(reader) => {
+            let source = SessionPlayer::new(reader, options.realtime);
+            runner.spawn("replay", move || {
+                run_source(source, &clock, |c| c, &cap_tx, &acct_src, &shutdown)
+            })
+        }
+        Input::Moseq(config) => {
+            let source = Input::moseq(config)?;
+            runner.spawn("replay", move || {
+                run_source(source, &clock, Captured::Depth, &cap_tx, &acct_src, &shutdown)
+            })
+        }
+    }
+    .map_err(threads)?;
     let acct_sync = Arc::clone(&acct);
     runner
         .spawn("sync", move || run_sync(sync_config, &cap_rx, &pair_tx, &acct_sync))
@@ -554,7 +674,7 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
     };
     if let Some(pose) = &tally.snapshot {
         let path = staging.path().join(PICTURE_FILE);
-        picture(&reader, &rig, pose)
+        picture(input, &rig, pose)
             .and_then(|img| img.write_png(&path).ok())
             .ok_or_else(|| ReplayError::Write {
                 path: path.clone(),

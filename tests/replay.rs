@@ -224,3 +224,33 @@ fn replay_json_prints_the_summary() {
     assert!(v["mean_error_mm"].as_f64().is_some());
     assert_eq!(v["per_joint_error_mm"].as_object().unwrap().len(), 12);
 }
+
+#[test]
+fn a_moseq_layout_recording_replays_depth_only() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("moseq");
+    std::fs::create_dir(&dir).unwrap();
+    let reader = SessionReader::open(fixture()).unwrap();
+    let mut dat = Vec::new();
+    let mut ts = String::new();
+    let mut size = (0, 0);
+    for f in reader.depth_frames() {
+        let f = f.unwrap();
+        size = (f.width, f.height);
+        dat.extend(f.data.iter().flat_map(|v| v.to_le_bytes()));
+        ts.push_str(&format!("{}\n", f.stamp.device_ns as f64 / 1e6));
+    }
+    std::fs::write(dir.join("depth.dat"), dat).unwrap();
+    std::fs::write(dir.join("depth_ts.txt"), ts).unwrap();
+    std::fs::write(
+        dir.join("metadata.json"),
+        format!("{{\"DepthResolution\": [{}, {}]}}", size.0, size.1),
+    )
+    .unwrap();
+    let s = replay(&options(&dir, &tmp.path().join("o"), 2)).unwrap();
+    assert_eq!(s.pairs as usize, reader.depth_count());
+    assert!(!s.cameras.contains_key("color"));
+    assert_eq!(s.cameras["depth"].unpaired, s.pairs);
+    assert!(s.pairing.is_none() && s.mean_error_mm.is_none());
+    assert_accounted(&s);
+}
