@@ -115,6 +115,8 @@ pub struct Runner {
     threads: Vec<(String, JoinHandle<Result<(), StageError>>)>,
     stages: Vec<(String, Arc<StageStats>)>,
     shutdown: Shutdown,
+    /// Set when any thread fails: stages and sinks stop at their next item.
+    failed: Shutdown,
 }
 
 impl Runner {
@@ -137,10 +139,11 @@ impl Runner {
         name: &str,
         body: impl FnOnce() -> Result<(), StageError> + Send + 'static,
     ) -> std::io::Result<()> {
-        let shutdown = self.shutdown.clone();
+        let (shutdown, failed) = (self.shutdown.clone(), self.failed.clone());
         let handle = std::thread::Builder::new().name(name.to_owned()).spawn(move || {
             let result = body();
             if result.is_err() {
+                failed.request();
                 shutdown.request();
             }
             result
@@ -170,9 +173,14 @@ impl Runner {
                 name.to_owned()
             };
             let (rx, tx, stats) = (input.clone(), output.clone(), Arc::clone(&stats));
+            let failed = self.failed.clone();
             self.spawn(&thread, move || {
                 let mut out = Vec::new();
                 for tracked in rx.iter() {
+                    if failed.requested() {
+                        // Another component failed and says so: stop quietly.
+                        return Ok(());
+                    }
                     stats.items_in.fetch_add(1, Ordering::Relaxed);
                     let start = Instant::now();
                     let (index, entered) = (tracked.index, tracked.entered);
@@ -207,6 +215,7 @@ impl Runner {
     ) -> std::io::Result<Arc<StageStats>> {
         let stats = Arc::new(StageStats::default());
         let st = Arc::clone(&stats);
+        let failed = self.failed.clone();
         self.spawn(name, move || {
             let mut held: BTreeMap<u64, Tracked<K::In>> = BTreeMap::new();
             let mut next = 0u64;
@@ -219,6 +228,9 @@ impl Runner {
                 Ok(())
             };
             for t in input.iter() {
+                if failed.requested() {
+                    return Ok(());
+                }
                 st.items_in.fetch_add(1, Ordering::Relaxed);
                 held.insert(t.index, t);
                 loop {
@@ -266,6 +278,7 @@ impl Runner {
                 threads: Vec::new(),
                 stages: stages.to_vec(),
                 shutdown: Shutdown::default(),
+                failed: Shutdown::default(),
             }
             .reports()
         };
@@ -290,5 +303,86 @@ impl Runner {
             Some(e) => Err(e),
             None => Ok(reports_of(&self.stages)),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::{EdgeConfig, edge};
+
+    /// Doubles its input; fails on `fail_on`.
+    struct Double {
+        fail_on: Option<u32>,
+    }
+
+    impl Stage for Double {
+        type In = u32;
+        type Out = u32;
+        fn process(&mut self, input: u32, out: &mut Vec<u32>) -> Result<(), StageError> {
+            if Some(input) == self.fail_on {
+                return Err(format!("cannot double {input}").into());
+            }
+            out.push(input * 2);
+            Ok(())
+        }
+    }
+
+    struct Collect(Arc<std::sync::Mutex<Vec<u32>>>);
+
+    impl Sink for Collect {
+        type In = u32;
+        fn write(&mut self, item: u32) -> Result<(), StageError> {
+            self.0.lock().map_err(|_| "poisoned")?.push(item);
+            Ok(())
+        }
+        fn flush(&mut self) -> Result<(), StageError> {
+            Ok(())
+        }
+    }
+
+    fn run(n: u32, workers: usize, fail_on: Option<u32>) -> (Result<Vec<StageReport>, PipelineError>, Vec<u32>) {
+        let (src_tx, src_rx, _) = edge(EdgeConfig::block(4));
+        let (out_tx, out_rx, _) = edge(EdgeConfig::block(4));
+        let got = Arc::new(std::sync::Mutex::new(Vec::new()));
+        let mut runner = Runner::new();
+        runner
+            .spawn("source", move || {
+                for i in 0..n {
+                    if src_tx.send(Tracked::new(u64::from(i), i)) == Sent::Closed {
+                        break;
+                    }
+                }
+                Ok(())
+            })
+            .unwrap();
+        let stages = (0..workers).map(|_| Double { fail_on }).collect();
+        runner.stage("double", stages, &src_rx, &out_tx).unwrap();
+        drop((src_rx, out_tx));
+        runner
+            .sink("collect", Collect(Arc::clone(&got)), out_rx, Arc::default())
+            .unwrap();
+        let result = runner.join();
+        let got = got.lock().unwrap().clone();
+        (result, got)
+    }
+
+    #[test]
+    fn several_workers_keep_the_order_and_every_item() {
+        let (result, got) = run(500, 3, None);
+        let reports = result.unwrap();
+        assert_eq!(got, (0..500).map(|i| i * 2).collect::<Vec<_>>());
+        let double = reports.iter().find(|r| r.name == "double").unwrap();
+        assert_eq!((double.items_in, double.items_out), (500, 500));
+        assert_eq!(double.latency.count, 500);
+    }
+
+    #[test]
+    fn a_failing_stage_stops_the_run_and_is_named() {
+        let (result, got) = run(10_000, 2, Some(100));
+        let e = result.unwrap_err();
+        assert!(e.name.starts_with("double"), "{}", e.name);
+        assert!(e.source.to_string().contains("cannot double 100"));
+        assert!(got.len() < 1_000, "{} items written after the failure", got.len());
     }
 }
