@@ -610,7 +610,7 @@ pub fn record(args: &crate::cli::RecordArgs) -> Result<()> {
         let _ = writeln!(
             text,
             "{name:>6}: captured {}, recorded {}, dropped {} {:?}, lost before capture {:?}",
-            c.captured, c.paired, c.dropped_total, c.dropped, c.lost_before_capture
+            c.captured, c.recorded, c.dropped_total, c.dropped, c.lost_before_capture
         );
     }
     print(&text)

@@ -97,10 +97,7 @@ impl FrameSource for ColorSource {
     }
 }
 
-/// Opens the depth camera a config names.
-///
-/// # Errors
-/// The camera cannot be found or opened.
+/// The depth camera a config names, ready to start (the camera is opened by `start`).
 pub fn open_depth(camera: &DepthCamera) -> OpenNiDepth {
     match camera {
         DepthCamera::Openni2 {
@@ -166,13 +163,36 @@ pub fn open_color(camera: &ColorCamera) -> Result<ColorSource, CaptureError> {
     }
 }
 
+/// One camera of a recording. `captured = recorded + dropped_total`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RecordedCamera {
+    pub captured: u64,
+    pub recorded: u64,
+    pub dropped: BTreeMap<String, u64>,
+    pub dropped_total: u64,
+    pub lost_before_capture: BTreeMap<String, u64>,
+}
+
+impl From<CameraSummary> for RecordedCamera {
+    /// The recorder counts each frame written as "paired" (kept).
+    fn from(c: CameraSummary) -> Self {
+        Self {
+            captured: c.captured,
+            recorded: c.paired,
+            dropped: c.dropped,
+            dropped_total: c.dropped_total,
+            lost_before_capture: c.lost_before_capture,
+        }
+    }
+}
+
 /// What a recording wrote, per camera.
 #[derive(Clone, Debug, Serialize)]
 pub struct RecordSummary {
     pub dir: PathBuf,
     pub seconds: f64,
-    /// Per camera: captured = paired (here: recorded) + dropped; `unpaired` is unused.
-    pub cameras: BTreeMap<&'static str, CameraSummary>,
+    /// Per camera: captured = recorded + dropped.
+    pub cameras: BTreeMap<&'static str, RecordedCamera>,
     pub depth_frames: u64,
     pub color_frames: u64,
     pub depth_bytes: u64,
@@ -296,9 +316,9 @@ pub fn record(
     let cpu = process_cpu_s() - cpu0;
     let writer = done_rx.recv().ok();
     let mut cams = BTreeMap::new();
-    cams.insert("depth", CameraSummary::of(&acct.depth));
+    cams.insert("depth", RecordedCamera::from(CameraSummary::of(&acct.depth)));
     if config.color.is_some() {
-        cams.insert("color", CameraSummary::of(&acct.color));
+        cams.insert("color", RecordedCamera::from(CameraSummary::of(&acct.color)));
     }
     let Some(mut writer) = writer else {
         joined?;
@@ -314,7 +334,7 @@ pub fn record(
             message: format!(
                 "{role}: captured {}, recorded {}, dropped [{}], lost before capture [{}]",
                 c.captured,
-                c.paired,
+                c.recorded,
                 dropped.join(", "),
                 lost.join(", ")
             ),
@@ -395,7 +415,7 @@ fn write_frames(
             Captured::Depth(f) => writer.write_depth(f)?,
             Captured::Color(f) => writer.write_color(f)?,
         }
-        // Recorded frames count as "paired" in the record summary (kept, not dropped).
+        // Kept frames are counted as paired (see `RecordedCamera::from`).
         acct.camera(role)
             .paired
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
