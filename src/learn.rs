@@ -225,10 +225,18 @@ pub fn load(dir: &Path) -> Result<(Dataset, Vec<Sample>), DatasetError> {
     Ok((ds, samples))
 }
 
+/// The name a model file records for a dataset: its directory's own name, not the full path,
+/// so that shared model files do not carry the trainer's file-system layout (the seed, size
+/// and noise recorded beside it identify the data).
+pub fn dataset_name(dir: &Path) -> String {
+    dir.file_name()
+        .map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned())
+}
+
 fn provenance(role: &str, ds: &Dataset) -> DataProvenance {
     DataProvenance {
         role: role.to_owned(),
-        path: ds.dir.display().to_string(),
+        path: dataset_name(&ds.dir),
         seed: ds.meta.seed,
         images: ds.meta.count,
         noise: ds.meta.noise,

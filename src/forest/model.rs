@@ -105,6 +105,7 @@ pub struct ModelInfo {
 pub struct DataProvenance {
     /// `train` (D_t) or `discriminative` (D_d).
     pub role: String,
+    /// The dataset directory's name (not its full path).
     pub path: String,
     pub seed: u64,
     pub images: u64,

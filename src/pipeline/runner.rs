@@ -19,11 +19,13 @@ use std::time::Instant;
 /// Why a stage, sink or source failed: the component's own error, kept as the cause.
 pub type StageError = Box<dyn std::error::Error + Send + Sync>;
 
-/// A processing step: a function from one input to any number of outputs.
+/// A processing step: a function from each input to exactly one output (a frame without a
+/// result is an output with a status), so that the sink can restore the order of the items
+/// behind a stage with several workers.
 pub trait Stage: Send + 'static {
     type In: Send + 'static;
     type Out: Send + 'static;
-    /// Pushes 0..n outputs for `input`.
+    /// Pushes the output for `input`. The runner refuses any other number of outputs.
     ///
     /// # Errors
     /// A failure that must stop the run (a bad frame is an output with a status, not an error).
@@ -105,10 +107,6 @@ impl Shutdown {
     }
 }
 
-/// Items a sink holds back while waiting for an earlier index (from a stage with several
-/// workers) before it writes the earliest it has anyway.
-const REORDER_WINDOW: usize = 256;
-
 /// The threads of a running pipeline.
 #[derive(Debug, Default)]
 pub struct Runner {
@@ -186,6 +184,9 @@ impl Runner {
                     let (index, entered) = (tracked.index, tracked.entered);
                     stage.process(tracked.item, &mut out)?;
                     stats.latency.record(start.elapsed());
+                    if out.len() != 1 {
+                        return Err(format!("emitted {} outputs for one input instead of one", out.len()).into());
+                    }
                     for item in out.drain(..) {
                         stats.items_out.fetch_add(1, Ordering::Relaxed);
                         if tx.send(Tracked { index, entered, item }) == Sent::Closed {
@@ -201,7 +202,8 @@ impl Runner {
         Ok(stats)
     }
 
-    /// Starts a sink thread. Items are written in index order (see [`REORDER_WINDOW`]);
+    /// Starts a sink thread. Items are written in index order (indices start at 0 and have no
+    /// gaps: every stage emits one output per input; items from workers that ran ahead wait);
     /// `end_to_end` gets each item's time from entering the pipeline to written.
     ///
     /// # Errors
@@ -233,21 +235,13 @@ impl Runner {
                 }
                 st.items_in.fetch_add(1, Ordering::Relaxed);
                 held.insert(t.index, t);
-                loop {
-                    let full = held.len() > REORDER_WINDOW;
-                    let Some(entry) = held.first_entry() else {
-                        break;
-                    };
-                    if *entry.key() != next && !full {
-                        break;
-                    }
-                    let t = entry.remove();
-                    next = t.index + 1;
+                while let Some(t) = held.remove(&next) {
+                    next += 1;
                     write(t, &mut sink)?;
                 }
             }
-            while let Some((_, t)) = held.pop_first() {
-                write(t, &mut sink)?;
+            if let Some(&index) = held.keys().next() {
+                return Err(format!("item {next} never arrived (item {index} did)").into());
             }
             sink.flush()
         })?;
