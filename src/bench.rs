@@ -387,14 +387,15 @@ fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Erro
     std::fs::create_dir_all(&copy)?;
     let depth: Vec<_> = reader.depth_frames().collect::<Result<_, _>>()?;
     let color: Vec<_> = reader.color_frames().into_iter().flatten().collect::<Result<_, _>>()?;
-    let cpu0 = thread_cpu_s();
+    let cpu0 = crate::capture::clock::thread_cpu_s();
     let mut writer = SessionWriter::create(&copy, reader.meta())?;
     for (d, c) in depth.iter().zip(color.iter()) {
         writer.write_depth(d)?;
         writer.write_color(c)?;
     }
     writer.finish()?;
-    let record_cores = (thread_cpu_s() - cpu0) / (depth.len().min(color.len()) as f64 / spec.fps);
+    let record_cores =
+        (crate::capture::clock::thread_cpu_s() - cpu0) / (depth.len().min(color.len()) as f64 / spec.fps);
     Ok(PipelineBench {
         session_seconds: seconds,
         replay_pairs_per_s: fast.throughput_pairs_per_s,
@@ -402,12 +403,6 @@ fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Erro
         paced_latency_p99_ms: paced.end_to_end_latency.p99_ms,
         record_cores,
     })
-}
-
-/// CPU seconds the calling thread has used.
-fn thread_cpu_s() -> f64 {
-    let t = rustix::time::clock_gettime(rustix::time::ClockId::ThreadCPUTime);
-    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
 }
 
 /// Removes a scratch directory when dropped.

@@ -14,7 +14,7 @@
 use crate::capture::aravis::{AravisColor, AravisConfig, Trigger};
 use crate::capture::openni::{OpenNiConfig, OpenNiDepth};
 use crate::capture::v4l2::{V4l2Color, V4l2Config};
-use crate::capture::{CaptureError, Captured, Clock, FrameSource};
+use crate::capture::{CaptureError, Captured, Clock, FrameSource, SeqGaps};
 use crate::config::{ColorCamera, Config, DepthCamera, TriggerMode};
 use crate::frame::ColorFrame;
 use crate::pipeline::{PipelineError, Runner, Shutdown, StageError, edge};
@@ -221,11 +221,6 @@ fn now_utc() -> String {
     format!("{y:04}-{mo:02}-{d:02}T{h:02}:{m:02}:{s:02}Z")
 }
 
-fn process_cpu_s() -> f64 {
-    let t = rustix::time::clock_gettime(rustix::time::ClockId::ProcessCPUTime);
-    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
-}
-
 /// Records the cameras of `config` into `out` until `seconds` have passed (if given) or
 /// `stop` is requested (a signal), whichever comes first.
 ///
@@ -305,7 +300,7 @@ pub fn record(
         .map_err(threads)?;
 
     let start = Instant::now();
-    let cpu0 = process_cpu_s();
+    let cpu0 = crate::capture::clock::process_cpu_s();
     let limit = seconds.map(Duration::from_secs_f64);
     while !stop.requested() && !shutdown.requested() && limit.is_none_or(|l| start.elapsed() < l) {
         std::thread::sleep(Duration::from_millis(20));
@@ -313,7 +308,7 @@ pub fn record(
     shutdown.request();
     let joined = runner.join();
     let elapsed = start.elapsed().as_secs_f64();
-    let cpu = process_cpu_s() - cpu0;
+    let cpu = crate::capture::clock::process_cpu_s() - cpu0;
     let writer = done_rx.recv().ok();
     let mut cams = BTreeMap::new();
     cams.insert("depth", RecordedCamera::from(CameraSummary::of(&acct.depth)));
@@ -392,25 +387,23 @@ fn write_frames(
     rx: &crossbeam_channel::Receiver<Captured>,
     acct: &Accounting,
 ) -> Result<(), StageError> {
-    let mut last: [Option<u64>; 2] = [None, None];
+    let mut gaps = [SeqGaps::default(); 2];
     for captured in rx.iter() {
         let (role, stamp) = match &captured {
             Captured::Depth(f) => (CameraRole::Depth, f.stamp),
             Captured::Color(f) => (CameraRole::Color, f.stamp),
         };
         let slot = usize::from(role == CameraRole::Color);
-        if let Some(prev) = last[slot] {
-            if stamp.seq > prev + 1 {
-                writer.log_event(&SessionEvent::FramesDropped {
-                    host_ns: stamp.host_ns,
-                    role,
-                    seq_from: prev + 1,
-                    count: stamp.seq - prev - 1,
-                    reason: "not delivered (camera gap or full capture queue)".to_owned(),
-                })?;
-            }
+        let missing = gaps[slot].observe(stamp.seq);
+        if missing > 0 {
+            writer.log_event(&SessionEvent::FramesDropped {
+                host_ns: stamp.host_ns,
+                role,
+                seq_from: stamp.seq - missing,
+                count: missing,
+                reason: "not delivered (camera gap or full capture queue)".to_owned(),
+            })?;
         }
-        last[slot] = Some(stamp.seq);
         match &captured {
             Captured::Depth(f) => writer.write_depth(f)?,
             Captured::Color(f) => writer.write_color(f)?,

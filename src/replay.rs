@@ -13,7 +13,7 @@
 
 use crate::capture::moseq::{MoseqConfig, MoseqDepth};
 use crate::capture::session::SessionPlayer;
-use crate::capture::{Captured, Clock, FrameSource};
+use crate::capture::{Captured, Clock, FrameSource, SeqGaps};
 use crate::forest::infer::{BodyEstimator, VoteSettings};
 use crate::forest::model::{self, Model, ModelError, ModelKind};
 use crate::frame::DepthFrame;
@@ -199,7 +199,7 @@ pub fn run_source<S: FrameSource>(
 ) -> Result<(), StageError> {
     let own_role = source.meta().role;
     source.start(clock)?;
-    let mut last_seq: [Option<u64>; 2] = [None, None];
+    let mut gaps = [SeqGaps::default(); 2];
     while !shutdown.requested() && !source.finished() {
         let Some(frame) = source.next_frame(Duration::from_millis(100))? else {
             continue;
@@ -210,10 +210,7 @@ pub fn run_source<S: FrameSource>(
         counters.captured.fetch_add(1, Ordering::Relaxed);
         let seq = crate::capture::Stamped::stamp(&frame).seq;
         let slot = usize::from(role == CameraRole::Color);
-        if let Some(last) = last_seq[slot] {
-            bump(&counters.lost, "camera_gap", seq.saturating_sub(last).saturating_sub(1));
-        }
-        last_seq[slot] = Some(last_seq[slot].map_or(seq, |l| l.max(seq)));
+        bump(&counters.lost, "camera_gap", gaps[slot].observe(seq));
         match tx.send(frame) {
             Sent::Delivered => {}
             Sent::DroppedFull => bump(&counters.dropped, "queue_full", 1),
@@ -410,10 +407,10 @@ const BACKGROUND_FRAMES: usize = 31;
 /// median of frames spread over the session (a mouse that moves drops out of the median, as
 /// in MoSeq's extraction).
 fn background(input: &Input, rig: &Rig) -> Result<Background, ReplayError> {
-    if input.depth_count()? == 0 {
+    if input.depth_count() == 0 {
         return Err(ReplayError::Empty(match input {
             Input::Session(r) => r.dir().to_path_buf(),
-            Input::Moseq(c) => c.dir.clone(),
+            Input::Moseq { config, .. } => config.dir.clone(),
         }));
     }
     if let Input::Session(reader) = input {
@@ -441,7 +438,10 @@ fn background(input: &Input, rig: &Rig) -> Result<Background, ReplayError> {
 /// See [`ReplayError`]; nothing is left at `options.out` on failure.
 pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
     if is_moseq(&options.session) {
-        return replay_input(options, &Input::Moseq(MoseqConfig::new(&options.session)));
+        let config = MoseqConfig::new(&options.session);
+        let recording = Input::moseq(&config)?;
+        let (size, count) = (recording.size(), recording.frame_count());
+        return replay_input(options, &Input::Moseq { config, size, count });
     }
     replay_input(
         options,
@@ -458,8 +458,12 @@ fn is_moseq(dir: &Path) -> bool {
 /// What a replay reads.
 enum Input {
     Session(Box<SessionReader>),
-    /// A depth-only recording in MoSeq's layout.
-    Moseq(MoseqConfig),
+    /// A depth-only recording in MoSeq's layout, its frame size and number of frames.
+    Moseq {
+        config: MoseqConfig,
+        size: (u32, u32),
+        count: usize,
+    },
 }
 
 impl Input {
@@ -469,12 +473,11 @@ impl Input {
 
     /// The rig: the session's calibration, or the default rig (for MoSeq recordings with the
     /// intrinsics of their frame size: Kinect v2's for 512x424, the default's scaled otherwise).
-    fn rig(&self) -> Result<Rig, ReplayError> {
+    fn rig(&self) -> Rig {
         let mut rig = Rig::default_rig();
         match self {
-            Input::Session(r) => Ok(r.meta().rig.unwrap_or(rig)),
-            Input::Moseq(c) => {
-                let (w, h) = Self::moseq(c)?.size();
+            Input::Session(r) => r.meta().rig.unwrap_or(rig),
+            &Input::Moseq { size: (w, h), .. } => {
                 let i = &mut rig.depth.intrinsics;
                 let f = if (w, h) == (512, 424) {
                     365.0
@@ -483,27 +486,27 @@ impl Input {
                 };
                 (i.width, i.height, i.fx, i.fy) = (w, h, f, f);
                 (i.cx, i.cy) = (f64::from(w) / 2.0, f64::from(h) / 2.0);
-                Ok(rig)
+                rig
             }
         }
     }
 
-    fn depth_count(&self) -> Result<usize, ReplayError> {
+    fn depth_count(&self) -> usize {
         match self {
-            Input::Session(r) => Ok(r.depth_count()),
-            Input::Moseq(c) => Ok(Self::moseq(c)?.frame_count()),
+            Input::Session(r) => r.depth_count(),
+            Input::Moseq { count, .. } => *count,
         }
     }
 
     /// Up to `n` depth frames spread over the session (MoSeq: over its first frames).
     fn sample_depth(&self, n: usize) -> Result<Vec<DepthFrame>, ReplayError> {
-        let count = self.depth_count()?;
+        let count = self.depth_count();
         let picks = n.min(count);
         match self {
             Input::Session(r) => Ok((0..picks)
                 .filter_map(|k| r.depth_frame(k * count / picks).ok())
                 .collect()),
-            Input::Moseq(c) => {
+            Input::Moseq { config: c, .. } => {
                 // One frame in ten of the first ones: a pass over the whole file would cost a
                 // full decode of a long video.
                 let mut source = Self::moseq(c)?;
@@ -531,7 +534,7 @@ impl Input {
                 let index = r.seqs(CameraRole::Depth).iter().position(|&s| s == seq)?;
                 r.depth_frame(index).ok()
             }
-            Input::Moseq(c) => {
+            Input::Moseq { config: c, .. } => {
                 let mut source = Self::moseq(c).ok()?;
                 source.start(&Clock::replay(0)).ok()?;
                 while !source.finished() {
@@ -554,7 +557,7 @@ fn replay_input(options: &ReplayOptions, input: &Input) -> Result<ReplaySummary,
         None => default_models_dir()?,
     };
     let estimator = load_body(&models)?;
-    let rig = input.rig()?;
+    let rig = input.rig();
     let background = background(input, &rig)?;
     let segmenter = SegmenterConfig::default()
         .build(background)
@@ -562,7 +565,7 @@ fn replay_input(options: &ReplayOptions, input: &Input) -> Result<ReplaySummary,
         .with_world(rig.depth.world_from_camera);
     let truth = match input {
         Input::Session(reader) => reader.truth()?,
-        Input::Moseq(_) => None,
+        Input::Moseq { .. } => None,
     };
     let staging = Staging::new(&options.out, options.force)?;
     let truth_joints: HashMap<u64, _> = truth
@@ -570,7 +573,7 @@ fn replay_input(options: &ReplayOptions, input: &Input) -> Result<ReplaySummary,
         .map(|t| t.joints.iter().map(|(seq, _, j)| (*seq, *j)).collect())
         .unwrap_or_default();
     let writer =
-        PoseWriter::create(staging.path(), truth_joints, input.depth_count()? as u64 / 2).map_err(|source| {
+        PoseWriter::create(staging.path(), truth_joints, input.depth_count() as u64 / 2).map_err(|source| {
             ReplayError::Write {
                 path: staging.path().join(crate::sink::poses::POSES_FILE),
                 source,
@@ -607,7 +610,7 @@ fn replay_input(options: &ReplayOptions, input: &Input) -> Result<ReplaySummary,
                 run_source(source, &clock, |c| c, &cap_tx, &acct_src, &shutdown)
             })
         }
-        Input::Moseq(config) => {
+        Input::Moseq { config, .. } => {
             let source = Input::moseq(config)?;
             runner.spawn("replay", move || {
                 run_source(source, &clock, Captured::Depth, &cap_tx, &acct_src, &shutdown)

@@ -38,7 +38,21 @@ impl Clock {
 
 /// `CLOCK_MONOTONIC` in nanoseconds.
 pub fn monotonic_ns() -> u64 {
-    let t = rustix::time::clock_gettime(rustix::time::ClockId::Monotonic);
+    read_ns(rustix::time::ClockId::Monotonic)
+}
+
+/// CPU time the whole process has used, in seconds.
+pub fn process_cpu_s() -> f64 {
+    read_ns(rustix::time::ClockId::ProcessCPUTime) as f64 * 1e-9
+}
+
+/// CPU time the calling thread has used, in seconds.
+pub fn thread_cpu_s() -> f64 {
+    read_ns(rustix::time::ClockId::ThreadCPUTime) as f64 * 1e-9
+}
+
+fn read_ns(id: rustix::time::ClockId) -> u64 {
+    let t = rustix::time::clock_gettime(id);
     t.tv_sec as u64 * 1_000_000_000 + t.tv_nsec as u64
 }
 

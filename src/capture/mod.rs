@@ -60,6 +60,23 @@ pub enum CaptureError {
     },
 }
 
+/// Frames missing from one camera's sequence numbers (the camera's own drops, or frames lost
+/// on the way).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SeqGaps {
+    last: Option<u64>,
+}
+
+impl SeqGaps {
+    /// How many numbers are missing between the highest one seen so far and `seq` (0 for the
+    /// first frame, and for a frame that does not move forward).
+    pub fn observe(&mut self, seq: u64) -> u64 {
+        let missing = self.last.map_or(0, |l| seq.saturating_sub(l).saturating_sub(1));
+        self.last = Some(self.last.map_or(seq, |l| l.max(seq)));
+        missing
+    }
+}
+
 /// A frame from either camera of the rig, as the synchroniser takes them.
 #[derive(Debug)]
 pub enum Captured {

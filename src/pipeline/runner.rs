@@ -251,15 +251,7 @@ impl Runner {
 
     /// Per stage and sink: items in and out, time per item.
     pub fn reports(&self) -> Vec<StageReport> {
-        self.stages
-            .iter()
-            .map(|(name, s)| StageReport {
-                name: name.clone(),
-                items_in: s.items_in.load(Ordering::Relaxed),
-                items_out: s.items_out.load(Ordering::Relaxed),
-                latency: s.latency.summary(),
-            })
-            .collect()
+        reports_of(&self.stages)
     }
 
     /// Waits for every thread in start order and returns the stage reports.
@@ -267,17 +259,9 @@ impl Runner {
     /// # Errors
     /// The first component (in start order) that failed or panicked.
     pub fn join(self) -> Result<Vec<StageReport>, PipelineError> {
-        let reports_of = |stages: &[(String, Arc<StageStats>)]| {
-            Runner {
-                threads: Vec::new(),
-                stages: stages.to_vec(),
-                shutdown: Shutdown::default(),
-                failed: Shutdown::default(),
-            }
-            .reports()
-        };
+        let Runner { threads, stages, .. } = self;
         let mut first: Option<PipelineError> = None;
-        for (name, handle) in self.threads {
+        for (name, handle) in threads {
             let result = match handle.join() {
                 Ok(r) => r,
                 Err(panic) => {
@@ -295,9 +279,21 @@ impl Runner {
         }
         match first {
             Some(e) => Err(e),
-            None => Ok(reports_of(&self.stages)),
+            None => Ok(reports_of(&stages)),
         }
     }
+}
+
+fn reports_of(stages: &[(String, Arc<StageStats>)]) -> Vec<StageReport> {
+    stages
+        .iter()
+        .map(|(name, s)| StageReport {
+            name: name.clone(),
+            items_in: s.items_in.load(Ordering::Relaxed),
+            items_out: s.items_out.load(Ordering::Relaxed),
+            latency: s.latency.summary(),
+        })
+        .collect()
 }
 
 #[cfg(test)]

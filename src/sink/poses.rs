@@ -68,6 +68,18 @@ impl PoseTally {
     }
 }
 
+/// A CSV cell that is empty for `None`.
+struct Blank(Option<u64>);
+
+impl std::fmt::Display for Blank {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.0 {
+            Some(v) => write!(f, "{v}"),
+            None => Ok(()),
+        }
+    }
+}
+
 /// Writes `poses.csv` and keeps the tally.
 #[derive(Debug)]
 pub struct PoseWriter {
@@ -110,16 +122,15 @@ impl Sink for PoseWriter {
         let mut tally = self.tally.lock().unwrap_or_else(PoisonError::into_inner);
         let line = &mut self.line;
         line.clear();
-        let opt = |v: Option<u64>| v.map(|v| v.to_string()).unwrap_or_default();
         let _ = write!(
             line,
             "{},{},{},{},{},{},{},{}",
             tally.rows,
             r.depth.seq,
-            opt(r.color.map(|c| c.seq)),
+            Blank(r.color.map(|c| c.seq)),
             r.depth.host_ns,
             r.depth.device_ns,
-            opt(r.color.map(|c| c.device_ns)),
+            Blank(r.color.map(|c| c.device_ns)),
             r.skew_ns,
             r.status.name()
         );
