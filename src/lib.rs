@@ -16,6 +16,7 @@ pub mod image;
 pub mod kinematics;
 pub mod learn;
 pub mod output;
+pub mod paws;
 pub mod pipeline;
 pub mod pose;
 pub mod progress;
