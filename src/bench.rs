@@ -377,6 +377,7 @@ fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Erro
         models: None,
         realtime,
         workers: 0,
+        overlays: None,
         force: true,
     };
     let fast = replay(&options("fast", false))?;

@@ -93,6 +93,10 @@ pub struct ReplayArgs {
     /// Body-forest worker threads (0: one per core).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=64))]
     pub workers: u32,
+    /// Draw every N-th frame (depth image with the skeleton, bottom view with the paws, side
+    /// view) into DIR/overlays/.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub overlays: Option<u64>,
     /// Print the summary as one JSON object.
     #[arg(long)]
     pub json: bool,

@@ -541,6 +541,7 @@ pub fn replay(args: &crate::cli::ReplayArgs) -> Result<()> {
         models: args.models.clone(),
         realtime: args.realtime,
         workers: args.workers as usize,
+        overlays: args.overlays,
         force: args.force,
     };
     let summary = replay(&options).with_context(|| format!("replaying {:?}", args.session))?;
@@ -578,8 +579,18 @@ pub fn replay(args: &crate::cli::ReplayArgs) -> Result<()> {
     if let Some(p) = &summary.pairing {
         let _ = writeln!(text, "pairing vs truth: {} of {} pairs match", p.matched, p.truth_pairs);
     }
+    if summary.paw_model.is_none() && summary.cameras.contains_key("color") {
+        let _ = writeln!(
+            text,
+            "no paw cascade ({}) among the models: paws and limbs are in their default configuration",
+            crate::replay::PAWS_MODEL
+        );
+    }
     if let Some(mean) = summary.mean_error_mm {
         let _ = writeln!(text, "mean joint error vs truth: {mean:.2} mm");
+        for (group, e) in &summary.group_error_mm {
+            let _ = writeln!(text, "{group:>14}: {e:.2} mm");
+        }
     }
     print(&text)
 }

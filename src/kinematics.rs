@@ -54,6 +54,41 @@ pub fn any_orthogonal(v: &Vector3<f64>) -> Vector3<f64> {
     u.cross(&helper).normalize()
 }
 
+/// Fore limb from the shoulder to a paw: the wrist sits behind and above the paw at the paw's
+/// length, and the elbow bends backwards (two-bone IK with the upper arm and forearm).
+///
+/// `forward` is the body's horizontal forward direction and `up` the world's up. Returns
+/// `(elbow, wrist)`.
+pub fn fore_limb(
+    shoulder: &Point3<f64>,
+    paw: &Point3<f64>,
+    [upper_arm, forearm, paw_length]: [f64; 3],
+    forward: &Vector3<f64>,
+    up: &Vector3<f64>,
+) -> (Point3<f64>, Point3<f64>) {
+    let wrist_dir = (-forward * 0.55 + up).normalize();
+    let wrist_target = paw + wrist_dir * paw_length;
+    two_bone(shoulder, &wrist_target, upper_arm, forearm, &(-forward + up * 0.3))
+}
+
+/// Where a paw rests when the limb stands in its neutral stance: on the floor (its joint
+/// `sole_mm` up) under its root (shoulder or hip), a little ahead for fore paws and behind
+/// for hind paws, and a little outward. `forward` is horizontal, `scale` the mouse's size
+/// factor, `side_sign` +1 for left and -1 for right.
+pub fn stance_paw(
+    root: &Point3<f64>,
+    forward: &Vector3<f64>,
+    side_sign: f64,
+    fore: bool,
+    scale: f64,
+    sole_mm: f64,
+) -> Point3<f64> {
+    let left = Vector3::z().cross(forward);
+    Point3::new(root.x, root.y, sole_mm * scale)
+        + forward * if fore { scale } else { -scale }
+        + left * side_sign * 2.0 * scale
+}
+
 /// Hind limb from the hip to a paw on or near the floor, with the angle at the ankle between
 /// knee and paw fixed at `ankle_angle` (the paper sets it to 90 degrees).
 ///

@@ -3,7 +3,8 @@
 //!
 //! ```text
 //!  replay (session reader, both cameras in host order) ─Captured─▶ sync ─FramePair─▶ segment
-//!      ─Segmented─▶ body (one worker per core) ─PoseRecord─▶ poses (poses.csv, in order)
+//!      ─Segmented─▶ body (one worker per core) ─Posed─▶ paws (one worker per core)
+//!      ─Posed─▶ fuse (frames in order) ─Fused─▶ poses (poses.csv, overlays, in order)
 //! ```
 //!
 //! Every frame is accounted for: per camera, captured = paired + unpaired + dropped (by
@@ -17,8 +18,10 @@ use crate::capture::{Captured, Clock, FrameSource, SeqGaps};
 use crate::forest::infer::{BodyEstimator, VoteSettings};
 use crate::forest::model::{self, Model, ModelError, ModelKind};
 use crate::frame::DepthFrame;
+use crate::fusion::{Fuser, FusionConfig};
 use crate::geometry::Rig;
 use crate::output::{OutputError, Staging};
+use crate::paws::PawDetector;
 use crate::pipeline::{
     EdgeConfig, EdgeSender, EdgeStats, Histogram, LatencySummary, PipelineError, Runner, Sent, Shutdown, StageError,
     StageReport, Tracked, edge,
@@ -27,6 +30,8 @@ use crate::segment::{Background, SegmentError, SegmenterConfig};
 use crate::session::{CameraRole, SessionError, SessionReader, SessionSource};
 use crate::sink::poses::{PoseTally, PoseWriter};
 use crate::stages::body::{BodyStage, PIPELINE_VOTE_BUDGET};
+use crate::stages::fuse::FuseStage;
+use crate::stages::paws::PawStage;
 use crate::stages::segment::SegmentStage;
 use crate::sync::{Role, SyncConfig, SyncOutput, Synchronizer};
 use crossbeam_channel::Receiver;
@@ -41,6 +46,8 @@ use std::time::{Duration, Instant};
 pub const SUMMARY_FILE: &str = "summary.json";
 /// The body forest's file name in a models directory.
 pub const BODY_MODEL: &str = "body.forest";
+/// The paw cascade's file name in a models directory.
+pub const PAWS_MODEL: &str = "paws.xml";
 
 /// What to replay and how.
 #[derive(Clone, Debug)]
@@ -52,6 +59,8 @@ pub struct ReplayOptions {
     pub realtime: bool,
     /// Body-forest workers; 0: one per core.
     pub workers: usize,
+    /// Draw every n-th frame (by depth sequence number) into `overlays/`.
+    pub overlays: Option<u64>,
     pub force: bool,
 }
 
@@ -70,6 +79,8 @@ pub enum ReplayError {
         #[source]
         source: ModelError,
     },
+    #[error("cannot load the paw cascade")]
+    PawModel(#[source] crate::paws::PawError),
     #[error("cannot read the MoSeq recording")]
     Moseq(#[source] crate::capture::CaptureError),
     #[error("cannot model the empty cage from the session's depth frames")]
@@ -134,6 +145,20 @@ pub fn load_body(models: &Path) -> Result<BodyEstimator, ReplayError> {
         }),
         Err(source) => Err(ReplayError::Model { path, source }),
     }
+}
+
+/// Loads the paw cascade of a models directory; `None` when the directory has none, so that
+/// older model directories still work (the limbs then take their default configuration, and
+/// the summary's `paw_model` is empty).
+///
+/// # Errors
+/// The file is there but is not a cascade we can run.
+pub fn load_paws(models: &Path) -> Result<Option<PawDetector>, ReplayError> {
+    let path = models.join(PAWS_MODEL);
+    if !path.exists() {
+        return Ok(None);
+    }
+    PawDetector::load(&path).map(Some).map_err(ReplayError::PawModel)
 }
 
 /// Frames per camera, by what became of them.
@@ -345,6 +370,8 @@ pub struct ReplaySummary {
     pub session: PathBuf,
     pub software_version: &'static str,
     pub body_model: PathBuf,
+    /// The paw cascade, when the models directory has one.
+    pub paw_model: Option<PathBuf>,
     pub realtime: bool,
     pub pairs: u64,
     pub statuses: BTreeMap<&'static str, u64>,
@@ -361,43 +388,21 @@ pub struct ReplaySummary {
     pub per_joint_error_mm: BTreeMap<&'static str, f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mean_error_mm: Option<f64>,
+    /// Mean error per group of joints (`body` 1-12, `limbs` 13-20, `paws` 21-24) and of the
+    /// paws the bottom camera found (`detected_paws`).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub group_error_mm: BTreeMap<&'static str, f64>,
 }
 
 /// The picture of one frame with its skeleton.
 pub const PICTURE_FILE: &str = "frame.png";
 
-/// The depth frame of `pose` around the mouse, magnified, with the estimated skeleton drawn
-/// in the paper's colours; `None` when the frame cannot be read again.
+/// The picture of the frame pair of `pose` (see [`crate::overlay`]); `None` when its frames
+/// cannot be read again.
 fn picture(input: &Input, rig: &Rig, pose: &crate::stages::PoseRecord) -> Option<crate::image::RgbImage> {
-    let frame = input.depth_frame(pose.depth.seq)?;
-    let joints = pose
-        .pose
-        .joints
-        .map(|j| (j.source != crate::pose::JointSource::Missing).then_some(j.position_mm));
-    let projected: Vec<_> = joints
-        .iter()
-        .flatten()
-        .filter_map(|p| rig.depth.project_world(p))
-        .collect();
-    let cx = projected.iter().map(|p| p.x).sum::<f64>() / projected.len().max(1) as f64;
-    let cy = projected.iter().map(|p| p.y).sum::<f64>() / projected.len().max(1) as f64;
-    let (w, h) = (160u32, 120u32);
-    let x0 = (cx - f64::from(w) / 2.0).clamp(0.0, f64::from(frame.width.saturating_sub(w))) as u32;
-    let y0 = (cy - f64::from(h) / 2.0).clamp(0.0, f64::from(frame.height.saturating_sub(h))) as u32;
-    let zoom = 4u32;
-    let near = rig.depth.world_from_camera.translation.vector.z - 120.0;
-    let far = near + 140.0;
-    let mut img = crate::image::depth_to_rgb(&frame.data, frame.width, frame.height, near, far)
-        .crop(x0, y0, w.min(frame.width), h.min(frame.height))
-        .upscale(zoom);
-    crate::synth::preview::draw_joints(
-        &mut img,
-        &rig.depth,
-        &joints,
-        (f64::from(x0), f64::from(y0)),
-        f64::from(zoom),
-    );
-    Some(img)
+    let depth = input.depth_frame(pose.depth.seq)?;
+    let color = pose.color.and_then(|c| input.color_frame(c.seq));
+    Some(crate::overlay::draw(rig, &depth, color.as_ref(), pose))
 }
 
 /// Frames the background model is built from, spread over the session.
@@ -527,6 +532,17 @@ impl Input {
         }
     }
 
+    /// The colour frame with sequence number `seq` (sessions only).
+    fn color_frame(&self, seq: u64) -> Option<crate::frame::ColorFrame> {
+        match self {
+            Input::Session(r) => {
+                let index = r.seqs(CameraRole::Color).iter().position(|&s| s == seq)?;
+                r.color_frame(index).ok()
+            }
+            Input::Moseq { .. } => None,
+        }
+    }
+
     /// The depth frame with sequence number `seq`.
     fn depth_frame(&self, seq: u64) -> Option<DepthFrame> {
         match self {
@@ -557,6 +573,7 @@ fn replay_input(options: &ReplayOptions, input: &Input) -> Result<ReplaySummary,
         None => default_models_dir()?,
     };
     let estimator = load_body(&models)?;
+    let paws = load_paws(&models)?;
     let rig = input.rig();
     let background = background(input, &rig)?;
     let segmenter = SegmenterConfig::default()
@@ -590,6 +607,8 @@ fn replay_input(options: &ReplayOptions, input: &Input) -> Result<ReplaySummary,
     let (cap_tx, cap_rx, cap_stats) = edge::<Captured>(capture_edge);
     let (pair_tx, pair_rx, pair_stats) = edge(stage_edge);
     let (seg_tx, seg_rx, seg_stats) = edge(stage_edge);
+    let (body_tx, body_rx, body_stats) = edge(stage_edge);
+    let (paws_tx, paws_rx, paws_stats) = edge(stage_edge);
     let (pose_tx, pose_rx, pose_stats) = edge(stage_edge);
     let acct = Arc::new(Accounting::default());
     let end_to_end = Arc::new(Histogram::default());
@@ -628,9 +647,20 @@ fn replay_input(options: &ReplayOptions, input: &Input) -> Result<ReplaySummary,
     drop((pair_rx, seg_tx));
     let body = BodyStage::new(estimator, rig.depth, PIPELINE_VOTE_BUDGET);
     runner
-        .stage("body", vec![body; workers], &seg_rx, &pose_tx)
+        .stage("body", vec![body; workers], &seg_rx, &body_tx)
         .map_err(threads)?;
-    drop((seg_rx, pose_tx));
+    drop((seg_rx, body_tx));
+    let paw_model = paws.is_some().then(|| models.join(PAWS_MODEL));
+    let paw_stage = PawStage::new(paws, rig.color);
+    runner
+        .stage("paws", vec![paw_stage; workers], &body_rx, &paws_tx)
+        .map_err(threads)?;
+    drop((body_rx, paws_tx));
+    let fuse = FuseStage::new(Fuser::new(rig.color, FusionConfig::default()), rig, options.overlays);
+    runner
+        .stage_in_order("fuse", fuse, &paws_rx, &pose_tx)
+        .map_err(threads)?;
+    drop((paws_rx, pose_tx));
     runner
         .sink("poses", writer, pose_rx, Arc::clone(&end_to_end))
         .map_err(threads)?;
@@ -656,12 +686,15 @@ fn replay_input(options: &ReplayOptions, input: &Input) -> Result<ReplaySummary,
         ("capture", edge_summary(capture_edge, &cap_stats)),
         ("sync->segment", edge_summary(stage_edge, &pair_stats)),
         ("segment->body", edge_summary(stage_edge, &seg_stats)),
-        ("body->poses", edge_summary(stage_edge, &pose_stats)),
+        ("body->paws", edge_summary(stage_edge, &body_stats)),
+        ("paws->fuse", edge_summary(stage_edge, &paws_stats)),
+        ("fuse->poses", edge_summary(stage_edge, &pose_stats)),
     ]);
     let summary = ReplaySummary {
         session: options.session.clone(),
         software_version: env!("CARGO_PKG_VERSION"),
         body_model: models.join(BODY_MODEL),
+        paw_model,
         realtime: options.realtime,
         pairs: tally.rows,
         statuses: tally.statuses.clone(),
@@ -674,6 +707,7 @@ fn replay_input(options: &ReplayOptions, input: &Input) -> Result<ReplaySummary,
         pairing,
         per_joint_error_mm: tally.per_joint_error_mm(),
         mean_error_mm: tally.mean_error_mm(),
+        group_error_mm: tally.group_error_mm(),
     };
     if let Some(pose) = &tally.snapshot {
         let path = staging.path().join(PICTURE_FILE);

@@ -20,6 +20,7 @@ fn options(session: &Path, out: &Path, workers: usize) -> ReplayOptions {
         models: Some(repo_root().join("fixtures/models")),
         realtime: false,
         workers,
+        overlays: None,
         force: false,
     }
 }
@@ -62,7 +63,8 @@ fn the_fixture_session_replays_with_its_true_pairs_and_joints() {
     assert_accounted(&s);
     // The session's forced camera drop shows as a gap in each camera's sequence numbers.
     assert_eq!(s.cameras["depth"].lost_before_capture.get("camera_gap"), Some(&1));
-    assert_eq!(s.per_joint_error_mm.len(), 12);
+    assert_eq!(s.per_joint_error_mm.len(), 24);
+    assert!(s.group_error_mm.contains_key("body") && s.group_error_mm.contains_key("limbs"));
     let mean = s.mean_error_mm.unwrap();
     assert!(mean < 6.0, "mean joint error {mean} mm");
     // poses.csv: the header, then one row per pair.
@@ -125,6 +127,8 @@ fn a_depth_only_session_gives_depth_only_pairs() {
     assert_eq!(s.cameras["depth"].paired, 0);
     assert_eq!(s.cameras["depth"].unpaired, s.pairs);
     assert_eq!(s.pairing.unwrap().mismatched, 0);
+    // The single depth image mode: joints 1-12 only.
+    assert_eq!(s.per_joint_error_mm.len(), 12);
 }
 
 fn copy_dir(from: &Path, to: &Path) {
@@ -222,7 +226,7 @@ fn replay_json_prints_the_summary() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(v["mean_error_mm"].as_f64().is_some());
-    assert_eq!(v["per_joint_error_mm"].as_object().unwrap().len(), 12);
+    assert_eq!(v["per_joint_error_mm"].as_object().unwrap().len(), 24);
 }
 
 #[test]

@@ -162,6 +162,33 @@ impl Runner {
         input: &Receiver<Tracked<S::In>>,
         output: &EdgeSender<Tracked<S::Out>>,
     ) -> std::io::Result<Arc<StageStats>> {
+        self.start_stage(name, workers, input, output, false)
+    }
+
+    /// Starts a stage with one worker that sees its items in index order (items that arrive
+    /// early from a stage with several workers wait): for stages that carry state from one
+    /// frame to the next, so that their output does not depend on thread timing.
+    ///
+    /// # Errors
+    /// The thread cannot be created.
+    pub fn stage_in_order<S: Stage>(
+        &mut self,
+        name: &str,
+        stage: S,
+        input: &Receiver<Tracked<S::In>>,
+        output: &EdgeSender<Tracked<S::Out>>,
+    ) -> std::io::Result<Arc<StageStats>> {
+        self.start_stage(name, vec![stage], input, output, true)
+    }
+
+    fn start_stage<S: Stage>(
+        &mut self,
+        name: &str,
+        workers: Vec<S>,
+        input: &Receiver<Tracked<S::In>>,
+        output: &EdgeSender<Tracked<S::Out>>,
+        in_order: bool,
+    ) -> std::io::Result<Arc<StageStats>> {
         let stats = Arc::new(StageStats::default());
         let several = workers.len() > 1;
         for (k, mut stage) in workers.into_iter().enumerate() {
@@ -174,28 +201,32 @@ impl Runner {
             let failed = self.failed.clone();
             self.spawn(&thread, move || {
                 let mut out = Vec::new();
+                let mut order = Reorder::default();
                 for tracked in rx.iter() {
                     if failed.requested() {
                         // Another component failed and says so: stop quietly.
                         return Ok(());
                     }
                     stats.items_in.fetch_add(1, Ordering::Relaxed);
-                    let start = Instant::now();
-                    let (index, entered) = (tracked.index, tracked.entered);
-                    stage.process(tracked.item, &mut out)?;
-                    stats.latency.record(start.elapsed());
-                    if out.len() != 1 {
-                        return Err(format!("emitted {} outputs for one input instead of one", out.len()).into());
-                    }
-                    for item in out.drain(..) {
-                        stats.items_out.fetch_add(1, Ordering::Relaxed);
-                        if tx.send(Tracked { index, entered, item }) == Sent::Closed {
-                            // Downstream stopped (it failed and says so): stop quietly.
-                            return Ok(());
+                    let ready = if in_order { order.push(tracked) } else { vec![tracked] };
+                    for tracked in ready {
+                        let start = Instant::now();
+                        let (index, entered) = (tracked.index, tracked.entered);
+                        stage.process(tracked.item, &mut out)?;
+                        stats.latency.record(start.elapsed());
+                        if out.len() != 1 {
+                            return Err(format!("emitted {} outputs for one input instead of one", out.len()).into());
+                        }
+                        for item in out.drain(..) {
+                            stats.items_out.fetch_add(1, Ordering::Relaxed);
+                            if tx.send(Tracked { index, entered, item }) == Sent::Closed {
+                                // Downstream stopped (it failed and says so): stop quietly.
+                                return Ok(());
+                            }
                         }
                     }
                 }
-                Ok(())
+                order.finish()
             })?;
         }
         self.stages.push((name.to_owned(), Arc::clone(&stats)));
@@ -219,8 +250,7 @@ impl Runner {
         let st = Arc::clone(&stats);
         let failed = self.failed.clone();
         self.spawn(name, move || {
-            let mut held: BTreeMap<u64, Tracked<K::In>> = BTreeMap::new();
-            let mut next = 0u64;
+            let mut order = Reorder::default();
             let write = |t: Tracked<K::In>, sink: &mut K| -> Result<(), StageError> {
                 let start = Instant::now();
                 sink.write(t.item)?;
@@ -234,15 +264,11 @@ impl Runner {
                     return Ok(());
                 }
                 st.items_in.fetch_add(1, Ordering::Relaxed);
-                held.insert(t.index, t);
-                while let Some(t) = held.remove(&next) {
-                    next += 1;
+                for t in order.push(t) {
                     write(t, &mut sink)?;
                 }
             }
-            if let Some(&index) = held.keys().next() {
-                return Err(format!("item {next} never arrived (item {index} did)").into());
-            }
+            order.finish()?;
             sink.flush()
         })?;
         self.stages.push((name.to_owned(), Arc::clone(&stats)));
@@ -280,6 +306,43 @@ impl Runner {
         match first {
             Some(e) => Err(e),
             None => Ok(reports_of(&stages)),
+        }
+    }
+}
+
+/// Puts items back in index order (indices start at 0 and have no gaps).
+#[derive(Debug)]
+struct Reorder<T> {
+    held: BTreeMap<u64, Tracked<T>>,
+    next: u64,
+}
+
+impl<T> Default for Reorder<T> {
+    fn default() -> Self {
+        Self {
+            held: BTreeMap::new(),
+            next: 0,
+        }
+    }
+}
+
+impl<T> Reorder<T> {
+    /// Takes an item and returns those now due, in order.
+    fn push(&mut self, t: Tracked<T>) -> Vec<Tracked<T>> {
+        self.held.insert(t.index, t);
+        let mut due = Vec::new();
+        while let Some(t) = self.held.remove(&self.next) {
+            self.next += 1;
+            due.push(t);
+        }
+        due
+    }
+
+    /// At the end of the input: an error when an item never arrived.
+    fn finish(&self) -> Result<(), StageError> {
+        match self.held.keys().next() {
+            Some(&index) => Err(format!("item {} never arrived (item {index} did)", self.next).into()),
+            None => Ok(()),
         }
     }
 }
@@ -365,6 +428,47 @@ mod tests {
         let double = reports.iter().find(|r| r.name == "double").unwrap();
         assert_eq!((double.items_in, double.items_out), (500, 500));
         assert_eq!(double.latency.count, 500);
+    }
+
+    /// Passes its input on and remembers the order it saw it in.
+    struct Witness(Arc<std::sync::Mutex<Vec<u32>>>);
+
+    impl Stage for Witness {
+        type In = u32;
+        type Out = u32;
+        fn process(&mut self, input: u32, out: &mut Vec<u32>) -> Result<(), StageError> {
+            self.0.lock().map_err(|_| "poisoned")?.push(input);
+            out.push(input);
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn an_in_order_stage_sees_items_in_order_behind_several_workers() {
+        let (src_tx, src_rx, _) = edge(EdgeConfig::block(4));
+        let (mid_tx, mid_rx, _) = edge(EdgeConfig::block(4));
+        let (out_tx, out_rx, _) = edge(EdgeConfig::block(4));
+        let seen = Arc::new(std::sync::Mutex::new(Vec::new()));
+        let mut runner = Runner::new();
+        runner
+            .spawn("source", move || {
+                for i in 0..2_000u32 {
+                    src_tx.send(Tracked::new(u64::from(i), i));
+                }
+                Ok(())
+            })
+            .unwrap();
+        let workers = (0..3).map(|_| Double { fail_on: None }).collect();
+        runner.stage("double", workers, &src_rx, &mid_tx).unwrap();
+        runner
+            .stage_in_order("witness", Witness(Arc::clone(&seen)), &mid_rx, &out_tx)
+            .unwrap();
+        drop((src_rx, mid_tx, mid_rx, out_tx));
+        runner
+            .sink("collect", Collect(Arc::default()), out_rx, Arc::default())
+            .unwrap();
+        runner.join().unwrap();
+        assert_eq!(*seen.lock().unwrap(), (0..2_000).map(|i| i * 2).collect::<Vec<_>>());
     }
 
     #[test]

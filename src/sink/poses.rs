@@ -10,7 +10,7 @@
 use crate::pipeline::{Sink, StageError};
 use crate::pose::{JointPositions, JointSource};
 use crate::skeleton::{JOINT_COUNT, Joint};
-use crate::stages::{PoseRecord, PoseStatus};
+use crate::stages::{Fused, PoseRecord, PoseStatus};
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::fs::File;
@@ -20,6 +20,10 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 /// The name of the file.
 pub const POSES_FILE: &str = "poses.csv";
+
+/// The directory the pictures of `--overlays` go to, one PNG per pictured frame named by its
+/// depth sequence number.
+pub const OVERLAYS_DIR: &str = "overlays";
 
 /// The header line of `poses.csv`.
 pub fn header() -> String {
@@ -42,6 +46,8 @@ pub struct PoseTally {
     /// Per joint: summed error (mm) and count, over rows with truth and an estimate.
     pub error_sum_mm: [f64; JOINT_COUNT],
     pub error_count: [u64; JOINT_COUNT],
+    /// Summed error (mm) and count of the paws placed from a detection.
+    pub detected_paw_error: (f64, u64),
     /// The first pose with a mouse at or after the snapshot row (for a picture).
     pub snapshot: Option<PoseRecord>,
 }
@@ -59,6 +65,30 @@ impl PoseTally {
                 )
             })
             .collect()
+    }
+
+    /// Mean error per group of joints: `body` (1-12), `limbs` (13-20), `paws` (21-24), and
+    /// `detected_paws` (paws placed from a detection in the bottom view).
+    pub fn group_error_mm(&self) -> BTreeMap<&'static str, f64> {
+        let mean = |sum: f64, count: u64| (count > 0).then(|| sum / count as f64);
+        let group = |joints: std::ops::Range<usize>| {
+            let (sum, count) = joints.fold((0.0, 0), |(s, c), k| {
+                (s + self.error_sum_mm[k], c + self.error_count[k])
+            });
+            mean(sum, count)
+        };
+        [
+            ("body", group(0..12)),
+            ("limbs", group(12..20)),
+            ("paws", group(20..24)),
+            (
+                "detected_paws",
+                mean(self.detected_paw_error.0, self.detected_paw_error.1),
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(name, v)| v.map(|v| (name, v)))
+        .collect()
     }
 
     /// Mean of the per-joint errors, `None` without any.
@@ -84,6 +114,7 @@ impl std::fmt::Display for Blank {
 #[derive(Debug)]
 pub struct PoseWriter {
     out: BufWriter<File>,
+    dir: std::path::PathBuf,
     line: String,
     truth: HashMap<u64, JointPositions>,
     snapshot_row: u64,
@@ -102,6 +133,7 @@ impl PoseWriter {
         writeln!(out, "{}", header())?;
         Ok(Self {
             out,
+            dir: dir.to_owned(),
             line: String::new(),
             truth,
             snapshot_row,
@@ -116,9 +148,15 @@ impl PoseWriter {
 }
 
 impl Sink for PoseWriter {
-    type In = PoseRecord;
+    type In = Fused;
 
-    fn write(&mut self, r: PoseRecord) -> Result<(), StageError> {
+    fn write(&mut self, item: Fused) -> Result<(), StageError> {
+        let Fused { record: r, overlay } = item;
+        if let Some(picture) = overlay {
+            let dir = self.dir.join(OVERLAYS_DIR);
+            std::fs::create_dir_all(&dir)?;
+            picture.write_png(&dir.join(format!("{:06}.png", r.depth.seq)))?;
+        }
         let mut tally = self.tally.lock().unwrap_or_else(PoisonError::into_inner);
         let line = &mut self.line;
         line.clear();
@@ -143,8 +181,13 @@ impl Sink for PoseWriter {
             let p = j.position_mm;
             let _ = write!(line, ",{:.2},{:.2},{:.2},{:.3},{}", p.x, p.y, p.z, j.score, j.source);
             if let Some(t) = truth.and_then(|t| t.get(k)) {
-                tally.error_sum_mm[k] += (p - t).norm();
+                let e = (p - t).norm();
+                tally.error_sum_mm[k] += e;
                 tally.error_count[k] += 1;
+                if j.source == JointSource::Paw {
+                    tally.detected_paw_error.0 += e;
+                    tally.detected_paw_error.1 += 1;
+                }
             }
         }
         line.push('\n');

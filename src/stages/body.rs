@@ -1,6 +1,6 @@
 //! The body stage: the body forest on the segmented mouse, joints 1-12 in the world frame.
 
-use super::{PoseRecord, PoseStatus, Segmented};
+use super::{PoseRecord, PoseStatus, Posed, Segmented};
 use crate::forest::depth::DepthImage;
 use crate::forest::infer::{BodyEstimator, Pixel, sample_pixels};
 use crate::geometry::Camera;
@@ -43,9 +43,9 @@ impl BodyStage {
 
 impl Stage for BodyStage {
     type In = Segmented;
-    type Out = PoseRecord;
+    type Out = Posed;
 
-    fn process(&mut self, input: Segmented, out: &mut Vec<PoseRecord>) -> Result<(), StageError> {
+    fn process(&mut self, input: Segmented, out: &mut Vec<Posed>) -> Result<(), StageError> {
         let Segmented { pair, mouse } = input;
         let mut record = PoseRecord {
             depth: pair.depth.stamp,
@@ -53,6 +53,7 @@ impl Stage for BodyStage {
             skew_ns: pair.skew_ns,
             status: PoseStatus::NoMouse,
             pose: Pose::default(),
+            paws: Vec::new(),
         };
         if let Some(mouse) = mouse {
             let r = mouse.region;
@@ -82,7 +83,7 @@ impl Stage for BodyStage {
                 record.status = PoseStatus::Ok;
             }
         }
-        out.push(record);
+        out.push(Posed { pair, record });
         Ok(())
     }
 }

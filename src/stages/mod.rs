@@ -2,6 +2,8 @@
 //! `process` function the runner calls on its own thread and a unit test can call directly.
 
 pub mod body;
+pub mod fuse;
+pub mod paws;
 pub mod segment;
 
 use crate::frame::FramePair;
@@ -43,4 +45,20 @@ pub struct PoseRecord {
     pub skew_ns: i64,
     pub status: PoseStatus,
     pub pose: Pose,
+    /// The paws found in the bottom view (empty without a colour frame or a paw model).
+    pub paws: Vec<crate::paws::PawDetection>,
+}
+
+/// A frame pair and its pose so far, on its way through the stages that add to the pose.
+#[derive(Debug)]
+pub struct Posed {
+    pub pair: FramePair,
+    pub record: PoseRecord,
+}
+
+/// The finished pose of a frame pair, and its picture when one was asked for.
+#[derive(Debug)]
+pub struct Fused {
+    pub record: PoseRecord,
+    pub overlay: Option<crate::image::RgbImage>,
 }

@@ -5,7 +5,7 @@
 //! under the rump) from a handful of continuous parameters, so behaviours can blend smoothly
 //! in a session, and then placed in the cage by a [`Placement`].
 
-use crate::kinematics::{hind_limb, two_bone};
+use crate::kinematics::{fore_limb, hind_limb, stance_paw};
 use crate::pose::JointPositions;
 use crate::skeleton::{BoneLengths, Joint, LIMBS, Side};
 use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
@@ -318,9 +318,9 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
         };
         let left = Vector3::z().cross(&fwd);
         let lengths = limb.lengths_in(&b);
-        let mut paw = Point3::new(root.x, root.y, PAW_SOLE_MM * s)
-            + fwd * (dx * s + if limb.fore { s } else { -s })
-            + left * sign * (dy + 2.0) * s
+        let mut paw = stance_paw(&root, &fwd, sign, limb.fore, s, PAW_SOLE_MM)
+            + fwd * dx * s
+            + left * sign * dy * s
             + Vector3::z() * dz.max(0.0) * s;
         if limb.fore && (params.fore_raise > 0.0 || params.fore_to_face > 0.0) {
             let chest = root + withers_frame * Vector3::new(7.0 * s, sign * 2.5 * s, -9.0 * s);
@@ -330,17 +330,7 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
             paw.z = paw.z.max(PAW_SOLE_MM * s);
         }
         let (upper, lower) = if limb.fore {
-            // The wrist sits behind and above the paw; the elbow bends backwards.
-            let wrist_dir = (-fwd * 0.55 + Vector3::z()).normalize();
-            let wrist_target = paw + wrist_dir * lengths[2];
-            let (elbow, wrist) = two_bone(
-                &root,
-                &wrist_target,
-                lengths[0],
-                lengths[1],
-                &(-fwd + Vector3::z() * 0.3),
-            );
-            (elbow, wrist)
+            fore_limb(&root, &paw, lengths, &fwd, &Vector3::z())
         } else {
             hind_limb(&root, &paw, lengths, params.ankle_angle, &fwd, &Vector3::z())
         };

@@ -41,18 +41,34 @@ pub fn draw_joints(
     origin: (f64, f64),
     zoom: f64,
 ) {
-    let to_img = |p: &Option<nalgebra::Point3<f64>>| {
-        p.as_ref()
-            .and_then(|p| camera.project_world(p))
-            .map(|q| ((q.x - origin.0 + 0.5) * zoom, (q.y - origin.1 + 0.5) * zoom))
-    };
+    draw_bones(
+        img,
+        joints,
+        |p| {
+            camera
+                .project_world(p)
+                .map(|q| ((q.x - origin.0 + 0.5) * zoom, (q.y - origin.1 + 0.5) * zoom))
+        },
+        zoom.max(1.0),
+    );
+}
+
+/// Draws the bones whose ends are both known, through any projection `to_img` from the world
+/// to the picture's pixels (`None`: not drawable), lines `thickness` wide, joints as discs.
+pub fn draw_bones(
+    img: &mut RgbImage,
+    joints: &[Option<nalgebra::Point3<f64>>; crate::skeleton::JOINT_COUNT],
+    to_img: impl Fn(&nalgebra::Point3<f64>) -> Option<(f64, f64)>,
+    thickness: f64,
+) {
+    let at = |p: &Option<nalgebra::Point3<f64>>| p.as_ref().and_then(&to_img);
     for (a, b, kind) in BONES {
-        if let (Some(pa), Some(pb)) = (to_img(&joints[a.index()]), to_img(&joints[b.index()])) {
-            img.line(pa, pb, bone_colour(kind), zoom.max(1.0));
+        if let (Some(pa), Some(pb)) = (at(&joints[a.index()]), at(&joints[b.index()])) {
+            img.line(pa, pb, bone_colour(kind), thickness);
         }
     }
-    for p in joints.iter().filter_map(to_img) {
-        img.disc(p, zoom * 0.9, [255, 255, 255]);
+    for p in joints.iter().filter_map(at) {
+        img.disc(p, thickness * 0.9, [255, 255, 255]);
     }
 }
 

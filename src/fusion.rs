@@ -1,0 +1,495 @@
+//! Step 3 of the paper: the body's joints from the top view, the paws found in the bottom view,
+//! and the limbs between them (DESIGN.md sec. 3-4).
+//!
+//! Each detected paw is the ray from the bottom camera through the detection's centre, met
+//! with the plane a resting paw's joint lies in (its sole's radius above the glass). Paws are
+//! given to the four legs by where they lie along and across the body's axis, each leg
+//! preferring the place its paw had in the last frames, so the assignment holds from frame to
+//! frame. Fore limbs follow by two-bone inverse kinematics from the shoulder, hind limbs with
+//! the knee-ankle-paw angle at 90 degrees; a paw no camera sees takes its neutral stance.
+//!
+//! Everything here is pure: [`Fuser::fuse`] is called once per frame, in frame order.
+
+use crate::geometry::Camera;
+use crate::kinematics::{fore_limb, hind_limb, stance_paw};
+use crate::paws::PawDetection;
+use crate::pose::{JointEstimate, JointSource, Pose};
+use crate::skeleton::{BoneLengths, Joint, LIMBS, LimbChain};
+use crate::synth::mouse::PAW_SOLE_MM;
+use nalgebra::{Point2, Point3, Vector3};
+
+/// The knee-ankle-paw angle of the hind limbs (the paper's Fig. "limb").
+pub const ANKLE_ANGLE_DEG: f64 = 90.0;
+
+/// Tuning of the fusion.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FusionConfig {
+    /// A paw further than this (mm, for a mouse of scale 1) from where its leg can put it is
+    /// not that leg's.
+    pub gate_mm: f64,
+    /// For how many depth frames a leg remembers where its paw was.
+    pub memory_frames: u64,
+    /// How many detections (the surest) are considered per frame.
+    pub max_detections: usize,
+    /// Score of a joint in its default configuration.
+    pub default_score: f64,
+}
+
+impl Default for FusionConfig {
+    fn default() -> Self {
+        Self {
+            gate_mm: 24.0,
+            memory_frames: 6,
+            max_detections: 8,
+            default_score: 0.05,
+        }
+    }
+}
+
+/// The body's frame and size, estimated from joints 1-12.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BodyAxes {
+    /// Horizontal forward direction at the withers (fore limbs) and at the rump (hind limbs).
+    pub fore_forward: Vector3<f64>,
+    pub hind_forward: Vector3<f64>,
+    /// The fore limbs' roots, left then right.
+    pub shoulders: [Point3<f64>; 2],
+    /// The mouse's size factor (its spine length over the default's).
+    pub scale: f64,
+    /// The bone lengths at that scale.
+    pub bones: BoneLengths,
+}
+
+impl BodyAxes {
+    /// The axes of a pose whose joints 1-12 are estimated; `None` when one is missing.
+    pub fn of(pose: &Pose) -> Option<Self> {
+        let p = |j: Joint| {
+            let e = pose.joint(j);
+            (e.source != JointSource::Missing).then_some(e.position_mm)
+        };
+        let spine = [
+            Joint::Snout,
+            Joint::Head,
+            Joint::Neck,
+            Joint::Withers,
+            Joint::MidBack,
+            Joint::Rump,
+            Joint::TailBase,
+        ];
+        let mut length = 0.0;
+        for w in spine.windows(2) {
+            length += (p(w[0])? - p(w[1])?).norm();
+        }
+        let scale = (length / BoneLengths::default().body_length()).clamp(0.8, 1.25);
+        let bones = BoneLengths::default().scaled(scale);
+        let (withers, mid_back, rump) = (p(Joint::Withers)?, p(Joint::MidBack)?, p(Joint::Rump)?);
+        let fore_forward = horizontal(withers - mid_back).or_else(|| horizontal(p(Joint::Snout)? - rump))?;
+        let hind_forward = horizontal(mid_back - rump).unwrap_or(fore_forward);
+        // The withers' frame: along the spine segment, left horizontal, and up from both.
+        let x = (withers - mid_back).try_normalize(1e-9).unwrap_or(fore_forward);
+        let left = Vector3::z().cross(&fore_forward);
+        let up = x.cross(&left).try_normalize(1e-9).unwrap_or_else(Vector3::z);
+        let shoulders = [1.0, -1.0].map(|sign| {
+            withers + x * bones.shoulder_forward + left * (sign * bones.shoulder_side) - up * bones.shoulder_down
+        });
+        Some(Self {
+            fore_forward,
+            hind_forward,
+            shoulders,
+            scale,
+            bones,
+        })
+    }
+
+    /// Where a limb hangs from: its shoulder or its hip joint.
+    fn root(&self, limb: &LimbChain, pose: &Pose) -> Point3<f64> {
+        if limb.fore {
+            self.shoulders[usize::from(limb.side.sign() < 0.0)]
+        } else {
+            pose.joint(limb.root).position_mm
+        }
+    }
+
+    fn forward(&self, limb: &LimbChain) -> Vector3<f64> {
+        if limb.fore {
+            self.fore_forward
+        } else {
+            self.hind_forward
+        }
+    }
+}
+
+fn horizontal(v: Vector3<f64>) -> Option<Vector3<f64>> {
+    Vector3::new(v.x, v.y, 0.0).try_normalize(1e-6)
+}
+
+/// Where the ray through `pixel` of `camera` meets the horizontal plane at height `z_mm`;
+/// `None` when it runs parallel to the plane or away from it.
+pub fn on_plane(camera: &Camera, pixel: &Point2<f64>, z_mm: f64) -> Option<Point3<f64>> {
+    let origin = camera.centre();
+    let direction = camera.world_from_camera.rotation * camera.intrinsics.ray(pixel);
+    if direction.z.abs() < 1e-9 {
+        return None;
+    }
+    let t = (z_mm - origin.z) / direction.z;
+    (t > 0.0).then(|| origin + direction * t)
+}
+
+/// A paw seen by the bottom camera, on the glass in the world frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Seen {
+    position: Point3<f64>,
+    score: f64,
+}
+
+/// Fuses the views of one rig, frame after frame.
+#[derive(Clone, Debug)]
+pub struct Fuser {
+    color: Camera,
+    config: FusionConfig,
+    /// Per leg (in [`LIMBS`] order): the depth frame and place its paw was last seen.
+    last: [Option<(u64, Point3<f64>)>; 4],
+    seen: Vec<Seen>,
+}
+
+impl Fuser {
+    /// A fuser for the rig's bottom camera `color`.
+    pub fn new(color: Camera, config: FusionConfig) -> Self {
+        Self {
+            color,
+            config,
+            last: [None; 4],
+            seen: Vec::new(),
+        }
+    }
+
+    /// Completes `pose` (whose joints 1-12 come from the depth image) with the paws in
+    /// `paws` (detections in the bottom frame of depth frame `seq`, or none when there was no
+    /// colour frame) and the limbs. A pose without its body joints is left as it is.
+    pub fn fuse(&mut self, seq: u64, pose: &mut Pose, paws: &[PawDetection]) {
+        let Some(axes) = BodyAxes::of(pose) else {
+            return;
+        };
+        let sole = PAW_SOLE_MM * axes.scale;
+        self.seen.clear();
+        self.seen.extend(paws.iter().filter_map(|d| {
+            let (x, y) = d.centre();
+            on_plane(&self.color, &Point2::new(x, y), sole).map(|position| Seen {
+                position,
+                score: f64::from(d.score),
+            })
+        }));
+        self.seen.sort_by(|a, b| b.score.total_cmp(&a.score));
+        self.seen.truncate(self.config.max_detections);
+
+        let body_score = Joint::MAIN_BODY
+            .iter()
+            .map(|j| pose.joint(*j).score)
+            .fold(f64::INFINITY, f64::min)
+            .clamp(0.0, 1.0);
+        let assigned = self.assign(seq, pose, &axes);
+        for (k, limb) in LIMBS.iter().enumerate() {
+            let root = axes.root(limb, pose);
+            let forward = axes.forward(limb);
+            let (paw, source, score) = match assigned[k] {
+                Some(i) => {
+                    let s = self.seen[i];
+                    self.last[k] = Some((seq, s.position));
+                    (s.position, JointSource::Paw, s.score)
+                }
+                None => (
+                    stance_paw(&root, &forward, limb.side.sign(), limb.fore, axes.scale, PAW_SOLE_MM),
+                    JointSource::Default,
+                    self.config.default_score,
+                ),
+            };
+            let lengths = axes.bones.limb(limb.fore);
+            let (upper, lower) = if limb.fore {
+                fore_limb(&root, &paw, lengths, &forward, &Vector3::z())
+            } else {
+                hind_limb(
+                    &root,
+                    &paw,
+                    lengths,
+                    ANKLE_ANGLE_DEG.to_radians(),
+                    &forward,
+                    &Vector3::z(),
+                )
+            };
+            let (limb_source, limb_score) = match source {
+                JointSource::Paw => (JointSource::Ik, score.min(body_score)),
+                other => (other, score),
+            };
+            let mut set = |j: Joint, position_mm, source, score| {
+                *pose.joint_mut(j) = JointEstimate {
+                    position_mm,
+                    score,
+                    source,
+                };
+            };
+            set(limb.paw, paw, source, score);
+            set(limb.upper, upper, limb_source, limb_score);
+            set(limb.lower, lower, limb_source, limb_score);
+        }
+    }
+
+    /// The detection each leg gets (an index into `self.seen`), minimising the summed distance
+    /// of each paw to where its leg would put it; a leg may get none.
+    fn assign(&self, seq: u64, pose: &Pose, axes: &BodyAxes) -> [Option<usize>; 4] {
+        let gate = self.config.gate_mm * axes.scale;
+        let n = self.seen.len();
+        // cost[leg][detection]: infinite where the detection cannot be that leg's.
+        let mut cost = [[f64::INFINITY; 8]; 4];
+        for (k, limb) in LIMBS.iter().enumerate() {
+            let root = axes.root(limb, pose);
+            let forward = axes.forward(limb);
+            let stance = stance_paw(&root, &forward, limb.side.sign(), limb.fore, axes.scale, PAW_SOLE_MM);
+            let remembered = self.last[k]
+                .filter(|(at, _)| seq.saturating_sub(*at) <= self.config.memory_frames && *at <= seq)
+                .map(|(_, p)| p);
+            // Which side of the body a paw is on, measured from the middle of the limb pair.
+            let pair_middle = if limb.fore {
+                nalgebra::center(&axes.shoulders[0], &axes.shoulders[1])
+            } else {
+                nalgebra::center(
+                    &pose.joint(Joint::LeftHip).position_mm,
+                    &pose.joint(Joint::RightHip).position_mm,
+                )
+            };
+            let left = Vector3::z().cross(&forward);
+            for (i, s) in self.seen.iter().enumerate().take(8) {
+                let side = (s.position - pair_middle).dot(&left) * limb.side.sign();
+                if side < -2.0 * axes.scale {
+                    continue; // on the other side of the body
+                }
+                let flat = |p: &Point3<f64>| Vector3::new(s.position.x - p.x, s.position.y - p.y, 0.0).norm();
+                let d = remembered.map_or(flat(&stance), |r| flat(&r).min(flat(&stance)));
+                if d <= gate {
+                    cost[k][i] = d;
+                }
+            }
+        }
+        let mut best = (f64::INFINITY, [None; 4]);
+        let mut current = [None; 4];
+        search(&cost, n.min(8), gate, 0, 0, 0.0, &mut current, &mut best);
+        best.1
+    }
+}
+
+/// Exhaustive search over the legs' choices (at most 9 x 8 x 7 x 6 of them); a leg without a
+/// paw costs `gate`.
+#[allow(clippy::too_many_arguments)]
+fn search(
+    cost: &[[f64; 8]; 4],
+    n: usize,
+    gate: f64,
+    leg: usize,
+    used: u16,
+    total: f64,
+    current: &mut [Option<usize>; 4],
+    best: &mut (f64, [Option<usize>; 4]),
+) {
+    if total >= best.0 {
+        return;
+    }
+    if leg == 4 {
+        *best = (total, *current);
+        return;
+    }
+    for i in 0..n {
+        if used & (1 << i) == 0 && cost[leg][i].is_finite() {
+            current[leg] = Some(i);
+            search(
+                cost,
+                n,
+                gate,
+                leg + 1,
+                used | (1 << i),
+                total + cost[leg][i],
+                current,
+                best,
+            );
+        }
+    }
+    current[leg] = None;
+    search(cost, n, gate, leg + 1, used, total + gate, current, best);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Rig;
+    use crate::synth::mouse::{Placement, PoseParams, pose_mouse};
+
+    /// A posed mouse, its pose as the body stage gives it (joints 1-12 exact), and the
+    /// detections a perfect paw detector would give for its paws on the glass.
+    fn scene(placement: &Placement, rig: &Rig) -> (crate::synth::mouse::MouseInstance, Pose, Vec<PawDetection>) {
+        let m = pose_mouse(&PoseParams::default(), placement);
+        let mut pose = Pose::default();
+        for j in Joint::MAIN_BODY {
+            *pose.joint_mut(j) = JointEstimate {
+                position_mm: m.joint(j),
+                score: 0.9,
+                source: JointSource::Depth,
+            };
+        }
+        let detections = Joint::PAWS
+            .iter()
+            .filter_map(|j| rig.color.project_world(&m.joint(*j)))
+            .map(|c| PawDetection {
+                x0: c.x as f32 - 6.0,
+                y0: c.y as f32 - 6.0,
+                x1: c.x as f32 + 6.0,
+                y1: c.y as f32 + 6.0,
+                score: 0.8,
+            })
+            .collect();
+        (m, pose, detections)
+    }
+
+    fn error(m: &crate::synth::mouse::MouseInstance, pose: &Pose, j: Joint) -> f64 {
+        (pose.joint(j).position_mm - m.joint(j)).norm()
+    }
+
+    #[test]
+    fn paws_go_to_their_legs_on_rotated_and_mirrored_mice() {
+        let rig = Rig::default_rig();
+        for heading in [0.0, 0.7, 2.0, -2.5, std::f64::consts::PI] {
+            for mirrored in [false, true] {
+                let placement = Placement {
+                    x_mm: 40.0,
+                    y_mm: -30.0,
+                    heading,
+                    ..Placement::default()
+                };
+                let (m, pose, mut detections) = scene(&placement, &rig);
+                if mirrored {
+                    // The same paws listed in another order: the assignment must not care.
+                    detections.reverse();
+                }
+                let mut fuser = Fuser::new(rig.color, FusionConfig::default());
+                let mut fused = pose.clone();
+                fuser.fuse(0, &mut fused, &detections);
+                for j in Joint::PAWS {
+                    assert_eq!(fused.joint(j).source, JointSource::Paw, "{j:?} at heading {heading}");
+                    assert!(
+                        error(&m, &fused, j) < 1.0,
+                        "{j:?} at heading {heading}: {}",
+                        error(&m, &fused, j)
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_mirror_image_mouse_swaps_left_and_right() {
+        // The mouse reflected across its own axis: the paws that were left are now right.
+        let rig = Rig::default_rig();
+        let (m, pose, _) = scene(&Placement::default(), &rig);
+        let mirror = |p: Point3<f64>| Point3::new(p.x, -p.y, p.z);
+        let mut mirrored = pose.clone();
+        for j in Joint::MAIN_BODY {
+            mirrored.joint_mut(j).position_mm = mirror(m.joint(j));
+        }
+        // Left and right hips trade places in the mirror.
+        mirrored.joint_mut(Joint::LeftHip).position_mm = mirror(m.joint(Joint::RightHip));
+        mirrored.joint_mut(Joint::RightHip).position_mm = mirror(m.joint(Joint::LeftHip));
+        let detections: Vec<_> = Joint::PAWS
+            .iter()
+            .filter_map(|j| rig.color.project_world(&mirror(m.joint(*j))))
+            .map(|c| PawDetection {
+                x0: c.x as f32 - 6.0,
+                y0: c.y as f32 - 6.0,
+                x1: c.x as f32 + 6.0,
+                y1: c.y as f32 + 6.0,
+                score: 0.8,
+            })
+            .collect();
+        let mut fuser = Fuser::new(rig.color, FusionConfig::default());
+        fuser.fuse(0, &mut mirrored, &detections);
+        let expect = [
+            (Joint::LeftForePaw, Joint::RightForePaw),
+            (Joint::RightForePaw, Joint::LeftForePaw),
+            (Joint::LeftHindPaw, Joint::RightHindPaw),
+            (Joint::RightHindPaw, Joint::LeftHindPaw),
+        ];
+        for (ours, theirs) in expect {
+            let d = (mirrored.joint(ours).position_mm - mirror(m.joint(theirs))).norm();
+            assert!(d < 1.0, "{ours:?} is {d} mm from the mirrored {theirs:?}");
+        }
+    }
+
+    #[test]
+    fn missing_paws_take_the_default_configuration() {
+        let rig = Rig::default_rig();
+        let (m, pose, detections) = scene(&Placement::default(), &rig);
+        let mut fuser = Fuser::new(rig.color, FusionConfig::default());
+        let mut fused = pose.clone();
+        // Only the first detection (the left fore paw) is seen.
+        fuser.fuse(0, &mut fused, &detections[..1]);
+        assert_eq!(fused.joint(Joint::LeftForePaw).source, JointSource::Paw);
+        assert_eq!(fused.joint(Joint::LeftElbow).source, JointSource::Ik);
+        for j in [
+            Joint::RightForePaw,
+            Joint::LeftHindPaw,
+            Joint::RightHindPaw,
+            Joint::RightKnee,
+        ] {
+            let e = fused.joint(j);
+            assert_eq!(e.source, JointSource::Default, "{j:?}");
+            assert!(e.position_mm.coords.iter().all(|v| v.is_finite()));
+        }
+        // The default stance of a standing mouse is where its paws stand.
+        for j in [Joint::RightForePaw, Joint::RightHindPaw] {
+            assert!(error(&m, &fused, j) < 3.0, "{j:?}: {}", error(&m, &fused, j));
+        }
+        // Nothing seen at all: every limb joint is the default, none is missing.
+        let mut blind = pose.clone();
+        fuser.fuse(100, &mut blind, &[]);
+        for limb in LIMBS {
+            for j in [limb.upper, limb.lower, limb.paw] {
+                assert_eq!(blind.joint(j).source, JointSource::Default, "{j:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn limbs_follow_the_paws_with_the_skeletons_lengths() {
+        let rig = Rig::default_rig();
+        let (m, pose, detections) = scene(&Placement::default(), &rig);
+        let mut fuser = Fuser::new(rig.color, FusionConfig::default());
+        let mut fused = pose.clone();
+        fuser.fuse(0, &mut fused, &detections);
+        for limb in LIMBS {
+            for j in [limb.upper, limb.lower] {
+                assert_eq!(fused.joint(j).source, JointSource::Ik);
+                assert!(error(&m, &fused, j) < 4.0, "{j:?}: {}", error(&m, &fused, j));
+            }
+        }
+    }
+
+    #[test]
+    fn a_stray_detection_far_from_the_mouse_is_ignored() {
+        let rig = Rig::default_rig();
+        let (_, pose, mut detections) = scene(&Placement::default(), &rig);
+        let far = rig
+            .color
+            .project_world(&Point3::new(150.0, 120.0, 1.5))
+            .expect("in view");
+        detections.push(PawDetection {
+            x0: far.x as f32 - 6.0,
+            y0: far.y as f32 - 6.0,
+            x1: far.x as f32 + 6.0,
+            y1: far.y as f32 + 6.0,
+            score: 5.0,
+        });
+        let mut fuser = Fuser::new(rig.color, FusionConfig::default());
+        let mut fused = pose.clone();
+        fuser.fuse(0, &mut fused, &detections);
+        for j in Joint::PAWS {
+            let p = fused.joint(j).position_mm;
+            assert!((p.x - 150.0).abs() > 50.0, "{j:?} took the stray detection");
+        }
+    }
+}
