@@ -489,11 +489,7 @@ pub fn decode_color(payload: &[u8]) -> Result<ColorFrame> {
     let row = usize::from(header.width) * format.bytes_per_pixel();
     if header.codec == Codec::DeltaZstd && row > 0 {
         for line in data.chunks_exact_mut(row) {
-            let mut left = 0u8;
-            for v in line {
-                *v = v.wrapping_add(left);
-                left = *v;
-            }
+            undo_byte_delta(line);
         }
     }
     Ok(ColorFrame {
@@ -503,6 +499,34 @@ pub fn decode_color(payload: &[u8]) -> Result<ColorFrame> {
         format,
         data,
     })
+}
+
+/// Undoes the horizontal delta filter on one row of bytes: each byte becomes the wrapping sum
+/// of itself and every byte to its left. Eight bytes at a time (a byte-wise prefix sum inside
+/// a `u64`, without carries between bytes), which is several times faster than byte by byte.
+fn undo_byte_delta(line: &mut [u8]) {
+    /// Byte-wise wrapping addition of two `u64`s.
+    fn add_bytes(a: u64, b: u64) -> u64 {
+        const LOW: u64 = 0x7f7f_7f7f_7f7f_7f7f;
+        ((a & LOW) + (b & LOW)) ^ ((a ^ b) & !LOW)
+    }
+    let mut left = 0u8;
+    let mut chunks = line.chunks_exact_mut(8);
+    for chunk in &mut chunks {
+        let mut bytes = [0u8; 8];
+        bytes.copy_from_slice(chunk);
+        let mut x = u64::from_le_bytes(bytes);
+        x = add_bytes(x, x << 8);
+        x = add_bytes(x, x << 16);
+        x = add_bytes(x, x << 32);
+        x = add_bytes(x, u64::from_le_bytes([left; 8]));
+        chunk.copy_from_slice(&x.to_le_bytes());
+        left = chunk[7];
+    }
+    for v in chunks.into_remainder() {
+        *v = v.wrapping_add(left);
+        left = *v;
+    }
 }
 
 #[cfg(test)]
@@ -522,6 +546,24 @@ mod tests {
             width: w,
             height: h,
             data,
+        }
+    }
+
+    #[test]
+    fn the_fast_delta_undo_matches_the_byte_by_byte_one() {
+        for len in [0usize, 1, 7, 8, 9, 17, 640, 1283] {
+            let deltas: Vec<u8> = (0..len).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect();
+            let mut fast = deltas.clone();
+            undo_byte_delta(&mut fast);
+            let mut left = 0u8;
+            let slow: Vec<u8> = deltas
+                .iter()
+                .map(|d| {
+                    left = left.wrapping_add(*d);
+                    left
+                })
+                .collect();
+            assert_eq!(fast, slow, "{len} bytes");
         }
     }
 
