@@ -39,10 +39,7 @@ pub enum ImageError {
 impl RgbImage {
     /// An image filled with one colour.
     pub fn new(width: u32, height: u32, fill: [u8; 3]) -> Self {
-        let mut data = Vec::with_capacity(width as usize * height as usize * 3);
-        for _ in 0..width as usize * height as usize {
-            data.extend_from_slice(&fill);
-        }
+        let data = fill.repeat(width as usize * height as usize);
         Self { width, height, data }
     }
 
@@ -111,16 +108,28 @@ impl RgbImage {
 
     /// The image scaled by an integer factor (nearest neighbour).
     pub fn upscale(&self, k: u32) -> RgbImage {
-        let k = k.max(1);
-        let mut out = RgbImage::new(self.width * k, self.height * k, [0; 3]);
-        for y in 0..out.height {
-            for x in 0..out.width {
-                if let Some(c) = self.get(x / k, y / k) {
-                    out.put(i64::from(x), i64::from(y), c);
+        let k = k.max(1) as usize;
+        let (w, h) = (self.width as usize, self.height as usize);
+        if w == 0 || h == 0 {
+            return RgbImage::new(0, 0, [0; 3]);
+        }
+        let mut data = Vec::with_capacity(w * k * h * k * 3);
+        for row in self.data.chunks_exact(w * 3).take(h) {
+            let start = data.len();
+            for px in row.chunks_exact(3) {
+                for _ in 0..k {
+                    data.extend_from_slice(px);
                 }
             }
+            for _ in 1..k {
+                data.extend_from_within(start..start + w * k * 3);
+            }
         }
-        out
+        RgbImage {
+            width: self.width * k as u32,
+            height: self.height * k as u32,
+            data,
+        }
     }
 
     /// Images side by side, top-aligned, with `gap` pixels of `background` between them.

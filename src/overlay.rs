@@ -51,9 +51,14 @@ fn top_panel(rig: &Rig, frame: &DepthFrame, joints: &[Option<Point3<f64>>; JOINT
     let x0 = (cx - f64::from(w) / 2.0).clamp(0.0, f64::from(frame.width - w)) as u32;
     let y0 = (cy - f64::from(h) / 2.0).clamp(0.0, f64::from(frame.height - h)) as u32;
     let near = rig.depth.world_from_camera.translation.vector.z - 120.0;
-    let mut img = depth_to_rgb(&frame.data, frame.width, frame.height, near, near + 140.0)
-        .crop(x0, y0, w, h)
-        .upscale(zoom);
+    let crop: Vec<u16> = (y0..y0 + h)
+        .flat_map(|y| {
+            let row = (y * frame.width + x0) as usize;
+            frame.data.get(row..row + w as usize).unwrap_or_default()
+        })
+        .copied()
+        .collect();
+    let mut img = depth_to_rgb(&crop, w, h, near, near + 140.0).upscale(zoom);
     crate::synth::preview::draw_joints(
         &mut img,
         &rig.depth,
@@ -98,12 +103,20 @@ fn bottom_panel(rig: &Rig, frame: &ColorFrame, record: &PoseRecord) -> RgbImage 
     let (w, h) = ((x1 - x0).max(1), (y1 - y0).max(1));
     let k = f64::from(PANEL) / f64::from(h);
     let out_w = ((f64::from(w) * k).round() as u32).clamp(1, 2 * PANEL);
+    let mut native = Vec::with_capacity(w as usize * h as usize * 3);
+    for y in y0..y0 + h {
+        for x in x0..x0 + w {
+            native.extend_from_slice(&rgb_at(frame, x, y));
+        }
+    }
     let mut img = RgbImage::new(out_w, PANEL, [0; 3]);
     for oy in 0..PANEL {
+        let sy = ((f64::from(oy) / k) as u32).min(h - 1);
         for ox in 0..out_w {
-            let sx = (x0 + (f64::from(ox) / k) as u32).min(x1 - 1);
-            let sy = (y0 + (f64::from(oy) / k) as u32).min(y1 - 1);
-            img.put(i64::from(ox), i64::from(oy), rgb_at(frame, sx, sy));
+            let sx = ((f64::from(ox) / k) as u32).min(w - 1);
+            let i = (sy * w + sx) as usize * 3;
+            let o = (oy * out_w + ox) as usize * 3;
+            img.data[o..o + 3].copy_from_slice(&native[i..i + 3]);
         }
     }
     let to_panel = |x: f64, y: f64| ((x - f64::from(x0)) * k, (y - f64::from(y0)) * k);
