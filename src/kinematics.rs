@@ -1,7 +1,7 @@
 //! Inverse kinematics of the limbs: the two-bone solver both the synthesis engine and the
 //! fusion stage use, and the hind-limb rule of the paper (the knee-ankle-paw angle fixed).
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Point3, Rotation3, Vector3};
 
 /// The middle joint of a two-bone chain from `root` to `target` with bone lengths `upper` and
 /// `lower`, bending towards `pole` (a direction, not a point).
@@ -89,6 +89,18 @@ pub fn stance_paw(
         + left * side_sign * 2.0 * scale
 }
 
+/// Where a fore paw is held when the mouse rears: in front of the chest, below and ahead of
+/// its shoulder in the withers' frame (x forward along the spine, y left, z dorsal).
+pub fn chest_paw(shoulder: &Point3<f64>, withers_frame: &Rotation3<f64>, side_sign: f64, scale: f64) -> Point3<f64> {
+    shoulder + withers_frame * Vector3::new(7.0 * scale, side_sign * 2.5 * scale, -9.0 * scale)
+}
+
+/// Where a fore paw is held when the mouse grooms: at the face, behind and below the snout in
+/// the head's frame.
+pub fn face_paw(snout: &Point3<f64>, head_frame: &Rotation3<f64>, side_sign: f64, scale: f64) -> Point3<f64> {
+    snout + head_frame * Vector3::new(-6.0 * scale, side_sign * 4.0 * scale, -4.0 * scale)
+}
+
 /// Hind limb from the hip to a paw on or near the floor, with the angle at the ankle between
 /// knee and paw fixed at `ankle_angle` (the paper sets it to 90 degrees).
 ///
@@ -125,11 +137,10 @@ pub fn hind_limb(
         } else {
             any_orthogonal(up)
         };
-        let rot = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(normal), -ankle_angle);
+        let rot = Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(normal), -ankle_angle);
         let mut shin_dir = rot * from_paw;
         if shin_dir.dot(up) < 0.0 {
-            shin_dir =
-                nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(normal), ankle_angle) * from_paw;
+            shin_dir = Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(normal), ankle_angle) * from_paw;
         }
         let knee = ankle + shin_dir * shin;
         (knee, ankle)

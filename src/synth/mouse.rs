@@ -5,7 +5,7 @@
 //! under the rump) from a handful of continuous parameters, so behaviours can blend smoothly
 //! in a session, and then placed in the cage by a [`Placement`].
 
-use crate::kinematics::{fore_limb, hind_limb, stance_paw};
+use crate::kinematics::{chest_paw, face_paw, fore_limb, hind_limb, stance_paw};
 use crate::pose::JointPositions;
 use crate::skeleton::{BoneLengths, Joint, LIMBS, Side};
 use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
@@ -323,8 +323,8 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
             + left * sign * dy * s
             + Vector3::z() * dz.max(0.0) * s;
         if limb.fore && (params.fore_raise > 0.0 || params.fore_to_face > 0.0) {
-            let chest = root + withers_frame * Vector3::new(7.0 * s, sign * 2.5 * s, -9.0 * s);
-            let face = snout + head_frame * Vector3::new(-6.0 * s, sign * 4.0 * s, -4.0 * s);
+            let chest = chest_paw(&root, &withers_frame, sign, s);
+            let face = face_paw(&snout, &head_frame, sign, s);
             let raised = paw + (chest - paw) * params.fore_raise.clamp(0.0, 1.0);
             paw = raised + (face - raised) * params.fore_to_face.clamp(0.0, 1.0);
             paw.z = paw.z.max(PAW_SOLE_MM * s);
