@@ -40,6 +40,8 @@ pub struct BenchReport {
     pub forest: Option<ForestBench>,
     /// The replay pipeline and the recorder on a synthetic session (with the bundled models).
     pub pipeline: Option<PipelineBench>,
+    /// The bundled paw cascade on a full bottom frame; `None` without the model.
+    pub paws: Option<PawBench>,
 }
 
 /// The pipeline end to end.
@@ -57,6 +59,20 @@ pub struct PipelineBench {
     /// Writing the session's frames as the recorder does (zstd, checksums, timestamps): CPU
     /// seconds per second of footage (1.0 = one core busy).
     pub record_cores: f64,
+}
+
+/// Speed of the bundled paw detector on one core.
+#[derive(Clone, Debug, Serialize)]
+pub struct PawBench {
+    pub model: String,
+    /// The region searched: the mouse's joints projected on the glass, grown by 15 mm, in
+    /// pixels of the full 1280x1024 BayerRG8 frame.
+    pub roi_px: [u32; 4],
+    /// The glass's scale in that frame.
+    pub px_per_mm: f64,
+    /// `PawDetector::detect` on the region (grey conversion, every scale, grouping), ms.
+    pub detect_ms_per_frame: f64,
+    pub detections: usize,
 }
 
 /// Speed of the bundled body forest on one core.
@@ -116,6 +132,18 @@ impl BenchReport {
             None => {
                 let _ = writeln!(s, "(no bundled body model found: forest inference not measured)");
             }
+        }
+        if let Some(p) = &self.paws {
+            let _ = writeln!(
+                s,
+                "{:<40} {:>12.3}",
+                format!(
+                    "paw detection ms/frame ({}x{} px)",
+                    p.roi_px[2] - p.roi_px[0],
+                    p.roi_px[3] - p.roi_px[1]
+                ),
+                p.detect_ms_per_frame
+            );
         }
         if let Some(p) = &self.pipeline {
             let rows = [
@@ -186,7 +214,9 @@ pub fn run(quick: bool) -> BenchReport {
     let pipeline = bench_pipeline(quick)
         .map_err(|e| tracing::warn!(error = %e, "cannot measure the pipeline"))
         .ok();
+    let paws = bench_paws(&rig, if quick { 50 } else { 500 });
     BenchReport {
+        paws,
         train_pixel_trees_per_s,
         forest,
         pipeline,
@@ -240,6 +270,88 @@ fn bench_training(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick:
             [0.0; 2],
             &|| {},
         ));
+    })
+}
+
+/// Where the bundled paw cascade is looked for: the checkout's fixtures.
+pub fn bundled_paw_model() -> Option<std::path::PathBuf> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/models/paws.xml");
+    path.exists().then_some(path)
+}
+
+/// Times the paw detector on a full-size synthetic BayerRG8 bottom frame, within the mouse's
+/// footprint on the glass grown by 15 mm; the fastest of ten batches.
+fn bench_paws(rig: &Rig, iterations: u32) -> Option<PawBench> {
+    use crate::frame::{ColorFrame, PixelFormat};
+    use crate::paws::PawDetector;
+    use crate::synth::views::render_bottom_frame;
+    use nalgebra::Point3;
+    let path = bundled_paw_model()?;
+    let mut detector = match PawDetector::load(&path) {
+        Ok(d) => d,
+        Err(e) => {
+            tracing::warn!(error = %e, "cannot measure the paw detector");
+            return None;
+        }
+    };
+    let mut rng = item_rng(0xBE7C, 9, 0);
+    let library = pose_library();
+    let pose = library.get(library.len() / 2).copied().unwrap_or_default();
+    let mut mouse = pose_mouse(&pose, &random_placement(&mut rng));
+    fit_in_cage(&mut mouse, 3.0);
+    let camera = &rig.color;
+    let i = &camera.intrinsics;
+    let (data, _) = render_bottom_frame(camera, &mouse, &skin(&mouse), PixelFormat::BayerRg8, &mut rng);
+    let frame = ColorFrame {
+        stamp: Stamp::default(),
+        width: i.width,
+        height: i.height,
+        format: PixelFormat::BayerRg8,
+        data,
+    };
+    // The joints' footprint on the glass, and the glass's scale there.
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    let mut centre = Point3::origin();
+    for p in &mouse.joints {
+        let on_glass = Point3::new(p.x, p.y, 0.0);
+        centre.coords += on_glass.coords / mouse.joints.len() as f64;
+        if let Some(q) = camera.project_world(&on_glass) {
+            lo = [lo[0].min(q.x), lo[1].min(q.y)];
+            hi = [hi[0].max(q.x), hi[1].max(q.y)];
+        }
+    }
+    let a = camera.project_world(&centre)?;
+    let b = camera.project_world(&Point3::new(centre.x + 10.0, centre.y, 0.0))?;
+    let px_per_mm = (b - a).norm() / 10.0;
+    let grow = 15.0 * px_per_mm;
+    let clamp = |v: f64, max: u32| v.clamp(0.0, f64::from(max)) as u32;
+    let roi = (
+        clamp(lo[0] - grow, i.width),
+        clamp(lo[1] - grow, i.height),
+        clamp(hi[0] + grow, i.width),
+        clamp(hi[1] + grow, i.height),
+    );
+    let mut out = Vec::new();
+    for _ in 0..20 {
+        detector.detect(&frame, roi, px_per_mm, &mut out);
+    }
+    let batch = (iterations / 10).max(1);
+    let mut best = f64::INFINITY;
+    for _ in 0..10 {
+        let t = Instant::now();
+        for _ in 0..batch {
+            detector.detect(&frame, roi, px_per_mm, &mut out);
+            std::hint::black_box(&out);
+        }
+        best = best.min(t.elapsed().as_secs_f64() * 1e3 / f64::from(batch));
+    }
+    Some(PawBench {
+        model: path.display().to_string(),
+        roi_px: [roi.0, roi.1, roi.2, roi.3],
+        px_per_mm,
+        detect_ms_per_frame: best,
+        detections: out.len(),
     })
 }
 

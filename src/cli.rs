@@ -30,7 +30,7 @@ enum Command {
     /// Render synthetic training data and sessions.
     #[command(subcommand)]
     Synth(SynthCommand),
-    /// Train a forest on synthetic datasets.
+    /// Train a forest or the paw cascade on synthetic datasets.
     Train(TrainArgs),
     /// Evaluate a trained model on a held-back dataset.
     Eval(EvalArgs),
@@ -112,6 +112,9 @@ pub enum ModelTarget {
     Body,
     /// The part forest: six body-part labels per depth pixel.
     Parts,
+    /// The paw detector: a boosted cascade of Haar features on the bottom colour view,
+    /// stored as OpenCV cascade XML.
+    Paws,
 }
 
 #[derive(Debug, Args)]
@@ -152,9 +155,13 @@ pub struct TrainArgs {
     /// Mouse pixels drawn per training image.
     #[arg(long, default_value_t = 150, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub pixels: u32,
-    /// Seed of the pixel draws and the random tests.
+    /// Seed of the pixel draws and the random tests (paws: of the augmentation and the
+    /// negatives' draws).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Cascade stages at most (paws).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=50))]
+    pub stages: u32,
     /// Replace the model file if it exists.
     #[arg(long)]
     pub force: bool,

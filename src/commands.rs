@@ -56,10 +56,13 @@ fn report_dir(dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating report directory {dir:?}"))
 }
 
-/// `mousepose train body|parts`.
+/// `mousepose train body|parts|paws`.
 pub fn train(args: &TrainArgs) -> Result<()> {
     if args.out.exists() && !args.force {
         return Err(Exists(args.out.clone()).into());
+    }
+    if args.target == ModelTarget::Paws {
+        return train_paws(args);
     }
     let params = TrainParams {
         trees: args.trees as usize,
@@ -71,7 +74,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
     let job = TrainJob {
         target: match args.target {
             ModelTarget::Body => Target::Body,
-            ModelTarget::Parts => Target::Parts,
+            ModelTarget::Parts | ModelTarget::Paws => Target::Parts,
         },
         train: &args.data,
         discriminative: args.discriminative.as_deref(),
@@ -95,7 +98,7 @@ pub fn train(args: &TrainArgs) -> Result<()> {
             Some(path) => {
                 let kind = match args.target {
                     ModelTarget::Body => ModelKind::Body,
-                    ModelTarget::Parts => ModelKind::Parts,
+                    ModelTarget::Parts | ModelTarget::Paws => ModelKind::Parts,
                 };
                 Some(model::load(path, Some(kind))?)
             }
@@ -136,11 +139,12 @@ fn counts<F, L>(f: &Forest<F, L>) -> (usize, usize, usize) {
     )
 }
 
-/// `mousepose eval body|parts`.
+/// `mousepose eval body|parts|paws`.
 pub fn eval(args: &EvalArgs) -> Result<()> {
     let kind = match args.target {
         ModelTarget::Body => ModelKind::Body,
         ModelTarget::Parts => ModelKind::Parts,
+        ModelTarget::Paws => return eval_paws(args),
     };
     let model = model::load(&args.model, Some(kind))?;
     let (ds, samples) = learn::load(&args.data).with_context(|| format!("reading test dataset {:?}", args.data))?;
@@ -648,4 +652,138 @@ pub fn devices(args: &crate::cli::DevicesArgs) -> Result<()> {
         }
     }
     print(&text)
+}
+
+/// The training parameters `train paws` uses besides its arguments.
+fn paw_params(args: &TrainArgs) -> crate::paws::train::TrainParams {
+    crate::paws::train::TrainParams {
+        stages: args.stages as usize,
+        seed: args.seed,
+        ..crate::paws::train::TrainParams::default()
+    }
+}
+
+/// Augmented copies of each paw window besides the plain one.
+const PAW_AUGMENT: usize = 3;
+
+/// `mousepose train paws`.
+fn train_paws(args: &TrainArgs) -> Result<()> {
+    use crate::paws::{WINDOW_PX, data, train, xml};
+    let set = data::load(
+        &args.data,
+        data::CutParams {
+            width: WINDOW_PX as usize,
+            height: WINDOW_PX as usize,
+            augment: PAW_AUGMENT,
+            seed: args.seed,
+        },
+    )
+    .with_context(|| format!("reading training dataset {:?}", args.data))?;
+    tracing::info!(
+        message = "Training windows cut.",
+        paws = set.paws,
+        positives = set.positive_count(),
+        backgrounds = set.backgrounds.len(),
+    );
+    let params = paw_params(args);
+    let bar = progress::bar(params.stages as u64, "stages");
+    let started = std::time::Instant::now();
+    let trained = train::train(&set, &params, &mut |r| {
+        bar.inc(1);
+        bar.set_message(format!("fa {:.4}", r.false_alarm));
+        tracing::debug!(
+            message = "Stage trained.",
+            stage = r.stage,
+            positives = r.positives,
+            negatives = r.negatives,
+            weak = r.weak,
+            hit_rate = r.hit_rate,
+            false_alarm = r.false_alarm,
+            windows_scanned = r.windows_scanned,
+            windows_accepted = r.windows_accepted,
+        );
+    })
+    .context("training the paw cascade")?;
+    bar.finish_and_clear();
+    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
+    }
+    xml::save(&trained.cascade, &args.out)?;
+    let weak: usize = trained.cascade.stages.iter().map(|s| s.weak.len()).sum();
+    if let train::StopReason::NoNegatives { found, scanned } = &trained.stop {
+        tracing::info!(
+            message = "Training stopped early: the backgrounds no longer yield enough windows the cascade accepts.",
+            found,
+            scanned,
+        );
+    }
+    let last = trained.stages.last();
+    tracing::info!(
+        message = "Paw cascade written.",
+        path = %args.out.display(),
+        stages = trained.cascade.stages.len(),
+        weak,
+        features = trained.cascade.features.len(),
+        flat_positives = trained.flat_positives,
+        last_acceptance = last.map_or(0.0, |r| r.windows_accepted as f64 / r.windows_scanned.max(1) as f64),
+        seconds = format!("{:.0}", started.elapsed().as_secs_f64()),
+    );
+    Ok(())
+}
+
+/// `mousepose eval paws`.
+fn eval_paws(args: &EvalArgs) -> Result<()> {
+    use crate::paws::{PawDetector, eval};
+    let detector = PawDetector::load(&args.model)?;
+    let report =
+        eval::evaluate(&detector, &args.data).with_context(|| format!("evaluating on test dataset {:?}", args.data))?;
+    if let Some(dir) = &args.report {
+        report_dir(dir)?;
+        let mut points = report.curve.clone();
+        points.sort_by(|a, b| a.recall.total_cmp(&b.recall).then(b.precision.total_cmp(&a.precision)));
+        let stride = points.len().div_ceil(10).max(1);
+        let picked: Vec<_> = points
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| i % stride == 0 || i + 1 == points.len())
+            .map(|(_, p)| *p)
+            .collect();
+        let recall: Vec<f64> = picked.iter().map(|p| (p.recall * 1000.0).round() / 1000.0).collect();
+        let precision: Vec<f64> = picked.iter().map(|p| p.precision).collect();
+        line_chart(
+            "paws on the glass: precision vs recall (minimum score varied)",
+            "recall",
+            "precision",
+            &recall,
+            &[("precision", [40, 90, 220], &precision)],
+        )
+        .write_png(&dir.join("precision_recall.png"))?;
+        let mut table = String::from("min_score,precision,recall\n");
+        for p in &report.curve {
+            let _ = writeln!(table, "{:.4},{:.4},{:.4}", p.min_score, p.precision, p.recall);
+        }
+        write_report_file(dir, "precision_recall.csv", table.as_bytes())?;
+        write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    if args.json {
+        return print_json(&report);
+    }
+    let mut t = String::new();
+    let _ = writeln!(t, "{:<28} {:>9}", "images", report.images);
+    let _ = writeln!(t, "{:<28} {:>9}", "paws on the glass", report.contact_paws);
+    let _ = writeln!(t, "{:<28} {:>9}", "detections", report.detections);
+    let _ = writeln!(t, "{:<28} {:>9.3}", "precision", report.precision);
+    let _ = writeln!(t, "{:<28} {:>9.3}", "recall (paws on the glass)", report.recall);
+    let _ = writeln!(t, "{:<28} {:>9.3}", "F1", report.f1);
+    let _ = writeln!(
+        t,
+        "{:<28} {:>9.2}",
+        "mean centre error (px)", report.mean_centre_error_px
+    );
+    let _ = writeln!(
+        t,
+        "{} true, {} false, {} of lifted or hidden paws (neither)",
+        report.true_positives, report.false_positives, report.neutral
+    );
+    print(&t)
 }

@@ -33,6 +33,10 @@ pub const RAISED_TRUNK_RAD: f64 = 0.35;
 /// the face, 35 mm in the standing stance).
 pub const RAISED_PAW_TOWARDS_FACE: f64 = 0.25;
 
+/// How much further than its bones' summed length a leg is taken to reach (the estimated
+/// body joints and bone lengths are not exact).
+const REACH_SLACK: f64 = 1.1;
+
 /// Tuning of the fusion.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FusionConfig {
@@ -183,11 +187,28 @@ pub fn on_plane(camera: &Camera, pixel: &Point2<f64>, z_mm: f64) -> Option<Point
     (t > 0.0).then(|| origin + direction * t)
 }
 
-/// A paw seen by the bottom camera, on the glass in the world frame.
+/// A paw seen by the bottom camera: where its ray meets the glass (world frame), and the ray's
+/// direction from the camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Seen {
     position: Point3<f64>,
+    direction: Vector3<f64>,
     score: f64,
+}
+
+impl Seen {
+    /// Where the paw is for a leg hanging from `root` with reach `reach`: on the glass when
+    /// the leg reaches it there; otherwise the paw is lifted (a rearing mouse's fore paws) and
+    /// it is the point of its ray nearest to where the leg holds a lifted paw (`lifted`).
+    fn place(&self, root: &Point3<f64>, reach: f64, lifted: &Point3<f64>, sole: f64) -> Point3<f64> {
+        if (self.position - root).norm() <= reach {
+            return self.position;
+        }
+        let d = self.direction.normalize();
+        let along = (lifted - self.position).dot(&d);
+        let p = self.position + d * along;
+        if p.z < sole { self.position } else { p }
+    }
 }
 
 /// Fuses the views of one rig, frame after frame.
@@ -224,6 +245,7 @@ impl Fuser {
             let (x, y) = d.centre();
             on_plane(&self.color, &Point2::new(x, y), sole).map(|position| Seen {
                 position,
+                direction: position - self.color.centre(),
                 score: f64::from(d.score),
             })
         }));
@@ -239,11 +261,14 @@ impl Fuser {
         for (k, limb) in LIMBS.iter().enumerate() {
             let root = axes.root(limb, pose);
             let forward = axes.forward(limb);
+            let lengths = axes.bones.limb(limb.fore);
             let (paw, source, score) = match assigned[k] {
                 Some(i) => {
                     let s = self.seen[i];
                     self.last[k] = Some((seq, s.position));
-                    (s.position, JointSource::Paw, s.score)
+                    let reach = lengths.iter().sum::<f64>() * REACH_SLACK;
+                    let paw = s.place(&root, reach, &axes.default_paw(limb, pose), sole);
+                    (paw, JointSource::Paw, s.score)
                 }
                 None => (
                     axes.default_paw(limb, pose),
@@ -251,7 +276,6 @@ impl Fuser {
                     self.config.default_score,
                 ),
             };
-            let lengths = axes.bones.limb(limb.fore);
             let (upper, lower) = if limb.fore {
                 fore_limb(&root, &paw, lengths, &forward, &Vector3::z())
             } else {

@@ -1,7 +1,37 @@
 //! Step 2 of the paper: the paws in the bottom colour view, found by a boosted cascade of
 //! Haar-like features (Viola-Jones) stored in OpenCV's cascade XML.
+//!
+//! The parts, one idea per file: [`integral`] images, [`haar`] features and OpenCV's window
+//! normalisation, the in-memory [`cascade`], its [`xml`] form, [`boost`]ing of one stage,
+//! [`train`]ing of the whole cascade with bootstrapped negatives, the training windows cut
+//! from synthetic datasets ([`data`]), the grey image at the detector's canonical scale
+//! ([`grey`]), the run-time [`detect`]or and its evaluation ([`eval`]).
+//!
+//! The detector works on a grey image at [`CANONICAL_PX_PER_MM`] (1 pixel per millimetre on
+//! the glass); [`PawDetector::detect`] converts any colour frame's region to that scale first.
+
+pub mod boost;
+pub mod cascade;
+pub mod data;
+pub mod detect;
+pub mod eval;
+pub mod grey;
+pub mod haar;
+pub mod integral;
+pub mod train;
+pub mod xml;
+
+pub use cascade::Cascade;
+pub use detect::PawDetector;
 
 use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// The scale of the grey image the cascade runs on: pixels per millimetre on the glass.
+pub const CANONICAL_PX_PER_MM: f64 = 1.0;
+
+/// The detection window's side, pixels at the canonical scale (millimetres on the glass).
+pub const WINDOW_PX: u32 = 12;
 
 /// One paw found in a bottom colour frame.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -22,5 +52,30 @@ impl PawDetection {
     }
 }
 
-mod detector_stub;
-pub use detector_stub::{PawDetector, PawError};
+/// Errors reading, writing or training a paw cascade.
+#[derive(Debug, thiserror::Error)]
+pub enum PawError {
+    #[error("cannot {action} cascade {path:?}")]
+    Io {
+        path: PathBuf,
+        action: &'static str,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("cascade {path:?} is not well-formed XML")]
+    Xml {
+        path: PathBuf,
+        #[source]
+        source: roxmltree::Error,
+    },
+    #[error("cascade {path:?} is damaged: {reason}")]
+    Format { path: PathBuf, reason: String },
+    #[error("cascade {path:?} uses {what}, which mousepose does not support")]
+    Unsupported { path: PathBuf, what: String },
+    #[error(transparent)]
+    Dataset(#[from] crate::synth::dataset::DatasetError),
+    #[error("dataset {path:?} has no bottom views with paws to train or test on")]
+    NoPaws { path: PathBuf },
+    #[error("training stopped: {reason}")]
+    Training { reason: String },
+}

@@ -1,0 +1,276 @@
+//! The paw detector: our cascade evaluator against OpenCV's `CascadeClassifier` (Debian's own
+//! face cascades and our trained paw cascade, both ways through our XML), `eval paws` end to
+//! end, and damaged cascades refused with one clear sentence.
+
+use crate::util::{mousepose, repo_root};
+use mousepose::paws::cascade::Cascade;
+use mousepose::paws::detect::scan_like_opencv;
+use mousepose::paws::grey::GreyImage;
+use mousepose::paws::{PawDetector, xml};
+use opencv::core::{Rect, Size, Vector};
+use opencv::prelude::*;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+const FACE: &str = "/usr/share/opencv4/haarcascades/haarcascade_frontalface_default.xml";
+
+fn paw_model() -> PathBuf {
+    repo_root().join("fixtures/models/paws.xml")
+}
+
+/// Test images: smooth blobs and edges with noise, so early stages accept many windows.
+fn images(seed: u64, n: usize, width: usize, height: usize) -> Vec<GreyImage> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..n)
+        .map(|_| {
+            let blobs: Vec<(f64, f64, f64, f64)> = (0..12)
+                .map(|_| {
+                    (
+                        rng.gen_range(0.0..width as f64),
+                        rng.gen_range(0.0..height as f64),
+                        rng.gen_range(2.0..14.0),
+                        rng.gen_range(-120.0..160.0),
+                    )
+                })
+                .collect();
+            let mut data = Vec::with_capacity(width * height);
+            for y in 0..height {
+                for x in 0..width {
+                    let mut v = 60.0 + 0.4 * x as f64;
+                    for &(bx, by, r, a) in &blobs {
+                        let d2 = (x as f64 - bx).powi(2) + (y as f64 - by).powi(2);
+                        v += a * (-d2 / (2.0 * r * r)).exp();
+                    }
+                    v += rng.gen_range(-6.0..6.0);
+                    data.push(v.clamp(0.0, 255.0) as u8);
+                }
+            }
+            GreyImage { width, height, data }
+        })
+        .collect()
+}
+
+/// OpenCV's raw windows at scale 1 (`minNeighbors = 0`, min = max size = the window).
+fn opencv_windows(path: &Path, c: &Cascade, img: &GreyImage) -> BTreeSet<(u32, u32)> {
+    opencv::core::set_use_opencl(false).expect("opencl off");
+    let mut cc = opencv::objdetect::CascadeClassifier::new(path.to_str().expect("utf-8 path")).expect("loads");
+    assert!(!cc.empty().expect("empty"), "OpenCV could not read {path:?}");
+    let mat = Mat::new_rows_cols_with_data(img.height as i32, img.width as i32, &img.data).expect("mat");
+    let mut found = Vector::<Rect>::new();
+    let win = Size::new(c.width as i32, c.height as i32);
+    cc.detect_multi_scale(&mat, &mut found, 1.1, 0, 0, win, win)
+        .expect("detects");
+    found
+        .iter()
+        .map(|r| {
+            assert_eq!((r.width, r.height), (win.width, win.height));
+            (r.x as u32, r.y as u32)
+        })
+        .collect()
+}
+
+fn ours(c: &Cascade, img: &GreyImage) -> BTreeSet<(u32, u32)> {
+    let mut v = Vec::new();
+    scan_like_opencv(c, img, &mut v);
+    v.into_iter().collect()
+}
+
+/// Compares both on `images`, returning the total number of windows found.
+fn agree(path: &Path, c: &Cascade, images: &[GreyImage]) -> usize {
+    let mut total = 0;
+    for (k, img) in images.iter().enumerate() {
+        let (a, b) = (opencv_windows(path, c, img), ours(c, img));
+        assert_eq!(
+            a,
+            b,
+            "image {k}: OpenCV and ours differ ({} vs {} windows)",
+            a.len(),
+            b.len()
+        );
+        total += a.len();
+    }
+    total
+}
+
+#[test]
+fn debian_face_cascade_agrees_with_opencv_through_our_writer() {
+    let full = xml::load(Path::new(FACE)).expect("Debian's face cascade reads");
+    assert_eq!((full.width, full.height, full.stages.len()), (24, 24, 25));
+    let imgs = images(7, 4, 160, 120);
+    // The full cascade as Debian ships it.
+    agree(Path::new(FACE), &full, &imgs);
+    // Its first stages, written by our writer and read by OpenCV: many raw windows.
+    let tmp = tempfile::tempdir().expect("tmp");
+    for n in [1, 3] {
+        let cut = full.truncated(n);
+        let path = tmp.path().join(format!("face{n}.xml"));
+        xml::save(&cut, &path).expect("writes");
+        assert_eq!(xml::load(&path).expect("reads back"), cut);
+        let found = agree(&path, &cut, &imgs);
+        assert!(found > 50, "only {found} windows with {n} stages");
+    }
+}
+
+#[test]
+fn debian_cascades_read_or_are_refused_clearly() {
+    for entry in std::fs::read_dir("/usr/share/opencv4/haarcascades").expect("cascades") {
+        let path = entry.expect("entry").path();
+        match xml::load(&path) {
+            Ok(c) => assert!(!c.stages.is_empty()),
+            Err(e) => {
+                let msg = e.to_string();
+                assert!(msg.contains("does not support"), "{path:?}: {msg}");
+            }
+        }
+    }
+}
+
+#[test]
+fn paw_cascade_agrees_with_opencv() {
+    let c = xml::load(&paw_model()).expect("the committed paw model reads");
+    let imgs = images(11, 3, 200, 140);
+    // Its first stages accept many windows; the whole cascade few.
+    let tmp = tempfile::tempdir().expect("tmp");
+    let path = tmp.path().join("paws2.xml");
+    let cut = c.truncated(2.min(c.stages.len()));
+    xml::save(&cut, &path).expect("writes");
+    let found = agree(&path, &cut, &imgs);
+    assert!(found > 20, "only {found} windows");
+    agree(&paw_model(), &c, &imgs);
+    // And on a grey bottom view at the canonical scale.
+    let ds = mousepose::synth::dataset::DatasetSpec {
+        count: 1,
+        seed: 3,
+        noise: mousepose::synth::noise::DepthNoise::default(),
+        bottom_views: true,
+    };
+    let rig = mousepose::geometry::Rig::default_rig();
+    let library = mousepose::synth::mouse::pose_library();
+    let sample = mousepose::synth::dataset::render_sample(&rig, &ds, &library, 0);
+    let view = sample.bottom.expect("bottom view");
+    let mut greyer = mousepose::paws::grey::Greyer::default();
+    let (grey, _) = mousepose::paws::data::canonical_view(&view, &mut greyer).expect("grey");
+    agree(&path, &cut, std::slice::from_ref(&grey));
+    agree(&paw_model(), &c, std::slice::from_ref(&grey));
+}
+
+#[test]
+fn detector_is_clone_send_debug_and_finds_paws_in_a_full_frame() {
+    fn bounds<T: Clone + Send + std::fmt::Debug>() {}
+    bounds::<PawDetector>();
+    let mut det = PawDetector::load(&paw_model()).expect("loads");
+    let frame = mousepose::frame::ColorFrame {
+        stamp: mousepose::frame::Stamp::default(),
+        width: 64,
+        height: 48,
+        format: mousepose::frame::PixelFormat::BayerRg8,
+        data: vec![16; 64 * 48],
+    };
+    let mut out = vec![mousepose::paws::PawDetection {
+        x0: 0.0,
+        y0: 0.0,
+        x1: 1.0,
+        y1: 1.0,
+        score: 1.0,
+    }];
+    det.detect(&frame, (0, 0, 64, 48), 2.0, &mut out);
+    assert!(out.is_empty(), "a flat frame has no paws: {out:?}");
+    // Regions outside the frame, and nonsense scales, give nothing rather than a panic.
+    det.detect(&frame, (100, 100, 200, 200), 2.0, &mut out);
+    det.detect(&frame, (0, 0, 64, 48), 0.0, &mut out);
+    assert!(out.is_empty());
+}
+
+#[test]
+fn eval_paws_end_to_end_with_the_committed_model() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let data = tmp.path().join("data");
+    let o = mousepose()
+        .args([
+            "synth",
+            "dataset",
+            "--out",
+            data.to_str().unwrap(),
+            "--images",
+            "12",
+            "--seed",
+            "77",
+        ])
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report = tmp.path().join("report");
+    let o = mousepose()
+        .args([
+            "eval",
+            "paws",
+            "--model",
+            paw_model().to_str().unwrap(),
+            "--data",
+            data.to_str().unwrap(),
+        ])
+        .args(["--report", report.to_str().unwrap(), "--json"])
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    for key in ["precision", "recall", "f1", "mean_centre_error_px"] {
+        let x = v[key].as_f64().unwrap_or(-1.0);
+        assert!((0.0..=1000.0).contains(&x), "{key} = {x}");
+    }
+    assert!(v["contact_paws"].as_u64().unwrap_or(0) > 0);
+    for f in ["precision_recall.png", "precision_recall.csv", "summary.json"] {
+        assert!(report.join(f).is_file(), "{f} missing");
+    }
+}
+
+#[test]
+fn a_damaged_cascade_is_one_clear_sentence_and_a_non_zero_exit() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let text = std::fs::read_to_string(paw_model()).expect("model");
+    let bad = tmp.path().join("cut.xml");
+    std::fs::write(&bad, &text[..text.len() / 3]).expect("write");
+    let o = mousepose()
+        .args([
+            "eval",
+            "paws",
+            "--model",
+            bad.to_str().unwrap(),
+            "--data",
+            tmp.path().to_str().unwrap(),
+        ])
+        .output()
+        .expect("runs");
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("cut.xml") && err.contains("not well-formed XML"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    // A cascade of LBP features is refused by name.
+    let lbp = tmp.path().join("lbp.xml");
+    std::fs::write(&lbp, text.replace("<featureType>HAAR", "<featureType>LBP")).expect("write");
+    let e = PawDetector::load(&lbp).unwrap_err();
+    assert!(e.to_string().contains("LBP features"), "{e}");
+}
+
+#[test]
+fn train_paws_refuses_an_existing_output() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let out = tmp.path().join("paws.xml");
+    std::fs::write(&out, "keep").expect("write");
+    let o = mousepose()
+        .args([
+            "train",
+            "paws",
+            "--data",
+            tmp.path().to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .expect("runs");
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(std::fs::read_to_string(&out).expect("kept"), "keep");
+}
