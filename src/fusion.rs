@@ -246,7 +246,8 @@ impl Fuser {
             on_plane(&self.color, &Point2::new(x, y), sole).map(|position| Seen {
                 position,
                 direction: position - self.color.centre(),
-                score: f64::from(d.score),
+                // Detector scores grow without bound (grouped windows); joints' are in [0, 1).
+                score: f64::from(d.score.max(0.0)) / (1.0 + f64::from(d.score.max(0.0))),
             })
         }));
         self.seen.sort_by(|a, b| b.score.total_cmp(&a.score));
