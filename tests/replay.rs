@@ -64,7 +64,13 @@ fn the_fixture_session_replays_with_its_true_pairs_and_joints() {
     // The session's forced camera drop shows as a gap in each camera's sequence numbers.
     assert_eq!(s.cameras["depth"].lost_before_capture.get("camera_gap"), Some(&1));
     assert_eq!(s.per_joint_error_mm.len(), 24);
-    assert!(s.group_error_mm.contains_key("body") && s.group_error_mm.contains_key("limbs"));
+    // The bundled paw cascade finds the paws even in this small (4x binned) colour stream,
+    // and the limbs follow them.
+    assert!(s.paw_model.is_some());
+    let detected = s.group_error_mm["detected_paws"];
+    assert!(detected < 5.0, "detected paws {detected} mm off");
+    let limbs = s.group_error_mm["limbs"];
+    assert!(limbs < 10.0, "limbs {limbs} mm off");
     let mean = s.mean_error_mm.unwrap();
     assert!(mean < 6.0, "mean joint error {mean} mm");
     // poses.csv: the header, then one row per pair.
@@ -88,6 +94,97 @@ fn the_fixture_session_replays_with_its_true_pairs_and_joints() {
     }
     for stage in summary["stages"].as_array().unwrap() {
         assert!(stage["latency"]["p99_ms"].as_f64().is_some());
+    }
+}
+
+/// The `{joint}_source` values of a poses.csv, per joint name.
+fn sources(csv: &str) -> std::collections::HashMap<String, std::collections::BTreeSet<String>> {
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let mut out: std::collections::HashMap<String, std::collections::BTreeSet<String>> = Default::default();
+    for line in lines {
+        for (name, value) in header.iter().zip(line.split(',')) {
+            if let Some(joint) = name.strip_suffix("_source") {
+                out.entry(joint.to_owned()).or_default().insert(value.to_owned());
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn every_joint_says_where_it_came_from_and_overlays_are_drawn() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("o");
+    let o = mousepose()
+        .arg("replay")
+        .arg(fixture())
+        .arg("--out")
+        .arg(&out)
+        .args(["--overlays", "10"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let sources = sources(&std::fs::read_to_string(out.join("poses.csv")).unwrap());
+    let allowed = |joint: mousepose::skeleton::Joint| -> &[&str] {
+        match joint.number() {
+            1..=12 => &["depth", "missing"],
+            13..=20 => &["ik", "default", "missing"],
+            _ => &["paw", "default", "missing"],
+        }
+    };
+    for joint in mousepose::skeleton::Joint::ALL {
+        let seen = &sources[joint.name()];
+        assert!(
+            seen.iter().all(|s| allowed(joint).contains(&s.as_str())),
+            "{}: {seen:?}",
+            joint.name()
+        );
+    }
+    assert!(sources["left_hind_paw"].contains("paw"));
+    assert!(sources["left_knee"].contains("ik"));
+    // One picture per depth frame whose sequence number is a multiple of 10.
+    let reader = SessionReader::open(fixture()).unwrap();
+    let expected: Vec<String> = reader
+        .seqs(mousepose::session::CameraRole::Depth)
+        .iter()
+        .filter(|s| *s % 10 == 0)
+        .map(|s| format!("{s:06}.png"))
+        .collect();
+    let mut written: Vec<String> = std::fs::read_dir(out.join("overlays"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    written.sort();
+    assert_eq!(written, expected);
+    assert!(out.join("frame.png").is_file());
+}
+
+#[test]
+fn without_a_paw_cascade_the_limbs_take_their_default_configuration() {
+    let tmp = tempfile::tempdir().unwrap();
+    let models = tmp.path().join("models");
+    std::fs::create_dir(&models).unwrap();
+    std::fs::copy(
+        repo_root().join("fixtures/models/body.forest"),
+        models.join("body.forest"),
+    )
+    .unwrap();
+    let out = tmp.path().join("o");
+    let s = replay(&ReplayOptions {
+        models: Some(models),
+        ..options(&fixture(), &out, 2)
+    })
+    .unwrap();
+    assert!(s.paw_model.is_none());
+    assert!(!s.group_error_mm.contains_key("detected_paws"));
+    let sources = sources(&std::fs::read_to_string(out.join("poses.csv")).unwrap());
+    for joint in ["left_fore_paw", "right_hind_paw", "left_elbow", "right_ankle"] {
+        assert!(
+            sources[joint].iter().all(|s| s == "default" || s == "missing"),
+            "{joint}: {:?}",
+            sources[joint]
+        );
     }
 }
 
