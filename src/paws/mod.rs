@@ -18,9 +18,6 @@ pub struct PawDetection {
 impl PawDetection {
     /// The box's centre, in the colour frame's pixel coordinates.
     pub fn centre(&self) -> (f64, f64) {
-        (
-            f64::from(self.x0 + self.x1) / 2.0,
-            f64::from(self.y0 + self.y1) / 2.0,
-        )
+        (f64::from(self.x0 + self.x1) / 2.0, f64::from(self.y0 + self.y1) / 2.0)
     }
 }
