@@ -83,6 +83,10 @@ pub struct ExtrinsicsArgs {
     /// Write report.json, report.txt and the views with the board's axes into this directory.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
+    /// A known rig calibration (e.g. `truth.yaml` of `synth chessboard`): report each camera's
+    /// position and rotation error against it.
+    #[arg(long, value_name = "FILE")]
+    pub truth: Option<PathBuf>,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -280,6 +284,15 @@ struct ExtrinsicsJson<'a> {
     out: String,
     depth: &'a extrinsics::CameraReport,
     color: &'a extrinsics::CameraReport,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error_vs_truth: Option<std::collections::BTreeMap<&'static str, PoseError>>,
+}
+
+/// A camera's pose error against a known calibration.
+#[derive(Clone, Copy, Debug, Serialize)]
+struct PoseError {
+    position_mm: f64,
+    rotation_deg: f64,
 }
 
 fn extrinsics_command(args: &ExtrinsicsArgs) -> Result<()> {
@@ -320,10 +333,40 @@ fn extrinsics_command(args: &ExtrinsicsArgs) -> Result<()> {
             r.reprojection_max_px
         );
     }
+    let error_vs_truth = match &args.truth {
+        Some(path) => {
+            let truth = super::RigCalibration::load(path)?;
+            let mut errors = std::collections::BTreeMap::new();
+            for (name, role) in [
+                ("depth", crate::session::CameraRole::Depth),
+                ("color", crate::session::CameraRole::Color),
+            ] {
+                let (position_mm, rotation_deg) = extrinsics::pose_difference(
+                    &result.calibration.camera(role).world_from_camera,
+                    &truth.camera(role).world_from_camera,
+                );
+                let _ = writeln!(
+                    table,
+                    "{name:<6} vs {}: {position_mm:.3} mm, {rotation_deg:.4} deg",
+                    path.display()
+                );
+                errors.insert(
+                    name,
+                    PoseError {
+                        position_mm,
+                        rotation_deg,
+                    },
+                );
+            }
+            Some(errors)
+        }
+        None => None,
+    };
     let json = ExtrinsicsJson {
         out: args.out.display().to_string(),
         depth: &result.depth,
         color: &result.color,
+        error_vs_truth,
     };
     if let Some(staging) = staging {
         let dir = staging.path();
