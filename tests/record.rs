@@ -135,7 +135,9 @@ fn dummy_calibration(dir: &Path, depth_size: (u32, u32)) -> std::path::PathBuf {
     rig.depth.intrinsics.width = depth_size.0;
     rig.depth.intrinsics.height = depth_size.1;
     let path = dir.join("rig.yaml");
-    mousepose::calibrate::RigCalibration::from_rig(&rig).save(&path).unwrap();
+    mousepose::calibrate::RigCalibration::from_rig(&rig)
+        .save(&path)
+        .unwrap();
     path
 }
 
