@@ -378,6 +378,8 @@ fn exit_code(e: &anyhow::Error) -> u8 {
         ) || c.is::<crate::commands::Exists>()
             || c.is::<crate::config::ConfigError>()
             || c.is::<crate::calibrate::command::UsageError>()
+            || c.downcast_ref::<crate::calibrate::CalibrationError>()
+                .is_some_and(crate::calibrate::CalibrationError::is_input_problem)
             || matches!(
                 c.downcast_ref::<crate::record::RecordError>(),
                 Some(crate::record::RecordError::NotEmpty(_) | crate::record::RecordError::Calibration(_))

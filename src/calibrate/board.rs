@@ -37,7 +37,7 @@ pub enum BoardError {
     OpenCv {
         image: PathBuf,
         #[source]
-        source: opencv::Error,
+        source: super::CvError,
     },
 }
 
@@ -151,9 +151,9 @@ impl Board {
     /// # Errors
     /// OpenCV fails (not: no board found).
     pub fn find_corners(&self, grey: &Mat, image: &Path) -> Result<Option<Vec<Point2<f64>>>, BoardError> {
-        let cv = |source| BoardError::OpenCv {
+        let cv = |source: opencv::Error| BoardError::OpenCv {
             image: image.to_owned(),
-            source,
+            source: source.into(),
         };
         let mut corners: Vector<Point2f> = Vector::new();
         let flags =

@@ -2,7 +2,7 @@
 //! and the commands themselves, kept here so the top-level CLI only delegates.
 
 use super::extrinsics::{self, ExtrinsicsView};
-use super::{Board, CalibrationError, calibrate_intrinsics, load_intrinsics};
+use super::{Board, calibrate_intrinsics, load_intrinsics};
 use crate::output::Staging;
 use crate::synth::chessboard::{ChessboardSpec, write_chessboards};
 use anyhow::{Context, Result};
@@ -224,7 +224,7 @@ fn intrinsics(args: &IntrinsicsArgs) -> Result<()> {
     }
     let pattern = args.images.as_deref().unwrap_or_default();
     let images = expand_glob(pattern)?;
-    let result = calibrate_intrinsics(&images, &board).map_err(usage_if_input)?;
+    let result = calibrate_intrinsics(&images, &board)?;
     result.save(&args.out)?;
     let i = &result.intrinsics;
     if args.json {
@@ -269,16 +269,6 @@ fn intrinsics(args: &IntrinsicsArgs) -> Result<()> {
     print(&t)
 }
 
-/// Input problems (boards not found, too few views, mismatched sizes) exit with code 1.
-fn usage_if_input(e: CalibrationError) -> anyhow::Error {
-    match e {
-        CalibrationError::Intrinsics(_) | CalibrationError::Board(_) | CalibrationError::Extrinsics(_) => {
-            UsageError(e.to_string()).into()
-        }
-        other => other.into(),
-    }
-}
-
 #[derive(Serialize)]
 struct ExtrinsicsJson<'a> {
     out: String,
@@ -306,7 +296,7 @@ fn extrinsics_command(args: &ExtrinsicsArgs) -> Result<()> {
         .transpose()?;
     let view = |file: &Path, image: &Path, serial: &Option<String>| -> Result<ExtrinsicsView> {
         Ok(ExtrinsicsView {
-            intrinsics: load_intrinsics(file).map_err(usage_if_input)?,
+            intrinsics: load_intrinsics(file)?,
             intrinsics_file: file.to_owned(),
             image: image.to_owned(),
             serial: serial.clone(),
@@ -314,7 +304,7 @@ fn extrinsics_command(args: &ExtrinsicsArgs) -> Result<()> {
     };
     let depth = view(&args.depth_intrinsics, &args.depth_image, &args.depth_serial)?;
     let color = view(&args.color_intrinsics, &args.color_image, &args.color_serial)?;
-    let result = extrinsics::calibrate_extrinsics(&depth, &color, &board).map_err(usage_if_input)?;
+    let result = extrinsics::calibrate_extrinsics(&depth, &color, &board)?;
     result.calibration.save(&args.out)?;
     let mut table = String::new();
     let _ = writeln!(

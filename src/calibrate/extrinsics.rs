@@ -56,7 +56,7 @@ pub struct CameraPose {
 fn cv_err(what: &str) -> impl FnOnce(opencv::Error) -> CalibrationError + '_ {
     move |source| CalibrationError::Solve {
         what: what.to_owned(),
-        source,
+        source: source.into(),
     }
 }
 
@@ -95,7 +95,7 @@ pub fn solve_pose(
                 object.len(),
                 image.len()
             ),
-            source: opencv::Error::new(core::StsBadArg, "need at least 4 matching points"),
+            source: opencv::Error::new(core::StsBadArg, "need at least 4 matching points").into(),
         });
     }
     let obj: Vector<Point3f> = object

@@ -88,7 +88,7 @@ fn at(m: &impl MatTraitConst, r: i32, c: i32) -> Result<f64, CalibrationError> {
 fn solve_err(what: &str) -> impl FnOnce(opencv::Error) -> CalibrationError + '_ {
     move |source| CalibrationError::Solve {
         what: what.to_owned(),
-        source,
+        source: source.into(),
     }
 }
 

@@ -47,7 +47,7 @@ pub enum CalibrationError {
         path: PathBuf,
         action: &'static str,
         #[source]
-        source: opencv::Error,
+        source: CvError,
     },
     #[error("calibration file {path:?} has no {node:?} node")]
     MissingNode { path: PathBuf, node: String },
@@ -108,8 +108,42 @@ pub enum CalibrationError {
     Solve {
         what: String,
         #[source]
-        source: opencv::Error,
+        source: CvError,
     },
+}
+
+impl CalibrationError {
+    /// True when the input is at fault (a file that is not a calibration, a board not found,
+    /// too few views, sizes that do not match), false when the work itself failed (I/O, OpenCV,
+    /// a device): the command line's exit codes 1 and 2.
+    pub fn is_input_problem(&self) -> bool {
+        match self {
+            Self::Io { .. } | Self::Solve { .. } | Self::OpenNi(_) => false,
+            Self::OpenCv { action, .. } => *action == "parse",
+            Self::Board(BoardError::OpenCv { .. }) => false,
+            _ => true,
+        }
+    }
+}
+
+/// An OpenCV error shown on one line (OpenCV's own messages hold newlines); the original is
+/// kept whole in the field.
+#[derive(Debug)]
+pub struct CvError(pub opencv::Error);
+
+impl std::fmt::Display for CvError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let message = self.0.message.split_whitespace().collect::<Vec<_>>().join(" ");
+        write!(f, "{message}")
+    }
+}
+
+impl std::error::Error for CvError {}
+
+impl From<opencv::Error> for CvError {
+    fn from(e: opencv::Error) -> Self {
+        Self(e)
+    }
 }
 
 /// One camera of a rig calibration.

@@ -96,7 +96,7 @@ fn cv(path: &Path, action: &'static str, source: opencv::Error) -> CalibrationEr
     CalibrationError::OpenCv {
         path: path.to_owned(),
         action,
-        source,
+        source: source.into(),
     }
 }
 
