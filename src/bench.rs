@@ -490,6 +490,7 @@ fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Erro
         realtime,
         workers: 0,
         overlays: None,
+        calibration: None,
         force: true,
     };
     let fast = replay(&options("fast", false))?;

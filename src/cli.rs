@@ -45,6 +45,9 @@ enum Command {
     Record(RecordArgs),
     /// List the cameras each backend sees (GigE cameras only at configured addresses).
     Devices(DevicesArgs),
+    /// Calibrate the cameras: intrinsics of each, then the rig against a board on the glass.
+    #[command(subcommand)]
+    Calibrate(crate::calibrate::command::CalibrateCommand),
 }
 
 #[derive(Debug, Args)]
@@ -97,6 +100,9 @@ pub struct ReplayArgs {
     /// view) into DIR/overlays/.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub overlays: Option<u64>,
+    /// A rig calibration (from `calibrate extrinsics`) to use instead of the session's own.
+    #[arg(long, value_name = "FILE")]
+    pub calibration: Option<PathBuf>,
     /// Print the summary as one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -217,6 +223,8 @@ enum SynthCommand {
     Dataset(DatasetArgs),
     /// A continuous behaviour sequence written as a recorded session.
     Session(SessionArgs),
+    /// Rendered chessboard views of both cameras, for testing calibration end to end.
+    Chessboard(crate::calibrate::command::ChessboardArgs),
 }
 
 #[derive(Debug, Args)]
@@ -383,9 +391,12 @@ fn exit_code(e: &anyhow::Error) -> u8 {
             Some(crate::output::OutputError::NotEmpty(_) | crate::output::OutputError::NotADirectory(_))
         ) || c.is::<crate::commands::Exists>()
             || c.is::<crate::config::ConfigError>()
+            || c.is::<crate::calibrate::command::UsageError>()
+            || c.downcast_ref::<crate::calibrate::CalibrationError>()
+                .is_some_and(crate::calibrate::CalibrationError::is_input_problem)
             || matches!(
                 c.downcast_ref::<crate::record::RecordError>(),
-                Some(crate::record::RecordError::NotEmpty(_))
+                Some(crate::record::RecordError::NotEmpty(_) | crate::record::RecordError::Calibration(_))
             )
     });
     if usage { 1 } else { 2 }
@@ -402,6 +413,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Replay(args) => crate::commands::replay(&args),
         Command::Record(args) => crate::commands::record(&args),
         Command::Devices(args) => crate::commands::devices(&args),
+        Command::Calibrate(command) => crate::calibrate::command::run(&command),
+        Command::Synth(SynthCommand::Chessboard(args)) => crate::calibrate::command::synth_chessboard(&args),
     }
 }
 

@@ -546,6 +546,7 @@ pub fn replay(args: &crate::cli::ReplayArgs) -> Result<()> {
         realtime: args.realtime,
         workers: args.workers as usize,
         overlays: args.overlays,
+        calibration: args.calibration.clone(),
         force: args.force,
     };
     let summary = replay(&options).with_context(|| format!("replaying {:?}", args.session))?;

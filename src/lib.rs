@@ -2,6 +2,7 @@
 //! camera under its glass floor. See `docs/ARCHITECTURE.md` for how the parts fit.
 
 pub mod bench;
+pub mod calibrate;
 pub mod capture;
 pub mod chart;
 pub mod cli;

@@ -11,6 +11,7 @@
 //! system as it is written, so a recorder killed at any moment leaves a session that reads up
 //! to its last complete frame (without the `session_ended` event that marks it complete).
 
+use crate::calibrate::RigCalibration;
 use crate::capture::aravis::{AravisColor, AravisConfig, Trigger};
 use crate::capture::openni::{OpenNiConfig, OpenNiDepth};
 use crate::capture::v4l2::{V4l2Color, V4l2Config};
@@ -49,6 +50,8 @@ pub enum RecordError {
     Threads(#[source] std::io::Error),
     #[error("recording stopped")]
     Pipeline(#[from] PipelineError),
+    #[error("cannot use the rig's calibration")]
+    Calibration(#[from] crate::calibrate::CalibrationError),
 }
 
 /// The colour camera of a rig, whichever its driver.
@@ -233,6 +236,7 @@ pub fn record(
     force: bool,
     stop: &Shutdown,
 ) -> Result<RecordSummary, RecordError> {
+    let calibration = load_calibration(config)?;
     prepare_output(out, force)?;
     let mut depth = open_depth(&config.depth);
     let color = config
@@ -254,6 +258,11 @@ pub fn record(
     cameras.extend(color.as_ref().map(FrameSource::meta));
     let mut meta = SessionMeta::new(now_utc(), SessionSource::Recorded, cameras);
     meta.notes = format!("recorded with rig config {:?}", config.path);
+    if let Some(calibration) = &calibration {
+        // The modes and serials the cameras actually opened with.
+        calibration.check_matches(&meta)?;
+        meta.rig = Some(calibration.rig());
+    }
     let mut writer = SessionWriter::create(out, &meta)?;
     let host_ns = clock.now_ns();
     writer.log_event(&SessionEvent::SessionStarted { host_ns })?;
@@ -414,6 +423,27 @@ fn write_frames(
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     }
     Ok(())
+}
+
+/// The rig config's calibration file, loaded and checked against the configured camera sizes
+/// (before any camera opens); `None` when the config names none.
+fn load_calibration(config: &Config) -> Result<Option<RigCalibration>, RecordError> {
+    let Some(path) = &config.calibration else {
+        return Ok(None);
+    };
+    let calibration = RigCalibration::load(path)?;
+    let target = format!("rig config {:?}", config.path);
+    let DepthCamera::Openni2 { width, height, .. } = &config.depth;
+    calibration.check_camera(CameraRole::Depth, *width, *height, None, &target)?;
+    let color_size = match &config.color {
+        Some(ColorCamera::V4l2 { width, height, .. }) => Some((*width, *height)),
+        Some(ColorCamera::Aravis { region, .. }) => region.map(|(_, _, w, h)| (w, h)),
+        None => None,
+    };
+    if let Some((width, height)) = color_size {
+        calibration.check_camera(CameraRole::Color, width, height, None, &target)?;
+    }
+    Ok(Some(calibration))
 }
 
 fn prepare_output(out: &Path, force: bool) -> Result<(), RecordError> {

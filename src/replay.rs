@@ -61,6 +61,8 @@ pub struct ReplayOptions {
     pub workers: usize,
     /// Draw every n-th frame (by depth sequence number) into `overlays/`.
     pub overlays: Option<u64>,
+    /// A rig calibration to use instead of the one the session carries.
+    pub calibration: Option<PathBuf>,
     pub force: bool,
 }
 
@@ -81,6 +83,8 @@ pub enum ReplayError {
     },
     #[error("cannot load the paw cascade")]
     PawModel(#[source] crate::paws::PawError),
+    #[error(transparent)]
+    Calibration(#[from] crate::calibrate::CalibrationError),
     #[error("cannot read the MoSeq recording")]
     Moseq(#[source] crate::capture::CaptureError),
     #[error("cannot model the empty cage from the session's depth frames")]
@@ -496,6 +500,19 @@ impl Input {
         }
     }
 
+    /// The rig of a calibration file, refused when it was made for other cameras than the
+    /// input's (their image sizes, and serials when both are known).
+    fn calibrated_rig(&self, path: &Path) -> Result<Rig, ReplayError> {
+        let calibration = crate::calibrate::RigCalibration::load(path)?;
+        match self {
+            Input::Session(r) => calibration.check_matches(r.meta())?,
+            &Input::Moseq { size: (w, h), .. } => {
+                calibration.check_camera(CameraRole::Depth, w, h, None, "the MoSeq recording")?;
+            }
+        }
+        Ok(calibration.rig())
+    }
+
     fn depth_count(&self) -> usize {
         match self {
             Input::Session(r) => r.depth_count(),
@@ -574,7 +591,10 @@ fn replay_input(options: &ReplayOptions, input: &Input) -> Result<ReplaySummary,
     };
     let estimator = load_body(&models)?;
     let paws = load_paws(&models)?;
-    let rig = input.rig();
+    let rig = match &options.calibration {
+        Some(path) => input.calibrated_rig(path)?,
+        None => input.rig(),
+    };
     let background = background(input, &rig)?;
     let segmenter = SegmenterConfig::default()
         .build(background)

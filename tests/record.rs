@@ -128,3 +128,41 @@ fn devices_lists_every_backend_as_json() {
         .collect();
     assert_eq!(names, ["openni2", "aravis", "v4l2"]);
 }
+
+/// A rig calibration for the Dummy depth camera (320x240) and no particular colour camera.
+fn dummy_calibration(dir: &Path, depth_size: (u32, u32)) -> std::path::PathBuf {
+    let mut rig = mousepose::geometry::Rig::default_rig();
+    rig.depth.intrinsics.width = depth_size.0;
+    rig.depth.intrinsics.height = depth_size.1;
+    let path = dir.join("rig.yaml");
+    mousepose::calibrate::RigCalibration::from_rig(&rig)
+        .save(&path)
+        .unwrap();
+    path
+}
+
+#[test]
+fn record_stores_the_configured_calibration_and_refuses_another_rigs() {
+    let _openni = crate::capture_openni::serial();
+    let tmp = tempfile::tempdir().unwrap();
+    let good = dummy_calibration(tmp.path(), (320, 240));
+    let text = format!("{DUMMY_DEPTH}[calibration]\nfile = {:?}\n", good.to_str().unwrap());
+    let out = tmp.path().join("session");
+    record(&config(&text), &out, Some(0.3), false, &Shutdown::default()).unwrap();
+    let r = SessionReader::open(&out).unwrap();
+    let rig = r.meta().rig.expect("the calibration is stored");
+    assert_eq!((rig.depth.intrinsics.width, rig.depth.intrinsics.height), (320, 240));
+
+    let other = tmp.path().join("other");
+    std::fs::create_dir(&other).unwrap();
+    let bad = dummy_calibration(&other, (640, 480));
+    let text = format!("{DUMMY_DEPTH}[calibration]\nfile = {:?}\n", bad.to_str().unwrap());
+    let out = tmp.path().join("refused");
+    let error = record(&config(&text), &out, Some(0.3), false, &Shutdown::default()).unwrap_err();
+    let message = format!("{:#}", anyhow::Error::from(error));
+    assert!(
+        message.contains("640x480 depth camera") && message.contains("320x240") && message.contains("rig.toml"),
+        "{message}"
+    );
+    assert!(!out.join("session.toml").exists());
+}

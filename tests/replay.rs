@@ -21,6 +21,7 @@ fn options(session: &Path, out: &Path, workers: usize) -> ReplayOptions {
         realtime: false,
         workers,
         overlays: None,
+        calibration: None,
         force: false,
     }
 }
@@ -186,6 +187,49 @@ fn without_a_paw_cascade_the_limbs_take_their_default_configuration() {
             sources[joint]
         );
     }
+}
+
+#[test]
+fn a_calibration_file_replaces_the_sessions_and_must_be_of_its_rig() {
+    use mousepose::calibrate::RigCalibration;
+    let tmp = tempfile::tempdir().unwrap();
+    let reader = SessionReader::open(fixture()).unwrap();
+    // The session's own rig, from a file: the same poses as without it.
+    let same = tmp.path().join("same.yaml");
+    RigCalibration::from_rig(&reader.meta().rig.unwrap())
+        .save(&same)
+        .unwrap();
+    let with = replay(&ReplayOptions {
+        calibration: Some(same),
+        ..options(&fixture(), &tmp.path().join("a"), 2)
+    })
+    .unwrap();
+    replay(&options(&fixture(), &tmp.path().join("b"), 2)).unwrap();
+    assert_eq!(
+        std::fs::read(tmp.path().join("a/poses.csv")).unwrap(),
+        std::fs::read(tmp.path().join("b/poses.csv")).unwrap()
+    );
+    assert!(with.mean_error_mm.is_some());
+    // A calibration of the full-size colour camera does not fit the session's binned one.
+    let other = tmp.path().join("other.yaml");
+    RigCalibration::from_rig(&mousepose::geometry::Rig::default_rig())
+        .save(&other)
+        .unwrap();
+    let out = tmp.path().join("c");
+    let o = mousepose()
+        .arg("replay")
+        .arg(fixture())
+        .arg("--out")
+        .arg(&out)
+        .arg("--calibration")
+        .arg(&other)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("other.yaml") && err.contains("1280"), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(!out.exists());
 }
 
 #[test]

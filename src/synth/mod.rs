@@ -7,6 +7,7 @@
 
 pub mod animate;
 pub mod body;
+pub mod chessboard;
 pub mod dataset;
 pub mod mouse;
 pub mod noise;

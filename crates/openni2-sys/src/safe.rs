@@ -915,6 +915,34 @@ impl DepthStream {
         (status == ffi::ONI_STATUS_OK).then_some(cropping)
     }
 
+    /// The stream's horizontal and vertical fields of view, radians
+    /// (`ONI_STREAM_PROPERTY_HORIZONTAL_FOV`, `ONI_STREAM_PROPERTY_VERTICAL_FOV`).
+    ///
+    /// # Errors
+    /// The driver does not report them.
+    pub fn field_of_view(&self) -> Result<(f32, f32), Error> {
+        let raw = lock(&self.shared.raw);
+        let get = |property: u32, what: &'static str| -> Result<f32, Error> {
+            let mut value: f32 = 0.0;
+            let mut size = size_of::<f32>() as c_int;
+            // SAFETY: the stream is alive; `value` is writable for `size` bytes, the float
+            // OpenNI2 writes for these properties.
+            check(what, unsafe {
+                ffi::oniStreamGetProperty(raw.handle, property as c_int, (&raw mut value).cast(), &mut size)
+            })?;
+            Ok(value)
+        };
+        let h = get(
+            ffi::ONI_STREAM_PROPERTY_HORIZONTAL_FOV,
+            "oniStreamGetProperty(HORIZONTAL_FOV)",
+        )?;
+        let v = get(
+            ffi::ONI_STREAM_PROPERTY_VERTICAL_FOV,
+            "oniStreamGetProperty(VERTICAL_FOV)",
+        )?;
+        Ok((h, v))
+    }
+
     /// The number of frames of a played-back stream (`ONI_STREAM_PROPERTY_NUMBER_OF_FRAMES`).
     ///
     /// # Errors
