@@ -131,13 +131,13 @@ fn debian_cascades_read_or_are_refused_clearly() {
 fn paw_cascade_agrees_with_opencv() {
     let c = xml::load(&paw_model()).expect("the committed paw model reads");
     let imgs = images(11, 3, 200, 140);
-    // Its first stages accept many windows; the whole cascade few.
+    // Its first stage accepts many windows; the whole cascade few.
     let tmp = tempfile::tempdir().expect("tmp");
-    let path = tmp.path().join("paws2.xml");
-    let cut = c.truncated(2.min(c.stages.len()));
+    let path = tmp.path().join("paws1.xml");
+    let cut = c.truncated(1);
     xml::save(&cut, &path).expect("writes");
     let found = agree(&path, &cut, &imgs);
-    assert!(found > 20, "only {found} windows");
+    assert!(found > 10, "only {found} windows");
     agree(&paw_model(), &c, &imgs);
     // And on a grey bottom view at the canonical scale.
     let ds = mousepose::synth::dataset::DatasetSpec {

@@ -202,7 +202,7 @@ pub fn boost_stage(
             .copied()
             .unwrap_or(0.0);
         out.threshold = f32_at_or_below(at);
-        let t = f64::from(out.threshold);
+        let t = super::cascade::applied_threshold(out.threshold);
         out.hit_rate = sums[..positives].iter().filter(|&&s| s >= t).count() as f64 / positives.max(1) as f64;
         out.false_alarm = sums[positives..].iter().filter(|&&s| s >= t).count() as f64 / negatives.max(1) as f64;
         if out.false_alarm <= max_false_alarm {
