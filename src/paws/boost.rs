@@ -215,7 +215,15 @@ pub fn boost_stage(
 /// The largest single-precision value not above `v`.
 pub fn f32_at_or_below(v: f64) -> f32 {
     let f = v as f32;
-    if f64::from(f) <= v { f } else { f.next_down() }
+    if f64::from(f) <= v || f.is_nan() {
+        f
+    } else if f > 0.0 {
+        f32::from_bits(f.to_bits() - 1)
+    } else if f < 0.0 {
+        f32::from_bits(f.to_bits() + 1)
+    } else {
+        -f32::from_bits(1)
+    }
 }
 
 #[cfg(test)]
@@ -281,5 +289,10 @@ mod tests {
         let v = 0.1f64;
         assert!(f64::from(f32_at_or_below(v)) <= v);
         assert_eq!(f32_at_or_below(0.5), 0.5);
+        for v in [-0.1f64, 1e-50, -1e-50, 3.3] {
+            let f = f32_at_or_below(v);
+            assert!(f64::from(f) <= v);
+            assert!(f64::from(f32::from_bits(if f > 0.0 { f.to_bits() + 1 } else { f.to_bits() - 1 })) > v || f == 0.0);
+        }
     }
 }
