@@ -291,8 +291,16 @@ mod tests {
         assert_eq!(f32_at_or_below(0.5), 0.5);
         for v in [-0.1f64, 1e-50, -1e-50, 3.3] {
             let f = f32_at_or_below(v);
-            assert!(f64::from(f) <= v);
-            assert!(f64::from(f32::from_bits(if f > 0.0 { f.to_bits() + 1 } else { f.to_bits() - 1 })) > v || f == 0.0);
+            assert!(f64::from(f) <= v, "{v}: {f}");
+            // Tight: the next single-precision value up is above `v`.
+            let up = if f > 0.0 {
+                f32::from_bits(f.to_bits() + 1)
+            } else if f < 0.0 {
+                f32::from_bits(f.to_bits() - 1)
+            } else {
+                f32::from_bits(1)
+            };
+            assert!(f64::from(up) > v, "{v}: {f}");
         }
     }
 }
