@@ -210,6 +210,10 @@ struct Group {
 }
 
 /// Finds paws in bottom colour frames. Cheap to clone: one per worker thread.
+///
+/// It converts the region to grey at 1 px/mm, runs the 12x12 window at every pixel (step 1)
+/// of that image and of its resamplings for objects 0.8x and 1.25x the window, and groups the
+/// raw windows. Single-threaded; after the first frames of a size it does not allocate.
 #[derive(Clone, Debug)]
 pub struct PawDetector {
     cascade: Cascade,
