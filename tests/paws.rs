@@ -131,13 +131,13 @@ fn debian_cascades_read_or_are_refused_clearly() {
 fn paw_cascade_agrees_with_opencv() {
     let c = xml::load(&paw_model()).expect("the committed paw model reads");
     let imgs = images(11, 3, 200, 140);
-    // Its first stages accept many windows; the whole cascade few.
+    // Its first stage accepts many windows; the whole cascade few.
     let tmp = tempfile::tempdir().expect("tmp");
-    let path = tmp.path().join("paws2.xml");
-    let cut = c.truncated(2.min(c.stages.len()));
+    let path = tmp.path().join("paws1.xml");
+    let cut = c.truncated(1);
     xml::save(&cut, &path).expect("writes");
     let found = agree(&path, &cut, &imgs);
-    assert!(found > 20, "only {found} windows");
+    assert!(found > 10, "only {found} windows");
     agree(&paw_model(), &c, &imgs);
     // And on a grey bottom view at the canonical scale.
     let ds = mousepose::synth::dataset::DatasetSpec {
@@ -273,4 +273,59 @@ fn train_paws_refuses_an_existing_output() {
         .expect("runs");
     assert_eq!(o.status.code(), Some(1));
     assert_eq!(std::fs::read_to_string(&out).expect("kept"), "keep");
+}
+
+/// The pipeline's use: a full 1280x1024 BayerRG8 frame, a region around the mouse, boxes
+/// back in the frame's pixels, on the paws that touch the glass.
+#[test]
+fn detections_land_on_paws_in_full_frames() {
+    use mousepose::frame::{ColorFrame, PixelFormat, Stamp};
+    use mousepose::synth::{body::skin, item_rng, mouse, random_placement, views::render_bottom_frame};
+    let rig = mousepose::geometry::Rig::default_rig();
+    let camera = &rig.color;
+    let library = mouse::pose_library();
+    let mut det = PawDetector::load(&paw_model()).expect("loads");
+    let mut out = Vec::new();
+    let (mut paws, mut found, mut false_hits) = (0, 0, 0);
+    for k in 0..6u64 {
+        let mut rng = item_rng(41, 3, k);
+        let pose = library[(k as usize * 97) % library.len()];
+        let mut m = mouse::pose_mouse(&pose, &random_placement(&mut rng));
+        mouse::fit_in_cage(&mut m, 3.0);
+        let (data, boxes) = render_bottom_frame(camera, &m, &skin(&m), PixelFormat::BayerRg8, &mut rng);
+        let (w, h) = (camera.intrinsics.width, camera.intrinsics.height);
+        let frame = ColorFrame {
+            stamp: Stamp::default(),
+            width: w,
+            height: h,
+            format: PixelFormat::BayerRg8,
+            data,
+        };
+        // A generous region around the paws (the pipeline uses the mouse's footprint).
+        let x0 = boxes.iter().map(|b| b.x0).fold(f32::INFINITY, f32::min) - 60.0;
+        let y0 = boxes.iter().map(|b| b.y0).fold(f32::INFINITY, f32::min) - 60.0;
+        let x1 = boxes.iter().map(|b| b.x1).fold(0.0, f32::max) + 60.0;
+        let y1 = boxes.iter().map(|b| b.y1).fold(0.0, f32::max) + 60.0;
+        let roi = (
+            x0.max(0.0) as u32,
+            y0.max(0.0) as u32,
+            (x1 as u32).min(w),
+            (y1 as u32).min(h),
+        );
+        det.detect(&frame, roi, 2.0, &mut out);
+        let near = |d: &mousepose::paws::PawDetection, b: &mousepose::synth::views::PawBox| {
+            let (cx, cy) = d.centre();
+            let (px, py) = (f64::from(b.x0 + b.x1) / 2.0, f64::from(b.y0 + b.y1) / 2.0);
+            (cx - px).hypot(cy - py) <= f64::from((b.x1 - b.x0).max(b.y1 - b.y0)) / 2.0
+        };
+        for b in boxes.iter().filter(|b| b.contact && b.visible) {
+            paws += 1;
+            found += usize::from(out.iter().any(|d| near(d, b)));
+        }
+        false_hits += out.iter().filter(|d| !boxes.iter().any(|b| near(d, b))).count();
+        assert!(out.iter().all(|d| d.score >= 2.0 && d.x1 > d.x0 && d.y1 > d.y0));
+    }
+    assert!(paws > 5, "only {paws} paws on the glass");
+    assert!(found * 10 >= paws * 8, "found {found} of {paws} paws on the glass");
+    assert!(false_hits <= 3, "{false_hits} detections away from every paw");
 }

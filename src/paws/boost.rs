@@ -202,7 +202,7 @@ pub fn boost_stage(
             .copied()
             .unwrap_or(0.0);
         out.threshold = f32_at_or_below(at);
-        let t = f64::from(out.threshold);
+        let t = super::cascade::applied_threshold(out.threshold);
         out.hit_rate = sums[..positives].iter().filter(|&&s| s >= t).count() as f64 / positives.max(1) as f64;
         out.false_alarm = sums[positives..].iter().filter(|&&s| s >= t).count() as f64 / negatives.max(1) as f64;
         if out.false_alarm <= max_false_alarm {
@@ -215,7 +215,15 @@ pub fn boost_stage(
 /// The largest single-precision value not above `v`.
 pub fn f32_at_or_below(v: f64) -> f32 {
     let f = v as f32;
-    if f64::from(f) <= v { f } else { f.next_down() }
+    if f64::from(f) <= v || f.is_nan() {
+        f
+    } else if f > 0.0 {
+        f32::from_bits(f.to_bits() - 1)
+    } else if f < 0.0 {
+        f32::from_bits(f.to_bits() + 1)
+    } else {
+        -f32::from_bits(1)
+    }
 }
 
 #[cfg(test)]
@@ -281,5 +289,18 @@ mod tests {
         let v = 0.1f64;
         assert!(f64::from(f32_at_or_below(v)) <= v);
         assert_eq!(f32_at_or_below(0.5), 0.5);
+        for v in [-0.1f64, 1e-50, -1e-50, 3.3] {
+            let f = f32_at_or_below(v);
+            assert!(f64::from(f) <= v, "{v}: {f}");
+            // Tight: the next single-precision value up is above `v`.
+            let up = if f > 0.0 {
+                f32::from_bits(f.to_bits() + 1)
+            } else if f < 0.0 {
+                f32::from_bits(f.to_bits() - 1)
+            } else {
+                f32::from_bits(1)
+            };
+            assert!(f64::from(up) > v, "{v}: {f}");
+        }
     }
 }

@@ -36,11 +36,27 @@ impl WeakTree {
     }
 }
 
-/// One stage: the window passes when the sum of its weak trees' leaves reaches `threshold`.
+/// OpenCV lowers every stage threshold it reads by this much (in single precision).
+pub const STAGE_EPS: f32 = 1e-5;
+
+/// One stage: the window passes when the sum of its weak trees' leaves reaches `threshold`
+/// (as stored in the file) less [`STAGE_EPS`], as OpenCV applies it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Stage {
     pub threshold: f32,
     pub weak: Vec<WeakTree>,
+}
+
+impl Stage {
+    /// The threshold a window's sum is compared with, in double precision.
+    pub fn applied_threshold(&self) -> f64 {
+        applied_threshold(self.threshold)
+    }
+}
+
+/// The threshold OpenCV applies for a stored stage threshold.
+pub fn applied_threshold(stored: f32) -> f64 {
+    f64::from(stored - STAGE_EPS)
 }
 
 /// What the cascade was trained with, written to and read from the XML's `stageParams` and
@@ -142,10 +158,11 @@ impl Cascade {
             for tree in &stage.weak {
                 sum += f64::from(tree_value(tree, &self.features, ii, x, y, factor));
             }
-            if sum < f64::from(stage.threshold) {
+            let threshold = stage.applied_threshold();
+            if sum < threshold {
                 return Verdict::Rejected { stage: k };
             }
-            margin = sum - f64::from(stage.threshold);
+            margin = sum - threshold;
         }
         Verdict::Accepted { margin }
     }

@@ -104,18 +104,19 @@ pub struct CutParams {
     pub seed: u64,
 }
 
-/// Samples the `width x height` window centred on `(cx, cy)` of `img`, rotated by `angle`
-/// and scaled by `scale` (window pixels per image pixel inverse), bilinearly, into `out`.
-pub fn warp_window(
-    img: &GreyImage,
-    cx: f64,
-    cy: f64,
-    angle: f64,
-    scale: f64,
-    width: usize,
-    height: usize,
-    out: &mut Vec<f32>,
-) {
+/// Where a window is cut: centred on `(cx, cy)` of the image, turned by `angle` radians,
+/// `scale` image pixels per window pixel.
+#[derive(Clone, Copy, Debug)]
+pub struct Warp {
+    pub cx: f64,
+    pub cy: f64,
+    pub angle: f64,
+    pub scale: f64,
+}
+
+/// Samples the `width x height` window `warp` of `img` bilinearly into `out`.
+pub fn warp_window(img: &GreyImage, warp: Warp, width: usize, height: usize, out: &mut Vec<f32>) {
+    let Warp { cx, cy, angle, scale } = warp;
     out.clear();
     let (s, c) = angle.sin_cos();
     for j in 0..height {
@@ -195,16 +196,13 @@ pub fn load(dir: &Path, params: CutParams) -> Result<TrainingSet, PawError> {
                         rng.gen_range(0.0f32..2.5),
                     )
                 };
-                warp_window(
-                    &grey,
-                    cx + dx,
-                    cy + dy,
+                let warp = Warp {
+                    cx: cx + dx,
+                    cy: cy + dy,
                     angle,
                     scale,
-                    params.width,
-                    params.height,
-                    &mut buf,
-                );
+                };
+                warp_window(&grey, warp, params.width, params.height, &mut buf);
                 for v in &buf {
                     let n: f32 = StandardNormal.sample(&mut rng);
                     let p = v * gain + offset + n * noise;

@@ -3,7 +3,8 @@
 //!
 //! The window arithmetic is OpenCV's, operation for operation: 32-bit integral sums, features
 //! in single precision times the window's normalisation factor, stage sums in double
-//! precision, flat windows rejected before the first stage. [`scan_like_opencv`] also walks
+//! precision against the stored threshold less 1e-5, flat windows rejected before the first
+//! stage. [`scan_like_opencv`] also walks
 //! the positions the way OpenCV 4's `CascadeClassifier` does at scale 1 (a step of 2 pixels in
 //! x and y, and one more step in x after a window the first stage rejects), so the two give
 //! identical raw windows on the same image.
@@ -40,8 +41,8 @@ struct FastStump {
 struct Compiled {
     stride: usize,
     stumps: Vec<FastStump>,
-    /// Per stage: index of its first stump, its stump count, its threshold.
-    stages: Vec<(usize, usize, f32)>,
+    /// Per stage: index of its first stump, its stump count, its applied threshold.
+    stages: Vec<(usize, usize, f64)>,
     norm: RectOfs,
     area: f64,
 }
@@ -83,7 +84,7 @@ impl Compiled {
                 }
                 self.stumps.push(s);
             }
-            self.stages.push((first, stage.weak.len(), stage.threshold));
+            self.stages.push((first, stage.weak.len(), stage.applied_threshold()));
         }
         let (w, h) = (cascade.width, cascade.height);
         self.norm = Self::ofs(stride, 1, 1, w - 2, h - 2, 1.0);
@@ -127,10 +128,10 @@ impl Compiled {
                 let value = v * factor;
                 sum += f64::from(if value < st.threshold { st.left } else { st.right });
             }
-            if sum < f64::from(threshold) {
+            if sum < threshold {
                 return Verdict::Rejected { stage: k };
             }
-            margin = sum - f64::from(threshold);
+            margin = sum - threshold;
         }
         Verdict::Accepted { margin }
     }
@@ -209,6 +210,10 @@ struct Group {
 }
 
 /// Finds paws in bottom colour frames. Cheap to clone: one per worker thread.
+///
+/// It converts the region to grey at 1 px/mm, runs the 12x12 window at every pixel (step 1)
+/// of that image and of its resamplings for objects 0.8x and 1.25x the window, and groups the
+/// raw windows. Single-threaded; after the first frames of a size it does not allocate.
 #[derive(Clone, Debug)]
 pub struct PawDetector {
     cascade: Cascade,

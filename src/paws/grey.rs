@@ -8,6 +8,9 @@
 
 use crate::frame::{ColorFrame, PixelFormat};
 
+/// The largest grey image [`Greyer::convert`] makes (pixels).
+pub const MAX_PIXELS: f64 = 16.0 * 1024.0 * 1024.0;
+
 /// An 8-bit grey image, row-major, no padding.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct GreyImage {
@@ -112,6 +115,11 @@ impl Greyer {
             }
         }
         let ratio = native_px_per_mm / target_px_per_mm;
+        // An absurd scale (a tiny `px_per_mm`) must not ask for a gigantic image.
+        let pixels = (n.width as f64 / ratio) * (n.height as f64 / ratio);
+        if pixels > MAX_PIXELS {
+            return None;
+        }
         resample(&self.native, ratio, out, &mut self.rows);
         if out.width == 0 || out.height == 0 {
             return None;
@@ -250,5 +258,6 @@ mod tests {
         assert_eq!(up.frame_px_per_px, 0.5);
         assert!(g.convert(&f, (10, 10, 10, 20), 1.0, 1.0, &mut out).is_none());
         assert!(g.convert(&f, (0, 0, 40, 30), f64::NAN, 1.0, &mut out).is_none());
+        assert!(g.convert(&f, (0, 0, 40, 30), 1e-6, 1.0, &mut out).is_none());
     }
 }

@@ -286,7 +286,7 @@ fn accepts_stages(c: &Cascade, ii: &Integral, factor: f32) -> bool {
                 tree.leaves[1]
             });
         }
-        if sum < f64::from(stage.threshold) {
+        if sum < stage.applied_threshold() {
             return false;
         }
     }
