@@ -177,6 +177,8 @@ fn calibration_round_trip_recovers_the_rendered_rig() {
         s(&boards.join("extrinsics/depth-ir.png")),
         "--color-image",
         s(&boards.join("extrinsics/color.png")),
+        "--square-mm",
+        "40",
         "--out",
         s(&rig),
     ]);
@@ -194,6 +196,8 @@ fn calibration_round_trip_recovers_the_rendered_rig() {
         s(&boards.join("extrinsics/color.png")),
         "--color-image",
         s(&boards.join("extrinsics/depth-ir.png")),
+        "--square-mm",
+        "40",
         "--out",
         s(&tmp.path().join("swapped.yaml")),
     ]);
@@ -384,6 +388,8 @@ fn corrupt_or_foreign_calibration_files_are_named() {
         "a.png",
         "--color-image",
         "b.png",
+        "--square-mm",
+        "40",
         "--out",
         s(&tmp.path().join("out.yaml")),
     ]);
