@@ -192,7 +192,7 @@ pub struct Synchronizer {
     color: VecDeque<Pending<ColorFrame>>,
     last_depth: Option<Stamp>,
     last_color: Option<Stamp>,
-    /// Smallest positive interval between consecutive depth frames (device time).
+    /// Smallest interval between depth frames per step of their frame counter (device time).
     depth_interval_ns: Option<u64>,
     /// The newest capture time seen from each camera (host time line).
     newest_depth: Option<i64>,
@@ -239,7 +239,9 @@ impl Synchronizer {
             return;
         }
         if let Some(last) = self.last_depth {
-            let dt = stamp.device_ns - last.device_ns;
+            // Per step of the frame counter, so that dropped frames do not widen it.
+            let steps = stamp.seq.saturating_sub(last.seq).max(1);
+            let dt = (stamp.device_ns - last.device_ns) / steps;
             self.depth_interval_ns = Some(self.depth_interval_ns.map_or(dt, |i| i.min(dt)));
         }
         self.last_depth = Some(stamp);
@@ -456,7 +458,7 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(64))]
+        #![proptest_config(ProptestConfig::with_cases(1024))]
 
         #[test]
         fn pairs_follow_the_truth_and_account_for_every_frame(
@@ -521,6 +523,23 @@ mod tests {
             prop_assert_eq!(count, seqs.len());
             prop_assert_eq!(sync.pending(), (0, 0));
         }
+    }
+
+    #[test]
+    fn dropped_depth_frames_do_not_widen_the_tolerance() {
+        // Every other depth frame lost: the frames still come 1/30 s apart per counter step,
+        // so a colour frame 0.85 of an interval away is no partner.
+        let period = 1.0 / 30.0;
+        let d = stream(19, period, 0.0, 1_000_000_000, 0.0, 6.0, &[0.0], &[false, true]);
+        let mut color_drops = vec![false; 19];
+        color_drops[18] = true;
+        let c = stream(19, period, 0.15 * period, 1_000_000_000, 0.0, 3.0, &[0.0], &color_drops);
+        let out = run(SyncConfig::default(), &d, &c);
+        let last = out.iter().rev().find_map(|o| match o {
+            SyncOutput::Pair(p) if p.depth.stamp.seq == 18 => Some(p.color.as_ref().map(|f| f.stamp.seq)),
+            _ => None,
+        });
+        assert_eq!(last, Some(None));
     }
 
     #[test]
