@@ -90,15 +90,8 @@ impl BodyAxes {
             let e = pose.joint(j);
             (e.source != JointSource::Missing).then_some(e.position_mm)
         };
-        let spine = [
-            Joint::Snout,
-            Joint::Head,
-            Joint::Neck,
-            Joint::Withers,
-            Joint::MidBack,
-            Joint::Rump,
-            Joint::TailBase,
-        ];
+        // The spine from snout to tail base: the joint table's first seven.
+        let spine = &Joint::ALL[..=Joint::TailBase.index()];
         let mut length = 0.0;
         for w in spine.windows(2) {
             length += (p(w[0])? - p(w[1])?).norm();
@@ -394,10 +387,19 @@ mod tests {
     use crate::geometry::Rig;
     use crate::synth::mouse::{Placement, PoseParams, pose_mouse};
 
-    /// A posed mouse, its pose as the body stage gives it (joints 1-12 exact), and the
-    /// detections a perfect paw detector would give for its paws on the glass.
-    fn scene(placement: &Placement, rig: &Rig) -> (crate::synth::mouse::MouseInstance, Pose, Vec<PawDetection>) {
-        let m = pose_mouse(&PoseParams::default(), placement);
+    /// A detection box centred on `c` (colour image pixels).
+    fn detection_at(c: Point2<f64>, score: f32) -> PawDetection {
+        PawDetection {
+            x0: c.x as f32 - 6.0,
+            y0: c.y as f32 - 6.0,
+            x1: c.x as f32 + 6.0,
+            y1: c.y as f32 + 6.0,
+            score,
+        }
+    }
+
+    /// The pose of `m` as the body stage gives it: joints 1-12, exact.
+    fn body_pose(m: &crate::synth::mouse::MouseInstance) -> Pose {
         let mut pose = Pose::default();
         for j in Joint::MAIN_BODY {
             *pose.joint_mut(j) = JointEstimate {
@@ -406,16 +408,18 @@ mod tests {
                 source: JointSource::Depth,
             };
         }
+        pose
+    }
+
+    /// A posed mouse, its pose as the body stage gives it (joints 1-12 exact), and the
+    /// detections a perfect paw detector would give for its paws on the glass.
+    fn scene(placement: &Placement, rig: &Rig) -> (crate::synth::mouse::MouseInstance, Pose, Vec<PawDetection>) {
+        let m = pose_mouse(&PoseParams::default(), placement);
+        let pose = body_pose(&m);
         let detections = Joint::PAWS
             .iter()
             .filter_map(|j| rig.color.project_world(&m.joint(*j)))
-            .map(|c| PawDetection {
-                x0: c.x as f32 - 6.0,
-                y0: c.y as f32 - 6.0,
-                x1: c.x as f32 + 6.0,
-                y1: c.y as f32 + 6.0,
-                score: 0.8,
-            })
+            .map(|c| detection_at(c, 0.8))
             .collect();
         (m, pose, detections)
     }
@@ -471,13 +475,7 @@ mod tests {
         let detections: Vec<_> = Joint::PAWS
             .iter()
             .filter_map(|j| rig.color.project_world(&mirror(m.joint(*j))))
-            .map(|c| PawDetection {
-                x0: c.x as f32 - 6.0,
-                y0: c.y as f32 - 6.0,
-                x1: c.x as f32 + 6.0,
-                y1: c.y as f32 + 6.0,
-                score: 0.8,
-            })
+            .map(|c| detection_at(c, 0.8))
             .collect();
         let mut fuser = Fuser::new(rig.color, FusionConfig::default());
         fuser.fuse(0, &mut mirrored, &detections);
@@ -533,14 +531,7 @@ mod tests {
         let params =
             crate::synth::mouse::behaviour_params(crate::synth::mouse::Behaviour::Rear, 0.3, 0.0, 0.0, 0.0, 0.8);
         let m = pose_mouse(&params, &Placement::default());
-        let mut pose = Pose::default();
-        for j in Joint::MAIN_BODY {
-            *pose.joint_mut(j) = JointEstimate {
-                position_mm: m.joint(j),
-                score: 0.9,
-                source: JointSource::Depth,
-            };
-        }
+        let mut pose = body_pose(&m);
         let mut fuser = Fuser::new(rig.color, FusionConfig::default());
         fuser.fuse(0, &mut pose, &[]);
         for j in [Joint::LeftForePaw, Joint::RightForePaw] {
@@ -573,13 +564,7 @@ mod tests {
             .color
             .project_world(&Point3::new(150.0, 120.0, 1.5))
             .expect("in view");
-        detections.push(PawDetection {
-            x0: far.x as f32 - 6.0,
-            y0: far.y as f32 - 6.0,
-            x1: far.x as f32 + 6.0,
-            y1: far.y as f32 + 6.0,
-            score: 5.0,
-        });
+        detections.push(detection_at(far, 5.0));
         let mut fuser = Fuser::new(rig.color, FusionConfig::default());
         let mut fused = pose.clone();
         fuser.fuse(0, &mut fused, &detections);
