@@ -202,14 +202,19 @@ impl Runner {
             self.spawn(&thread, move || {
                 let mut out = Vec::new();
                 let mut order = Reorder::default();
+                let mut ready = Vec::new();
                 for tracked in rx.iter() {
                     if failed.requested() {
                         // Another component failed and says so: stop quietly.
                         return Ok(());
                     }
                     stats.items_in.fetch_add(1, Ordering::Relaxed);
-                    let ready = if in_order { order.push(tracked) } else { vec![tracked] };
-                    for tracked in ready {
+                    if in_order {
+                        order.push(tracked, &mut ready);
+                    } else {
+                        ready.push(tracked);
+                    }
+                    for tracked in ready.drain(..) {
                         let start = Instant::now();
                         let (index, entered) = (tracked.index, tracked.entered);
                         stage.process(tracked.item, &mut out)?;
@@ -251,6 +256,7 @@ impl Runner {
         let failed = self.failed.clone();
         self.spawn(name, move || {
             let mut order = Reorder::default();
+            let mut ready = Vec::new();
             let write = |t: Tracked<K::In>, sink: &mut K| -> Result<(), StageError> {
                 let start = Instant::now();
                 sink.write(t.item)?;
@@ -264,7 +270,8 @@ impl Runner {
                     return Ok(());
                 }
                 st.items_in.fetch_add(1, Ordering::Relaxed);
-                for t in order.push(t) {
+                order.push(t, &mut ready);
+                for t in ready.drain(..) {
                     write(t, &mut sink)?;
                 }
             }
@@ -327,15 +334,13 @@ impl<T> Default for Reorder<T> {
 }
 
 impl<T> Reorder<T> {
-    /// Takes an item and returns those now due, in order.
-    fn push(&mut self, t: Tracked<T>) -> Vec<Tracked<T>> {
+    /// Takes an item and appends those now due to `due`, in order.
+    fn push(&mut self, t: Tracked<T>, due: &mut Vec<Tracked<T>>) {
         self.held.insert(t.index, t);
-        let mut due = Vec::new();
         while let Some(t) = self.held.remove(&self.next) {
             self.next += 1;
             due.push(t);
         }
-        due
     }
 
     /// At the end of the input: an error when an item never arrived.
