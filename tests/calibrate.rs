@@ -23,6 +23,31 @@ fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 path")
 }
 
+/// Runs `calibrate extrinsics` with a 9x6 board of 40 mm squares: the depth and colour
+/// intrinsics files, the depth and colour images, the output, then `extra` arguments.
+fn extrinsics(intrinsics: [&str; 2], images: [&str; 2], out: &str, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "calibrate",
+        "extrinsics",
+        "--depth-intrinsics",
+        intrinsics[0],
+        "--color-intrinsics",
+        intrinsics[1],
+        "--depth-image",
+        images[0],
+        "--color-image",
+        images[1],
+        "--board",
+        "9x6",
+        "--square-mm",
+        "40",
+        "--out",
+        out,
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
 /// Renders a chessboard set (colour binned by 2, a 9x6 board of 40 mm squares) with `views`
 /// views per camera. A board this size (440 x 320 mm with its margin) fills much of both
 /// views when it lies on the glass, which PnP needs to reach 1 mm and 0.2 degrees at 600 mm.
@@ -121,27 +146,15 @@ fn calibration_round_trip_recovers_the_rendered_rig() {
     }
     let rig = tmp.path().join("rig.yaml");
     let report = tmp.path().join("report");
-    let o = run(&[
-        "calibrate",
-        "extrinsics",
-        "--depth-intrinsics",
-        s(&files[1]),
-        "--color-intrinsics",
-        s(&files[0]),
-        "--depth-image",
-        s(&boards.join("extrinsics/depth-ir.png")),
-        "--color-image",
-        s(&boards.join("extrinsics/color.png")),
-        "--board",
-        "9x6",
-        "--square-mm",
-        "40",
-        "--out",
+    let o = extrinsics(
+        [s(&files[1]), s(&files[0])],
+        [
+            s(&boards.join("extrinsics/depth-ir.png")),
+            s(&boards.join("extrinsics/color.png")),
+        ],
         s(&rig),
-        "--report",
-        s(&report),
-        "--json",
-    ]);
+        &["--report", s(&report), "--json"],
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let json: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
     for cam in ["depth", "color"] {
@@ -166,41 +179,27 @@ fn calibration_round_trip_recovers_the_rendered_rig() {
         assert!(mm < 1.0 && deg < 0.2, "{role}: {mm:.3} mm, {deg:.4} deg off");
     }
     // An existing output is refused without --force.
-    let o = run(&[
-        "calibrate",
-        "extrinsics",
-        "--depth-intrinsics",
-        s(&files[1]),
-        "--color-intrinsics",
-        s(&files[0]),
-        "--depth-image",
-        s(&boards.join("extrinsics/depth-ir.png")),
-        "--color-image",
-        s(&boards.join("extrinsics/color.png")),
-        "--square-mm",
-        "40",
-        "--out",
+    let o = extrinsics(
+        [s(&files[1]), s(&files[0])],
+        [
+            s(&boards.join("extrinsics/depth-ir.png")),
+            s(&boards.join("extrinsics/color.png")),
+        ],
         s(&rig),
-    ]);
+        &[],
+    );
     assert_refused(&o, &["exists", "--force"]);
 
     // Swapped images: each camera's image has the other's size.
-    let o = run(&[
-        "calibrate",
-        "extrinsics",
-        "--depth-intrinsics",
-        s(&files[1]),
-        "--color-intrinsics",
-        s(&files[0]),
-        "--depth-image",
-        s(&boards.join("extrinsics/color.png")),
-        "--color-image",
-        s(&boards.join("extrinsics/depth-ir.png")),
-        "--square-mm",
-        "40",
-        "--out",
+    let o = extrinsics(
+        [s(&files[1]), s(&files[0])],
+        [
+            s(&boards.join("extrinsics/color.png")),
+            s(&boards.join("extrinsics/depth-ir.png")),
+        ],
         s(&tmp.path().join("swapped.yaml")),
-    ]);
+        &[],
+    );
     assert_refused(&o, &["depth image", "640x512", "640x480"]);
 
     // A board size that does not match the printed board.
@@ -377,22 +376,12 @@ fn corrupt_or_foreign_calibration_files_are_named() {
     );
     // The CLI names the intrinsics file it cannot use.
     std::fs::write(&path, "%YAML:1.0\n---\nimage_width: 640\n").expect("write");
-    let o = run(&[
-        "calibrate",
-        "extrinsics",
-        "--depth-intrinsics",
-        s(&path),
-        "--color-intrinsics",
-        s(&path),
-        "--depth-image",
-        "a.png",
-        "--color-image",
-        "b.png",
-        "--square-mm",
-        "40",
-        "--out",
+    let o = extrinsics(
+        [s(&path), s(&path)],
+        ["a.png", "b.png"],
         s(&tmp.path().join("out.yaml")),
-    ]);
+        &[],
+    );
     let err = stderr(&o);
     assert_ne!(o.status.code(), Some(0));
     assert!(err.contains("image_height") && err.contains("rig.yaml"), "{err}");
