@@ -395,13 +395,14 @@ fn bench_forest(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: b
         .collect();
     let rounds = if quick { 2 } else { 10 };
     let mut sink = 0usize;
+    let mut traversal = crate::forest::Traversal::default();
     let traverse = Instant::now();
     for _ in 0..rounds {
         for (f, pixels) in frames.iter().zip(&all) {
-            for px in pixels {
-                for t in &estimator.forest.trees {
-                    sink = sink.wrapping_add(t.leaf_index(|u| f.feature(px.x, px.y, px.depth, u)));
-                }
+            for t in &estimator.forest.trees {
+                let feature = |s: usize, u: &_| f.feature(pixels[s].x, pixels[s].y, pixels[s].depth, u);
+                t.leaf_indices(pixels.len(), feature, &mut traversal);
+                sink = sink.wrapping_add(traversal.leaves().iter().map(|&l| l as usize).sum::<usize>());
             }
         }
     }

@@ -37,6 +37,22 @@ impl<F> Node<F> {
     }
 }
 
+/// The buffers of [`Tree::leaf_indices`], kept between calls so traversal does not allocate.
+#[derive(Clone, Debug, Default)]
+pub struct Traversal {
+    /// Per sample: its node while on its way, its leaf index at the end.
+    at: Vec<u32>,
+    /// The samples not yet at a leaf.
+    moving: Vec<u32>,
+}
+
+impl Traversal {
+    /// The leaf index each sample reached in the last traversal.
+    pub fn leaves(&self) -> &[u32] {
+        &self.at
+    }
+}
+
 /// A binary tree in two flat arrays: nodes (root first) and leaf payloads.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tree<F, L> {
@@ -55,6 +71,39 @@ impl<F: Copy, L> Tree<F, L> {
                 return node.leaf as usize;
             }
             i = node.left as usize + usize::from(value(&node.feature) <= node.threshold);
+        }
+    }
+
+    /// The leaf index each of `count` samples reaches, in `scratch.leaves()` (`value(s,
+    /// feature)` is the feature's value for sample `s`). Level by level: every sample still
+    /// on its way takes one step down per pass, so the memory loads of many samples overlap
+    /// instead of waiting on one sample's chain of dependent loads, and one tree's nodes stay
+    /// in cache.
+    pub fn leaf_indices(&self, count: usize, mut value: impl FnMut(usize, &F) -> f32, scratch: &mut Traversal) {
+        let Traversal { at, moving } = scratch;
+        at.clear();
+        moving.clear();
+        if self.nodes.is_empty() {
+            return;
+        }
+        // Node indices first, leaf indices once every sample has arrived.
+        at.resize(count, 0);
+        moving.extend(0..count as u32);
+        while !moving.is_empty() {
+            let mut kept = 0;
+            for k in 0..moving.len() {
+                let s = moving[k] as usize;
+                let node = &self.nodes[at[s] as usize];
+                if !node.is_leaf() {
+                    at[s] = node.left + u32::from(value(s, &node.feature) <= node.threshold);
+                    moving[kept] = s as u32;
+                    kept += 1;
+                }
+            }
+            moving.truncate(kept);
+        }
+        for i in at.iter_mut() {
+            *i = self.nodes[*i as usize].leaf;
         }
     }
 

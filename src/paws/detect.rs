@@ -10,7 +10,7 @@
 //! identical raw windows on the same image.
 
 use super::cascade::{Cascade, Verdict};
-use super::grey::{GreyImage, Greyer, Placement, resample};
+use super::grey::{GreyImage, Greyer, Placement, ResampleScratch, resample};
 use super::integral::Integral;
 use super::{CANONICAL_PX_PER_MM, PawDetection, PawError};
 use crate::frame::ColorFrame;
@@ -224,7 +224,7 @@ pub struct PawDetector {
     greyer: Greyer,
     canonical: GreyImage,
     scaled: GreyImage,
-    rows: Vec<f32>,
+    rows: ResampleScratch,
     ii: Integral,
     raw: Vec<Raw>,
     labels: Vec<usize>,
@@ -258,7 +258,7 @@ impl PawDetector {
             greyer: Greyer::default(),
             canonical: GreyImage::default(),
             scaled: GreyImage::default(),
-            rows: Vec::new(),
+            rows: ResampleScratch::default(),
             ii: Integral::default(),
             raw: Vec::new(),
             labels: Vec::new(),

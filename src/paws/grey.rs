@@ -39,7 +39,7 @@ impl Placement {
 #[derive(Clone, Debug, Default)]
 pub struct Greyer {
     native: GreyImage,
-    rows: Vec<f32>,
+    scratch: ResampleScratch,
 }
 
 impl Greyer {
@@ -120,7 +120,7 @@ impl Greyer {
         if pixels > MAX_PIXELS {
             return None;
         }
-        resample(&self.native, ratio, out, &mut self.rows);
+        resample(&self.native, ratio, out, &mut self.scratch);
         if out.width == 0 || out.height == 0 {
             return None;
         }
@@ -132,9 +132,64 @@ impl Greyer {
     }
 }
 
+/// Scratch buffers of [`resample`], kept between calls so resampling does not allocate.
+#[derive(Clone, Debug, Default)]
+pub struct ResampleScratch {
+    columns: Taps,
+    lines: Taps,
+    /// The horizontal pass: one row of output width per source row.
+    rows: Vec<f32>,
+    /// One output row being summed.
+    acc: Vec<f32>,
+}
+
+/// What each output sample of a one-dimensional resampling reads: source indices with
+/// weights, and the divisor of their weighted sum.
+#[derive(Clone, Debug, Default)]
+struct Taps {
+    /// Per output sample: the range of its taps in `taps`, and its divisor.
+    spans: Vec<(usize, usize, f32)>,
+    /// (source index, weight).
+    taps: Vec<(usize, f32)>,
+}
+
+impl Taps {
+    /// The taps of `n` output samples from `len` source samples, `ratio` source samples per
+    /// output sample: partial-pixel area weights when shrinking, bilinear when enlarging.
+    fn build(&mut self, len: usize, n: usize, ratio: f64) {
+        self.spans.clear();
+        self.taps.clear();
+        for k in 0..n {
+            let first = self.taps.len();
+            let divisor = if ratio > 1.0 {
+                // The mean of source samples `[k * ratio, (k + 1) * ratio)`.
+                let start = k as f64 * ratio;
+                let end = ((k + 1) as f64 * ratio).min(len as f64);
+                let mut i = start.floor() as usize;
+                while (i as f64) < end && i < len {
+                    let cover = (end.min(i as f64 + 1.0) - start.max(i as f64)) as f32;
+                    self.taps.push((i, cover));
+                    i += 1;
+                }
+                (end - start) as f32
+            } else {
+                let s = ((k as f64 + 0.5) * ratio - 0.5).max(0.0);
+                let i0 = (s.floor() as usize).min(len - 1);
+                let i1 = (i0 + 1).min(len - 1);
+                let f = (s - i0 as f64) as f32;
+                self.taps.push((i0, 1.0 - f));
+                self.taps.push((i1, f));
+                1.0
+            };
+            self.spans.push((first, self.taps.len(), divisor));
+        }
+    }
+}
+
 /// Resamples `src` so that `ratio` source pixels become one output pixel: area averaging for
-/// `ratio > 1`, bilinear interpolation for `ratio < 1`, a copy for 1. `rows` is scratch.
-pub fn resample(src: &GreyImage, ratio: f64, out: &mut GreyImage, rows: &mut Vec<f32>) {
+/// `ratio > 1`, bilinear interpolation for `ratio < 1`, a copy for 1. Separable: a horizontal
+/// pass over every source row, then a vertical pass one output row at a time.
+pub fn resample(src: &GreyImage, ratio: f64, out: &mut GreyImage, scratch: &mut ResampleScratch) {
     let w = (src.width as f64 / ratio).floor() as usize;
     let h = (src.height as f64 / ratio).floor() as usize;
     out.width = w;
@@ -147,58 +202,38 @@ pub fn resample(src: &GreyImage, ratio: f64, out: &mut GreyImage, rows: &mut Vec
         out.data.extend_from_slice(&src.data[..w * h]);
         return;
     }
-    if ratio > 1.0 {
-        // Horizontal pass into `rows` (src.height x w), then vertical.
-        rows.clear();
-        rows.resize(src.height * w, 0.0);
-        for y in 0..src.height {
-            let line = &src.data[y * src.width..(y + 1) * src.width];
-            for u in 0..w {
-                rows[y * w + u] = area(line.len(), u, ratio, |i| f32::from(line[i]));
+    let ResampleScratch {
+        columns,
+        lines,
+        rows,
+        acc,
+    } = scratch;
+    columns.build(src.width, w, ratio);
+    lines.build(src.height, h, ratio);
+    rows.clear();
+    rows.resize(src.height * w, 0.0);
+    for (line, row) in src.data.chunks_exact(src.width).zip(rows.chunks_exact_mut(w)) {
+        for (r, &(a, b, divisor)) in row.iter_mut().zip(&columns.spans) {
+            let mut sum = 0.0f32;
+            for &(i, weight) in &columns.taps[a..b] {
+                sum += weight * f32::from(line[i]);
             }
-        }
-        out.data.resize(w * h, 0);
-        for u in 0..w {
-            for v in 0..h {
-                let value = area(src.height, v, ratio, |i| rows[i * w + u]);
-                out.data[v * w + u] = (value + 0.5).clamp(0.0, 255.0) as u8;
-            }
-        }
-    } else {
-        out.data.reserve(w * h);
-        for v in 0..h {
-            let sy = ((v as f64 + 0.5) * ratio - 0.5).max(0.0);
-            let y0 = (sy.floor() as usize).min(src.height - 1);
-            let y1 = (y0 + 1).min(src.height - 1);
-            let fy = (sy - y0 as f64) as f32;
-            for u in 0..w {
-                let sx = ((u as f64 + 0.5) * ratio - 0.5).max(0.0);
-                let x0 = (sx.floor() as usize).min(src.width - 1);
-                let x1 = (x0 + 1).min(src.width - 1);
-                let fx = (sx - x0 as f64) as f32;
-                let p = |x: usize, y: usize| f32::from(src.data[y * src.width + x]);
-                let top = p(x0, y0) * (1.0 - fx) + p(x1, y0) * fx;
-                let bottom = p(x0, y1) * (1.0 - fx) + p(x1, y1) * fx;
-                out.data
-                    .push((top * (1.0 - fy) + bottom * fy + 0.5).clamp(0.0, 255.0) as u8);
-            }
+            *r = sum / divisor;
         }
     }
-}
-
-/// The mean of source samples `[k * ratio, (k + 1) * ratio)`, partial pixels weighted.
-#[inline]
-fn area(len: usize, k: usize, ratio: f64, at: impl Fn(usize) -> f32) -> f32 {
-    let start = k as f64 * ratio;
-    let end = ((k + 1) as f64 * ratio).min(len as f64);
-    let mut acc = 0.0f32;
-    let mut i = start.floor() as usize;
-    while (i as f64) < end && i < len {
-        let cover = (end.min(i as f64 + 1.0) - start.max(i as f64)) as f32;
-        acc += cover * at(i);
-        i += 1;
+    out.data.resize(w * h, 0);
+    for (dst, &(a, b, divisor)) in out.data.chunks_exact_mut(w).zip(&lines.spans) {
+        acc.clear();
+        acc.resize(w, 0.0);
+        for &(i, weight) in &lines.taps[a..b] {
+            for (s, &r) in acc.iter_mut().zip(&rows[i * w..(i + 1) * w]) {
+                *s += weight * r;
+            }
+        }
+        for (d, &s) in dst.iter_mut().zip(acc.iter()) {
+            *d = (s / divisor + 0.5).clamp(0.0, 255.0) as u8;
+        }
     }
-    acc / (end - start) as f32
 }
 
 #[cfg(test)]

@@ -13,7 +13,7 @@ use super::boost::{Binned, boost_stage};
 use super::cascade::{Cascade, CascadeParams, Stage, Verdict, WeakTree};
 use super::data::{Background, TrainingSet};
 use super::detect::DEFAULT_SCALES;
-use super::grey::{GreyImage, resample};
+use super::grey::{GreyImage, ResampleScratch, resample};
 use super::haar::{basic_features, window_norm};
 use super::integral::Integral;
 use rand::seq::SliceRandom;
@@ -338,7 +338,7 @@ fn negatives_of(
     let mut rng =
         ChaCha8Rng::seed_from_u64(params.seed ^ ((stage as u64) << 40) ^ (image as u64).wrapping_mul(0x9E37_79B9));
     let mut scaled = GreyImage::default();
-    let mut rows = Vec::new();
+    let mut rows = ResampleScratch::default();
     let mut ii = Integral::default();
     let mut hits: Vec<(usize, usize, usize)> = Vec::new();
     let (mut scanned, mut accepted) = (0u64, 0u64);

@@ -451,18 +451,20 @@ pub fn decode_depth(payload: &[u8]) -> Result<DepthFrame> {
             expected: "depth16",
         });
     }
-    let mut data: Vec<u16> = pixels
-        .chunks_exact(2)
-        .map(|b| u16::from_le_bytes([b[0], b[1]]))
-        .collect();
     let row = usize::from(header.width);
+    let mut data = vec![0u16; pixels.len() / 2];
     if header.codec == Codec::DeltaZstd && row > 0 {
-        for line in data.chunks_exact_mut(row) {
+        // The filter is undone in the same pass: a running sum that restarts at each row.
+        for (line, bytes) in data.chunks_exact_mut(row).zip(pixels.chunks_exact(2 * row)) {
             let mut left = 0u16;
-            for v in line {
-                *v = v.wrapping_add(left);
-                left = *v;
+            for (v, b) in line.iter_mut().zip(bytes.chunks_exact(2)) {
+                left = left.wrapping_add(u16::from_le_bytes([b[0], b[1]]));
+                *v = left;
             }
+        }
+    } else {
+        for (v, b) in data.iter_mut().zip(pixels.chunks_exact(2)) {
+            *v = u16::from_le_bytes([b[0], b[1]]);
         }
     }
     Ok(DepthFrame {
