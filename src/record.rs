@@ -258,6 +258,9 @@ pub fn record(
     cameras.extend(color.as_ref().map(FrameSource::meta));
     let mut meta = SessionMeta::new(now_utc(), SessionSource::Recorded, cameras);
     meta.notes = format!("recorded with rig config {:?}", config.path);
+    if meta.camera(CameraRole::Color).is_some() {
+        meta.color_latency_ns = Some(config.sync.color_latency_ns);
+    }
     if let Some(calibration) = &calibration {
         // The modes and serials the cameras actually opened with.
         calibration.check_matches(&meta)?;

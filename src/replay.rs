@@ -632,9 +632,16 @@ fn replay_input(options: &ReplayOptions, input: &Input) -> Result<ReplaySummary,
     let (pose_tx, pose_rx, pose_stats) = edge(stage_edge);
     let acct = Arc::new(Accounting::default());
     let end_to_end = Arc::new(Histogram::default());
-    let sync_config = SyncConfig {
-        color: matches!(&input, Input::Session(r) if r.meta().camera(CameraRole::Color).is_some()),
-        ..SyncConfig::default()
+    let sync_config = match input {
+        Input::Session(r) => SyncConfig {
+            color: r.meta().camera(CameraRole::Color).is_some(),
+            color_latency_ns: r.meta().color_latency_ns.unwrap_or(0),
+            ..SyncConfig::default()
+        },
+        Input::Moseq { .. } => SyncConfig {
+            color: false,
+            ..SyncConfig::default()
+        },
     };
 
     let mut runner = Runner::new();

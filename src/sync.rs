@@ -543,6 +543,42 @@ mod tests {
     }
 
     #[test]
+    fn a_known_latency_difference_decides_pairs_near_half_an_interval() {
+        // Colour frames half an interval plus 1 ms after the depth frames: each depth frame's
+        // partner is the colour frame before it. The depth camera's transport is 3 ms slower,
+        // which the clock models cannot see; uncorrected, that shifts the colour frames 3 ms
+        // earlier and the frame after wins.
+        let period = 1.0 / 30.0;
+        let d = stream(60, period, 0.0, 1_000_000_000, 10.0, 6.0, &[0.0], &[false]);
+        let c = stream(
+            60,
+            period,
+            0.5 * period + 0.001,
+            5_000_000_000,
+            -10.0,
+            3.0,
+            &[0.0],
+            &[false],
+        );
+        let want: Vec<_> = d.iter().map(|x| (x.1.seq, true_partner(&c, x.0, period))).collect();
+        let pairs = |color_latency_ns| -> Vec<_> {
+            let config = SyncConfig {
+                color_latency_ns,
+                ..SyncConfig::default()
+            };
+            run(config, &d, &c)
+                .iter()
+                .filter_map(|o| match o {
+                    SyncOutput::Pair(p) => Some((p.depth.stamp.seq, p.color.as_ref().map(|f| f.stamp.seq))),
+                    _ => None,
+                })
+                .collect()
+        };
+        assert_ne!(pairs(0), want);
+        assert_eq!(pairs(-3_000_000), want);
+    }
+
+    #[test]
     fn depth_only_pairs_go_out_at_once() {
         let mut sync = Synchronizer::new(SyncConfig {
             color: false,

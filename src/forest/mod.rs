@@ -53,6 +53,15 @@ impl Traversal {
     }
 }
 
+/// Asks the processor to bring `x` into its caches, without waiting for it.
+#[inline(always)]
+fn prefetch<T>(x: &T) {
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse"))]
+    safe_arch::prefetch_t0(x);
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse")))]
+    let _ = x;
+}
+
 /// A binary tree in two flat arrays: nodes (root first) and leaf payloads.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tree<F, L> {
@@ -95,7 +104,12 @@ impl<F: Copy, L> Tree<F, L> {
                 let s = moving[k] as usize;
                 let node = &self.nodes[at[s] as usize];
                 if !node.is_leaf() {
-                    at[s] = node.left + u32::from(value(s, &node.feature) <= node.threshold);
+                    let next = node.left + u32::from(value(s, &node.feature) <= node.threshold);
+                    // Wanted on the next pass, after every other moving sample's step.
+                    if let Some(n) = self.nodes.get(next as usize) {
+                        prefetch(n);
+                    }
+                    at[s] = next;
                     moving[kept] = s as u32;
                     kept += 1;
                 }

@@ -108,6 +108,11 @@ pub struct SessionMeta {
     /// The calibration in use when the session was written, if there was one.
     #[serde(default, skip_serializing_if = "Option::is_none", with = "rig_repr")]
     pub rig: Option<Rig>,
+    /// The colour camera's minimal transport latency minus the depth camera's (ns), when
+    /// known: the rig config's `sync.color_latency_ms` for recorded sessions, the simulated
+    /// cameras' own for synthetic ones. Replay pairs frames with it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub color_latency_ns: Option<i64>,
     /// One entry per camera: exactly one depth camera, at most one colour camera.
     pub cameras: Vec<CameraMeta>,
     /// The synthetic generator's parameters, free-form.
@@ -127,6 +132,7 @@ impl SessionMeta {
             source,
             notes: String::new(),
             rig: None,
+            color_latency_ns: None,
             cameras,
             synthetic: None,
         }

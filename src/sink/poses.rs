@@ -41,7 +41,8 @@ pub fn header() -> String {
 pub struct PoseTally {
     pub rows: u64,
     pub statuses: BTreeMap<&'static str, u64>,
-    /// `(depth_seq, color_seq)` of every row, in order.
+    /// `(depth_seq, color_seq)` of every row, in order, when there is ground truth to check
+    /// the pairing against (otherwise nothing grows with the session's length).
     pub pairs: Vec<(u64, Option<u64>)>,
     /// Per joint: summed error (mm) and count, over rows with truth and an estimate.
     pub error_sum_mm: [f64; JOINT_COUNT],
@@ -194,7 +195,9 @@ impl Sink for PoseWriter {
         self.out.write_all(line.as_bytes())?;
         tally.rows += 1;
         *tally.statuses.entry(r.status.name()).or_default() += 1;
-        tally.pairs.push((r.depth.seq, r.color.map(|c| c.seq)));
+        if !self.truth.is_empty() {
+            tally.pairs.push((r.depth.seq, r.color.map(|c| c.seq)));
+        }
         if tally.snapshot.is_none() && tally.rows > self.snapshot_row && r.status == PoseStatus::Ok {
             tally.snapshot = Some(r);
         }

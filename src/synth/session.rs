@@ -63,6 +63,11 @@ const STREAM_CLOCKS: u64 = 11;
 const STREAM_DEPTH: u64 = 12;
 const STREAM_COLOR: u64 = 13;
 
+/// The simulated cameras' minimal transport latencies (ms), recorded in the session's
+/// metadata as the colour camera's latency relative to the depth camera's.
+const DEPTH_LATENCY_MS: f64 = 6.0;
+const COLOR_LATENCY_MS: f64 = 3.0;
+
 /// One camera's device clock and transport to the host.
 #[derive(Clone, Copy, Debug)]
 struct CameraClock {
@@ -136,8 +141,8 @@ fn cameras(rig: &Rig, spec: &SessionSpec) -> Vec<CameraMeta> {
 /// Plans every frame: times, stamps, drops and the animated mouse at each instant.
 fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
     let mut clocks_rng = item_rng(spec.seed, STREAM_CLOCKS, 0);
-    let depth_clock = CameraClock::random(&mut clocks_rng, 6.0);
-    let color_clock = CameraClock::random(&mut clocks_rng, 3.0);
+    let depth_clock = CameraClock::random(&mut clocks_rng, DEPTH_LATENCY_MS);
+    let color_clock = CameraClock::random(&mut clocks_rng, COLOR_LATENCY_MS);
     let host0_ns = 5e9;
     let period = 1.0 / spec.fps;
     let depth_count = (spec.seconds * spec.fps).round() as u64;
@@ -265,6 +270,9 @@ pub fn write_session(
     let rig = Rig::default_rig().with_color_binning(spec.color_binning);
     let mut meta = SessionMeta::new(SYNTHETIC_CREATED, SessionSource::Synthetic, cameras(&rig, spec));
     meta.rig = Some(rig);
+    if spec.color {
+        meta.color_latency_ns = Some(((COLOR_LATENCY_MS - DEPTH_LATENCY_MS) * 1e6) as i64);
+    }
     meta.notes = "synthetic session: the created time is fixed so that a seed gives identical files".to_owned();
     let mut table = toml::Table::new();
     table.insert("seed".into(), toml::Value::Integer(spec.seed as i64));
