@@ -87,7 +87,8 @@ impl<F: Copy, L> Tree<F, L> {
     /// feature)` is the feature's value for sample `s`). Level by level: every sample still
     /// on its way takes one step down per pass, so the memory loads of many samples overlap
     /// instead of waiting on one sample's chain of dependent loads, and one tree's nodes stay
-    /// in cache.
+    /// in cache. Each sample's next node is asked into the cache as soon as it is known, a
+    /// whole pass before it is read.
     pub fn leaf_indices(&self, count: usize, mut value: impl FnMut(usize, &F) -> f32, scratch: &mut Traversal) {
         let Traversal { at, moving } = scratch;
         at.clear();
