@@ -158,6 +158,14 @@ pub struct TrainArgs {
     /// Tree level where discriminative training starts.
     #[arg(long, default_value_t = 0)]
     pub start_level: u32,
+    /// Fraction of D_d each tree sees (D'_d); it should hold about as many pixels as D_t, or
+    /// the shrink rule coarsens the trees.
+    #[arg(long, default_value_t = 0.5, value_parser = parse_subset)]
+    pub subset: f64,
+    /// In discriminative training, refit the leaves that stay leaves to D'_d instead of
+    /// keeping what D_t taught them.
+    #[arg(long)]
+    pub refit_leaves: bool,
     /// Mouse pixels drawn per training image.
     #[arg(long, default_value_t = 150, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub pixels: u32,
@@ -320,6 +328,14 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
     let v = parse_ranged(s, "a number of seconds", 0.0, 86_400.0)?;
     if v <= 0.0 {
         return Err(format!("expected a number of seconds above 0, got {s}"));
+    }
+    Ok(v)
+}
+
+fn parse_subset(s: &str) -> Result<f64, String> {
+    let v = parse_ranged(s, "a fraction of the data set", 0.0, 1.0)?;
+    if v <= 0.0 {
+        return Err(format!("expected a fraction of the data set above 0, got {s}"));
     }
     Ok(v)
 }

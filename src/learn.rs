@@ -142,11 +142,8 @@ pub fn draw_pixels(samples: &[Sample], params: &PixelParams) -> PixelSet {
             let image = depth_image(s);
             let r = image.region;
             let mut on: Vec<(f32, f32, f32)> = image
-                .depth
-                .iter()
-                .enumerate()
-                .filter(|(_, d)| **d < crate::forest::depth::BACKGROUND_MM)
-                .map(|(k, &d)| {
+                .on_mouse()
+                .map(|(k, d)| {
                     let x = r.x0 as usize + k % r.width as usize;
                     let y = r.y0 as usize + k / r.width as usize;
                     (x as f32, y as f32, d)
@@ -558,9 +555,9 @@ pub fn eval_parts(forest: &Forest<[f32; 2], Vec<f32>>, samples: &[Sample]) -> Pa
             let r = image.region;
             let mut c = vec![vec![0u64; PART_COUNT]; PART_COUNT];
             let mut hist = [0f32; PART_COUNT];
-            for (k, &truth) in s.top.label.iter().enumerate() {
-                let d = image.depth[k];
-                if truth == BACKGROUND_LABEL || d >= crate::forest::depth::BACKGROUND_MM {
+            for (k, d) in image.on_mouse() {
+                let truth = s.top.label[k];
+                if truth == BACKGROUND_LABEL {
                     continue;
                 }
                 let (x, y) = (

@@ -66,6 +66,37 @@ fn a_tree_separates_separable_data() {
 }
 
 #[test]
+fn packed_traversal_reaches_the_leaves_of_root_to_leaf_descent() {
+    let xy = points(3000, 4);
+    let labels: Vec<u8> = xy.iter().map(|p| (p[0] * 4.0) as u8 ^ (p[1] * 3.0) as u8).collect();
+    let space = Xy(&xy);
+    let objective = ClassObjective {
+        labels: &labels,
+        classes: 8,
+    };
+    let params = TrainParams {
+        trees: 1,
+        max_depth: 14,
+        tests: 10,
+        min_leaf: 4,
+        seed: 9,
+    };
+    let mut all: Vec<u32> = (0..2000).collect();
+    let tree = train_tree(&space, &objective, &mut all, &params, 0, 0);
+    assert!(tree.depth() > 4, "a tree deep enough to test: {}", tree.depth());
+    let packed = tree.packed();
+    let mut traversal = mousepose::forest::Traversal::default();
+    // Every point, including the 1,000 the tree never saw, twice to reuse the buffers.
+    for _ in 0..2 {
+        packed.leaf_indices(xy.len(), |s, f| space.value(s as u32, f), &mut traversal);
+        let want: Vec<u32> = (0..xy.len())
+            .map(|s| tree.leaf_index(|f| space.value(s as u32, f)) as u32)
+            .collect();
+        assert_eq!(traversal.leaves(), want.as_slice());
+    }
+}
+
+#[test]
 fn discriminative_training_never_raises_a_nodes_error() {
     let xy = points(6000, 2);
     let noisy =

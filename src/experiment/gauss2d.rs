@@ -235,6 +235,8 @@ impl Setup {
             start_level: 0,
             iterations: 1,
             subset: self.subset,
+            // A class leaf refitted to D'_d is the paper's leaf rule applied to the new data.
+            refit_leaves: true,
             scoring,
             max_depth: self.max_depth,
             seed: self.seed ^ 0xD1,

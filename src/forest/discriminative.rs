@@ -2,7 +2,13 @@
 //! tree, root first, among the current test and `m` fresh random tests, keeping the one under
 //! which the subtree rooted at the node does best on a second data set. A split node reached by
 //! at most `l_n` samples shrinks to a leaf; a leaf reached by more grows a subtree; other
-//! leaves are refitted to the samples that reach them.
+//! leaves keep what the first data set taught them, as in the paper (or, with
+//! [`DiscriminativeParams::refit_leaves`], are refitted to the samples that reach them).
+//!
+//! Because shrinking compares a node's share of D'_d with `l_n`, D'_d should be about as large
+//! as the training set D_t: with half as many samples, every lowest level of split nodes
+//! shrinks and the tree comes out coarser than its baseline (on the body forest, 2,000 images
+//! each for D_t and D_d with half of D_d per tree: 4.76 mm against the baseline's 4.08 mm).
 //!
 //! Scoring a candidate needs each sample's error under the existing subtrees: every sample's
 //! error is computed once through the left subtree and once through the right one, and a
@@ -37,6 +43,10 @@ pub struct DiscriminativeParams {
     pub iterations: usize,
     /// Fraction of D_d each tree sees per pass (D'_d).
     pub subset: f64,
+    /// Refit the leaves that stay leaves to the samples of D'_d that reach them, instead of
+    /// keeping what D_t taught them.
+    #[serde(default)]
+    pub refit_leaves: bool,
     pub scoring: Scoring,
     /// Depth limit for subtrees grown at leaves.
     pub max_depth: u32,
@@ -51,6 +61,7 @@ impl Default for DiscriminativeParams {
             start_level: 0,
             iterations: 1,
             subset: 0.5,
+            refit_leaves: false,
             scoring: Scoring::SubtreeError,
             max_depth: 20,
             seed: 1,
@@ -133,7 +144,7 @@ impl<S: SplitSpace, O: Objective> Refiner<'_, S, O> {
                 // Grow a subtree in the leaf's place (its old payload stays, unreachable).
                 self.grower().grow(tree, node, samples, depth, path);
                 self.stats.grown += 1;
-            } else if !samples.is_empty() && depth >= self.params.start_level {
+            } else if self.params.refit_leaves && !samples.is_empty() && depth >= self.params.start_level {
                 let leaf = current.leaf as usize;
                 tree.leaves[leaf] = self.objective.refit(&tree.leaves[leaf], samples);
             }

@@ -1,14 +1,15 @@
 //! Running the body forest on a segmented depth image: every sampled mouse pixel goes down
 //! every tree, each leaf votes for each joint it knows (the pixel's 3D point plus the leaf's
-//! mean offset), and each joint is found as the densest mode of its votes: the mean of the
-//! confident votes refined by mean-shift, started also from the strongest votes so a
-//! multi-modal vote cloud settles on its main mode rather than between modes.
+//! mean offset), weighted by how many of the leaf's samples were near the joint and how
+//! tightly their offsets agreed, and each joint is found as the densest mode of its votes: the
+//! mean of the confident votes refined by mean-shift, started also from the strongest votes so
+//! a multi-modal vote cloud settles on its main mode rather than between modes.
 //!
 //! Buffers live in the estimator and are reused, so estimating a frame allocates nothing once
 //! the first frame has sized them.
 
 use super::depth::{BODY_JOINTS, DepthFeature, DepthImage, JointLeaf};
-use super::{Forest, Traversal};
+use super::{Forest, PackedTree, Traversal, Tree};
 use crate::geometry::Intrinsics;
 use nalgebra::{Point2, Vector3};
 use wide::f32x8;
@@ -29,6 +30,9 @@ pub struct JointGuess {
     pub score: f32,
 }
 
+/// A joint's score is the share of its vote weight within this distance of its estimate.
+pub const SCORE_RADIUS_MM: f32 = 12.0;
+
 /// Settings of vote aggregation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VoteSettings {
@@ -39,14 +43,18 @@ pub struct VoteSettings {
     pub bandwidth_mm: f32,
     /// Mean-shift iterations at most.
     pub iterations: usize,
+    /// A vote's weight is its leaf's share of samples near the joint divided by its spread
+    /// plus this (mm^2): tight leaves count more, and no spread near zero dominates.
+    pub spread_prior_mm2: f32,
 }
 
 impl Default for VoteSettings {
     fn default() -> Self {
         Self {
-            max_spread_mm2: 200.0,
-            bandwidth_mm: 6.0,
-            iterations: 8,
+            max_spread_mm2: 100.0,
+            bandwidth_mm: 3.0,
+            iterations: 32,
+            spread_prior_mm2: 100.0,
         }
     }
 }
@@ -54,7 +62,8 @@ impl Default for VoteSettings {
 /// The body forest ready to run.
 #[derive(Clone, Debug)]
 pub struct BodyEstimator {
-    pub forest: Forest<DepthFeature, JointLeaf>,
+    /// The trees (private: the router holds them packed, and the two must agree).
+    forest: Forest<DepthFeature, JointLeaf>,
     pub settings: VoteSettings,
     /// Per joint: the confident votes, and the others (used only when a joint has no
     /// confident vote).
@@ -62,20 +71,65 @@ pub struct BodyEstimator {
     doubtful: Vec<VoteCloud>,
     /// Each pixel's 3D point (camera frame).
     points: Vec<Vector3<f32>>,
-    /// The leaf each pixel reaches in the current tree.
+    router: Router,
+}
+
+/// Runs pixels down the trees: the trees in their packed form, and buffers kept between
+/// frames.
+#[derive(Clone, Debug)]
+struct Router {
+    trees: Vec<PackedTree<DepthFeature>>,
     traversal: Traversal,
+    /// Each pixel's inverse depth, which scales every probe offset.
+    inverse: Vec<f32>,
+}
+
+impl Router {
+    /// Sends every pixel down every tree of `forest` (whose packed form this router holds)
+    /// and hands each tree with the leaf index of each pixel to `visit`.
+    fn route<'f>(
+        &mut self,
+        forest: &'f Forest<DepthFeature, JointLeaf>,
+        image: &DepthImage,
+        pixels: &[Pixel],
+        mut visit: impl FnMut(&'f Tree<DepthFeature, JointLeaf>, &[u32]),
+    ) {
+        self.inverse.clear();
+        self.inverse.extend(pixels.iter().map(|px| 1.0 / px.depth));
+        let inverse = &self.inverse;
+        for (tree, packed) in forest.trees.iter().zip(&self.trees) {
+            let value = |s: usize, u: &DepthFeature| {
+                let px = &pixels[s];
+                image.feature_scaled(px.x, px.y, px.depth, inverse[s], u)
+            };
+            packed.leaf_indices(pixels.len(), value, &mut self.traversal);
+            visit(tree, self.traversal.leaves());
+        }
+    }
 }
 
 impl BodyEstimator {
     pub fn new(forest: Forest<DepthFeature, JointLeaf>, settings: VoteSettings) -> Self {
+        let router = Router {
+            trees: forest.trees.iter().map(Tree::packed).collect(),
+            traversal: Traversal::default(),
+            inverse: Vec::new(),
+        };
         Self {
             forest,
             settings,
             confident: vec![VoteCloud::default(); BODY_JOINTS],
             doubtful: vec![VoteCloud::default(); BODY_JOINTS],
             points: Vec::new(),
-            traversal: Traversal::default(),
+            router,
         }
+    }
+
+    /// The leaf each pixel reaches in each tree, without voting (for benchmarks): `visit` gets
+    /// each tree's leaf indices in turn.
+    pub fn leaves(&mut self, image: &DepthImage, pixels: &[Pixel], mut visit: impl FnMut(&[u32])) {
+        self.router
+            .route(&self.forest, image, pixels, |_, leaves| visit(leaves));
     }
 
     /// Runs the forest on `pixels` of `image` and returns each joint's estimate (camera frame),
@@ -94,29 +148,26 @@ impl BodyEstimator {
             let p = intrinsics.unproject(&Point2::new(f64::from(px.x), f64::from(px.y)), f64::from(px.depth));
             Vector3::new(p.x as f32, p.y as f32, p.z as f32)
         }));
-        let max_spread = self.settings.max_spread_mm2;
-        for tree in &self.forest.trees {
-            tree.leaf_indices(
-                pixels.len(),
-                |s, u| {
-                    let px = &pixels[s];
-                    image.feature(px.x, px.y, px.depth, u)
-                },
-                &mut self.traversal,
-            );
-            for (p, &leaf) in self.points.iter().zip(self.traversal.leaves()) {
+        let VoteSettings {
+            max_spread_mm2: max_spread,
+            spread_prior_mm2: prior,
+            ..
+        } = self.settings;
+        let (points, confident, doubtful) = (&self.points, &mut self.confident, &mut self.doubtful);
+        self.router.route(&self.forest, image, pixels, |tree, leaves| {
+            for (p, &leaf) in points.iter().zip(leaves) {
                 for (j, v) in tree.leaves[leaf as usize].iter().enumerate() {
                     if v.weight > 0.0 {
                         let cloud = if v.spread <= max_spread {
-                            &mut self.confident[j]
+                            &mut confident[j]
                         } else {
-                            &mut self.doubtful[j]
+                            &mut doubtful[j]
                         };
-                        cloud.push(p + Vector3::from(v.offset), v.weight);
+                        cloud.push(p + Vector3::from(v.offset), v.weight / (v.spread + prior));
                     }
                 }
             }
-        }
+        });
         std::array::from_fn(|j| self.aggregate(j))
     }
 
@@ -170,8 +221,8 @@ impl BodyEstimator {
                 best = (density, mode);
             }
         }
-        // Score: the share of the weight within two bandwidths of the mode.
-        let (m, r2) = (best.1, 4.0 * h2);
+        // Score: the share of the weight within a fixed radius of the mode.
+        let (m, r2) = (best.1, SCORE_RADIUS_MM * SCORE_RADIUS_MM);
         let [near, ..] = votes.sum(|x, y, z, w| {
             let d2 = (x - m.x) * (x - m.x) + (y - m.y) * (y - m.y) + (z - m.z) * (z - m.z);
             [if d2 <= r2 { w } else { 0.0 }, 0.0, 0.0, 0.0]
@@ -294,7 +345,7 @@ fn kernel_scale(h2: f32) -> f32 {
 /// directions), written into `out`.
 pub fn sample_pixels(image: &DepthImage, budget: usize, out: &mut Vec<Pixel>) {
     out.clear();
-    let on_mouse = image.depth.iter().filter(|&&d| d < super::depth::BACKGROUND_MM).count();
+    let on_mouse = image.on_mouse().count();
     let mut step = 1usize;
     while on_mouse / (step * step) > budget.max(1) {
         step += 1;

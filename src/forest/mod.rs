@@ -37,7 +37,8 @@ impl<F> Node<F> {
     }
 }
 
-/// The buffers of [`Tree::leaf_indices`], kept between calls so traversal does not allocate.
+/// The buffers of [`PackedTree::leaf_indices`], kept between calls so traversal does not
+/// allocate.
 #[derive(Clone, Debug, Default)]
 pub struct Traversal {
     /// Per sample: its node while on its way, its leaf index at the end.
@@ -83,49 +84,29 @@ impl<F: Copy, L> Tree<F, L> {
         }
     }
 
-    /// The leaf index each of `count` samples reaches, in `scratch.leaves()` (`value(s,
-    /// feature)` is the feature's value for sample `s`). Level by level: every sample still
-    /// on its way takes one step down per pass, so the memory loads of many samples overlap
-    /// instead of waiting on one sample's chain of dependent loads, and one tree's nodes stay
-    /// in cache. Each sample's next node is asked into the cache as soon as it is known, a
-    /// whole pass before it is read.
-    pub fn leaf_indices(&self, count: usize, mut value: impl FnMut(usize, &F) -> f32, scratch: &mut Traversal) {
-        let Traversal { at, moving } = scratch;
-        at.clear();
-        moving.clear();
-        if self.nodes.is_empty() {
-            return;
-        }
-        // Node indices first, leaf indices once every sample has arrived.
-        at.resize(count, 0);
-        moving.extend(0..count as u32);
-        while !moving.is_empty() {
-            let mut kept = 0;
-            for k in 0..moving.len() {
-                let s = moving[k] as usize;
-                let node = &self.nodes[at[s] as usize];
-                if !node.is_leaf() {
-                    let next = node.left + u32::from(value(s, &node.feature) <= node.threshold);
-                    // Wanted on the next pass, after every other moving sample's step.
-                    if let Some(n) = self.nodes.get(next as usize) {
-                        prefetch(n);
-                    }
-                    at[s] = next;
-                    moving[kept] = s as u32;
-                    kept += 1;
-                }
-            }
-            moving.truncate(kept);
-        }
-        for i in at.iter_mut() {
-            *i = self.nodes[*i as usize].leaf;
-        }
-    }
-
     /// The leaf payload a sample reaches.
     #[inline]
     pub fn leaf(&self, value: impl FnMut(&F) -> f32) -> &L {
         &self.leaves[self.leaf_index(value)]
+    }
+
+    /// The tree in the compact form that run-time traversal reads.
+    pub fn packed(&self) -> PackedTree<F> {
+        let nodes = self
+            .nodes
+            .iter()
+            .map(|n| PackedNode {
+                feature: n.feature,
+                threshold: n.threshold,
+                next: if n.is_leaf() {
+                    assert!(n.leaf < PACKED_LEAF, "too many leaves to pack");
+                    n.leaf | PACKED_LEAF
+                } else {
+                    n.left
+                },
+            })
+            .collect();
+        PackedTree { nodes }
     }
 
     /// Number of levels below the root of the deepest leaf.
@@ -170,6 +151,67 @@ impl<F: Copy, L> Tree<F, L> {
         }
         self.nodes = nodes;
         self.leaves = leaves;
+    }
+}
+
+/// Marks a [`PackedNode`] that is a leaf; the other bits are its leaf index.
+const PACKED_LEAF: u32 = 1 << 31;
+
+/// A node as traversal reads it: the child index and the leaf index share one word, so a
+/// node with a two-float feature fills 16 bytes and four share a cache line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PackedNode<F> {
+    feature: F,
+    threshold: f32,
+    /// The left child's index, or the leaf index with [`PACKED_LEAF`] set.
+    next: u32,
+}
+
+/// A tree's split nodes and leaf indices in [`PackedNode`]s, same order as the tree's nodes;
+/// the leaf payloads stay in the [`Tree`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct PackedTree<F> {
+    nodes: Vec<PackedNode<F>>,
+}
+
+impl<F> PackedTree<F> {
+    /// The leaf index each of `count` samples reaches, in `scratch.leaves()` (`value(s,
+    /// feature)` is the feature's value for sample `s`). Level by level: every sample still
+    /// on its way takes one step down per pass, so the memory loads of many samples overlap
+    /// instead of waiting on one sample's chain of dependent loads, and one tree's nodes stay
+    /// in cache. Each sample's next node is asked into the cache as soon as it is known, a
+    /// whole pass before it is read.
+    pub fn leaf_indices(&self, count: usize, mut value: impl FnMut(usize, &F) -> f32, scratch: &mut Traversal) {
+        let Traversal { at, moving } = scratch;
+        at.clear();
+        moving.clear();
+        if self.nodes.is_empty() {
+            return;
+        }
+        // Node indices while on the way, leaf indices (flagged) on arrival.
+        at.resize(count, 0);
+        moving.extend(0..count as u32);
+        while !moving.is_empty() {
+            let mut kept = 0;
+            for k in 0..moving.len() {
+                let s = moving[k] as usize;
+                let node = &self.nodes[at[s] as usize];
+                let next = if node.next & PACKED_LEAF == 0 {
+                    let next = node.next + u32::from(value(s, &node.feature) <= node.threshold);
+                    // Wanted on the next pass, after every other moving sample's step.
+                    if let Some(n) = self.nodes.get(next as usize) {
+                        prefetch(n);
+                    }
+                    moving[kept] = s as u32;
+                    kept += 1;
+                    next
+                } else {
+                    node.next & !PACKED_LEAF
+                };
+                at[s] = next;
+            }
+            moving.truncate(kept);
+        }
     }
 }
 
