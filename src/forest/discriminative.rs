@@ -44,13 +44,18 @@ pub struct DiscriminativeParams {
     /// Fraction of D_d each tree sees per pass (D'_d).
     pub subset: f64,
     /// Refit the leaves that stay leaves to the samples of D'_d that reach them, instead of
-    /// keeping what D_t taught them.
-    #[serde(default)]
+    /// keeping what D_t taught them. Model files written before this choice existed refitted
+    /// them, and their descriptions lack the key.
+    #[serde(default = "leaves_refitted_before_the_choice")]
     pub refit_leaves: bool,
     pub scoring: Scoring,
     /// Depth limit for subtrees grown at leaves.
     pub max_depth: u32,
     pub seed: u64,
+}
+
+fn leaves_refitted_before_the_choice() -> bool {
+    true
 }
 
 impl Default for DiscriminativeParams {
@@ -278,4 +283,20 @@ pub fn subset(pool: &[u32], fraction: f64, seed: u64, tree: usize, iteration: us
         .copied()
         .filter(|_| rng.gen_bool(fraction.clamp(0.0, 1.0)))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn descriptions_written_before_the_refit_choice_read_as_refitted() {
+        let new = DiscriminativeParams::default();
+        let json = serde_json::to_value(new).expect("serialises");
+        let mut old = json.clone();
+        old.as_object_mut().expect("an object").remove("refit_leaves");
+        let read = |v| serde_json::from_value::<DiscriminativeParams>(v).expect("reads");
+        assert!(!read(json).refit_leaves);
+        assert!(read(old).refit_leaves);
+    }
 }
