@@ -43,13 +43,16 @@ impl DepthImage {
         Self { region, depth }
     }
 
+    /// The depth (mm) of the pixel at index `k` of the region (row-major), when it is on the
+    /// mouse.
+    #[inline]
+    pub fn mouse_depth(&self, k: usize) -> Option<f32> {
+        self.depth.get(k).copied().filter(|&d| d < BACKGROUND_MM)
+    }
+
     /// The mouse's pixels: index in the region (row-major) and depth in mm.
     pub fn on_mouse(&self) -> impl Iterator<Item = (usize, f32)> + '_ {
-        self.depth
-            .iter()
-            .enumerate()
-            .filter(|(_, d)| **d < BACKGROUND_MM)
-            .map(|(k, &d)| (k, d))
+        (0..self.depth.len()).filter_map(|k| self.mouse_depth(k).map(|d| (k, d)))
     }
 
     /// The depth at a full-image pixel position (the pixel that contains it),

@@ -353,8 +353,7 @@ pub fn sample_pixels(image: &DepthImage, budget: usize, out: &mut Vec<Pixel>) {
     let r = image.region;
     for y in (0..r.height as usize).step_by(step) {
         for x in (0..r.width as usize).step_by(step) {
-            let d = image.depth[y * r.width as usize + x];
-            if d < super::depth::BACKGROUND_MM {
+            if let Some(d) = image.mouse_depth(y * r.width as usize + x) {
                 out.push(Pixel {
                     x: (r.x0 as usize + x) as f32,
                     y: (r.y0 as usize + y) as f32,
