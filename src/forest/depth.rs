@@ -13,8 +13,17 @@ use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
-/// What a probe reads outside the mouse or the image, millimetres.
-pub const BACKGROUND_MM: f32 = 1000.0;
+/// What a probe reads outside the mouse or the image, millimetres: beyond any 16-bit depth
+/// reading, so that a mouse at any distance from the camera is on the mouse, and a probe off
+/// it always gives a feature value far above any value on it. (It was once 1 m, which lost
+/// mice seen from 1 m or more and confused probes off the mouse with probes on it beyond
+/// 75 cm; models trained then route every pixel nearer than that exactly as now.)
+pub const BACKGROUND_MM: f32 = 100_000.0;
+/// A feature value above this means the probe left the mouse: no part of a mouse stands this
+/// high (mm) above another.
+const OFF_MOUSE_MM: f32 = 250.0;
+/// The threshold of the test that separates probes off the mouse from probes on it.
+const OFF_MOUSE_SPLIT_MM: f32 = 200.0;
 /// Probe offsets reach this far at 1 m (in pixel-millimetres: pixels at a depth of 1 mm).
 pub const MAX_OFFSET: f32 = 60.0 * 600.0;
 /// The number of main-body joints the body forest estimates.
@@ -149,7 +158,7 @@ impl SplitSpace for DepthSpace<'_> {
                 let (mut lo, mut hi, mut off_mouse) = (f32::INFINITY, f32::NEG_INFINITY, false);
                 for &s in samples.iter().step_by(stride) {
                     let v = self.value(s, &u);
-                    if v > BACKGROUND_MM * 0.25 {
+                    if v > OFF_MOUSE_MM {
                         off_mouse = true;
                     } else {
                         lo = lo.min(v);
@@ -162,7 +171,7 @@ impl SplitSpace for DepthSpace<'_> {
                     Vec::new()
                 };
                 if off_mouse {
-                    t.push(BACKGROUND_MM * 0.2);
+                    t.push(OFF_MOUSE_SPLIT_MM);
                 }
                 if t.is_empty() {
                     t.push(0.0);
