@@ -406,3 +406,57 @@ fn the_body_forest_finds_the_joints_under_a_higher_camera() {
         );
     }
 }
+
+/// The tail tip follows the segmented tail to its end under structured light, where the tail
+/// is segmented whole; under time of flight, which loses the tail's last part, it stays about
+/// where the votes put it.
+#[test]
+fn the_tail_tip_follows_the_segmented_tail_to_its_end() {
+    use mousepose::forest::infer::{BodyEstimator, VoteSettings};
+    use mousepose::geometry::Rig;
+    use mousepose::synth::dataset::{DatasetSpec, render_sample};
+    use mousepose::synth::mouse::pose_library;
+    use mousepose::synth::noise::{DepthNoise, NoiseModel};
+    let path = repo_root().join("fixtures/models/body-baseline.forest");
+    let Model::Body(_, forest) = model::load(&path, Some(ModelKind::Body)).expect("bundled body model") else {
+        panic!("{} is not a body model", path.display());
+    };
+    let rig = Rig::default_rig();
+    let library = pose_library();
+    let tail_tip = |model: NoiseModel, follow_tail: bool| {
+        let spec = DatasetSpec {
+            count: 60,
+            seed: 0x7A11,
+            noise: DepthNoise {
+                model,
+                gaussian_mm: 0.0,
+            },
+            bottom_views: false,
+        };
+        let samples: Vec<_> = (0..spec.count)
+            .map(|i| render_sample(&rig, &spec, &library, i))
+            .collect();
+        let settings = VoteSettings {
+            follow_tail,
+            ..VoteSettings::default()
+        };
+        let estimator = BodyEstimator::new(forest.clone(), settings);
+        let report = mousepose::learn::eval_body(&estimator, &samples, &rig, 0.0).expect("evaluates");
+        report.per_joint_mm["tail_tip"]
+    };
+    let (votes, followed) = (
+        tail_tip(NoiseModel::StructuredLight, false),
+        tail_tip(NoiseModel::StructuredLight, true),
+    );
+    println!("structured light, tail tip: votes {votes:.2} mm, followed {followed:.2} mm");
+    assert!(
+        followed < 0.8 * votes,
+        "following the tail: {followed:.2} mm against {votes:.2} mm"
+    );
+    let (votes, followed) = (tail_tip(NoiseModel::Tof, false), tail_tip(NoiseModel::Tof, true));
+    println!("time of flight, tail tip: votes {votes:.2} mm, followed {followed:.2} mm");
+    assert!(
+        followed < 1.1 * votes,
+        "following the tail: {followed:.2} mm against {votes:.2} mm"
+    );
+}

@@ -5,13 +5,19 @@
 //! mean of the confident votes refined by mean-shift, started also from the strongest votes so
 //! a multi-modal vote cloud settles on its main mode rather than between modes.
 //!
+//! The tail tip then moves to the far end of the segmented tail ([`TailEnd`]): few training
+//! pixels lie on the thin tail, so its votes are the loosest of all, while the end of the
+//! segmented tail is where the tip is, whenever the tail was segmented to its end.
+//!
 //! Buffers live in the estimator and are reused, so estimating a frame allocates nothing once
 //! the first frame has sized them.
 
 use super::depth::{BODY_JOINTS, DepthFeature, DepthImage, JointLeaf};
 use super::{Forest, PackedTree, Traversal, Tree};
 use crate::geometry::Intrinsics;
-use nalgebra::{Point2, Vector3};
+use crate::skeleton::Joint;
+use nalgebra::{Point2, Point3, Vector3};
+use std::collections::VecDeque;
 use wide::f32x8;
 
 /// A mouse pixel to run through the forest: full-image position and depth (mm).
@@ -46,6 +52,9 @@ pub struct VoteSettings {
     /// A vote's weight is its leaf's share of samples near the joint divided by its spread
     /// plus this (mm^2): tight leaves count more, and no spread near zero dominates.
     pub spread_prior_mm2: f32,
+    /// Move the tail tip to the far end of the segmented tail, when the votes put it on the
+    /// tail near that end ([`TailEnd`]).
+    pub follow_tail: bool,
 }
 
 impl Default for VoteSettings {
@@ -55,6 +64,7 @@ impl Default for VoteSettings {
             bandwidth_mm: 3.0,
             iterations: 32,
             spread_prior_mm2: 100.0,
+            follow_tail: true,
         }
     }
 }
@@ -72,6 +82,7 @@ pub struct BodyEstimator {
     /// Each pixel's 3D point (camera frame).
     points: Vec<Vector3<f32>>,
     router: Router,
+    tail_end: TailEnd,
 }
 
 /// Runs pixels down the trees: the trees in their packed form, and buffers kept between
@@ -122,6 +133,7 @@ impl BodyEstimator {
             doubtful: vec![VoteCloud::default(); BODY_JOINTS],
             points: Vec::new(),
             router,
+            tail_end: TailEnd::default(),
         }
     }
 
@@ -168,7 +180,14 @@ impl BodyEstimator {
                 }
             }
         });
-        std::array::from_fn(|j| self.aggregate(j))
+        let mut guesses: [Option<JointGuess>; BODY_JOINTS] = std::array::from_fn(|j| self.aggregate(j));
+        if self.settings.follow_tail
+            && let (Some(base), Some(tip)) = (guesses[TAIL_BASE], &mut guesses[TAIL_TIP])
+            && let Some(end) = self.tail_end.find(image, intrinsics, base.position_mm, tip.position_mm)
+        {
+            tip.position_mm = end;
+        }
+        guesses
     }
 
     fn aggregate(&self, joint: usize) -> Option<JointGuess> {
@@ -231,6 +250,87 @@ impl BodyEstimator {
             position_mm: best.1,
             score: (near / total).clamp(0.0, 1.0),
         })
+    }
+}
+
+/// Where the tail base and the tail tip sit among the main-body joints.
+const TAIL_BASE: usize = Joint::TailBase as usize;
+const TAIL_TIP: usize = Joint::TailTip as usize;
+const _: () = assert!(matches!(Joint::MAIN_BODY[TAIL_BASE], Joint::TailBase));
+const _: () = assert!(matches!(Joint::MAIN_BODY[TAIL_TIP], Joint::TailTip));
+
+/// How far (mm) the tail tip may move from the votes' estimate to the end of the segmented tail.
+const TAIL_END_REACH_MM: f32 = 20.0;
+/// The tail tip moves only when the votes put it within this distance (mm) of a segmented
+/// pixel: an estimate off the mask means the tail's last part was lost in the noise (as a
+/// time-of-flight camera loses it), and then the votes know better than the mask where it ends.
+const TAIL_ON_MASK_MM: f32 = 3.0;
+
+/// Finds the far end of the segmented tail: of the mouse's pixels near the votes' tail tip, the
+/// one furthest from the tail base along the mouse (8-connected steps over its pixels, so a
+/// curled tail is followed rather than cut across). Buffers are kept between frames.
+#[derive(Clone, Debug, Default)]
+struct TailEnd {
+    /// Per pixel of the region: steps from the pixel nearest the tail base, `u32::MAX` when not
+    /// reached.
+    steps: Vec<u32>,
+    queue: VecDeque<u32>,
+}
+
+impl TailEnd {
+    /// The 3D point (camera frame) of the tail's far end, or `None` when the tip should stay
+    /// where the votes put it: no mouse pixel within [`TAIL_END_REACH_MM`] of it, or none
+    /// within [`TAIL_ON_MASK_MM`].
+    fn find(
+        &mut self,
+        image: &DepthImage,
+        intrinsics: &Intrinsics,
+        base: Vector3<f32>,
+        tip: Vector3<f32>,
+    ) -> Option<Vector3<f32>> {
+        let r = image.region;
+        let (w, h) = (r.width as usize, r.height as usize);
+        let point = |k: usize, d: f32| -> Vector3<f32> {
+            let pixel = Point2::new((r.x0 as usize + k % w) as f64, (r.y0 as usize + k / w) as f64);
+            intrinsics.unproject(&pixel, f64::from(d)).coords.cast()
+        };
+        let b = intrinsics.project(&Point3::from(base.cast::<f64>()))?;
+        let (bx, by) = (b.x - f64::from(r.x0), b.y - f64::from(r.y0));
+        let from_base = |k: usize| ((k % w) as f64 - bx).powi(2) + ((k / w) as f64 - by).powi(2);
+        let (start, _) = image
+            .on_mouse()
+            .min_by(|(a, _), (b, _)| from_base(*a).total_cmp(&from_base(*b)))?;
+        self.steps.clear();
+        self.steps.resize(w * h, u32::MAX);
+        self.queue.clear();
+        self.steps[start] = 0;
+        self.queue.push_back(start as u32);
+        // The furthest pixel within reach of the tip (steps, index), and how near the tip the
+        // nearest pixel lies.
+        let mut end: Option<(u32, usize)> = None;
+        let mut nearest = f32::INFINITY;
+        while let Some(k) = self.queue.pop_front() {
+            let k = k as usize;
+            let Some(d) = image.mouse_depth(k) else { continue };
+            let off = (point(k, d) - tip).norm();
+            nearest = nearest.min(off);
+            let steps = self.steps[k];
+            if off <= TAIL_END_REACH_MM && end.is_none_or(|(s, _)| steps > s) {
+                end = Some((steps, k));
+            }
+            let (x, y) = (k % w, k / w);
+            for ny in y.saturating_sub(1)..(y + 2).min(h) {
+                for nx in x.saturating_sub(1)..(x + 2).min(w) {
+                    let n = ny * w + nx;
+                    if self.steps[n] == u32::MAX && image.mouse_depth(n).is_some() {
+                        self.steps[n] = steps + 1;
+                        self.queue.push_back(n as u32);
+                    }
+                }
+            }
+        }
+        let (_, k) = end.filter(|_| nearest <= TAIL_ON_MASK_MM)?;
+        Some(point(k, image.mouse_depth(k)?))
     }
 }
 
