@@ -360,40 +360,51 @@ fn gauss2d_runs_end_to_end_at_small_scale() {
     assert!(stats.error_after <= stats.error_before);
 }
 
+/// `fixtures/models/body-baseline.forest` with `settings`, evaluated (segmentation included)
+/// on `count` images rendered under `rig` with `noise` from `seed`.
+fn eval_bundled_baseline(
+    rig: &mousepose::geometry::Rig,
+    settings: mousepose::forest::infer::VoteSettings,
+    noise: mousepose::synth::noise::NoiseModel,
+    count: u64,
+    seed: u64,
+) -> mousepose::learn::BodyReport {
+    use mousepose::forest::infer::BodyEstimator;
+    use mousepose::synth::dataset::{DatasetSpec, render_sample};
+    use mousepose::synth::mouse::pose_library;
+    use mousepose::synth::noise::DepthNoise;
+    let path = repo_root().join("fixtures/models/body-baseline.forest");
+    let Model::Body(_, forest) = model::load(&path, Some(ModelKind::Body)).expect("bundled body model") else {
+        panic!("{} is not a body model", path.display());
+    };
+    let spec = DatasetSpec {
+        count,
+        seed,
+        noise: DepthNoise {
+            model: noise,
+            gaussian_mm: 0.0,
+        },
+        bottom_views: false,
+    };
+    let library = pose_library();
+    let samples: Vec<_> = (0..count).map(|i| render_sample(rig, &spec, &library, i)).collect();
+    mousepose::learn::eval_body(&BodyEstimator::new(forest, settings), &samples, rig, 0.0).expect("evaluates")
+}
+
 /// The default body model (trained with the camera 600 mm above the floor) under cameras
 /// mounted higher: the features scale with depth, so the joints are still found, with an error
 /// that grows only as the mouse shrinks in the image. (When probes off the mouse read 1 m, this
 /// gave 31 mm at 900 mm and no mouse at all at 1200 mm.)
 #[test]
 fn the_body_forest_finds_the_joints_under_a_higher_camera() {
-    use mousepose::forest::infer::{BodyEstimator, VoteSettings};
+    use mousepose::forest::infer::VoteSettings;
     use mousepose::geometry::{Rig, look_at};
-    use mousepose::synth::dataset::{DatasetSpec, render_sample};
-    use mousepose::synth::mouse::pose_library;
-    use mousepose::synth::noise::{DepthNoise, NoiseModel};
+    use mousepose::synth::noise::NoiseModel;
     use nalgebra::{Point3, Vector3};
-    let path = repo_root().join("fixtures/models/body-baseline.forest");
-    let Model::Body(_, forest) = model::load(&path, Some(ModelKind::Body)).expect("bundled body model") else {
-        panic!("{} is not a body model", path.display());
-    };
-    let estimator = BodyEstimator::new(forest, VoteSettings::default());
-    let library = pose_library();
-    let spec = DatasetSpec {
-        count: 40,
-        seed: 0x41_71,
-        noise: DepthNoise {
-            model: NoiseModel::None,
-            gaussian_mm: 0.0,
-        },
-        bottom_views: false,
-    };
     for height_mm in [600.0, 900.0, 1200.0] {
         let mut rig = Rig::default_rig();
         rig.depth.world_from_camera = look_at(Point3::new(0.0, 0.0, height_mm), Point3::origin(), -Vector3::y());
-        let samples: Vec<_> = (0..spec.count)
-            .map(|i| render_sample(&rig, &spec, &library, i))
-            .collect();
-        let report = mousepose::learn::eval_body(&estimator, &samples, &rig, 0.0).expect("evaluates");
+        let report = eval_bundled_baseline(&rig, VoteSettings::default(), NoiseModel::None, 40, 0x41_71);
         println!("camera {height_mm} mm above the floor: {:.2} mm", report.mean_error_mm);
         assert_eq!(
             report.no_mouse, 0,
@@ -412,37 +423,16 @@ fn the_body_forest_finds_the_joints_under_a_higher_camera() {
 /// where the votes put it.
 #[test]
 fn the_tail_tip_follows_the_segmented_tail_to_its_end() {
-    use mousepose::forest::infer::{BodyEstimator, VoteSettings};
+    use mousepose::forest::infer::VoteSettings;
     use mousepose::geometry::Rig;
-    use mousepose::synth::dataset::{DatasetSpec, render_sample};
-    use mousepose::synth::mouse::pose_library;
-    use mousepose::synth::noise::{DepthNoise, NoiseModel};
-    let path = repo_root().join("fixtures/models/body-baseline.forest");
-    let Model::Body(_, forest) = model::load(&path, Some(ModelKind::Body)).expect("bundled body model") else {
-        panic!("{} is not a body model", path.display());
-    };
+    use mousepose::synth::noise::NoiseModel;
     let rig = Rig::default_rig();
-    let library = pose_library();
-    let tail_tip = |model: NoiseModel, follow_tail: bool| {
-        let spec = DatasetSpec {
-            count: 60,
-            seed: 0x7A11,
-            noise: DepthNoise {
-                model,
-                gaussian_mm: 0.0,
-            },
-            bottom_views: false,
-        };
-        let samples: Vec<_> = (0..spec.count)
-            .map(|i| render_sample(&rig, &spec, &library, i))
-            .collect();
+    let tail_tip = |noise: NoiseModel, follow_tail: bool| {
         let settings = VoteSettings {
             follow_tail,
             ..VoteSettings::default()
         };
-        let estimator = BodyEstimator::new(forest.clone(), settings);
-        let report = mousepose::learn::eval_body(&estimator, &samples, &rig, 0.0).expect("evaluates");
-        report.per_joint_mm["tail_tip"]
+        eval_bundled_baseline(&rig, settings, noise, 60, 0x7A11).per_joint_mm["tail_tip"]
     };
     let (votes, followed) = (
         tail_tip(NoiseModel::StructuredLight, false),
