@@ -1,35 +1,23 @@
 //! mousepose: live 3D pose of a lab mouse from a depth camera above its cage and a colour
 //! camera under its glass floor. See `docs/ARCHITECTURE.md` for how the parts fit.
+//!
+//! The folders are the layers, and imports only point down (`tests/layers.rs` checks it):
+//!
+//! * [`core`]: plain types: frames, poses, the skeleton, cameras and the rig, kinematics, images.
+//! * [`io`]: file formats: the record store, sessions, staged output directories.
+//! * [`vision`]: the algorithms: segmentation, forests, the paw cascade, fusion, calibration
+//!   maths. No threads, no command line, no files but those they are asked to open.
+//! * [`runtime`]: the frame path: camera sources, the synchroniser, the pipeline runner, stages,
+//!   sinks, the rig config, and the one topology builder every command uses.
+//! * Tooling beside them: [`synth`] (the synthesis engine), [`training`] (datasets to models
+//!   and their figures), [`experiment`] (the paper's running example).
+//! * [`app`]: the command line, one file per command; the only place clap and exit codes live.
 
-pub mod bench;
-pub mod calibrate;
-pub mod capture;
-pub mod chart;
-pub mod cli;
-pub mod commands;
-pub mod config;
-pub mod devices;
+pub mod app;
+pub mod core;
 pub mod experiment;
-pub mod forest;
-pub mod frame;
-pub mod fusion;
-pub mod geometry;
-pub mod image;
-pub mod kinematics;
-pub mod learn;
-pub mod output;
-pub mod overlay;
-pub mod paws;
-pub mod pipeline;
-pub mod pose;
-pub mod progress;
-pub mod record;
-pub mod replay;
-pub mod segment;
-pub mod session;
-pub mod sink;
-pub mod skeleton;
-pub mod stages;
-pub mod store;
-pub mod sync;
+pub mod io;
+pub mod runtime;
 pub mod synth;
+pub mod training;
+pub mod vision;

@@ -1,5 +1,5 @@
-//! The `mousepose` binary: everything happens in the library's [`mousepose::cli::main`].
+//! The `mousepose` binary: everything happens in the library's [`mousepose::app::main`].
 
 fn main() -> std::process::ExitCode {
-    mousepose::cli::main()
+    mousepose::app::main()
 }

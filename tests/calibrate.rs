@@ -3,11 +3,11 @@
 //! truth; and every bad input refused with one clear sentence and a non-zero exit.
 
 use crate::util::mousepose;
-use mousepose::calibrate::extrinsics::pose_difference;
-use mousepose::calibrate::{CalibrationError, RigCalibration, load_intrinsics};
-use mousepose::frame::PixelFormat;
-use mousepose::geometry::Rig;
-use mousepose::session::{Backend, CameraMeta, CameraRole, FrameFormat, SessionMeta, SessionSource};
+use mousepose::core::frame::PixelFormat;
+use mousepose::core::geometry::Rig;
+use mousepose::io::session::{Backend, CameraMeta, CameraRole, FrameFormat, SessionMeta, SessionSource};
+use mousepose::vision::calibrate::extrinsics::pose_difference;
+use mousepose::vision::calibrate::{CalibrationError, RigCalibration, load_intrinsics};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -392,12 +392,12 @@ fn openni_dummy_intrinsics() {
     let _guard = crate::capture_openni::serial();
     let tmp = tempfile::tempdir().expect("tmp");
     let out = tmp.path().join("depth.yaml");
-    let result = mousepose::calibrate::openni::depth_intrinsics("Dummy");
+    let result = mousepose::vision::calibrate::openni::depth_intrinsics("Dummy");
     match result {
         Ok(found) => {
             assert_eq!((found.intrinsics.width, found.intrinsics.height), (320, 240));
             assert!(found.intrinsics.fx > 0.0);
-            mousepose::calibrate::openni::save(&found, &out).expect("saves");
+            mousepose::vision::calibrate::openni::save(&found, &out).expect("saves");
             let back = load_intrinsics(&out).expect("loads");
             assert_eq!(back, found.intrinsics);
         }

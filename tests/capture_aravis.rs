@@ -5,11 +5,11 @@
 //!
 //! Aravis 0.8's fake camera listens on the fixed GVCP port, so the tests take turns.
 
-use mousepose::capture::aravis::{AravisColor, AravisConfig, Trigger, list_devices};
-use mousepose::capture::{CaptureError, Clock, FrameSource};
-use mousepose::frame::{ColorFrame, PixelFormat};
-use mousepose::session::codec::FrameFormat;
-use mousepose::session::meta::{Backend, CameraRole};
+use mousepose::core::frame::{ColorFrame, PixelFormat};
+use mousepose::io::session::codec::FrameFormat;
+use mousepose::io::session::meta::{Backend, CameraRole};
+use mousepose::runtime::capture::aravis::{AravisColor, AravisConfig, Trigger, list_devices};
+use mousepose::runtime::capture::{CaptureError, Clock, FrameSource};
 use std::net::UdpSocket;
 use std::process::{Child, Command, Stdio};
 use std::sync::{Mutex, MutexGuard};

@@ -4,10 +4,10 @@
 //!
 //! OpenNI2 is one context per process, so these tests run one at a time (`serial()`).
 
-use mousepose::capture::openni::list_devices;
-use mousepose::capture::{CaptureError, Clock, FrameSource, OpenNiConfig, OpenNiDepth};
-use mousepose::frame::DepthFrame;
-use mousepose::session::{Backend, CameraRole, FrameFormat};
+use mousepose::core::frame::DepthFrame;
+use mousepose::io::session::{Backend, CameraRole, FrameFormat};
+use mousepose::runtime::capture::openni::list_devices;
+use mousepose::runtime::capture::{CaptureError, Clock, FrameSource, OpenNiConfig, OpenNiDepth};
 use openni2_sys as ni;
 use std::path::Path;
 use std::sync::{Mutex, MutexGuard, PoisonError};

@@ -16,10 +16,10 @@ fn chain(error: &(dyn std::error::Error + 'static)) -> String {
 
 mod moseq {
     use super::chain;
-    use mousepose::capture::moseq::{MoseqConfig, MoseqDepth, MoseqError, MoseqKind};
-    use mousepose::capture::{CaptureError, Clock, FrameSource};
-    use mousepose::frame::DepthFrame;
-    use mousepose::session::meta::Backend;
+    use mousepose::core::frame::DepthFrame;
+    use mousepose::io::session::meta::Backend;
+    use mousepose::runtime::capture::moseq::{MoseqConfig, MoseqDepth, MoseqError, MoseqKind};
+    use mousepose::runtime::capture::{CaptureError, Clock, FrameSource};
     use std::path::Path;
     use std::process::Command;
     use std::time::Duration;
@@ -281,13 +281,13 @@ mod moseq {
 
 mod v4l2 {
     use super::chain;
-    use mousepose::capture::v4l2::{
+    use mousepose::core::frame::PixelFormat;
+    use mousepose::runtime::capture::v4l2::{
         BUF_FLAG_ERROR, BufferDecoder, BufferMeta, BufferProblem, Chosen, Conversion, LOSS_ERROR_FLAG,
         LOSS_SHORT_BUFFER, OfferedFormat, OfferedSize, V4l2Color, V4l2Config, choose_format, list_devices,
         list_devices_in, stamp_from_buffer, yuv_to_rgb,
     };
-    use mousepose::capture::{CaptureError, Clock};
-    use mousepose::frame::PixelFormat;
+    use mousepose::runtime::capture::{CaptureError, Clock};
     use std::path::PathBuf;
 
     fn fixtures() -> PathBuf {

@@ -2,7 +2,7 @@
 //! with one clear sentence and a non-zero exit.
 
 use crate::util::mousepose;
-use mousepose::session::{CameraRole, SessionEvent, SessionReader};
+use mousepose::io::session::{CameraRole, SessionEvent, SessionReader};
 use std::fs;
 use std::path::Path;
 use std::process::Output;

@@ -1,12 +1,12 @@
 //! The forest library: training, discriminative training, model files and determinism.
 
 use crate::util::repo_root;
-use mousepose::forest::classify::{ClassObjective, argmax};
-use mousepose::forest::discriminative::{DiscriminativeParams, Scoring, refine_tree};
-use mousepose::forest::model::{self, Model, ModelError, ModelKind};
-use mousepose::forest::train::{train_forest, train_tree};
-use mousepose::forest::{SplitSpace, TrainParams};
-use mousepose::learn::{PixelParams, Target, TrainJob, TrainProgress};
+use mousepose::training::{PixelParams, Target, TrainJob, TrainProgress};
+use mousepose::vision::forest::classify::{ClassObjective, argmax};
+use mousepose::vision::forest::discriminative::{DiscriminativeParams, Scoring, refine_tree};
+use mousepose::vision::forest::model::{self, Model, ModelError, ModelKind};
+use mousepose::vision::forest::train::{train_forest, train_tree};
+use mousepose::vision::forest::{SplitSpace, TrainParams};
 use rand::Rng;
 
 /// Points in the unit square; features are the two coordinates, thresholds uniform.
@@ -24,14 +24,14 @@ impl SplitSpace for Xy<'_> {
                 let values = s.iter().map(|&i| self.value(i, &f));
                 let lo = values.clone().fold(f32::INFINITY, f32::min);
                 let hi = values.fold(f32::NEG_INFINITY, f32::max);
-                (f, mousepose::forest::uniform_thresholds(lo, hi, 4, rng))
+                (f, mousepose::vision::forest::uniform_thresholds(lo, hi, 4, rng))
             })
             .collect()
     }
 }
 
 fn points(n: usize, seed: u64) -> Vec<[f32; 2]> {
-    let mut rng = mousepose::synth::item_rng(seed, 0, 0);
+    let mut rng = mousepose::core::rng::item_rng(seed, 0, 0);
     (0..n)
         .map(|_| [rng.gen_range(0.0..1.0), rng.gen_range(0.0..1.0)])
         .collect()
@@ -85,7 +85,7 @@ fn packed_traversal_reaches_the_leaves_of_root_to_leaf_descent() {
     let tree = train_tree(&space, &objective, &mut all, &params, 0, 0);
     assert!(tree.depth() > 4, "a tree deep enough to test: {}", tree.depth());
     let packed = tree.packed();
-    let mut traversal = mousepose::forest::Traversal::default();
+    let mut traversal = mousepose::vision::forest::Traversal::default();
     // Every point, including the 1,000 the tree never saw, twice to reuse the buffers.
     for _ in 0..2 {
         packed.leaf_indices(xy.len(), |s, f| space.value(s as u32, f), &mut traversal);
@@ -177,7 +177,7 @@ fn encoded(target: Target, discriminative: bool, threads: usize) -> Vec<u8> {
         .build()
         .expect("pool");
     let (model, _) = pool
-        .install(|| mousepose::learn::train(&small_job(target, discriminative), &Quiet))
+        .install(|| mousepose::training::train(&small_job(target, discriminative), &Quiet))
         .expect("trains");
     let mut bytes = model::encode(&model).expect("encodes");
     // The description records the training time (and the checksum covers it): compare the
@@ -205,8 +205,8 @@ fn training_is_reproducible_whatever_the_thread_count() {
 
 #[test]
 fn a_regression_forest_recovers_a_constant_offset() {
-    use mousepose::forest::depth::{DepthImage, DepthSpace, JointObjective, JointTargets, PixelSet};
-    use mousepose::synth::render::Region;
+    use mousepose::core::image::Region;
+    use mousepose::vision::forest::depth::{DepthImage, DepthSpace, JointObjective, JointTargets, PixelSet};
     // One flat image; every pixel is 5 mm from every joint, in the same direction.
     let region = Region {
         x0: 100,
@@ -261,7 +261,7 @@ fn a_regression_forest_recovers_a_constant_offset() {
 
 #[test]
 fn model_files_round_trip_and_damage_is_refused() {
-    let (model, _) = mousepose::learn::train(&small_job(Target::Body, false), &Quiet).expect("trains");
+    let (model, _) = mousepose::training::train(&small_job(Target::Body, false), &Quiet).expect("trains");
     let dir = tempfile::tempdir().expect("tmp");
     let path = dir.path().join("body.forest");
     model::save(&model, &path).expect("saves");
@@ -363,16 +363,16 @@ fn gauss2d_runs_end_to_end_at_small_scale() {
 /// `fixtures/models/body-baseline.forest` with `settings`, evaluated (segmentation included)
 /// on `count` images rendered under `rig` with `noise` from `seed`.
 fn eval_bundled_baseline(
-    rig: &mousepose::geometry::Rig,
-    settings: mousepose::forest::infer::VoteSettings,
-    noise: mousepose::synth::noise::NoiseModel,
+    rig: &mousepose::core::geometry::Rig,
+    settings: mousepose::vision::forest::infer::VoteSettings,
+    noise: mousepose::core::noise::NoiseModel,
     count: u64,
     seed: u64,
-) -> mousepose::learn::BodyReport {
-    use mousepose::forest::infer::BodyEstimator;
+) -> mousepose::training::BodyReport {
+    use mousepose::core::noise::DepthNoise;
     use mousepose::synth::dataset::{DatasetSpec, render_sample};
     use mousepose::synth::mouse::pose_library;
-    use mousepose::synth::noise::DepthNoise;
+    use mousepose::vision::forest::infer::BodyEstimator;
     let path = repo_root().join("fixtures/models/body-baseline.forest");
     let Model::Body(_, forest) = model::load(&path, Some(ModelKind::Body)).expect("bundled body model") else {
         panic!("{} is not a body model", path.display());
@@ -388,7 +388,7 @@ fn eval_bundled_baseline(
     };
     let library = pose_library();
     let samples: Vec<_> = (0..count).map(|i| render_sample(rig, &spec, &library, i)).collect();
-    mousepose::learn::eval_body(&BodyEstimator::new(forest, settings), &samples, rig, 0.0).expect("evaluates")
+    mousepose::training::eval_body(&BodyEstimator::new(forest, settings), &samples, rig, 0.0).expect("evaluates")
 }
 
 /// The default body model (trained with the camera 600 mm above the floor) under cameras
@@ -397,9 +397,9 @@ fn eval_bundled_baseline(
 /// gave 31 mm at 900 mm and no mouse at all at 1200 mm.)
 #[test]
 fn the_body_forest_finds_the_joints_under_a_higher_camera() {
-    use mousepose::forest::infer::VoteSettings;
-    use mousepose::geometry::{Rig, look_at};
-    use mousepose::synth::noise::NoiseModel;
+    use mousepose::core::geometry::{Rig, look_at};
+    use mousepose::core::noise::NoiseModel;
+    use mousepose::vision::forest::infer::VoteSettings;
     use nalgebra::{Point3, Vector3};
     for height_mm in [600.0, 900.0, 1200.0] {
         let mut rig = Rig::default_rig();
@@ -423,9 +423,9 @@ fn the_body_forest_finds_the_joints_under_a_higher_camera() {
 /// where the votes put it.
 #[test]
 fn the_tail_tip_follows_the_segmented_tail_to_its_end() {
-    use mousepose::forest::infer::VoteSettings;
-    use mousepose::geometry::Rig;
-    use mousepose::synth::noise::NoiseModel;
+    use mousepose::core::geometry::Rig;
+    use mousepose::core::noise::NoiseModel;
+    use mousepose::vision::forest::infer::VoteSettings;
     let rig = Rig::default_rig();
     let tail_tip = |noise: NoiseModel, follow_tail: bool| {
         let settings = VoteSettings {

@@ -3,10 +3,10 @@
 //! end, and damaged cascades refused with one clear sentence.
 
 use crate::util::{mousepose, repo_root};
-use mousepose::paws::cascade::Cascade;
-use mousepose::paws::detect::scan_like_opencv;
-use mousepose::paws::grey::GreyImage;
-use mousepose::paws::{PawDetector, xml};
+use mousepose::vision::paws::cascade::Cascade;
+use mousepose::vision::paws::detect::scan_like_opencv;
+use mousepose::vision::paws::grey::GreyImage;
+use mousepose::vision::paws::{PawDetector, xml};
 use opencv::core::{Rect, Size, Vector};
 use opencv::prelude::*;
 use rand::{Rng, SeedableRng};
@@ -143,15 +143,15 @@ fn paw_cascade_agrees_with_opencv() {
     let ds = mousepose::synth::dataset::DatasetSpec {
         count: 1,
         seed: 3,
-        noise: mousepose::synth::noise::DepthNoise::default(),
+        noise: mousepose::core::noise::DepthNoise::default(),
         bottom_views: true,
     };
-    let rig = mousepose::geometry::Rig::default_rig();
+    let rig = mousepose::core::geometry::Rig::default_rig();
     let library = mousepose::synth::mouse::pose_library();
     let sample = mousepose::synth::dataset::render_sample(&rig, &ds, &library, 0);
     let view = sample.bottom.expect("bottom view");
-    let mut greyer = mousepose::paws::grey::Greyer::default();
-    let (grey, _) = mousepose::paws::data::canonical_view(&view, &mut greyer).expect("grey");
+    let mut greyer = mousepose::vision::paws::grey::Greyer::default();
+    let (grey, _) = mousepose::training::paws_data::canonical_view(&view, &mut greyer).expect("grey");
     agree(&path, &cut, std::slice::from_ref(&grey));
     agree(&paw_model(), &c, std::slice::from_ref(&grey));
 }
@@ -161,14 +161,14 @@ fn detector_is_clone_send_debug_and_finds_paws_in_a_full_frame() {
     fn bounds<T: Clone + Send + std::fmt::Debug>() {}
     bounds::<PawDetector>();
     let mut det = PawDetector::load(&paw_model()).expect("loads");
-    let frame = mousepose::frame::ColorFrame {
-        stamp: mousepose::frame::Stamp::default(),
+    let frame = mousepose::core::frame::ColorFrame {
+        stamp: mousepose::core::frame::Stamp::default(),
         width: 64,
         height: 48,
-        format: mousepose::frame::PixelFormat::BayerRg8,
+        format: mousepose::core::frame::PixelFormat::BayerRg8,
         data: vec![16; 64 * 48],
     };
-    let mut out = vec![mousepose::paws::PawDetection {
+    let mut out = vec![mousepose::vision::paws::PawDetection {
         x0: 0.0,
         y0: 0.0,
         x1: 1.0,
@@ -279,9 +279,10 @@ fn train_paws_refuses_an_existing_output() {
 /// back in the frame's pixels, on the paws that touch the glass.
 #[test]
 fn detections_land_on_paws_in_full_frames() {
-    use mousepose::frame::{ColorFrame, PixelFormat, Stamp};
-    use mousepose::synth::{body::skin, item_rng, mouse, random_placement, views::render_bottom_frame};
-    let rig = mousepose::geometry::Rig::default_rig();
+    use mousepose::core::frame::{ColorFrame, PixelFormat, Stamp};
+    use mousepose::core::rng::item_rng;
+    use mousepose::synth::{body::skin, mouse, random_placement, views::render_bottom_frame};
+    let rig = mousepose::core::geometry::Rig::default_rig();
     let camera = &rig.color;
     let library = mouse::pose_library();
     let mut det = PawDetector::load(&paw_model()).expect("loads");
@@ -313,7 +314,7 @@ fn detections_land_on_paws_in_full_frames() {
             (y1 as u32).min(h),
         );
         det.detect(&frame, roi, 2.0, &mut out);
-        let near = |d: &mousepose::paws::PawDetection, b: &mousepose::synth::views::PawBox| {
+        let near = |d: &mousepose::vision::paws::PawDetection, b: &mousepose::synth::views::PawBox| {
             let (cx, cy) = d.centre();
             let (px, py) = (f64::from(b.x0 + b.x1) / 2.0, f64::from(b.y0 + b.y1) / 2.0);
             (cx - px).hypot(cy - py) <= f64::from((b.x1 - b.x0).max(b.y1 - b.y0)) / 2.0

@@ -4,10 +4,10 @@
 
 use crate::util::mousepose;
 use aravis_ext::FakeCameraConfig;
-use mousepose::config::Config;
-use mousepose::pipeline::Shutdown;
-use mousepose::record::record;
-use mousepose::session::{Backend, CameraRole, SessionReader};
+use mousepose::io::session::{Backend, CameraRole, SessionReader};
+use mousepose::runtime::config::Config;
+use mousepose::runtime::pipeline::Shutdown;
+use mousepose::runtime::record::record;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -131,11 +131,11 @@ fn devices_lists_every_backend_as_json() {
 
 /// A rig calibration for the Dummy depth camera (320x240) and no particular colour camera.
 fn dummy_calibration(dir: &Path, depth_size: (u32, u32)) -> std::path::PathBuf {
-    let mut rig = mousepose::geometry::Rig::default_rig();
+    let mut rig = mousepose::core::geometry::Rig::default_rig();
     rig.depth.intrinsics.width = depth_size.0;
     rig.depth.intrinsics.height = depth_size.1;
     let path = dir.join("rig.yaml");
-    mousepose::calibrate::RigCalibration::from_rig(&rig)
+    mousepose::vision::calibrate::RigCalibration::from_rig(&rig)
         .save(&path)
         .unwrap();
     path

@@ -3,9 +3,9 @@
 #![allow(clippy::unwrap_used)] // the helpers below are test code too
 
 use crate::util::{mousepose, repo_root};
-use mousepose::replay::{ReplayOptions, ReplaySummary, replay};
-use mousepose::session::{SessionReader, SessionWriter};
-use mousepose::synth::noise::{DepthNoise, NoiseModel};
+use mousepose::core::noise::{DepthNoise, NoiseModel};
+use mousepose::io::session::{SessionReader, SessionWriter};
+use mousepose::runtime::topology::{ReplayOptions, ReplaySummary, replay};
 use mousepose::synth::session::{SessionSpec, write_session};
 use std::path::{Path, PathBuf};
 
@@ -77,10 +77,10 @@ fn the_fixture_session_replays_with_its_true_pairs_and_joints() {
     // poses.csv: the header, then one row per pair.
     let csv = std::fs::read_to_string(out.join("poses.csv")).unwrap();
     let mut lines = csv.lines();
-    assert_eq!(lines.next().unwrap(), mousepose::sink::poses::header());
+    assert_eq!(lines.next().unwrap(), mousepose::runtime::sink::poses::header());
     let rows: Vec<&str> = lines.collect();
     assert_eq!(rows.len() as u64, s.pairs);
-    let columns = mousepose::sink::poses::header().split(',').count();
+    let columns = mousepose::runtime::sink::poses::header().split(',').count();
     assert!(rows.iter().all(|r| r.split(',').count() == columns));
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
@@ -127,14 +127,14 @@ fn every_joint_says_where_it_came_from_and_overlays_are_drawn() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let sources = sources(&std::fs::read_to_string(out.join("poses.csv")).unwrap());
-    let allowed = |joint: mousepose::skeleton::Joint| -> &[&str] {
+    let allowed = |joint: mousepose::core::skeleton::Joint| -> &[&str] {
         match joint.number() {
             1..=12 => &["depth", "missing"],
             13..=20 => &["ik", "default", "missing"],
             _ => &["paw", "default", "missing"],
         }
     };
-    for joint in mousepose::skeleton::Joint::ALL {
+    for joint in mousepose::core::skeleton::Joint::ALL {
         let seen = &sources[joint.name()];
         assert!(
             seen.iter().all(|s| allowed(joint).contains(&s.as_str())),
@@ -147,7 +147,7 @@ fn every_joint_says_where_it_came_from_and_overlays_are_drawn() {
     // One picture per depth frame whose sequence number is a multiple of 10.
     let reader = SessionReader::open(fixture()).unwrap();
     let expected: Vec<String> = reader
-        .seqs(mousepose::session::CameraRole::Depth)
+        .seqs(mousepose::io::session::CameraRole::Depth)
         .iter()
         .filter(|s| *s % 10 == 0)
         .map(|s| format!("{s:06}.png"))
@@ -191,7 +191,7 @@ fn without_a_paw_cascade_the_limbs_take_their_default_configuration() {
 
 #[test]
 fn a_calibration_file_replaces_the_sessions_and_must_be_of_its_rig() {
-    use mousepose::calibrate::RigCalibration;
+    use mousepose::vision::calibrate::RigCalibration;
     let tmp = tempfile::tempdir().unwrap();
     let reader = SessionReader::open(fixture()).unwrap();
     // The session's own rig, from a file: the same poses as without it.
@@ -212,7 +212,7 @@ fn a_calibration_file_replaces_the_sessions_and_must_be_of_its_rig() {
     assert!(with.mean_error_mm.is_some());
     // A calibration of the full-size colour camera does not fit the session's binned one.
     let other = tmp.path().join("other.yaml");
-    RigCalibration::from_rig(&mousepose::geometry::Rig::default_rig())
+    RigCalibration::from_rig(&mousepose::core::geometry::Rig::default_rig())
         .save(&other)
         .unwrap();
     let out = tmp.path().join("c");

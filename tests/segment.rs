@@ -1,16 +1,19 @@
 //! The mouse segmenter on synthetic data: every noise model, crops and full frames, a tilted
 //! floor at another camera height, the reported figures, and bad input.
 
-use mousepose::frame::{DepthFrame, Stamp};
-use mousepose::geometry::{Intrinsics, Rig};
-use mousepose::segment::{Background, Mouse, PoseFrame, SegmentError, Segmenter, SegmenterConfig};
-use mousepose::skeleton::{BACKGROUND_LABEL, Joint, Part};
+use mousepose::core::frame::{DepthFrame, Stamp};
+use mousepose::core::geometry::{Intrinsics, Rig};
+use mousepose::core::image::Region;
+use mousepose::core::noise::{DepthNoise, NoiseModel};
+use mousepose::core::rng::item_rng;
+use mousepose::core::skeleton::{BACKGROUND_LABEL, Joint, Part};
 use mousepose::synth::body::skin;
 use mousepose::synth::dataset::{DatasetSpec, Sample, render_sample};
 use mousepose::synth::mouse::{MouseInstance, fit_in_cage, pose_library, pose_mouse};
-use mousepose::synth::noise::{DepthNoise, NoiseModel, quantise};
-use mousepose::synth::render::{Cage, Region, Scene};
-use mousepose::synth::{item_rng, jitter_pose, random_placement};
+use mousepose::synth::noise::quantise;
+use mousepose::synth::render::{Cage, Scene};
+use mousepose::synth::{jitter_pose, random_placement};
+use mousepose::vision::segment::{Background, Mouse, PoseFrame, SegmentError, Segmenter, SegmenterConfig};
 use nalgebra::{Point2, Point3, Vector3};
 use rand::Rng;
 

@@ -1,14 +1,14 @@
 //! Session directories: writing and reading back, surviving a killed writer and damaged
 //! bytes, rejecting what is not a session, and writing byte-identical files for equal input.
 
-use mousepose::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
-use mousepose::geometry::Rig;
-use mousepose::pose::JointPositions;
-use mousepose::session::{
+use mousepose::core::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
+use mousepose::core::geometry::Rig;
+use mousepose::core::pose::JointPositions;
+use mousepose::io::session::{
     Backend, CameraMeta, CameraRole, FrameFormat, SessionError, SessionEvent, SessionMeta, SessionReader,
     SessionSource, SessionSummary, SessionWriter, Truth,
 };
-use mousepose::store::{self, HeaderFault, IndexStatus, Kind, RecordReader, RecordWriter, SkipReason, StoreError};
+use mousepose::io::store::{self, HeaderFault, IndexStatus, Kind, RecordReader, RecordWriter, SkipReason, StoreError};
 use nalgebra::Point3;
 use std::fs;
 use std::path::{Path, PathBuf};

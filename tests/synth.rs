@@ -1,14 +1,16 @@
 //! The synthesis engine through its public API: geometry, renderer properties, determinism
 //! and the dataset format.
 
-use mousepose::geometry::{Intrinsics, Rig};
-use mousepose::skeleton::{BACKGROUND_LABEL, Joint, Part};
+use mousepose::core::geometry::{Intrinsics, Rig};
+use mousepose::core::image::Region;
+use mousepose::core::noise::DepthNoise;
+use mousepose::core::rng::item_rng;
+use mousepose::core::skeleton::{BACKGROUND_LABEL, Joint, Part};
 use mousepose::synth::body::skin;
 use mousepose::synth::dataset::{DatasetSpec, decode_sample, encode_sample, render_sample};
 use mousepose::synth::mouse::{Placement, pose_library, pose_mouse};
-use mousepose::synth::noise::DepthNoise;
-use mousepose::synth::render::{Cage, Region};
-use mousepose::synth::{item_rng, random_placement};
+use mousepose::synth::random_placement;
+use mousepose::synth::render::Cage;
 use nalgebra::{Point2, Point3};
 
 fn clean_spec(count: u64) -> DatasetSpec {
@@ -167,7 +169,7 @@ fn rendering_is_deterministic_for_a_seed() {
     let lib = pose_library();
     let spec = DatasetSpec {
         noise: DepthNoise {
-            model: mousepose::synth::noise::NoiseModel::StructuredLight,
+            model: mousepose::core::noise::NoiseModel::StructuredLight,
             gaussian_mm: 2.0,
         },
         ..clean_spec(20)

@@ -3,11 +3,11 @@
 //! levels, vertical at odd ones, thresholds with three decimals), and its discriminative
 //! training on a second data set.
 
-use crate::forest::classify::{ClassObjective, argmax};
-use crate::forest::discriminative::{DiscriminativeParams, PassStats, Scoring, refine_tree, subset};
-use crate::forest::train::train_forest;
-use crate::forest::{Forest, SplitSpace, TrainParams};
-use crate::synth::item_rng;
+use crate::core::rng::item_rng;
+use crate::vision::forest::classify::{ClassObjective, argmax};
+use crate::vision::forest::discriminative::{DiscriminativeParams, PassStats, Scoring, refine_tree, subset};
+use crate::vision::forest::train::train_forest;
+use crate::vision::forest::{Forest, SplitSpace, TrainParams};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;

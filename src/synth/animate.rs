@@ -3,7 +3,7 @@
 //! every pose parameter eased so nothing jumps between frames.
 
 use super::mouse::{Behaviour, Placement, PoseParams, behaviour_params};
-use crate::geometry::{CAGE_X_MM, CAGE_Y_MM};
+use crate::core::geometry::{CAGE_X_MM, CAGE_Y_MM};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::{PI, TAU};

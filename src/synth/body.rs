@@ -5,8 +5,9 @@
 //! trunk widest at the hips, a thin tapering tail; the legs are thin capsules folded under the
 //! trunk, so from the top little more than the paws' tips shows.
 
-use super::mouse::{MouseInstance, PAW_SOLE_MM, TAIL_POINTS};
-use crate::skeleton::{Joint, LIMBS, Part, Side};
+use super::mouse::{MouseInstance, TAIL_POINTS};
+use crate::core::kinematics::PAW_SOLE_MM;
+use crate::core::skeleton::{Joint, LIMBS, Part, Side};
 use nalgebra::{Point3, Rotation3, Vector3};
 
 /// A solid.

@@ -7,8 +7,8 @@
 //! board plane, then blurred a little, lit by a gradient and given sensor noise. The glass is
 //! treated as infinitely thin (no refraction). Output is deterministic for a seed.
 
-use crate::calibrate::{Board, RigCalibration};
-use crate::geometry::{Camera, Intrinsics, Rig};
+use crate::core::geometry::{Camera, Intrinsics, Rig};
+use crate::vision::calibrate::{Board, RigCalibration};
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
@@ -54,7 +54,7 @@ pub enum ChessboardError {
         camera: &'static str,
     },
     #[error("cannot write the true rig")]
-    Truth(#[from] crate::calibrate::CalibrationError),
+    Truth(#[from] crate::vision::calibrate::CalibrationError),
 }
 
 /// A grey image.
@@ -296,7 +296,7 @@ pub fn write_chessboards(
     for (stream, name, camera) in [(1u64, COLOR_DIR, &rig.color), (2, DEPTH_IR_DIR, &rig.depth)] {
         let sub = mkdir(dir.join(name))?;
         for view in 0..spec.views {
-            let mut rng = super::item_rng(spec.seed, 0xC4E5 + stream, u64::from(view));
+            let mut rng = crate::core::rng::item_rng(spec.seed, 0xC4E5 + stream, u64::from(view));
             let pose = random_board_pose(&camera.intrinsics, board, &mut rng).ok_or(ChessboardError::DoesNotFit {
                 board: *board,
                 square_mm: board.square_mm,
@@ -318,7 +318,7 @@ pub fn write_chessboards(
                 camera: if stream == 3 { "colour" } else { "depth" },
             });
         }
-        let mut rng = super::item_rng(spec.seed, 0xC4E5 + stream, 0);
+        let mut rng = crate::core::rng::item_rng(spec.seed, 0xC4E5 + stream, 0);
         let image = render_view(&camera.intrinsics, &camera.camera_from_world(), board, &mut rng);
         write_grey_png(&sub.join(name), &image)?;
         count += 1;
@@ -333,8 +333,8 @@ pub fn write_chessboards(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calibrate::board::{Side, grey_mat};
-    use crate::synth::item_rng;
+    use crate::core::rng::item_rng;
+    use crate::vision::calibrate::board::{Side, grey_mat};
 
     #[test]
     fn extrinsics_views_are_found_in_physical_order() {

@@ -7,14 +7,15 @@
 
 use super::body::skin;
 use super::mouse::{Behaviour, fit_in_cage, pose_library, pose_mouse};
-use super::noise::DepthNoise;
-use super::render::{Cage, Region};
+use super::render::Cage;
 use super::views::{BottomView, PawBox, TopView, render_bottom, render_top};
 use super::{ENGINE_VERSION, item_rng, jitter_pose, random_placement};
-use crate::geometry::Rig;
-use crate::pose::JointPositions;
-use crate::skeleton::{JOINT_COUNT, Joint, SKELETON_VERSION};
-use crate::store::{Kind, RecordReader, RecordWriter, StoreError};
+use crate::core::geometry::Rig;
+use crate::core::image::Region;
+use crate::core::noise::DepthNoise;
+use crate::core::pose::JointPositions;
+use crate::core::skeleton::{JOINT_COUNT, Joint, SKELETON_VERSION};
+use crate::io::store::{Kind, RecordReader, RecordWriter, StoreError};
 use nalgebra::Point3;
 use rand::Rng;
 use rayon::prelude::*;
@@ -48,7 +49,7 @@ pub struct DatasetMeta {
     pub seed: u64,
     pub noise: DepthNoise,
     pub bottom_views: bool,
-    #[serde(with = "crate::session::meta::rig_repr")]
+    #[serde(with = "crate::io::session::meta::rig_repr")]
     pub rig: Option<Rig>,
 }
 

@@ -16,29 +16,20 @@ pub mod render;
 pub mod session;
 pub mod views;
 
-use crate::geometry::{CAGE_X_MM, CAGE_Y_MM};
+use crate::core::geometry::{CAGE_X_MM, CAGE_Y_MM};
+use crate::core::rng::item_rng;
 use mouse::{Placement, PoseParams};
 use rand::Rng;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 
 /// Version of the synthesis engine's model and renderers; data files record it so a dataset
 /// made by another version is recognised as such.
 pub const ENGINE_VERSION: u32 = 1;
 
-/// The RNG for item `index` of a run seeded with `seed`: every image or frame draws from its
-/// own stream, so output does not depend on the thread count or the order of work.
-pub fn item_rng(seed: u64, stream: u64, index: u64) -> ChaCha8Rng {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ stream.wrapping_mul(0x9E37_79B9_7F4A_7C15));
-    rng.set_stream(index);
-    rng
-}
-
 /// Random variation of a library pose for a training image: placement anywhere in the cage,
 /// any heading, pitch and roll up to 10 degrees, scale 0.85-1.15, bone lengths +-10 %.
 pub fn random_placement(rng: &mut impl Rng) -> Placement {
     let margin = 45.0;
-    let bones = crate::skeleton::BoneLengths::default().map(|v| v * rng.gen_range(0.9..=1.1));
+    let bones = crate::core::skeleton::BoneLengths::default().map(|v| v * rng.gen_range(0.9..=1.1));
     Placement {
         x_mm: rng.gen_range(-(CAGE_X_MM / 2.0 - margin)..=(CAGE_X_MM / 2.0 - margin)),
         y_mm: rng.gen_range(-(CAGE_Y_MM / 2.0 - margin)..=(CAGE_Y_MM / 2.0 - margin)),

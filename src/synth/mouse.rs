@@ -5,9 +5,9 @@
 //! under the rump) from a handful of continuous parameters, so behaviours can blend smoothly
 //! in a session, and then placed in the cage by a [`Placement`].
 
-use crate::kinematics::{chest_paw, face_paw, fore_limb, hind_limb, stance_paw};
-use crate::pose::JointPositions;
-use crate::skeleton::{BoneLengths, Joint, LIMBS, Side};
+use crate::core::kinematics::{PAW_SOLE_MM, chest_paw, face_paw, fore_limb, hind_limb, stance_paw};
+use crate::core::pose::JointPositions;
+use crate::core::skeleton::{BoneLengths, Joint, LIMBS, Side};
 use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{PI, TAU};
@@ -157,7 +157,7 @@ pub struct MouseInstance {
     pub joints: JointPositions,
     /// Orientation (x forward, y left, z dorsal) of the spine segment ending at each joint,
     /// indexed by joint; limbs and the tail carry the frame of their body attachment.
-    pub frames: [Rotation3<f64>; crate::skeleton::JOINT_COUNT],
+    pub frames: [Rotation3<f64>; crate::core::skeleton::JOINT_COUNT],
     /// The tail's centre line from `tail_base` to `tail_tip`.
     pub tail: [Point3<f64>; TAIL_POINTS],
     /// Shoulder points (fore limb roots), left then right.
@@ -177,9 +177,6 @@ impl MouseInstance {
         &self.frames[joint.index()]
     }
 }
-
-/// Radius of the paw's sole: a paw resting on the glass has its joint this high.
-pub const PAW_SOLE_MM: f64 = 1.5;
 
 /// The horizontal forward direction of a body frame (world x when the frame points straight
 /// up or down).
@@ -205,8 +202,8 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
     };
     let b = placement.bones.scaled(placement.scale);
     let s = placement.scale;
-    let mut joints = [Point3::origin(); crate::skeleton::JOINT_COUNT];
-    let mut frames = [Rotation3::identity(); crate::skeleton::JOINT_COUNT];
+    let mut joints = [Point3::origin(); crate::core::skeleton::JOINT_COUNT];
+    let mut frames = [Rotation3::identity(); crate::core::skeleton::JOINT_COUNT];
     let set = |joints: &mut JointPositions, frames: &mut [Rotation3<f64>; 24], j: Joint, p, r| {
         joints[j.index()] = p;
         frames[j.index()] = r;
@@ -354,7 +351,7 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
     )
 }
 
-impl crate::skeleton::LimbChain {
+impl crate::core::skeleton::LimbChain {
     /// The limb's three bone lengths from `bones`.
     pub fn lengths_in(&self, bones: &BoneLengths) -> [f64; 3] {
         bones.limb(self.fore)
@@ -381,7 +378,7 @@ fn place(mut m: MouseInstance, placement: &Placement) -> MouseInstance {
     // the skin of a leg (about 1.5 mm).
     let lowest = Joint::ALL
         .iter()
-        .filter(|j| j.group() != crate::skeleton::JointGroup::Tail)
+        .filter(|j| j.group() != crate::core::skeleton::JointGroup::Tail)
         .map(|j| m.joints[j.index()].z - PAW_SOLE_MM * m.scale)
         .chain(m.tail.iter().map(|p| p.z - 0.8 * m.scale))
         .fold(f64::INFINITY, f64::min);
@@ -602,7 +599,7 @@ impl PoseParams {
 /// Shifts a posed mouse horizontally so that every joint and tail point lies at least
 /// `margin_mm` inside the cage's walls (no part of the mouse passes through a wall).
 pub fn fit_in_cage(m: &mut MouseInstance, margin_mm: f64) {
-    use crate::geometry::{CAGE_X_MM, CAGE_Y_MM};
+    use crate::core::geometry::{CAGE_X_MM, CAGE_Y_MM};
     let points = || m.joints.iter().chain(m.tail.iter());
     let mut shift = [0.0f64; 2];
     for (axis, half) in [(0usize, CAGE_X_MM / 2.0 - margin_mm), (1, CAGE_Y_MM / 2.0 - margin_mm)] {

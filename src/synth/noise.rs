@@ -5,65 +5,11 @@
 //! Noise works on a depth buffer of `f32` millimetres (0 = no reading) covering a region of
 //! the image; it needs the region's place in the image for the projector's geometry.
 
-use super::render::Region;
-use crate::geometry::Intrinsics;
+use crate::core::geometry::Intrinsics;
+use crate::core::image::Region;
+use crate::core::noise::{DepthNoise, NoiseModel};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
-use serde::{Deserialize, Serialize};
-use std::fmt;
-use std::str::FromStr;
-
-/// The kind of depth camera to imitate.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum NoiseModel {
-    /// Exact depth (plus any Gaussian noise asked for).
-    #[default]
-    None,
-    /// Primesense, Kinect v1, Xtion: disparity quantised to 1/8 pixel (depth steps growing with
-    /// the square of the distance), projector shadows, missing pixels on steep edges.
-    StructuredLight,
-    /// Time of flight: flying pixels across depth edges, noise growing with distance.
-    Tof,
-}
-
-impl NoiseModel {
-    pub fn name(self) -> &'static str {
-        match self {
-            NoiseModel::None => "none",
-            NoiseModel::StructuredLight => "structured-light",
-            NoiseModel::Tof => "tof",
-        }
-    }
-}
-
-impl fmt::Display for NoiseModel {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl FromStr for NoiseModel {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "none" => Ok(NoiseModel::None),
-            "structured-light" => Ok(NoiseModel::StructuredLight),
-            "tof" => Ok(NoiseModel::Tof),
-            other => Err(format!(
-                "unknown noise model {other:?} (expected none, structured-light or tof)"
-            )),
-        }
-    }
-}
-
-/// A depth noise configuration.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct DepthNoise {
-    pub model: NoiseModel,
-    /// Standard deviation of additive Gaussian noise, millimetres.
-    pub gaussian_mm: f64,
-}
 
 /// Projector-camera baseline of a Primesense-like camera, millimetres.
 pub const BASELINE_MM: f64 = 75.0;

@@ -3,74 +3,14 @@
 
 use super::body::skin;
 use super::mouse::MouseInstance;
-use super::noise::DepthNoise;
-use super::render::{Cage, Region};
+use super::render::Cage;
 use super::views::{render_bottom, render_top};
-use crate::geometry::{Camera, Rig};
-use crate::image::{RgbImage, depth_to_rgb};
-use crate::skeleton::{BACKGROUND_LABEL, BONES, BoneKind, Part};
+use crate::core::geometry::Rig;
+use crate::core::image::Region;
+use crate::core::image::{RgbImage, depth_to_rgb, draw_skeleton};
+use crate::core::noise::DepthNoise;
+use crate::core::skeleton::{BACKGROUND_LABEL, Part};
 use rand::Rng;
-
-/// Colours of bones in drawings: the paper's spine red, ears green, limbs blue.
-pub fn bone_colour(kind: BoneKind) -> [u8; 3] {
-    match kind {
-        BoneKind::Spine => [230, 30, 30],
-        BoneKind::Ear => [30, 200, 30],
-        BoneKind::Limb => [40, 90, 255],
-    }
-}
-
-/// Draws the skeleton of `m` as seen by `camera` onto `img`, whose pixel (0, 0) is the
-/// camera's pixel `origin`, magnified `zoom` times.
-pub fn draw_skeleton(
-    img: &mut RgbImage,
-    camera: &Camera,
-    joints: &crate::pose::JointPositions,
-    origin: (f64, f64),
-    zoom: f64,
-) {
-    draw_joints(img, camera, &joints.map(Some), origin, zoom);
-}
-
-/// As [`draw_skeleton`], for joints that may be unknown (`None`): only bones with both ends
-/// known are drawn.
-pub fn draw_joints(
-    img: &mut RgbImage,
-    camera: &Camera,
-    joints: &[Option<nalgebra::Point3<f64>>; crate::skeleton::JOINT_COUNT],
-    origin: (f64, f64),
-    zoom: f64,
-) {
-    draw_bones(
-        img,
-        joints,
-        |p| {
-            camera
-                .project_world(p)
-                .map(|q| ((q.x - origin.0 + 0.5) * zoom, (q.y - origin.1 + 0.5) * zoom))
-        },
-        zoom.max(1.0),
-    );
-}
-
-/// Draws the bones whose ends are both known, through any projection `to_img` from the world
-/// to the picture's pixels (`None`: not drawable), lines `thickness` wide, joints as discs.
-pub fn draw_bones(
-    img: &mut RgbImage,
-    joints: &[Option<nalgebra::Point3<f64>>; crate::skeleton::JOINT_COUNT],
-    to_img: impl Fn(&nalgebra::Point3<f64>) -> Option<(f64, f64)>,
-    thickness: f64,
-) {
-    let at = |p: &Option<nalgebra::Point3<f64>>| p.as_ref().and_then(&to_img);
-    for (a, b, kind) in BONES {
-        if let (Some(pa), Some(pb)) = (at(&joints[a.index()]), at(&joints[b.index()])) {
-            img.line(pa, pb, bone_colour(kind), thickness);
-        }
-    }
-    for p in joints.iter().filter_map(at) {
-        img.disc(p, thickness * 0.9, [255, 255, 255]);
-    }
-}
 
 /// The three-panel picture of one instant (each panel the mouse's surroundings, magnified).
 pub fn preview(rig: &Rig, m: &MouseInstance, noise: &DepthNoise, rng: &mut impl Rng) -> RgbImage {
@@ -81,7 +21,7 @@ pub fn preview(rig: &Rig, m: &MouseInstance, noise: &DepthNoise, rng: &mut impl 
     let i = &rig.depth.intrinsics;
     let centre = rig
         .depth
-        .project_world(&m.joint(crate::skeleton::Joint::MidBack))
+        .project_world(&m.joint(crate::core::skeleton::Joint::MidBack))
         .unwrap_or(nalgebra::Point2::new(i.cx, i.cy));
     let (cx, cy) = (centre.x.max(0.0) as u32, centre.y.max(0.0) as u32);
     let window = Region {

@@ -5,91 +5,10 @@
 //! costs about as many ray tests as the mouse covers pixels, whatever the image size.
 
 use super::body::{Labeller, Material, Primitive, Shape};
-use crate::geometry::{CAGE_WALL_MM, CAGE_X_MM, CAGE_Y_MM, Camera, Intrinsics};
-use crate::skeleton::BACKGROUND_LABEL;
+use crate::core::geometry::{CAGE_WALL_MM, CAGE_X_MM, CAGE_Y_MM, Camera, Intrinsics};
+use crate::core::image::Region;
+use crate::core::skeleton::BACKGROUND_LABEL;
 use nalgebra::{Isometry3, Matrix3, Point2, Point3, Vector3};
-
-/// A rectangle of an image, in pixels.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Region {
-    pub x0: u32,
-    pub y0: u32,
-    pub width: u32,
-    pub height: u32,
-}
-
-impl Region {
-    /// The whole image of a camera.
-    pub fn full(intrinsics: &Intrinsics) -> Self {
-        Self {
-            x0: 0,
-            y0: 0,
-            width: intrinsics.width,
-            height: intrinsics.height,
-        }
-    }
-
-    pub fn len(&self) -> usize {
-        self.width as usize * self.height as usize
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.width == 0 || self.height == 0
-    }
-
-    /// The smallest region holding both.
-    pub fn union(&self, other: &Region) -> Region {
-        if self.is_empty() {
-            return *other;
-        }
-        if other.is_empty() {
-            return *self;
-        }
-        let x0 = self.x0.min(other.x0);
-        let y0 = self.y0.min(other.y0);
-        let x1 = (self.x0 + self.width).max(other.x0 + other.width);
-        let y1 = (self.y0 + self.height).max(other.y0 + other.height);
-        Region {
-            x0,
-            y0,
-            width: x1 - x0,
-            height: y1 - y0,
-        }
-    }
-
-    /// The region grown by `margin` pixels on every side, clipped to `width` x `height`.
-    pub fn grown(&self, margin: u32, width: u32, height: u32) -> Region {
-        let x0 = self.x0.saturating_sub(margin);
-        let y0 = self.y0.saturating_sub(margin);
-        let x1 = (self.x0 + self.width + margin).min(width);
-        let y1 = (self.y0 + self.height + margin).min(height);
-        Region {
-            x0,
-            y0,
-            width: x1.saturating_sub(x0),
-            height: y1.saturating_sub(y0),
-        }
-    }
-
-    /// The part of `self` inside `other`.
-    pub fn intersect(&self, other: &Region) -> Region {
-        let x0 = self.x0.max(other.x0);
-        let y0 = self.y0.max(other.y0);
-        let x1 = (self.x0 + self.width).min(other.x0 + other.width);
-        let y1 = (self.y0 + self.height).min(other.y0 + other.height);
-        Region {
-            x0,
-            y0,
-            width: x1.saturating_sub(x0),
-            height: y1.saturating_sub(y0),
-        }
-    }
-
-    /// Whether the pixel `(x, y)` of the full image lies in the region.
-    pub fn contains(&self, x: u32, y: u32) -> bool {
-        x >= self.x0 && y >= self.y0 && x < self.x0 + self.width && y < self.y0 + self.height
-    }
-}
 
 /// A primitive moved into a camera's frame, with what the ray tests need precomputed.
 #[derive(Clone, Copy, Debug)]

@@ -6,13 +6,14 @@
 use super::animate::Animator;
 use super::body::skin;
 use super::mouse::{MouseInstance, fit_in_cage, pose_mouse};
-use super::noise::DepthNoise;
-use super::render::{Cage, Region};
+use super::render::Cage;
 use super::views::{render_bottom_frame, render_top_frame};
 use super::{ENGINE_VERSION, item_rng, random_placement};
-use crate::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
-use crate::geometry::Rig;
-use crate::session::{
+use crate::core::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
+use crate::core::geometry::Rig;
+use crate::core::image::Region;
+use crate::core::noise::DepthNoise;
+use crate::io::session::{
     Backend, CameraMeta, CameraRole, FrameFormat, SessionError, SessionEvent, SessionMeta, SessionSource,
     SessionSummary, SessionWriter,
 };
@@ -47,7 +48,7 @@ impl Default for SessionSpec {
             fps: 30.0,
             seed: 0,
             noise: DepthNoise {
-                model: super::noise::NoiseModel::StructuredLight,
+                model: crate::core::noise::NoiseModel::StructuredLight,
                 gaussian_mm: 0.0,
             },
             color_binning: 1,
@@ -253,7 +254,7 @@ pub enum SynthSessionError {
     Preview {
         path: PathBuf,
         #[source]
-        source: crate::image::ImageError,
+        source: crate::core::image::ImageError,
     },
 }
 

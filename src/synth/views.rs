@@ -2,12 +2,15 @@
 //! bottom colour image through the glass with the paws' boxes.
 
 use super::body::{Material, PAW_PRIMITIVES, Primitive};
-use super::mouse::{MouseInstance, PAW_SOLE_MM};
-use super::noise::{DepthNoise, quantise};
-use super::render::{Cage, Hits, Region, Scene};
-use crate::frame::PixelFormat;
-use crate::geometry::Camera;
-use crate::skeleton::Joint;
+use super::mouse::MouseInstance;
+use super::noise::quantise;
+use super::render::{Cage, Hits, Scene};
+use crate::core::frame::PixelFormat;
+use crate::core::geometry::Camera;
+use crate::core::image::Region;
+use crate::core::kinematics::PAW_SOLE_MM;
+use crate::core::noise::DepthNoise;
+use crate::core::skeleton::Joint;
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
@@ -17,7 +20,7 @@ use serde::{Deserialize, Serialize};
 pub struct TopView {
     pub region: Region,
     pub depth: Vec<u16>,
-    /// Part label per pixel ([`crate::skeleton::Part::label`]), 255 where there is no mouse.
+    /// Part label per pixel ([`crate::core::skeleton::Part::label`]), 255 where there is no mouse.
     pub label: Vec<u8>,
 }
 

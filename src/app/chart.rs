@@ -1,0 +1,296 @@
+//! Small charts for reports (bar, line, confusion matrix) drawn into [`RgbImage`]s, with a
+//! built-in 5x7 pixel font so no font files are needed.
+
+use crate::core::image::RgbImage;
+
+const GLYPHS: &[(char, [u8; 7])] = &[
+    ('0', [0x0E, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0E]),
+    ('1', [0x04, 0x0C, 0x04, 0x04, 0x04, 0x04, 0x0E]),
+    ('2', [0x0E, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1F]),
+    ('3', [0x1F, 0x02, 0x04, 0x02, 0x01, 0x11, 0x0E]),
+    ('4', [0x02, 0x06, 0x0A, 0x12, 0x1F, 0x02, 0x02]),
+    ('5', [0x1F, 0x10, 0x1E, 0x01, 0x01, 0x11, 0x0E]),
+    ('6', [0x06, 0x08, 0x10, 0x1E, 0x11, 0x11, 0x0E]),
+    ('7', [0x1F, 0x01, 0x02, 0x04, 0x08, 0x08, 0x08]),
+    ('8', [0x0E, 0x11, 0x11, 0x0E, 0x11, 0x11, 0x0E]),
+    ('9', [0x0E, 0x11, 0x11, 0x0F, 0x01, 0x02, 0x0C]),
+    ('A', [0x0E, 0x11, 0x11, 0x11, 0x1F, 0x11, 0x11]),
+    ('B', [0x1E, 0x11, 0x11, 0x1E, 0x11, 0x11, 0x1E]),
+    ('C', [0x0E, 0x11, 0x10, 0x10, 0x10, 0x11, 0x0E]),
+    ('D', [0x1C, 0x12, 0x11, 0x11, 0x11, 0x12, 0x1C]),
+    ('E', [0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x1F]),
+    ('F', [0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x10]),
+    ('G', [0x0E, 0x11, 0x10, 0x17, 0x11, 0x11, 0x0F]),
+    ('H', [0x11, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11]),
+    ('I', [0x0E, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0E]),
+    ('J', [0x07, 0x02, 0x02, 0x02, 0x02, 0x12, 0x0C]),
+    ('K', [0x11, 0x12, 0x14, 0x18, 0x14, 0x12, 0x11]),
+    ('L', [0x10, 0x10, 0x10, 0x10, 0x10, 0x10, 0x1F]),
+    ('M', [0x11, 0x1B, 0x15, 0x15, 0x11, 0x11, 0x11]),
+    ('N', [0x11, 0x11, 0x19, 0x15, 0x13, 0x11, 0x11]),
+    ('O', [0x0E, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E]),
+    ('P', [0x1E, 0x11, 0x11, 0x1E, 0x10, 0x10, 0x10]),
+    ('Q', [0x0E, 0x11, 0x11, 0x11, 0x15, 0x12, 0x0D]),
+    ('R', [0x1E, 0x11, 0x11, 0x1E, 0x14, 0x12, 0x11]),
+    ('S', [0x0F, 0x10, 0x10, 0x0E, 0x01, 0x01, 0x1E]),
+    ('T', [0x1F, 0x04, 0x04, 0x04, 0x04, 0x04, 0x04]),
+    ('U', [0x11, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E]),
+    ('V', [0x11, 0x11, 0x11, 0x11, 0x11, 0x0A, 0x04]),
+    ('W', [0x11, 0x11, 0x11, 0x15, 0x15, 0x15, 0x0A]),
+    ('X', [0x11, 0x11, 0x0A, 0x04, 0x0A, 0x11, 0x11]),
+    ('Y', [0x11, 0x11, 0x11, 0x0A, 0x04, 0x04, 0x04]),
+    ('Z', [0x1F, 0x01, 0x02, 0x04, 0x08, 0x10, 0x1F]),
+    ('.', [0, 0, 0, 0, 0, 0x0C, 0x0C]),
+    (',', [0, 0, 0, 0, 0x0C, 0x04, 0x08]),
+    ('-', [0, 0, 0, 0x1F, 0, 0, 0]),
+    ('_', [0, 0, 0, 0, 0, 0, 0x1F]),
+    (':', [0, 0x0C, 0x0C, 0, 0x0C, 0x0C, 0]),
+    ('%', [0x18, 0x19, 0x02, 0x04, 0x08, 0x13, 0x03]),
+    ('(', [0x02, 0x04, 0x08, 0x08, 0x08, 0x04, 0x02]),
+    (')', [0x08, 0x04, 0x02, 0x02, 0x02, 0x04, 0x08]),
+    ('/', [0, 0x01, 0x02, 0x04, 0x08, 0x10, 0]),
+    ('=', [0, 0, 0x1F, 0, 0x1F, 0, 0]),
+    ('+', [0, 0x04, 0x04, 0x1F, 0x04, 0x04, 0]),
+];
+
+/// Width in pixels of `text` at `scale`.
+pub fn text_width(text: &str, scale: u32) -> u32 {
+    text.chars().count() as u32 * 6 * scale
+}
+
+/// Draws `text` (upper-cased) with its top-left corner at `(x, y)`.
+pub fn draw_text(img: &mut RgbImage, x: i64, y: i64, text: &str, colour: [u8; 3], scale: u32) {
+    let s = i64::from(scale.max(1));
+    for (k, ch) in text.chars().enumerate() {
+        let up = ch.to_ascii_uppercase();
+        let Some((_, rows)) = GLYPHS.iter().find(|(c, _)| *c == up) else {
+            continue;
+        };
+        let gx = x + k as i64 * 6 * s;
+        for (row, bits) in rows.iter().enumerate() {
+            for col in 0..5 {
+                if bits & (0x10 >> col) != 0 {
+                    for dy in 0..s {
+                        for dx in 0..s {
+                            img.put(gx + col * s + dx, y + row as i64 * s + dy, colour);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A data series: name, colour, values.
+pub type Series<'a> = (&'a str, [u8; 3], &'a [f64]);
+
+const W: u32 = 900;
+const H: u32 = 520;
+const LEFT: f64 = 80.0;
+const RIGHT: f64 = 20.0;
+const TOP: f64 = 50.0;
+const BOTTOM: f64 = 110.0;
+const INK: [u8; 3] = [30, 30, 30];
+const GRID: [u8; 3] = [225, 225, 225];
+
+fn nice_max(v: f64) -> f64 {
+    if v.is_nan() || v <= 0.0 || !v.is_finite() {
+        return 1.0;
+    }
+    let p = 10f64.powf(v.log10().floor());
+    for m in [1.0, 2.0, 2.5, 5.0, 10.0] {
+        if v <= m * p {
+            return m * p;
+        }
+    }
+    10.0 * p
+}
+
+fn frame(title: &str, y_label: &str, y_lo: f64, y_hi: f64) -> RgbImage {
+    let mut img = RgbImage::new(W, H, [255, 255, 255]);
+    draw_text(&mut img, LEFT as i64, 15, title, INK, 2);
+    let plot_h = f64::from(H) - TOP - BOTTOM;
+    for k in 0..=5 {
+        let v = y_lo + (y_hi - y_lo) * f64::from(k) / 5.0;
+        let y = TOP + plot_h * (1.0 - f64::from(k) / 5.0);
+        img.line((LEFT, y), (f64::from(W) - RIGHT, y), GRID, 1.0);
+        let label = format_number(v);
+        draw_text(
+            &mut img,
+            LEFT as i64 - 8 - i64::from(text_width(&label, 1)),
+            y as i64 - 3,
+            &label,
+            INK,
+            1,
+        );
+    }
+    img.line((LEFT, TOP), (LEFT, TOP + plot_h), INK, 1.0);
+    img.line((LEFT, TOP + plot_h), (f64::from(W) - RIGHT, TOP + plot_h), INK, 1.0);
+    draw_text(&mut img, 8, TOP as i64 - 20, y_label, INK, 1);
+    img
+}
+
+fn format_number(v: f64) -> String {
+    if v.abs() >= 100.0 || v == v.round() {
+        format!("{v:.0}")
+    } else if v.abs() >= 1.0 {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
+fn legend(img: &mut RgbImage, series: &[Series<'_>]) {
+    let mut x = LEFT as i64 + 10;
+    let y = i64::from(H) - 22;
+    for (name, colour, _) in series {
+        for dy in 0..8 {
+            for dx in 0..14 {
+                img.put(x + dx, y + dy, *colour);
+            }
+        }
+        draw_text(img, x + 20, y, name, INK, 1);
+        x += 40 + i64::from(text_width(name, 1));
+    }
+}
+
+/// Grouped bars: one group per category, one bar per series.
+pub fn bar_chart(title: &str, y_label: &str, categories: &[String], series: &[Series<'_>]) -> RgbImage {
+    let hi = nice_max(series.iter().flat_map(|s| s.2.iter().copied()).fold(0.0, f64::max));
+    let mut img = frame(title, y_label, 0.0, hi);
+    let plot_w = f64::from(W) - LEFT - RIGHT;
+    let plot_h = f64::from(H) - TOP - BOTTOM;
+    let group = plot_w / categories.len().max(1) as f64;
+    let bar = group * 0.8 / series.len().max(1) as f64;
+    for (c, name) in categories.iter().enumerate() {
+        let x0 = LEFT + group * c as f64 + group * 0.1;
+        for (k, (_, colour, values)) in series.iter().enumerate() {
+            let v = values.get(c).copied().unwrap_or(0.0).max(0.0);
+            let h = plot_h * (v / hi).min(1.0);
+            let bx = x0 + bar * k as f64;
+            for y in (TOP + plot_h - h) as i64..(TOP + plot_h) as i64 {
+                for x in bx as i64..(bx + bar - 1.0) as i64 {
+                    img.put(x, y, *colour);
+                }
+            }
+        }
+        // Category names, written downwards one above the other when long.
+        let label: String = name.chars().take(14).collect();
+        let lx = (x0 + group * 0.4) as i64 - i64::from(text_width(&label, 1)) / 2;
+        draw_text(
+            &mut img,
+            lx,
+            (TOP + plot_h) as i64 + 8 + (c as i64 % 2) * 12,
+            &label,
+            INK,
+            1,
+        );
+    }
+    legend(&mut img, series);
+    img
+}
+
+/// Lines over a shared x axis.
+pub fn line_chart(title: &str, x_label: &str, y_label: &str, x: &[f64], series: &[Series<'_>]) -> RgbImage {
+    let all = || {
+        series
+            .iter()
+            .flat_map(|s| s.2.iter().copied())
+            .filter(|v| v.is_finite())
+    };
+    let (mut lo, mut hi) = (
+        all().fold(f64::INFINITY, f64::min),
+        all().fold(f64::NEG_INFINITY, f64::max),
+    );
+    if lo.is_nan() || hi.is_nan() || lo >= hi {
+        lo -= 0.5;
+        hi += 0.5;
+    }
+    let pad = (hi - lo) * 0.1;
+    let (lo, hi) = (lo - pad, hi + pad);
+    let mut img = frame(title, y_label, lo, hi);
+    let plot_w = f64::from(W) - LEFT - RIGHT;
+    let plot_h = f64::from(H) - TOP - BOTTOM;
+    let (x_lo, x_hi) = (
+        x.iter().copied().fold(f64::INFINITY, f64::min),
+        x.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+    );
+    let span = if x_hi > x_lo { x_hi - x_lo } else { 1.0 };
+    let px = |v: f64| LEFT + plot_w * (v - x_lo) / span;
+    let py = |v: f64| TOP + plot_h * (1.0 - (v - lo) / (hi - lo));
+    for &v in x {
+        let label = format_number(v);
+        draw_text(
+            &mut img,
+            px(v) as i64 - i64::from(text_width(&label, 1)) / 2,
+            (TOP + plot_h) as i64 + 8,
+            &label,
+            INK,
+            1,
+        );
+    }
+    draw_text(
+        &mut img,
+        (LEFT + plot_w / 2.0) as i64,
+        (TOP + plot_h) as i64 + 28,
+        x_label,
+        INK,
+        1,
+    );
+    for (_, colour, values) in series {
+        let pts: Vec<(f64, f64)> = x
+            .iter()
+            .zip(values.iter())
+            .filter(|(_, v)| v.is_finite())
+            .map(|(&a, &b)| (px(a), py(b)))
+            .collect();
+        for w in pts.windows(2) {
+            img.line(w[0], w[1], *colour, 2.0);
+        }
+        for p in &pts {
+            img.disc(*p, 3.5, *colour);
+        }
+    }
+    legend(&mut img, series);
+    img
+}
+
+/// A confusion matrix as a heat map, rows normalised to 1, with each cell's percentage.
+pub fn confusion_chart(title: &str, labels: &[String], counts: &[Vec<u64>]) -> RgbImage {
+    let n = labels.len().max(1);
+    let cell = 70u32;
+    let left = 130u32;
+    let top = 60u32;
+    let mut img = RgbImage::new(left + cell * n as u32 + 20, top + cell * n as u32 + 40, [255, 255, 255]);
+    draw_text(&mut img, 10, 15, title, INK, 2);
+    for (r, row) in counts.iter().enumerate() {
+        let total = row.iter().sum::<u64>().max(1) as f64;
+        for (c, &v) in row.iter().enumerate() {
+            let f = v as f64 / total;
+            let shade = (255.0 * (1.0 - f)) as u8;
+            let colour = [shade, shade, 255];
+            let (x0, y0) = (left + c as u32 * cell, top + r as u32 * cell);
+            for y in y0..y0 + cell - 2 {
+                for x in x0..x0 + cell - 2 {
+                    img.put(i64::from(x), i64::from(y), colour);
+                }
+            }
+            let text = format!("{:.1}", 100.0 * f);
+            let ink = if f > 0.5 { [255, 255, 255] } else { INK };
+            draw_text(&mut img, i64::from(x0) + 12, i64::from(y0) + 30, &text, ink, 1);
+        }
+        draw_text(&mut img, 8, i64::from(top + r as u32 * cell) + 30, &labels[r], INK, 1);
+    }
+    for (c, l) in labels.iter().enumerate() {
+        let short: String = l.chars().take(11).collect();
+        draw_text(
+            &mut img,
+            i64::from(left + c as u32 * cell) + 2,
+            i64::from(top + cell * n as u32) + 10,
+            &short,
+            INK,
+            1,
+        );
+    }
+    img
+}

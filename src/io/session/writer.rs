@@ -1,0 +1,358 @@
+//! Writing a session: metadata first, then frames, events and truth as they come, each handed
+//! to the operating system at once; indexes and the closing event at [`SessionWriter::finish`].
+
+use super::codec::{Codec, CodecError, FrameEncoder};
+use super::events::SessionEvent;
+use super::meta::{CameraRole, SessionMeta};
+use super::text::LineWriter;
+use super::{
+    EVENTS_FILE, FRAMES_FILE, INDEX_FILE, JOINTS_FILE, META_FILE, PAIRS_FILE, PAIRS_HEADER, Result, SessionError,
+    SessionSummary, TIMESTAMPS_FILE, TIMESTAMPS_HEADER, TRUTH_DIR, io_error, joints_header,
+};
+use crate::core::frame::{ColorFrame, DepthFrame, Stamp};
+use crate::core::pose::JointPositions;
+use crate::io::store::{self, RecordWriter};
+use std::fmt::Write as _;
+use std::fs::{self, OpenOptions};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// How a [`SessionWriter`] stores pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WriterOptions {
+    pub depth_codec: Codec,
+    /// zstd level for depth frames (1 fastest, up to 22 smallest).
+    pub depth_level: i32,
+    pub color_codec: Codec,
+    /// zstd level for colour frames.
+    pub color_level: i32,
+}
+
+impl Default for WriterOptions {
+    /// Delta filter and zstd level 1 for both cameras: fast enough for live recording.
+    fn default() -> Self {
+        Self {
+            depth_codec: Codec::DeltaZstd,
+            depth_level: 1,
+            color_codec: Codec::DeltaZstd,
+            color_level: 1,
+        }
+    }
+}
+
+/// One camera's files being written.
+#[derive(Debug)]
+struct StreamWriter {
+    store: RecordWriter,
+    encoder: FrameEncoder,
+    index_path: PathBuf,
+    index: Vec<(u64, u64)>,
+    timestamps: LineWriter,
+}
+
+impl StreamWriter {
+    fn create(dir: &Path, role: CameraRole, codec: Codec, level: i32) -> Result<Self> {
+        let sub = dir.join(role.name());
+        fs::create_dir(&sub).map_err(io_error(&sub, "create directory"))?;
+        let store = RecordWriter::create(sub.join(FRAMES_FILE), role.store_kind())?;
+        let encoder = FrameEncoder::new(codec, level).map_err(|source| SessionError::Compression {
+            path: store.path().to_path_buf(),
+            level,
+            source,
+        })?;
+        let timestamps = LineWriter::create(sub.join(TIMESTAMPS_FILE), Some(TIMESTAMPS_HEADER))?;
+        Ok(Self {
+            store,
+            encoder,
+            index_path: sub.join(INDEX_FILE),
+            index: Vec::new(),
+            timestamps,
+        })
+    }
+
+    /// Appends an encoded frame, flushes it, then records its time.
+    fn append(&mut self, stamp: Stamp, payload: &[u8]) -> Result<()> {
+        let offset = self.store.append(payload)?;
+        self.store.flush()?;
+        self.index.push((stamp.seq, offset));
+        self.timestamps
+            .write_line(&format!("{},{},{}", stamp.seq, stamp.device_ns, stamp.host_ns))
+    }
+
+    fn write_index(&mut self) -> Result<()> {
+        self.store.flush()?;
+        store::write_index(&self.index_path, self.store.position(), &self.index)?;
+        Ok(())
+    }
+
+    fn sync(&mut self) -> Result<()> {
+        self.store.sync()?;
+        self.timestamps.sync()
+    }
+}
+
+/// The truth files of a synthetic session, created with the first truth written.
+#[derive(Debug)]
+struct TruthWriter {
+    joints: LineWriter,
+    pairs: LineWriter,
+}
+
+/// Writes a session directory. See the [module documentation](super) for the layout.
+///
+/// Frames, events and truth rows are handed to the operating system as they are written, so
+/// a process killed at any point leaves every completed frame readable. Dropping the writer
+/// without [`finish`](SessionWriter::finish) leaves a session without indexes and without the
+/// `session_ended` event, which readers accept.
+#[derive(Debug)]
+pub struct SessionWriter {
+    dir: PathBuf,
+    depth: Option<StreamWriter>,
+    color: Option<StreamWriter>,
+    events: LineWriter,
+    truth: Option<TruthWriter>,
+    /// The latest host time seen in frames and events: the end time `finish` logs.
+    last_host_ns: u64,
+}
+
+impl SessionWriter {
+    /// Starts a session in `dir`, which must exist and be empty, with the default
+    /// [`WriterOptions`].
+    ///
+    /// # Errors
+    /// See [`SessionWriter::create_with`].
+    pub fn create(dir: impl AsRef<Path>, meta: &SessionMeta) -> Result<Self> {
+        Self::create_with(dir, meta, WriterOptions::default())
+    }
+
+    /// Starts a session in `dir`, which must exist and be empty: writes `session.toml` (and
+    /// syncs it), then creates the frame files of the cameras in `meta.cameras` and the event
+    /// log.
+    ///
+    /// # Errors
+    /// [`SessionError::NotEmpty`] when `dir` holds anything; [`SessionError::Format`] when
+    /// the metadata is not valid for this format version ([`SessionMeta::problem`]);
+    /// [`SessionError::Io`] when a file can not be created; [`SessionError::Compression`]
+    /// when zstd rejects a compression level.
+    pub fn create_with(dir: impl AsRef<Path>, meta: &SessionMeta, options: WriterOptions) -> Result<Self> {
+        let dir = dir.as_ref();
+        let mut entries = fs::read_dir(dir).map_err(io_error(dir, "read directory"))?;
+        if entries.next().is_some() {
+            return Err(SessionError::NotEmpty {
+                path: dir.to_path_buf(),
+            });
+        }
+        let meta_path = dir.join(META_FILE);
+        if let Some(reason) = meta.problem() {
+            return Err(SessionError::Format {
+                path: meta_path,
+                reason,
+            });
+        }
+        let text = toml::to_string(meta).map_err(|source| SessionError::MetaEncode {
+            path: meta_path.clone(),
+            source,
+        })?;
+        let mut file = OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&meta_path)
+            .map_err(io_error(&meta_path, "create"))?;
+        file.write_all(text.as_bytes()).map_err(io_error(&meta_path, "write"))?;
+        file.sync_all().map_err(io_error(&meta_path, "sync"))?;
+
+        let mut depth = None;
+        let mut color = None;
+        for camera in &meta.cameras {
+            match camera.role {
+                CameraRole::Depth => {
+                    depth = Some(StreamWriter::create(
+                        dir,
+                        camera.role,
+                        options.depth_codec,
+                        options.depth_level,
+                    )?);
+                }
+                CameraRole::Color => {
+                    color = Some(StreamWriter::create(
+                        dir,
+                        camera.role,
+                        options.color_codec,
+                        options.color_level,
+                    )?);
+                }
+            }
+        }
+        let events = LineWriter::create(dir.join(EVENTS_FILE), None)?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            depth,
+            color,
+            events,
+            truth: None,
+            last_host_ns: 0,
+        })
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    fn stream(&mut self, role: CameraRole) -> Result<&mut StreamWriter> {
+        let stream = match role {
+            CameraRole::Depth => self.depth.as_mut(),
+            CameraRole::Color => self.color.as_mut(),
+        };
+        stream.ok_or_else(|| SessionError::NoCamera {
+            dir: self.dir.clone(),
+            role,
+        })
+    }
+
+    /// Appends a depth frame and its `timestamps.csv` row.
+    ///
+    /// # Errors
+    /// [`SessionError::NoCamera`] without a depth camera in the metadata;
+    /// [`SessionError::Encode`] when the frame's data does not match its size;
+    /// [`SessionError::Store`] or [`SessionError::Io`] when writing fails.
+    pub fn write_depth(&mut self, frame: &DepthFrame) -> Result<()> {
+        self.write_frame(CameraRole::Depth, frame.stamp, |e| e.encode_depth(frame))
+    }
+
+    /// Appends a colour frame and its `timestamps.csv` row.
+    ///
+    /// # Errors
+    /// As [`SessionWriter::write_depth`], for the colour camera.
+    pub fn write_color(&mut self, frame: &ColorFrame) -> Result<()> {
+        self.write_frame(CameraRole::Color, frame.stamp, |e| e.encode_color(frame))
+    }
+
+    /// Encodes a frame with the camera's encoder and appends it with its stamp.
+    fn write_frame(
+        &mut self,
+        role: CameraRole,
+        stamp: Stamp,
+        encode: impl FnOnce(&mut FrameEncoder) -> std::result::Result<Vec<u8>, CodecError>,
+    ) -> Result<()> {
+        let stream = self.stream(role)?;
+        let payload = encode(&mut stream.encoder).map_err(|source| SessionError::Encode {
+            path: stream.store.path().to_path_buf(),
+            seq: stamp.seq,
+            source,
+        })?;
+        stream.append(stamp, &payload)?;
+        self.last_host_ns = self.last_host_ns.max(stamp.host_ns);
+        Ok(())
+    }
+
+    /// Appends an event to `events.jsonl`.
+    ///
+    /// # Errors
+    /// [`SessionError::Io`] when writing fails; [`SessionError::EventEncode`] should the event
+    /// not serialise.
+    pub fn log_event(&mut self, event: &SessionEvent) -> Result<()> {
+        let line = serde_json::to_string(event).map_err(|source| SessionError::EventEncode {
+            path: self.dir.join(EVENTS_FILE),
+            source,
+        })?;
+        self.events.write_line(&line)?;
+        if let Some(host_ns) = event.host_ns() {
+            self.last_host_ns = self.last_host_ns.max(host_ns);
+        }
+        Ok(())
+    }
+
+    fn truth(&mut self) -> Result<&mut TruthWriter> {
+        let truth = match self.truth.take() {
+            Some(truth) => truth,
+            None => {
+                let dir = self.dir.join(TRUTH_DIR);
+                fs::create_dir(&dir).map_err(io_error(&dir, "create directory"))?;
+                TruthWriter {
+                    joints: LineWriter::create(dir.join(JOINTS_FILE), Some(&joints_header()))?,
+                    pairs: LineWriter::create(dir.join(PAIRS_FILE), Some(PAIRS_HEADER))?,
+                }
+            }
+        };
+        Ok(self.truth.insert(truth))
+    }
+
+    /// Appends the true joint positions of a depth frame to `truth/joints.csv` (creating the
+    /// truth files first if needed). Numbers are written so they read back exactly.
+    ///
+    /// # Errors
+    /// [`SessionError::Io`] when a truth file can not be created or written.
+    pub fn write_truth(&mut self, depth_seq: u64, time_ns: u64, joints: &JointPositions) -> Result<()> {
+        let mut line = format!("{depth_seq},{time_ns}");
+        for p in joints {
+            // Writing into a String can not fail.
+            let _ = write!(line, ",{},{},{}", p.x, p.y, p.z);
+        }
+        self.truth()?.joints.write_line(&line)
+    }
+
+    /// Appends a depth frame's true colour partner (or none) to `truth/pairs.csv`.
+    ///
+    /// # Errors
+    /// [`SessionError::Io`] when a truth file can not be created or written.
+    pub fn write_truth_pair(&mut self, depth_seq: u64, color_seq: Option<u64>) -> Result<()> {
+        let line = match color_seq {
+            Some(c) => format!("{depth_seq},{c}"),
+            None => format!("{depth_seq},"),
+        };
+        self.truth()?.pairs.write_line(&line)
+    }
+
+    /// Depth frames written so far.
+    pub fn depth_frames(&self) -> u64 {
+        self.depth.as_ref().map_or(0, |s| s.index.len() as u64)
+    }
+
+    /// Colour frames written so far.
+    pub fn color_frames(&self) -> u64 {
+        self.color.as_ref().map_or(0, |s| s.index.len() as u64)
+    }
+
+    /// Ends the session at the latest host time seen in its frames and events; see
+    /// [`SessionWriter::finish_at`].
+    ///
+    /// # Errors
+    /// As [`SessionWriter::finish_at`].
+    pub fn finish(self) -> Result<SessionSummary> {
+        let host_ns = self.last_host_ns;
+        self.finish_at(host_ns)
+    }
+
+    /// Ends the session: writes the indexes, logs `session_ended` with the frame counts at
+    /// `host_ns`, and syncs every file to disk.
+    ///
+    /// # Errors
+    /// [`SessionError::Io`] or [`SessionError::Store`] when writing or syncing fails.
+    pub fn finish_at(mut self, host_ns: u64) -> Result<SessionSummary> {
+        for stream in self.depth.iter_mut().chain(self.color.iter_mut()) {
+            stream.write_index()?;
+        }
+        let (depth_frames, color_frames) = (self.depth_frames(), self.color_frames());
+        self.log_event(&SessionEvent::SessionEnded {
+            host_ns,
+            depth_frames,
+            color_frames,
+        })?;
+        for stream in self.depth.iter_mut().chain(self.color.iter_mut()) {
+            stream.sync()?;
+        }
+        self.events.sync()?;
+        if let Some(truth) = self.truth.as_mut() {
+            truth.joints.sync()?;
+            truth.pairs.sync()?;
+        }
+        Ok(SessionSummary {
+            dir: self.dir.clone(),
+            depth_frames,
+            color_frames,
+            depth_bytes: self.depth.as_ref().map_or(0, |s| s.store.position()),
+            color_bytes: self.color.as_ref().map_or(0, |s| s.store.position()),
+            events: self.events.lines(),
+        })
+    }
+}

@@ -1,0 +1,747 @@
+//! The colour camera read through Aravis: GenICam cameras on GigE Vision (or USB3 Vision).
+//!
+//! A GigE Vision camera is opened by its IPv4 address, by unicast only: the control channel
+//! goes from the local address that routes to the camera, and nothing is broadcast. Aravis 0.8
+//! cannot restrict its GigE Vision discovery to one network interface (its discovery
+//! broadcasts on every interface of the host; a per-interface setting only came with 0.9), so
+//! this module never runs it: [`list_devices`] probes the configured addresses one by one, and
+//! a camera named by serial alone is looked up on USB3 Vision only (which enumerates the USB
+//! bus, no network). A GigE Vision camera named by serial needs its address too; the serial is
+//! then checked.
+//!
+//! The settings of [`AravisConfig`] are applied when the camera is opened, each checked
+//! against what the camera allows first, so that a refused setting names the setting and the
+//! camera's range. Frames come from a pool of `buffers` stream buffers, each copied out once
+//! into a [`ColorFrame`] and pushed back. Buffers Aravis hands back damaged (missing packets,
+//! timeout, wrong size) are counted by reason in [`FrameSource::losses`] and never returned.
+
+use super::{CaptureError, Clock, DeviceInfo, FrameSource};
+use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
+use crate::io::session::codec::FrameFormat;
+use crate::io::session::meta::{Backend, CameraMeta, CameraRole};
+use aravis_ext::aravis;
+use aravis_ext::aravis::prelude::*;
+use aravis_ext::aravis::{BufferStatus, Camera, Stream};
+use aravis_ext::{Interface, use_only_interfaces};
+use std::net::Ipv4Addr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+const BACKEND: &str = "aravis";
+
+/// How the camera starts each frame.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum Trigger {
+    /// The camera runs at its own frame rate.
+    #[default]
+    FreeRun,
+    /// Each frame starts on a rising edge of this input line (`Line0`, `Line1`, ...).
+    Line(String),
+}
+
+/// Which camera to open and how to set it up. Plain data: [`AravisColor::open`] does the I/O.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AravisConfig {
+    /// The camera's IPv4 address (GigE Vision). Opened by unicast, without discovery.
+    pub address: Option<String>,
+    /// The camera's serial number: checked against the camera at `address`, or, without an
+    /// address, looked up among USB3 Vision cameras only (see the module header).
+    pub serial: Option<String>,
+    pub pixel_format: PixelFormat,
+    /// `(x, y, width, height)` in pixels; the camera's current region when `None`.
+    pub region: Option<(u32, u32, u32, u32)>,
+    pub exposure_us: Option<f64>,
+    pub gain_db: Option<f64>,
+    pub fps: Option<f64>,
+    pub trigger: Trigger,
+    /// The number of stream buffers in the pool (at least 1).
+    pub buffers: usize,
+}
+
+impl Default for AravisConfig {
+    fn default() -> Self {
+        Self {
+            address: None,
+            serial: None,
+            pixel_format: PixelFormat::Mono8,
+            region: None,
+            exposure_us: None,
+            gain_db: None,
+            fps: None,
+            trigger: Trigger::FreeRun,
+            buffers: 8,
+        }
+    }
+}
+
+/// The colour camera, read through Aravis.
+pub struct AravisColor {
+    id: String,
+    buffers: usize,
+    camera: Option<Camera>,
+    stream: Option<Stream>,
+    clock: Clock,
+    meta: CameraMeta,
+    format: PixelFormat,
+    payload: usize,
+    frame_ids: FrameIdExtender,
+    losses: Vec<(&'static str, u64)>,
+    connected: Arc<AtomicBool>,
+}
+
+impl std::fmt::Debug for AravisColor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("AravisColor")
+            .field("id", &self.id)
+            .field("meta", &self.meta)
+            .field("streaming", &self.stream.is_some())
+            .finish_non_exhaustive()
+    }
+}
+
+/// A [`CaptureError::Driver`] builder for `glib` errors.
+fn driver(id: &str, what: impl Into<String>) -> impl FnOnce(aravis::glib::Error) -> CaptureError {
+    let id = id.to_owned();
+    let what = what.into();
+    move |error| CaptureError::Driver {
+        backend: BACKEND,
+        id,
+        what,
+        source: Some(Box::new(error)),
+    }
+}
+
+fn refused(id: &str, what: impl Into<String>, reason: impl Into<String>) -> CaptureError {
+    CaptureError::Refused {
+        backend: BACKEND,
+        id: id.to_owned(),
+        what: what.into(),
+        reason: reason.into(),
+    }
+}
+
+fn parse_address(id: &str, address: &str) -> Result<Ipv4Addr, CaptureError> {
+    address.trim().parse().map_err(|_| {
+        refused(
+            id,
+            format!("address {address:?}"),
+            "it is not an IPv4 address (GigE Vision cameras are opened by address only)",
+        )
+    })
+}
+
+/// Opens the GigE Vision camera at `address` by unicast, with every Aravis discovery
+/// interface disabled.
+fn open_by_address(id: &str, address: &str) -> Result<Camera, CaptureError> {
+    let ip = parse_address(id, address)?;
+    use_only_interfaces(&[]);
+    aravis_ext::open_gv_camera(ip).map_err(|error| match error {
+        aravis_ext::OpenError::NoRoute { .. } => CaptureError::NotFound {
+            backend: BACKEND,
+            id: id.to_owned(),
+        },
+        aravis_ext::OpenError::Device { source, .. } => {
+            driver(id, format!("no GigE Vision camera answers at {ip}"))(source)
+        }
+    })
+}
+
+/// The GenICam pixel format names for one of ours (PFNC, then the GigE Vision 1.x name).
+fn genicam_names(format: PixelFormat) -> &'static [&'static str] {
+    match format {
+        PixelFormat::Mono8 => &["Mono8"],
+        PixelFormat::Rgb8 => &["RGB8", "RGB8Packed"],
+        PixelFormat::BayerRg8 => &["BayerRG8"],
+        PixelFormat::BayerGr8 => &["BayerGR8"],
+        PixelFormat::BayerGb8 => &["BayerGB8"],
+        PixelFormat::BayerBg8 => &["BayerBG8"],
+    }
+}
+
+/// Our pixel format for an Aravis (PFNC) pixel format code.
+pub fn pixel_format_from_aravis(format: aravis::PixelFormat) -> Option<PixelFormat> {
+    Some(match format {
+        aravis::PixelFormat::MONO_8 => PixelFormat::Mono8,
+        aravis::PixelFormat::RGB_8_PACKED => PixelFormat::Rgb8,
+        aravis::PixelFormat::BAYER_RG_8 => PixelFormat::BayerRg8,
+        aravis::PixelFormat::BAYER_GR_8 => PixelFormat::BayerGr8,
+        aravis::PixelFormat::BAYER_GB_8 => PixelFormat::BayerGb8,
+        aravis::PixelFormat::BAYER_BG_8 => PixelFormat::BayerBg8,
+        _ => return None,
+    })
+}
+
+/// The name a loss reason is counted under, for a buffer status other than success.
+fn loss_reason(status: BufferStatus) -> &'static str {
+    match status {
+        BufferStatus::MissingPackets => "incomplete",
+        BufferStatus::Timeout => "timeout",
+        BufferStatus::SizeMismatch => "size_mismatch",
+        BufferStatus::WrongPacketId => "wrong_packet_id",
+        BufferStatus::Aborted => "aborted",
+        BufferStatus::PayloadNotSupported => "payload_not_supported",
+        _ => "unknown_status",
+    }
+}
+
+impl AravisColor {
+    /// Opens the camera and applies the settings of `config`.
+    ///
+    /// # Errors
+    /// No camera at the address or with the serial ([`CaptureError::NotFound`] or
+    /// [`CaptureError::Driver`] with Aravis's cause), a setting the camera does not allow
+    /// ([`CaptureError::Refused`], naming the setting and what the camera allows), or a
+    /// failure reading or writing a feature.
+    pub fn open(config: &AravisConfig) -> Result<Self, CaptureError> {
+        let id = match (&config.address, &config.serial) {
+            (Some(address), _) => address.clone(),
+            (None, Some(serial)) => serial.clone(),
+            (None, None) => String::new(),
+        };
+        if config.buffers == 0 {
+            return Err(refused(&id, "buffers = 0", "the stream needs at least 1 buffer"));
+        }
+        let camera = match (&config.address, &config.serial) {
+            (Some(address), serial) => {
+                let camera = open_by_address(&id, address)?;
+                if let Some(serial) = serial {
+                    let found = camera
+                        .device_serial_number()
+                        .map_err(driver(&id, "reading the serial number"))?;
+                    if found.as_str() != serial.as_str() {
+                        return Err(CaptureError::NotFound {
+                            backend: BACKEND,
+                            id: format!("{serial} at {address} (the camera there is {found})"),
+                        });
+                    }
+                }
+                camera
+            }
+            (None, Some(serial)) => {
+                use_only_interfaces(&[Interface::Usb3Vision]);
+                Camera::new(Some(serial)).map_err(driver(
+                    &id,
+                    "no USB3 Vision camera with this serial (a GigE Vision camera needs its address)",
+                ))?
+            }
+            (None, None) => {
+                return Err(refused(
+                    "",
+                    "the camera selection",
+                    "the config names neither an address nor a serial",
+                ));
+            }
+        };
+        let format = apply_settings(&camera, &id, config)?;
+        let meta = read_meta(&camera, &id, format)?;
+        let payload = camera.payload().map_err(driver(&id, "reading the payload size"))? as usize;
+        tracing::info!(
+            message = "Aravis camera opened.",
+            camera = %id,
+            model = %meta.model,
+            serial = %meta.serial,
+            width = meta.width,
+            height = meta.height,
+            pixel_format = %format,
+            fps = meta.fps,
+        );
+        Ok(Self {
+            id,
+            buffers: config.buffers,
+            camera: Some(camera),
+            stream: None,
+            clock: Clock::Monotonic,
+            meta,
+            format,
+            payload,
+            frame_ids: FrameIdExtender::default(),
+            losses: Vec::new(),
+            connected: Arc::new(AtomicBool::new(true)),
+        })
+    }
+
+    fn count_loss(&mut self, reason: &'static str) {
+        if let Some(entry) = self.losses.iter_mut().find(|(r, _)| *r == reason) {
+            entry.1 += 1;
+            tracing::trace!(message = "Aravis buffer dropped.", camera = %self.id, reason);
+        } else {
+            self.losses.push((reason, 1));
+            tracing::warn!(
+                message = "Aravis buffer dropped (logged once per reason, counted in losses).",
+                camera = %self.id,
+                reason,
+            );
+        }
+    }
+
+    /// The host time a buffer arrived: the clock now, less the buffer's age on the system
+    /// clock Aravis stamped it with at its first packet (on a live clock only; a replay clock
+    /// is used as it stands).
+    fn host_ns(&self, system_timestamp_ns: u64) -> u64 {
+        let now_ns = self.clock.now_ns();
+        if !matches!(self.clock, Clock::Monotonic) || system_timestamp_ns == 0 {
+            return now_ns;
+        }
+        let realtime_ns = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+        let age_ns = realtime_ns.saturating_sub(system_timestamp_ns).min(10_000_000_000);
+        now_ns.saturating_sub(age_ns)
+    }
+
+    /// Turns a good buffer into a frame, or names why it cannot be one.
+    fn frame_from(&mut self, buffer: &aravis::Buffer) -> Result<ColorFrame, &'static str> {
+        if buffer.payload_type() != aravis::BufferPayloadType::Image {
+            return Err("payload_not_supported");
+        }
+        let format = pixel_format_from_aravis(buffer.image_pixel_format()).ok_or("format_mismatch")?;
+        if format != self.format {
+            return Err("format_mismatch");
+        }
+        let width = u32::try_from(buffer.image_width()).map_err(|_| "size_mismatch")?;
+        let height = u32::try_from(buffer.image_height()).map_err(|_| "size_mismatch")?;
+        let (x_padding, _) = buffer.image_padding();
+        let row_len = width as usize * format.bytes_per_pixel();
+        let expected = ColorFrame::expected_len(width, height, format);
+        let mut data = buffer.image_data();
+        if x_padding > 0 {
+            let stride = row_len + x_padding as usize;
+            data = data
+                .chunks(stride)
+                .take(height as usize)
+                .flat_map(|row| row.iter().take(row_len))
+                .copied()
+                .collect();
+        }
+        if data.len() < expected {
+            return Err("size_mismatch");
+        }
+        data.truncate(expected);
+        let seq = self.frame_ids.extend(buffer.frame_id()).ok_or("out_of_order")?;
+        Ok(ColorFrame {
+            stamp: Stamp {
+                seq,
+                device_ns: buffer.timestamp(),
+                host_ns: self.host_ns(buffer.system_timestamp()),
+            },
+            width,
+            height,
+            format,
+            data,
+        })
+    }
+}
+
+/// Checks each setting against the camera's range, then applies it. Returns the pixel format.
+fn apply_settings(camera: &Camera, id: &str, config: &AravisConfig) -> Result<PixelFormat, CaptureError> {
+    // Best effort: a camera without the feature is continuous anyway.
+    if let Err(error) = camera.set_acquisition_mode(aravis::AcquisitionMode::Continuous) {
+        tracing::debug!(message = "AcquisitionMode not set.", camera = %id, %error);
+    }
+
+    // Trigger.
+    match &config.trigger {
+        Trigger::FreeRun => {
+            // A camera without trigger control always runs free.
+            if camera.is_feature_available("TriggerMode").unwrap_or(false) {
+                camera.clear_triggers().map_err(driver(id, "switching triggers off"))?;
+            }
+        }
+        Trigger::Line(line) => {
+            let sources = camera.dup_available_trigger_sources().unwrap_or_default();
+            if !sources.iter().any(|s| s.as_str() == line) {
+                let offered: Vec<&str> = sources.iter().map(|s| s.as_str()).collect();
+                return Err(refused(
+                    id,
+                    format!("trigger line {line:?}"),
+                    format!("the camera's trigger sources are [{}]", offered.join(", ")),
+                ));
+            }
+            camera
+                .set_trigger(line)
+                .map_err(driver(id, format!("setting trigger source {line}")))?;
+        }
+    }
+
+    // Pixel format.
+    let wanted = config.pixel_format;
+    let available = camera
+        .dup_available_pixel_formats_as_strings()
+        .map_err(driver(id, "reading the pixel formats"))?;
+    let name = genicam_names(wanted)
+        .iter()
+        .find(|name| available.iter().any(|a| a.as_str() == **name))
+        .ok_or_else(|| {
+            let offered: Vec<&str> = available.iter().map(|s| s.as_str()).collect();
+            refused(
+                id,
+                format!("pixel format {wanted}"),
+                format!("the camera offers [{}]", offered.join(", ")),
+            )
+        })?;
+    camera
+        .set_pixel_format_from_string(name)
+        .map_err(driver(id, format!("setting pixel format {name}")))?;
+    let set = camera.pixel_format().map_err(driver(id, "reading the pixel format"))?;
+    if pixel_format_from_aravis(set) != Some(wanted) {
+        return Err(refused(
+            id,
+            format!("pixel format {wanted}"),
+            format!("the camera kept format 0x{:08x}", set.raw()),
+        ));
+    }
+
+    // Region.
+    if let Some((x, y, width, height)) = config.region {
+        let (w_min, w_max) = camera.width_bounds().map_err(driver(id, "reading the width range"))?;
+        let (h_min, h_max) = camera.height_bounds().map_err(driver(id, "reading the height range"))?;
+        let (sensor_w, sensor_h) = camera.sensor_size().unwrap_or((w_max, h_max));
+        let allowed = format!(
+            "the camera allows width {w_min} to {w_max}, height {h_min} to {h_max}, within a {sensor_w}x{sensor_h} sensor"
+        );
+        let what = format!("region x {x} y {y} width {width} height {height}");
+        let fits = |offset: u32, len: u32, min: i32, max: i32, sensor: i32| {
+            i64::from(len) >= i64::from(min)
+                && i64::from(len) <= i64::from(max)
+                && i64::from(offset) + i64::from(len) <= i64::from(sensor.max(max))
+        };
+        if !fits(x, width, w_min, w_max, sensor_w) || !fits(y, height, h_min, h_max, sensor_h) {
+            return Err(refused(id, what, allowed));
+        }
+        let as_i32 = |v: u32| i32::try_from(v).unwrap_or(i32::MAX);
+        camera
+            .set_region(as_i32(x), as_i32(y), as_i32(width), as_i32(height))
+            .map_err(driver(id, format!("setting {what}")))?;
+        let got = camera.region().map_err(driver(id, "reading the region"))?;
+        if got != (as_i32(x), as_i32(y), as_i32(width), as_i32(height)) {
+            let (gx, gy, gw, gh) = got;
+            return Err(refused(
+                id,
+                what,
+                format!("the camera set x {gx} y {gy} width {gw} height {gh} instead ({allowed}, in its increments)"),
+            ));
+        }
+    }
+
+    // Exposure.
+    if let Some(exposure_us) = config.exposure_us {
+        let what = format!("exposure {exposure_us} us");
+        if !camera.is_exposure_time_available().unwrap_or(false) {
+            return Err(refused(id, what, "the camera has no exposure time control"));
+        }
+        let (min, max) = camera
+            .exposure_time_bounds()
+            .map_err(driver(id, "reading the exposure range"))?;
+        if !(min..=max).contains(&exposure_us) {
+            return Err(refused(id, what, format!("the camera allows {min} to {max} us")));
+        }
+        if camera.is_exposure_auto_available().unwrap_or(false) {
+            camera
+                .set_exposure_time_auto(aravis::Auto::Off)
+                .map_err(driver(id, "switching auto exposure off"))?;
+        }
+        camera
+            .set_exposure_time(exposure_us)
+            .map_err(driver(id, format!("setting {what}")))?;
+    }
+
+    // Gain.
+    if let Some(gain_db) = config.gain_db {
+        let what = format!("gain {gain_db} dB");
+        if !camera.is_gain_available().unwrap_or(false) {
+            return Err(refused(id, what, "the camera has no gain control"));
+        }
+        let (min, max) = camera.gain_bounds().map_err(driver(id, "reading the gain range"))?;
+        if !(min..=max).contains(&gain_db) {
+            return Err(refused(id, what, format!("the camera allows {min} to {max} dB")));
+        }
+        if camera.is_gain_auto_available().unwrap_or(false) {
+            camera
+                .set_gain_auto(aravis::Auto::Off)
+                .map_err(driver(id, "switching auto gain off"))?;
+        }
+        camera
+            .set_gain(gain_db)
+            .map_err(driver(id, format!("setting {what}")))?;
+    }
+
+    // Frame rate.
+    if let Some(fps) = config.fps {
+        let what = format!("frame rate {fps} fps");
+        if !camera.is_frame_rate_available().unwrap_or(false) {
+            return Err(refused(id, what, "the camera has no frame rate control"));
+        }
+        let (min, max) = camera
+            .frame_rate_bounds()
+            .map_err(driver(id, "reading the frame rate range"))?;
+        if !(min..=max).contains(&fps) {
+            return Err(refused(id, what, format!("the camera allows {min} to {max} fps")));
+        }
+        camera
+            .set_frame_rate(fps)
+            .map_err(driver(id, format!("setting {what}")))?;
+    }
+    Ok(wanted)
+}
+
+fn read_meta(camera: &Camera, id: &str, format: PixelFormat) -> Result<CameraMeta, CaptureError> {
+    let model = camera.model_name().map_err(driver(id, "reading the model name"))?;
+    let serial = camera
+        .device_serial_number()
+        .map_err(driver(id, "reading the serial number"))?;
+    let firmware = ["DeviceFirmwareVersion", "DeviceVersion"]
+        .iter()
+        .find(|feature| camera.is_feature_available(feature).unwrap_or(false))
+        .and_then(|feature| camera.string(feature).ok())
+        .map(|s| s.to_string())
+        .unwrap_or_default();
+    let (_, _, width, height) = camera.region().map_err(driver(id, "reading the region"))?;
+    let fps = if camera.is_frame_rate_available().unwrap_or(false) {
+        camera.frame_rate().map_err(driver(id, "reading the frame rate"))?
+    } else {
+        0.0
+    };
+    Ok(CameraMeta {
+        role: CameraRole::Color,
+        backend: Backend::Aravis,
+        model: model.to_string(),
+        serial: serial.to_string(),
+        firmware,
+        width: u32::try_from(width).unwrap_or(0),
+        height: u32::try_from(height).unwrap_or(0),
+        pixel_format: FrameFormat::Color(format),
+        fps,
+    })
+}
+
+impl FrameSource for AravisColor {
+    type Frame = ColorFrame;
+
+    fn meta(&self) -> CameraMeta {
+        self.meta.clone()
+    }
+
+    fn start(&mut self, clock: &Clock) -> Result<(), CaptureError> {
+        let id = self.id.clone();
+        let Some(camera) = &self.camera else {
+            return Err(CaptureError::Disconnected {
+                backend: BACKEND,
+                id,
+                reason: "the camera was stopped and released".into(),
+            });
+        };
+        self.clock = clock.clone();
+        if let Some(device) = camera.device() {
+            let connected = Arc::clone(&self.connected);
+            device.connect_control_lost(move |_| connected.store(false, Ordering::Release));
+        }
+        let stream = camera.create_stream().map_err(driver(&id, "creating the stream"))?;
+        for _ in 0..self.buffers {
+            stream.push_buffer(aravis::Buffer::new_allocate(self.payload));
+        }
+        camera
+            .start_acquisition()
+            .map_err(driver(&id, "starting acquisition"))?;
+        self.stream = Some(stream);
+        self.losses.clear();
+        self.frame_ids = FrameIdExtender::default();
+        tracing::info!(message = "Aravis camera streaming.", camera = %id, buffers = self.buffers);
+        Ok(())
+    }
+
+    fn next_frame(&mut self, timeout: Duration) -> Result<Option<ColorFrame>, CaptureError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if !self.connected.load(Ordering::Acquire) {
+                return Err(CaptureError::Disconnected {
+                    backend: BACKEND,
+                    id: self.id.clone(),
+                    reason: "the camera stopped answering (control channel lost)".into(),
+                });
+            }
+            let Some(stream) = self.stream.clone() else {
+                return Err(CaptureError::Disconnected {
+                    backend: BACKEND,
+                    id: self.id.clone(),
+                    reason: "the camera is not streaming (start was not called)".into(),
+                });
+            };
+            let left = deadline.saturating_duration_since(Instant::now());
+            let left_us = u64::try_from(left.as_micros()).unwrap_or(u64::MAX);
+            let Some(buffer) = stream.timeout_pop_buffer(left_us) else {
+                return Ok(None);
+            };
+            let frame = match buffer.status() {
+                BufferStatus::Success => self.frame_from(&buffer),
+                status => {
+                    // Keep the frame counter's wraps even across damaged buffers.
+                    self.frame_ids.observe(buffer.frame_id());
+                    Err(loss_reason(status))
+                }
+            };
+            stream.push_buffer(buffer);
+            match frame {
+                Ok(frame) => return Ok(Some(frame)),
+                Err(reason) => self.count_loss(reason),
+            }
+            if Instant::now() >= deadline {
+                return Ok(None);
+            }
+        }
+    }
+
+    fn losses(&self) -> Vec<(&'static str, u64)> {
+        self.losses.clone()
+    }
+
+    fn stop(&mut self) -> Result<(), CaptureError> {
+        let result = match &self.camera {
+            Some(camera) if self.stream.is_some() => camera
+                .stop_acquisition()
+                .map_err(driver(&self.id, "stopping acquisition")),
+            _ => Ok(()),
+        };
+        // Dropping the stream stops its thread; dropping the camera releases control.
+        self.stream = None;
+        self.camera = None;
+        tracing::info!(message = "Aravis camera stopped.", camera = %self.id);
+        result
+    }
+}
+
+impl Drop for AravisColor {
+    fn drop(&mut self) {
+        let (Some(camera), Some(_)) = (&self.camera, &self.stream) else {
+            return;
+        };
+        if let Err(error) = camera.stop_acquisition() {
+            tracing::warn!(message = "Aravis acquisition not stopped on drop.", camera = %self.id, %error);
+        }
+    }
+}
+
+/// Extends GigE Vision's 16-bit frame ids (1 to 65535, then 1 again: 0 is never used) to a
+/// monotonic `u64`. Ids above 65535 (GigE Vision 2 extended ids) are used as they are.
+#[derive(Clone, Copy, Debug, Default)]
+struct FrameIdExtender {
+    last_raw: Option<u64>,
+    wraps: u64,
+    last_seq: Option<u64>,
+}
+
+impl FrameIdExtender {
+    const PERIOD: u64 = 65_535;
+
+    /// Notes an id (of any buffer, good or not), counting a wrap when it goes back by more
+    /// than half the range. Returns the extended id.
+    fn observe(&mut self, raw: u64) -> u64 {
+        if raw > Self::PERIOD {
+            return raw;
+        }
+        const HALF: u64 = FrameIdExtender::PERIOD / 2;
+        let Some(last) = self.last_raw else {
+            self.last_raw = Some(raw);
+            return raw;
+        };
+        if raw < last && last - raw > HALF {
+            // Went round: 65535 is followed by 1.
+            self.wraps += 1;
+            self.last_raw = Some(raw);
+        } else if raw > last && raw - last > HALF && self.wraps > 0 {
+            // A late id from before the last wrap.
+            return (self.wraps - 1) * Self::PERIOD + raw;
+        } else if raw > last {
+            self.last_raw = Some(raw);
+        }
+        self.wraps * Self::PERIOD + raw
+    }
+
+    /// The extended id of a frame to pass on, or `None` when it would not be after the last
+    /// one passed on (a late or repeated frame).
+    fn extend(&mut self, raw: u64) -> Option<u64> {
+        let seq = self.observe(raw);
+        if self.last_seq.is_some_and(|last| seq <= last) {
+            return None;
+        }
+        self.last_seq = Some(seq);
+        Some(seq)
+    }
+}
+
+/// The cameras answering at the given IPv4 addresses, probed one by one by unicast.
+///
+/// This never runs Aravis's GigE Vision discovery: in Aravis 0.8 it broadcasts on every
+/// network interface of the host and cannot be restricted to one. Addresses where nothing
+/// answers (or that are not IPv4 addresses) are left out. Each silent address costs Aravis's
+/// control timeout (a few seconds).
+pub fn list_devices(addresses: &[String]) -> Vec<DeviceInfo> {
+    let mut devices = Vec::new();
+    for address in addresses {
+        let camera = match open_by_address(address, address) {
+            Ok(camera) => camera,
+            Err(error) => {
+                tracing::debug!(message = "No Aravis camera at address.", address = %address, %error);
+                continue;
+            }
+        };
+        let text = |value: Result<aravis::glib::GString, aravis::glib::Error>| {
+            value.map(|s| s.to_string()).unwrap_or_default()
+        };
+        let vendor = text(camera.vendor_name());
+        devices.push(DeviceInfo {
+            backend: BACKEND,
+            id: address.clone(),
+            model: text(camera.model_name()),
+            serial: text(camera.device_serial_number()),
+            details: format!("vendor {vendor}, GigE Vision at {address}"),
+        });
+    }
+    devices
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_ids_extend_across_the_16_bit_wrap() {
+        let mut ids = FrameIdExtender::default();
+        let raws = [65_533, 65_534, 65_535, 1, 2, 3];
+        let seqs: Vec<u64> = raws.iter().map(|&r| ids.extend(r).unwrap()).collect();
+        assert_eq!(seqs, [65_533, 65_534, 65_535, 65_536, 65_537, 65_538]);
+    }
+
+    #[test]
+    fn damaged_buffers_keep_the_wrap_and_late_frames_are_refused() {
+        let mut ids = FrameIdExtender::default();
+        assert_eq!(ids.extend(65_534), Some(65_534));
+        ids.observe(65_535);
+        ids.observe(1);
+        assert_eq!(ids.extend(2), Some(65_537));
+        assert_eq!(ids.extend(2), None);
+        assert_eq!(ids.extend(1), None);
+        assert_eq!(ids.extend(100_000), Some(100_000));
+    }
+
+    #[test]
+    fn a_late_id_from_before_the_wrap_does_not_count_a_second_wrap() {
+        let mut ids = FrameIdExtender::default();
+        assert_eq!(ids.extend(65_534), Some(65_534));
+        assert_eq!(ids.extend(2), Some(65_537));
+        assert_eq!(ids.observe(65_535), 65_535);
+        assert_eq!(ids.extend(3), Some(65_538));
+    }
+
+    #[test]
+    fn pixel_formats_map_both_ways() {
+        for format in PixelFormat::ALL {
+            assert!(!genicam_names(format).is_empty());
+        }
+        assert_eq!(
+            pixel_format_from_aravis(aravis::PixelFormat::BAYER_RG_8),
+            Some(PixelFormat::BayerRg8)
+        );
+        assert_eq!(pixel_format_from_aravis(aravis::PixelFormat::MONO_16), None);
+    }
+}

@@ -1,0 +1,509 @@
+//! The rig configuration (`rig.toml`): read in two steps, raw then checked. Only this module
+//! sees the raw form; the rest of mousepose gets a [`Config`] whose values are known to make
+//! sense. An unknown key or an impossible value is refused with the file, the key and why.
+//!
+//! `docs/rig.example.toml` is a commented example of every key.
+
+use crate::core::frame::PixelFormat;
+use crate::runtime::pipeline::{EdgeConfig, WhenFull};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// What is wrong with a configuration file.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read {path:?}")]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Not TOML, an unknown key or a value of the wrong type (the parser's message names it).
+    #[error("{path:?} is not a valid rig config: {message}")]
+    Parse { path: PathBuf, message: String },
+    /// A value of the right type that cannot work.
+    #[error("{path:?}: {key} {reason}")]
+    Value { path: PathBuf, key: String, reason: String },
+}
+
+// ---- the raw form, as written -------------------------------------------------------------
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    depth: RawDepth,
+    color: Option<RawColor>,
+    #[serde(default)]
+    aravis: RawAravis,
+    #[serde(default)]
+    sync: RawSync,
+    #[serde(default)]
+    pipeline: RawPipeline,
+    #[serde(default)]
+    models: RawModels,
+    #[serde(default)]
+    calibration: RawCalibration,
+    #[serde(default)]
+    output: RawOutput,
+    #[serde(default)]
+    http: RawHttp,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDepth {
+    backend: String,
+    uri: Option<String>,
+    serial: Option<String>,
+    #[serde(default = "default_depth_width")]
+    width: u32,
+    #[serde(default = "default_depth_height")]
+    height: u32,
+    #[serde(default = "default_fps")]
+    fps: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawColor {
+    backend: String,
+    address: Option<String>,
+    serial: Option<String>,
+    device: Option<PathBuf>,
+    #[serde(default = "default_pixel_format")]
+    pixel_format: String,
+    width: Option<u32>,
+    height: Option<u32>,
+    region: Option<[u32; 4]>,
+    exposure_us: Option<f64>,
+    gain_db: Option<f64>,
+    fps: Option<f64>,
+    #[serde(default = "default_trigger")]
+    trigger: String,
+    #[serde(default = "default_buffers")]
+    buffers: usize,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAravis {
+    #[serde(default)]
+    interfaces: Vec<String>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSync {
+    tolerance_ms: Option<f64>,
+    color_latency_ms: Option<f64>,
+    max_wait_ms: Option<f64>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPipeline {
+    capture_capacity: Option<usize>,
+    capture_when_full: Option<WhenFull>,
+    stage_capacity: Option<usize>,
+    body_workers: Option<usize>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawModels {
+    dir: Option<PathBuf>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCalibration {
+    file: Option<PathBuf>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawOutput {
+    dir: Option<PathBuf>,
+    record: Option<bool>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawHttp {
+    address: Option<String>,
+}
+
+fn default_depth_width() -> u32 {
+    640
+}
+fn default_depth_height() -> u32 {
+    480
+}
+fn default_fps() -> f64 {
+    30.0
+}
+fn default_pixel_format() -> String {
+    "bayer_rg8".to_owned()
+}
+fn default_trigger() -> String {
+    "free_run".to_owned()
+}
+fn default_buffers() -> usize {
+    16
+}
+
+// ---- the checked form -----------------------------------------------------------------------
+
+/// The depth camera.
+#[derive(Clone, Debug, PartialEq)]
+pub enum DepthCamera {
+    /// An OpenNI2 device by URI (a `.oni` file is a URI too) or serial, in a depth mode.
+    Openni2 {
+        uri: Option<String>,
+        serial: Option<String>,
+        width: u32,
+        height: u32,
+        fps: f64,
+    },
+}
+
+/// How the colour camera is triggered.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum TriggerMode {
+    FreeRun,
+    /// A hardware trigger on the named input line (e.g. `Line1`).
+    Line(String),
+}
+
+/// The colour camera.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ColorCamera {
+    /// A GenICam camera through Aravis, opened by address (unicast) or serial.
+    Aravis {
+        address: Option<String>,
+        serial: Option<String>,
+        pixel_format: PixelFormat,
+        region: Option<(u32, u32, u32, u32)>,
+        exposure_us: Option<f64>,
+        gain_db: Option<f64>,
+        fps: Option<f64>,
+        trigger: TriggerMode,
+        buffers: usize,
+    },
+    /// A UVC camera through V4L2.
+    V4l2 {
+        device: PathBuf,
+        width: u32,
+        height: u32,
+        fps: f64,
+    },
+}
+
+/// The checked configuration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Config {
+    /// The file it was read from.
+    pub path: PathBuf,
+    pub depth: DepthCamera,
+    pub color: Option<ColorCamera>,
+    /// Network interfaces Aravis may discover cameras on (none: no discovery at all).
+    pub aravis_interfaces: Vec<String>,
+    pub sync: crate::runtime::sync::SyncConfig,
+    /// Edges out of the capture threads.
+    pub capture_edge: EdgeConfig,
+    /// Edges between stages.
+    pub stage_edge: EdgeConfig,
+    /// Body-forest workers (0: one per core).
+    pub body_workers: usize,
+    pub models_dir: Option<PathBuf>,
+    pub calibration: Option<PathBuf>,
+    pub output_dir: PathBuf,
+    pub record: bool,
+    pub http_address: std::net::SocketAddr,
+}
+
+impl Config {
+    /// Reads and checks a config file.
+    ///
+    /// # Errors
+    /// The file cannot be read, does not parse (unknown keys included), or holds a value
+    /// that cannot work.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Checks config text; `path` is named in errors.
+    ///
+    /// # Errors
+    /// As [`Config::load`].
+    pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
+        let raw: RawConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: path.to_owned(),
+            message: e.message().to_owned() + &span_note(text, e.span()),
+        })?;
+        Checker { path }.check(raw)
+    }
+}
+
+/// ` (line N)` for a parse error's position.
+fn span_note(text: &str, span: Option<std::ops::Range<usize>>) -> String {
+    span.map(|s| {
+        format!(
+            " (line {})",
+            text.get(..s.start).unwrap_or("").matches('\n').count() + 1
+        )
+    })
+    .unwrap_or_default()
+}
+
+struct Checker<'a> {
+    path: &'a Path,
+}
+
+impl Checker<'_> {
+    fn bad(&self, key: &str, reason: impl Into<String>) -> ConfigError {
+        ConfigError::Value {
+            path: self.path.to_owned(),
+            key: key.to_owned(),
+            reason: reason.into(),
+        }
+    }
+
+    fn positive(&self, key: &str, v: f64, max: f64) -> Result<f64, ConfigError> {
+        if v.is_finite() && v > 0.0 && v <= max {
+            Ok(v)
+        } else {
+            Err(self.bad(key, format!("must be above 0 and at most {max}, not {v}")))
+        }
+    }
+
+    fn capacity(&self, key: &str, v: usize) -> Result<usize, ConfigError> {
+        if (1..=4096).contains(&v) {
+            Ok(v)
+        } else {
+            Err(self.bad(key, format!("must be from 1 to 4096, not {v}")))
+        }
+    }
+
+    fn check(&self, raw: RawConfig) -> Result<Config, ConfigError> {
+        let d = raw.depth;
+        let depth = match d.backend.as_str() {
+            "openni2" => {
+                if d.uri.is_none() && d.serial.is_none() {
+                    return Err(self.bad("depth", "needs `uri` or `serial` to say which camera"));
+                }
+                if !(1..=4096).contains(&d.width) || !(1..=4096).contains(&d.height) {
+                    return Err(self.bad(
+                        "depth.width/height",
+                        format!("must be from 1 to 4096, not {}x{}", d.width, d.height),
+                    ));
+                }
+                DepthCamera::Openni2 {
+                    uri: d.uri,
+                    serial: d.serial,
+                    width: d.width,
+                    height: d.height,
+                    fps: self.positive("depth.fps", d.fps, 1000.0)?,
+                }
+            }
+            other => return Err(self.bad("depth.backend", format!("must be \"openni2\", not {other:?}"))),
+        };
+        let color = raw.color.map(|c| self.color(c)).transpose()?;
+        let fps = match &depth {
+            DepthCamera::Openni2 { fps, .. } => *fps,
+        };
+        let ms = |key: &str, v: Option<f64>| -> Result<Option<f64>, ConfigError> {
+            v.map(|v| self.positive(key, v, 10_000.0)).transpose()
+        };
+        let tolerance = ms("sync.tolerance_ms", raw.sync.tolerance_ms)?;
+        if let Some(t) = tolerance {
+            if t * 1e-3 * fps > 0.5 + 1e-9 {
+                return Err(self.bad(
+                    "sync.tolerance_ms",
+                    format!(
+                        "must be at most half a depth frame interval ({:.1} ms), not {t}",
+                        500.0 / fps
+                    ),
+                ));
+            }
+        }
+        let latency = raw.sync.color_latency_ms.unwrap_or(0.0);
+        if !latency.is_finite() || latency.abs() > 1000.0 {
+            return Err(self.bad("sync.color_latency_ms", format!("must be within ±1000, not {latency}")));
+        }
+        let sync = crate::runtime::sync::SyncConfig {
+            tolerance_ns: tolerance.map(|t| (t * 1e6) as u64),
+            color: color.is_some(),
+            max_wait_ns: (ms("sync.max_wait_ms", raw.sync.max_wait_ms)?.unwrap_or(200.0) * 1e6) as u64,
+            color_latency_ns: (latency * 1e6) as i64,
+        };
+        let p = raw.pipeline;
+        let capture_edge = EdgeConfig {
+            when_full: p.capture_when_full.unwrap_or(WhenFull::DropNewest),
+            ..EdgeConfig::block(self.capacity("pipeline.capture_capacity", p.capture_capacity.unwrap_or(16))?)
+        };
+        let stage_edge = EdgeConfig::block(self.capacity("pipeline.stage_capacity", p.stage_capacity.unwrap_or(8))?);
+        let body_workers = p.body_workers.unwrap_or(0);
+        if body_workers > 64 {
+            return Err(self.bad(
+                "pipeline.body_workers",
+                format!("must be at most 64, not {body_workers}"),
+            ));
+        }
+        let http = raw.http.address.unwrap_or_else(|| "127.0.0.1:8080".to_owned());
+        let http_address = http.parse().map_err(|_| {
+            self.bad(
+                "http.address",
+                format!("must be an address and port like 127.0.0.1:8080, not {http:?}"),
+            )
+        })?;
+        Ok(Config {
+            path: self.path.to_owned(),
+            depth,
+            color,
+            aravis_interfaces: raw.aravis.interfaces,
+            sync,
+            capture_edge,
+            stage_edge,
+            body_workers,
+            models_dir: raw.models.dir,
+            calibration: raw.calibration.file,
+            output_dir: raw.output.dir.unwrap_or_else(|| PathBuf::from("/var/lib/mousepose")),
+            record: raw.output.record.unwrap_or(true),
+            http_address,
+        })
+    }
+
+    fn color(&self, c: RawColor) -> Result<ColorCamera, ConfigError> {
+        let fps = c.fps.map(|f| self.positive("color.fps", f, 1000.0)).transpose()?;
+        match c.backend.as_str() {
+            "aravis" => {
+                if c.address.is_none() && c.serial.is_none() {
+                    return Err(self.bad("color", "needs `address` or `serial` to say which camera"));
+                }
+                if let Some(a) = &c.address {
+                    if a.parse::<std::net::Ipv4Addr>().is_err() {
+                        return Err(self.bad("color.address", format!("must be an IPv4 address, not {a:?}")));
+                    }
+                }
+                let pixel_format = PixelFormat::ALL
+                    .into_iter()
+                    .find(|f| f.name() == c.pixel_format)
+                    .ok_or_else(|| {
+                        let names: Vec<&str> = PixelFormat::ALL.iter().map(|f| f.name()).collect();
+                        self.bad(
+                            "color.pixel_format",
+                            format!("must be one of {}, not {:?}", names.join(", "), c.pixel_format),
+                        )
+                    })?;
+                if let Some([_, _, w, h]) = c.region {
+                    if w == 0 || h == 0 {
+                        return Err(self.bad("color.region", "must have a width and height above 0"));
+                    }
+                }
+                let trigger = match c.trigger.as_str() {
+                    "free_run" => TriggerMode::FreeRun,
+                    t => match t.strip_prefix("line:") {
+                        Some(line) if !line.is_empty() => TriggerMode::Line(line.to_owned()),
+                        _ => {
+                            return Err(self.bad(
+                                "color.trigger",
+                                format!("must be \"free_run\" or \"line:<LINE>\" (e.g. \"line:Line1\"), not {t:?}"),
+                            ));
+                        }
+                    },
+                };
+                if c.exposure_us.is_some_and(|e| !(e.is_finite() && e > 0.0)) {
+                    return Err(self.bad("color.exposure_us", "must be above 0"));
+                }
+                if !(1..=256).contains(&c.buffers) {
+                    return Err(self.bad("color.buffers", format!("must be from 1 to 256, not {}", c.buffers)));
+                }
+                Ok(ColorCamera::Aravis {
+                    address: c.address,
+                    serial: c.serial,
+                    pixel_format,
+                    region: c.region.map(|[x, y, w, h]| (x, y, w, h)),
+                    exposure_us: c.exposure_us,
+                    gain_db: c.gain_db,
+                    fps,
+                    trigger,
+                    buffers: c.buffers,
+                })
+            }
+            "v4l2" => {
+                let device = c
+                    .device
+                    .ok_or_else(|| self.bad("color.device", "is needed for a v4l2 camera (e.g. /dev/video0)"))?;
+                Ok(ColorCamera::V4l2 {
+                    device,
+                    width: c.width.unwrap_or(640),
+                    height: c.height.unwrap_or(480),
+                    fps: fps.unwrap_or(30.0),
+                })
+            }
+            other => Err(self.bad(
+                "color.backend",
+                format!("must be \"aravis\" or \"v4l2\", not {other:?}"),
+            )),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Config, ConfigError> {
+        Config::parse(text, Path::new("rig.toml"))
+    }
+
+    #[test]
+    fn the_example_config_is_valid() {
+        let text = include_str!("../../docs/rig.example.toml");
+        let c = parse(text).unwrap();
+        assert!(matches!(c.color, Some(ColorCamera::Aravis { .. })));
+        assert_eq!(c.capture_edge.when_full, WhenFull::DropNewest);
+    }
+
+    #[test]
+    fn a_minimal_depth_only_config() {
+        let c = parse("[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n").unwrap();
+        assert!(c.color.is_none() && !c.sync.color);
+        assert_eq!(c.stage_edge.when_full, WhenFull::Block);
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_name_the_key_and_file() {
+        let e = parse("[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\nwidht = 640\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("rig.toml") && e.contains("widht") && e.contains("line 4"),
+            "{e}"
+        );
+        let e = parse("[depth]\nbackend = \"kinect\"\nuri = \"x\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("depth.backend") && e.contains("kinect"), "{e}");
+        let e = parse("[depth]\nbackend = \"openni2\"\nuri = \"x\"\nfps = -3\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("depth.fps"), "{e}");
+        let e = parse("[depth]\nbackend = \"openni2\"\nuri = \"x\"\n[sync]\ntolerance_ms = 40\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("sync.tolerance_ms") && e.contains("16.7"), "{e}");
+        let e =
+            parse("[depth]\nbackend = \"openni2\"\nuri = \"x\"\n[color]\nbackend = \"aravis\"\naddress = \"cam\"\n")
+                .unwrap_err()
+                .to_string();
+        assert!(e.contains("color.address"), "{e}");
+        let e = parse("[depth]\nbackend = \"openni2\"\n").unwrap_err().to_string();
+        assert!(e.contains("uri"), "{e}");
+    }
+}

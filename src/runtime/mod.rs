@@ -1,0 +1,15 @@
+//! The frame path: camera sources, the synchroniser, the pipeline runner with its edges,
+//! stages and sinks, the rig config, and [`topology`], the one builder that wires them for
+//! `record`, `replay`, `bench` and `run`.
+
+pub mod accounting;
+pub mod capture;
+pub mod config;
+pub mod devices;
+pub mod overlay;
+pub mod pipeline;
+pub mod record;
+pub mod sink;
+pub mod stages;
+pub mod sync;
+pub mod topology;

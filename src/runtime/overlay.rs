@@ -1,0 +1,158 @@
+//! Pictures of one frame pair and its pose: the depth image around the mouse with the
+//! skeleton in the paper's colours (spine red, ears green, limbs blue), the bottom view around
+//! the mouse with the paws found there, and a side view of the skeleton in 3D.
+
+use crate::core::frame::{ColorFrame, DepthFrame, PixelFormat};
+use crate::core::geometry::Rig;
+use crate::core::image::draw_bones;
+use crate::core::image::{RgbImage, depth_to_rgb};
+use crate::core::pose::JointSource;
+use crate::core::skeleton::{JOINT_COUNT, Joint};
+use crate::runtime::stages::PoseRecord;
+use crate::runtime::stages::paws::{FOOTPRINT_MARGIN_MM, footprint};
+use crate::vision::fusion::BodyAxes;
+use nalgebra::{Point3, Vector3};
+
+/// Height of every panel, pixels.
+const PANEL: u32 = 480;
+
+/// The three panels side by side.
+pub fn draw(rig: &Rig, depth: &DepthFrame, color: Option<&ColorFrame>, record: &PoseRecord) -> RgbImage {
+    let joints = record
+        .pose
+        .joints
+        .map(|j| (j.source != JointSource::Missing).then_some(j.position_mm));
+    let mut panels = vec![top_panel(rig, depth, &joints)];
+    if let Some(color) = color {
+        panels.push(bottom_panel(rig, color, record));
+    }
+    panels.push(side_panel(record, &joints));
+    RgbImage::hstack(&panels, 4, [255, 255, 255])
+}
+
+/// The depth frame around the mouse, magnified 4 times, with the skeleton.
+fn top_panel(rig: &Rig, frame: &DepthFrame, joints: &[Option<Point3<f64>>; JOINT_COUNT]) -> RgbImage {
+    let projected: Vec<_> = joints
+        .iter()
+        .flatten()
+        .filter_map(|p| rig.depth.project_world(p))
+        .collect();
+    let n = projected.len().max(1) as f64;
+    let (cx, cy) = if projected.is_empty() {
+        (f64::from(frame.width) / 2.0, f64::from(frame.height) / 2.0)
+    } else {
+        (
+            projected.iter().map(|p| p.x).sum::<f64>() / n,
+            projected.iter().map(|p| p.y).sum::<f64>() / n,
+        )
+    };
+    let zoom = 4u32;
+    let (w, h) = (160u32.min(frame.width), (PANEL / zoom).min(frame.height));
+    let x0 = (cx - f64::from(w) / 2.0).clamp(0.0, f64::from(frame.width - w)) as u32;
+    let y0 = (cy - f64::from(h) / 2.0).clamp(0.0, f64::from(frame.height - h)) as u32;
+    let near = rig.depth.world_from_camera.translation.vector.z - 120.0;
+    let crop: Vec<u16> = (y0..y0 + h)
+        .flat_map(|y| {
+            let row = (y * frame.width + x0) as usize;
+            frame.data.get(row..row + w as usize).unwrap_or_default()
+        })
+        .copied()
+        .collect();
+    let mut img = depth_to_rgb(&crop, w, h, near, near + 140.0).upscale(zoom);
+    crate::core::image::draw_joints(
+        &mut img,
+        &rig.depth,
+        joints,
+        (f64::from(x0), f64::from(y0)),
+        f64::from(zoom),
+    );
+    img
+}
+
+/// The colour frame's pixel at `(x, y)` as RGB (a Bayer mosaic shows its 2x2 cell's colour).
+fn rgb_at(frame: &ColorFrame, x: u32, y: u32) -> [u8; 3] {
+    let w = frame.width as usize;
+    let (x, y) = (x as usize, y as usize);
+    match frame.format {
+        PixelFormat::Mono8 => [frame.data[y * w + x]; 3],
+        PixelFormat::Rgb8 => {
+            let i = (y * w + x) * 3;
+            [frame.data[i], frame.data[i + 1], frame.data[i + 2]]
+        }
+        bayer => {
+            let (bx, by) = (x & !1, y & !1);
+            let mut rgb = [0u16; 3];
+            let mut count = [0u16; 3];
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let (px, py) = ((bx + dx).min(w - 1), (by + dy).min(frame.height as usize - 1));
+                let c = bayer.bayer_channel(px, py).unwrap_or(1);
+                rgb[c] += u16::from(frame.data[py * w + px]);
+                count[c] += 1;
+            }
+            [0, 1, 2].map(|c| (rgb[c] / count[c].max(1)) as u8)
+        }
+    }
+}
+
+/// The bottom view around the mouse's footprint, scaled to the panel's height, with the paw
+/// detections (yellow) and the fused paws (blue discs).
+fn bottom_panel(rig: &Rig, frame: &ColorFrame, record: &PoseRecord) -> RgbImage {
+    let (x0, y0, x1, y1) = footprint(&record.pose, &rig.color, FOOTPRINT_MARGIN_MM)
+        .map_or((0, 0, frame.width, frame.height), |(roi, _)| roi);
+    let (x1, y1) = (x1.min(frame.width), y1.min(frame.height));
+    let (w, h) = ((x1 - x0).max(1), (y1 - y0).max(1));
+    let k = f64::from(PANEL) / f64::from(h);
+    let out_w = ((f64::from(w) * k).round() as u32).clamp(1, 2 * PANEL);
+    let mut native = Vec::with_capacity(w as usize * h as usize * 3);
+    for y in y0..y0 + h {
+        for x in x0..x0 + w {
+            native.extend_from_slice(&rgb_at(frame, x, y));
+        }
+    }
+    let mut img = RgbImage::new(out_w, PANEL, [0; 3]);
+    for oy in 0..PANEL {
+        let sy = ((f64::from(oy) / k) as u32).min(h - 1);
+        for ox in 0..out_w {
+            let sx = ((f64::from(ox) / k) as u32).min(w - 1);
+            let i = (sy * w + sx) as usize * 3;
+            let o = (oy * out_w + ox) as usize * 3;
+            img.data[o..o + 3].copy_from_slice(&native[i..i + 3]);
+        }
+    }
+    let to_panel = |x: f64, y: f64| ((x - f64::from(x0)) * k, (y - f64::from(y0)) * k);
+    for d in &record.paws {
+        let a = to_panel(f64::from(d.x0), f64::from(d.y0));
+        let b = to_panel(f64::from(d.x1), f64::from(d.y1));
+        img.rect(a, b, [255, 220, 40], 2.0);
+    }
+    for j in Joint::PAWS {
+        let e = record.pose.joint(j);
+        if e.source == JointSource::Paw
+            && let Some(q) = rig.color.project_world(&e.position_mm)
+        {
+            img.disc(to_panel(q.x, q.y), 4.0, [40, 90, 255]);
+        }
+    }
+    img
+}
+
+/// The skeleton seen from the mouse's left side (orthographic, 4 pixels per mm), the glass as
+/// a grey line.
+fn side_panel(record: &PoseRecord, joints: &[Option<Point3<f64>>; JOINT_COUNT]) -> RgbImage {
+    let mut img = RgbImage::new(PANEL, PANEL, [250, 250, 250]);
+    let scale = 4.0;
+    let floor_y = f64::from(PANEL) - 40.0;
+    img.line((0.0, floor_y), (f64::from(PANEL), floor_y), [150, 150, 150], 2.0);
+    let forward = BodyAxes::of(&record.pose).map_or(Vector3::x(), |a| a.fore_forward);
+    let centre = joints[Joint::MidBack.index()].unwrap_or_else(Point3::origin);
+    draw_bones(
+        &mut img,
+        joints,
+        |p| {
+            let along = (p - centre).dot(&forward);
+            Some((f64::from(PANEL) / 2.0 + along * scale, floor_y - p.z * scale))
+        },
+        3.0,
+    );
+    img
+}

@@ -1,0 +1,487 @@
+//! The runner: starts one named thread per source, stage worker and sink, joins them in
+//! order, and reports which one failed.
+//!
+//! Stages and sinks are plain objects ([`Stage`], [`Sink`]); the runner owns the channels,
+//! the timing and the counters. Items travel wrapped in [`Tracked`], which carries the pair's
+//! index and the instant it entered the pipeline, so the sink can measure end-to-end latency
+//! and restore order behind a stage with several workers.
+
+use super::edge::{EdgeSender, Sent};
+use super::metrics::{Histogram, LatencySummary};
+use crossbeam_channel::Receiver;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+/// Why a stage, sink or source failed: the component's own error, kept as the cause.
+pub type StageError = Box<dyn std::error::Error + Send + Sync>;
+
+/// A processing step: a function from each input to exactly one output (a frame without a
+/// result is an output with a status), so that the sink can restore the order of the items
+/// behind a stage with several workers.
+pub trait Stage: Send + 'static {
+    type In: Send + 'static;
+    type Out: Send + 'static;
+    /// Pushes the output for `input`. The runner refuses any other number of outputs.
+    ///
+    /// # Errors
+    /// A failure that must stop the run (a bad frame is an output with a status, not an error).
+    fn process(&mut self, input: Self::In, out: &mut Vec<Self::Out>) -> Result<(), StageError>;
+}
+
+/// The end of the pipeline: writes what reaches it.
+pub trait Sink: Send + 'static {
+    type In: Send + 'static;
+    /// # Errors
+    /// The item cannot be written.
+    fn write(&mut self, item: Self::In) -> Result<(), StageError>;
+    /// # Errors
+    /// What was written cannot be made durable.
+    fn flush(&mut self) -> Result<(), StageError>;
+}
+
+/// An item with its place in the run and the instant it entered the pipeline.
+#[derive(Debug)]
+pub struct Tracked<T> {
+    pub index: u64,
+    pub entered: Instant,
+    pub item: T,
+}
+
+impl<T> Tracked<T> {
+    pub fn new(index: u64, item: T) -> Self {
+        Self {
+            index,
+            entered: Instant::now(),
+            item,
+        }
+    }
+}
+
+/// Counters of one stage (all its workers) or sink.
+#[derive(Debug, Default)]
+pub struct StageStats {
+    pub items_in: AtomicU64,
+    pub items_out: AtomicU64,
+    /// Time spent in `process` or `write` per item.
+    pub latency: Histogram,
+}
+
+/// What a stage did, for summaries.
+#[derive(Clone, Debug, Serialize)]
+pub struct StageReport {
+    pub name: String,
+    pub items_in: u64,
+    pub items_out: u64,
+    pub latency: LatencySummary,
+}
+
+/// A component that stopped the run.
+#[derive(Debug, thiserror::Error)]
+#[error("{name} failed")]
+pub struct PipelineError {
+    pub name: String,
+    #[source]
+    pub source: StageError,
+}
+
+/// The stop signal sources check between frames.
+#[derive(Clone, Debug, Default)]
+pub struct Shutdown(Arc<AtomicBool>);
+
+impl Shutdown {
+    pub fn request(&self) {
+        self.0.store(true, Ordering::Release);
+    }
+
+    pub fn requested(&self) -> bool {
+        self.0.load(Ordering::Acquire)
+    }
+
+    /// The flag itself, for a signal handler to set.
+    pub fn flag(&self) -> Arc<AtomicBool> {
+        Arc::clone(&self.0)
+    }
+}
+
+/// The threads of a running pipeline.
+#[derive(Debug, Default)]
+pub struct Runner {
+    threads: Vec<(String, JoinHandle<Result<(), StageError>>)>,
+    stages: Vec<(String, Arc<StageStats>)>,
+    shutdown: Shutdown,
+    /// Set when any thread fails: stages and sinks stop at their next item.
+    failed: Shutdown,
+}
+
+impl Runner {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The signal that stops the sources.
+    pub fn shutdown(&self) -> Shutdown {
+        self.shutdown.clone()
+    }
+
+    /// Starts a thread named `name` running `body`. Start threads in topological order
+    /// (sources first): [`Runner::join`] joins them in that order.
+    ///
+    /// # Errors
+    /// The thread cannot be created.
+    pub fn spawn(
+        &mut self,
+        name: &str,
+        body: impl FnOnce() -> Result<(), StageError> + Send + 'static,
+    ) -> std::io::Result<()> {
+        let (shutdown, failed) = (self.shutdown.clone(), self.failed.clone());
+        let handle = std::thread::Builder::new().name(name.to_owned()).spawn(move || {
+            let result = body();
+            if result.is_err() {
+                failed.request();
+                shutdown.request();
+            }
+            result
+        })?;
+        self.threads.push((name.to_owned(), handle));
+        Ok(())
+    }
+
+    /// Starts a stage with one thread per worker (`name-0`, `name-1`, ... when several), all
+    /// reading `input` and sending to `output`.
+    ///
+    /// # Errors
+    /// A thread cannot be created.
+    pub fn stage<S: Stage>(
+        &mut self,
+        name: &str,
+        workers: Vec<S>,
+        input: &Receiver<Tracked<S::In>>,
+        output: &EdgeSender<Tracked<S::Out>>,
+    ) -> std::io::Result<Arc<StageStats>> {
+        self.start_stage(name, workers, input, output, false)
+    }
+
+    /// Starts a stage with one worker that sees its items in index order (items that arrive
+    /// early from a stage with several workers wait): for stages that carry state from one
+    /// frame to the next, so that their output does not depend on thread timing.
+    ///
+    /// # Errors
+    /// The thread cannot be created.
+    pub fn stage_in_order<S: Stage>(
+        &mut self,
+        name: &str,
+        stage: S,
+        input: &Receiver<Tracked<S::In>>,
+        output: &EdgeSender<Tracked<S::Out>>,
+    ) -> std::io::Result<Arc<StageStats>> {
+        self.start_stage(name, vec![stage], input, output, true)
+    }
+
+    fn start_stage<S: Stage>(
+        &mut self,
+        name: &str,
+        workers: Vec<S>,
+        input: &Receiver<Tracked<S::In>>,
+        output: &EdgeSender<Tracked<S::Out>>,
+        in_order: bool,
+    ) -> std::io::Result<Arc<StageStats>> {
+        let stats = Arc::new(StageStats::default());
+        let several = workers.len() > 1;
+        for (k, mut stage) in workers.into_iter().enumerate() {
+            let thread = if several {
+                format!("{name}-{k}")
+            } else {
+                name.to_owned()
+            };
+            let (rx, tx, stats) = (input.clone(), output.clone(), Arc::clone(&stats));
+            let failed = self.failed.clone();
+            self.spawn(&thread, move || {
+                let mut out = Vec::new();
+                let mut order = Reorder::default();
+                let mut ready = Vec::new();
+                for tracked in rx.iter() {
+                    if failed.requested() {
+                        // Another component failed and says so: stop quietly.
+                        return Ok(());
+                    }
+                    stats.items_in.fetch_add(1, Ordering::Relaxed);
+                    if in_order {
+                        order.push(tracked, &mut ready);
+                    } else {
+                        ready.push(tracked);
+                    }
+                    for tracked in ready.drain(..) {
+                        let start = Instant::now();
+                        let (index, entered) = (tracked.index, tracked.entered);
+                        stage.process(tracked.item, &mut out)?;
+                        stats.latency.record(start.elapsed());
+                        if out.len() != 1 {
+                            return Err(format!("emitted {} outputs for one input instead of one", out.len()).into());
+                        }
+                        for item in out.drain(..) {
+                            stats.items_out.fetch_add(1, Ordering::Relaxed);
+                            if tx.send(Tracked { index, entered, item }) == Sent::Closed {
+                                // Downstream stopped (it failed and says so): stop quietly.
+                                return Ok(());
+                            }
+                        }
+                    }
+                }
+                order.finish()
+            })?;
+        }
+        self.stages.push((name.to_owned(), Arc::clone(&stats)));
+        Ok(stats)
+    }
+
+    /// Starts a sink thread. Items are written in index order (indices start at 0 and have no
+    /// gaps: every stage emits one output per input; items from workers that ran ahead wait);
+    /// `end_to_end` gets each item's time from entering the pipeline to written.
+    ///
+    /// # Errors
+    /// The thread cannot be created.
+    pub fn sink<K: Sink>(
+        &mut self,
+        name: &str,
+        mut sink: K,
+        input: Receiver<Tracked<K::In>>,
+        end_to_end: Arc<Histogram>,
+    ) -> std::io::Result<Arc<StageStats>> {
+        let stats = Arc::new(StageStats::default());
+        let st = Arc::clone(&stats);
+        let failed = self.failed.clone();
+        self.spawn(name, move || {
+            let mut order = Reorder::default();
+            let mut ready = Vec::new();
+            let write = |t: Tracked<K::In>, sink: &mut K| -> Result<(), StageError> {
+                let start = Instant::now();
+                sink.write(t.item)?;
+                st.latency.record(start.elapsed());
+                end_to_end.record(t.entered.elapsed());
+                st.items_out.fetch_add(1, Ordering::Relaxed);
+                Ok(())
+            };
+            for t in input.iter() {
+                if failed.requested() {
+                    return Ok(());
+                }
+                st.items_in.fetch_add(1, Ordering::Relaxed);
+                order.push(t, &mut ready);
+                for t in ready.drain(..) {
+                    write(t, &mut sink)?;
+                }
+            }
+            order.finish()?;
+            sink.flush()
+        })?;
+        self.stages.push((name.to_owned(), Arc::clone(&stats)));
+        Ok(stats)
+    }
+
+    /// Per stage and sink: items in and out, time per item.
+    pub fn reports(&self) -> Vec<StageReport> {
+        reports_of(&self.stages)
+    }
+
+    /// Waits for every thread in start order and returns the stage reports.
+    ///
+    /// # Errors
+    /// The first component (in start order) that failed or panicked.
+    pub fn join(self) -> Result<Vec<StageReport>, PipelineError> {
+        let Runner { threads, stages, .. } = self;
+        let mut first: Option<PipelineError> = None;
+        for (name, handle) in threads {
+            let result = match handle.join() {
+                Ok(r) => r,
+                Err(panic) => {
+                    let what = panic
+                        .downcast_ref::<&str>()
+                        .map(|s| (*s).to_owned())
+                        .or_else(|| panic.downcast_ref::<String>().cloned())
+                        .unwrap_or_else(|| "unknown panic".to_owned());
+                    Err(format!("panicked: {what}").into())
+                }
+            };
+            if let (Err(source), None) = (result, &first) {
+                first = Some(PipelineError { name, source });
+            }
+        }
+        match first {
+            Some(e) => Err(e),
+            None => Ok(reports_of(&stages)),
+        }
+    }
+}
+
+/// Puts items back in index order (indices start at 0 and have no gaps).
+#[derive(Debug)]
+struct Reorder<T> {
+    held: BTreeMap<u64, Tracked<T>>,
+    next: u64,
+}
+
+impl<T> Default for Reorder<T> {
+    fn default() -> Self {
+        Self {
+            held: BTreeMap::new(),
+            next: 0,
+        }
+    }
+}
+
+impl<T> Reorder<T> {
+    /// Takes an item and appends those now due to `due`, in order.
+    fn push(&mut self, t: Tracked<T>, due: &mut Vec<Tracked<T>>) {
+        self.held.insert(t.index, t);
+        while let Some(t) = self.held.remove(&self.next) {
+            self.next += 1;
+            due.push(t);
+        }
+    }
+
+    /// At the end of the input: an error when an item never arrived.
+    fn finish(&self) -> Result<(), StageError> {
+        match self.held.keys().next() {
+            Some(&index) => Err(format!("item {} never arrived (item {index} did)", self.next).into()),
+            None => Ok(()),
+        }
+    }
+}
+
+fn reports_of(stages: &[(String, Arc<StageStats>)]) -> Vec<StageReport> {
+    stages
+        .iter()
+        .map(|(name, s)| StageReport {
+            name: name.clone(),
+            items_in: s.items_in.load(Ordering::Relaxed),
+            items_out: s.items_out.load(Ordering::Relaxed),
+            latency: s.latency.summary(),
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::runtime::pipeline::{EdgeConfig, edge};
+
+    /// Doubles its input; fails on `fail_on`.
+    struct Double {
+        fail_on: Option<u32>,
+    }
+
+    impl Stage for Double {
+        type In = u32;
+        type Out = u32;
+        fn process(&mut self, input: u32, out: &mut Vec<u32>) -> Result<(), StageError> {
+            if Some(input) == self.fail_on {
+                return Err(format!("cannot double {input}").into());
+            }
+            out.push(input * 2);
+            Ok(())
+        }
+    }
+
+    struct Collect(Arc<std::sync::Mutex<Vec<u32>>>);
+
+    impl Sink for Collect {
+        type In = u32;
+        fn write(&mut self, item: u32) -> Result<(), StageError> {
+            self.0.lock().map_err(|_| "poisoned")?.push(item);
+            Ok(())
+        }
+        fn flush(&mut self) -> Result<(), StageError> {
+            Ok(())
+        }
+    }
+
+    fn run(n: u32, workers: usize, fail_on: Option<u32>) -> (Result<Vec<StageReport>, PipelineError>, Vec<u32>) {
+        let (src_tx, src_rx, _) = edge(EdgeConfig::block(4));
+        let (out_tx, out_rx, _) = edge(EdgeConfig::block(4));
+        let got = Arc::new(std::sync::Mutex::new(Vec::new()));
+        let mut runner = Runner::new();
+        runner
+            .spawn("source", move || {
+                for i in 0..n {
+                    if src_tx.send(Tracked::new(u64::from(i), i)) == Sent::Closed {
+                        break;
+                    }
+                }
+                Ok(())
+            })
+            .unwrap();
+        let stages = (0..workers).map(|_| Double { fail_on }).collect();
+        runner.stage("double", stages, &src_rx, &out_tx).unwrap();
+        drop((src_rx, out_tx));
+        runner
+            .sink("collect", Collect(Arc::clone(&got)), out_rx, Arc::default())
+            .unwrap();
+        let result = runner.join();
+        let got = got.lock().unwrap().clone();
+        (result, got)
+    }
+
+    #[test]
+    fn several_workers_keep_the_order_and_every_item() {
+        let (result, got) = run(500, 3, None);
+        let reports = result.unwrap();
+        assert_eq!(got, (0..500).map(|i| i * 2).collect::<Vec<_>>());
+        let double = reports.iter().find(|r| r.name == "double").unwrap();
+        assert_eq!((double.items_in, double.items_out), (500, 500));
+        assert_eq!(double.latency.count, 500);
+    }
+
+    /// Passes its input on and remembers the order it saw it in.
+    struct Witness(Arc<std::sync::Mutex<Vec<u32>>>);
+
+    impl Stage for Witness {
+        type In = u32;
+        type Out = u32;
+        fn process(&mut self, input: u32, out: &mut Vec<u32>) -> Result<(), StageError> {
+            self.0.lock().map_err(|_| "poisoned")?.push(input);
+            out.push(input);
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn an_in_order_stage_sees_items_in_order_behind_several_workers() {
+        let (src_tx, src_rx, _) = edge(EdgeConfig::block(4));
+        let (mid_tx, mid_rx, _) = edge(EdgeConfig::block(4));
+        let (out_tx, out_rx, _) = edge(EdgeConfig::block(4));
+        let seen = Arc::new(std::sync::Mutex::new(Vec::new()));
+        let mut runner = Runner::new();
+        runner
+            .spawn("source", move || {
+                for i in 0..2_000u32 {
+                    src_tx.send(Tracked::new(u64::from(i), i));
+                }
+                Ok(())
+            })
+            .unwrap();
+        let workers = (0..3).map(|_| Double { fail_on: None }).collect();
+        runner.stage("double", workers, &src_rx, &mid_tx).unwrap();
+        runner
+            .stage_in_order("witness", Witness(Arc::clone(&seen)), &mid_rx, &out_tx)
+            .unwrap();
+        drop((src_rx, mid_tx, mid_rx, out_tx));
+        runner
+            .sink("collect", Collect(Arc::default()), out_rx, Arc::default())
+            .unwrap();
+        runner.join().unwrap();
+        assert_eq!(*seen.lock().unwrap(), (0..2_000).map(|i| i * 2).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn a_failing_stage_stops_the_run_and_is_named() {
+        let (result, got) = run(10_000, 2, Some(100));
+        let e = result.unwrap_err();
+        assert!(e.name.starts_with("double"), "{}", e.name);
+        assert!(e.source.to_string().contains("cannot double 100"));
+        assert!(got.len() < 1_000, "{} items written after the failure", got.len());
+    }
+}

@@ -1,0 +1,213 @@
+//! `poses.csv`: one row per frame pair, written as the poses arrive, and a tally of what was
+//! written (statuses, pairs, and the error against ground truth when there is one).
+//!
+//! Columns: `frame, depth_seq, color_seq, host_ns, depth_device_ns, color_device_ns, skew_ns,
+//! status`, then per joint in joint order `{name}_x, {name}_y, {name}_z` (mm, world frame),
+//! `{name}_score` and `{name}_source` (Anipose's per-joint convention). A joint without an
+//! estimate has empty coordinates and score, and source `missing`; a depth-only pair has an
+//! empty `color_seq` and `color_device_ns`.
+
+use crate::core::pose::{JointPositions, JointSource};
+use crate::core::skeleton::{JOINT_COUNT, Joint};
+use crate::runtime::pipeline::{Sink, StageError};
+use crate::runtime::stages::{Fused, PoseRecord, PoseStatus};
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write as _;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+use std::sync::{Arc, Mutex, PoisonError};
+
+/// The name of the file.
+pub const POSES_FILE: &str = "poses.csv";
+
+/// The directory the pictures of `--overlays` go to, one PNG per pictured frame named by its
+/// depth sequence number.
+pub const OVERLAYS_DIR: &str = "overlays";
+
+/// The header line of `poses.csv`.
+pub fn header() -> String {
+    let mut h = String::from("frame,depth_seq,color_seq,host_ns,depth_device_ns,color_device_ns,skew_ns,status");
+    for joint in Joint::ALL {
+        for col in ["x", "y", "z", "score", "source"] {
+            let _ = write!(h, ",{}_{col}", joint.name());
+        }
+    }
+    h
+}
+
+/// What the sink has written.
+#[derive(Clone, Debug, Default)]
+pub struct PoseTally {
+    pub rows: u64,
+    pub statuses: BTreeMap<&'static str, u64>,
+    /// `(depth_seq, color_seq)` of every row, in order, when there is ground truth to check
+    /// the pairing against (otherwise nothing grows with the session's length).
+    pub pairs: Vec<(u64, Option<u64>)>,
+    /// Per joint: summed error (mm) and count, over rows with truth and an estimate.
+    pub error_sum_mm: [f64; JOINT_COUNT],
+    pub error_count: [u64; JOINT_COUNT],
+    /// Summed error (mm) and count of the paws placed from a detection.
+    pub detected_paw_error: (f64, u64),
+    /// The first pose with a mouse at or after the snapshot row (for a picture).
+    pub snapshot: Option<PoseRecord>,
+}
+
+impl PoseTally {
+    /// Mean error per joint (mm), for joints that were ever compared.
+    pub fn per_joint_error_mm(&self) -> BTreeMap<&'static str, f64> {
+        Joint::ALL
+            .iter()
+            .filter(|j| self.error_count[j.index()] > 0)
+            .map(|j| {
+                (
+                    j.name(),
+                    self.error_sum_mm[j.index()] / self.error_count[j.index()] as f64,
+                )
+            })
+            .collect()
+    }
+
+    /// Mean error per group of joints: `body` (1-12), `limbs` (13-20), `paws` (21-24), and
+    /// `detected_paws` (paws placed from a detection in the bottom view).
+    pub fn group_error_mm(&self) -> BTreeMap<&'static str, f64> {
+        let mean = |sum: f64, count: u64| (count > 0).then(|| sum / count as f64);
+        let group = |joints: std::ops::Range<usize>| {
+            let (sum, count) = joints.fold((0.0, 0), |(s, c), k| {
+                (s + self.error_sum_mm[k], c + self.error_count[k])
+            });
+            mean(sum, count)
+        };
+        [
+            ("body", group(0..12)),
+            ("limbs", group(12..20)),
+            ("paws", group(20..24)),
+            (
+                "detected_paws",
+                mean(self.detected_paw_error.0, self.detected_paw_error.1),
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(name, v)| v.map(|v| (name, v)))
+        .collect()
+    }
+
+    /// Mean of the per-joint errors, `None` without any.
+    pub fn mean_error_mm(&self) -> Option<f64> {
+        let per = self.per_joint_error_mm();
+        (!per.is_empty()).then(|| per.values().sum::<f64>() / per.len() as f64)
+    }
+}
+
+/// A CSV cell that is empty for `None`.
+struct Blank(Option<u64>);
+
+impl std::fmt::Display for Blank {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.0 {
+            Some(v) => write!(f, "{v}"),
+            None => Ok(()),
+        }
+    }
+}
+
+/// Writes `poses.csv` and keeps the tally.
+#[derive(Debug)]
+pub struct PoseWriter {
+    out: BufWriter<File>,
+    dir: std::path::PathBuf,
+    line: String,
+    truth: HashMap<u64, JointPositions>,
+    snapshot_row: u64,
+    tally: Arc<Mutex<PoseTally>>,
+}
+
+impl PoseWriter {
+    /// Creates `dir/poses.csv` and writes the header. `truth` maps depth sequence numbers to
+    /// the true joints (empty for recorded sessions).
+    ///
+    /// # Errors
+    /// The file cannot be created or written.
+    /// The tally keeps the first pose with a mouse from row `snapshot_row` on.
+    pub fn create(dir: &Path, truth: HashMap<u64, JointPositions>, snapshot_row: u64) -> std::io::Result<Self> {
+        let mut out = BufWriter::new(File::create(dir.join(POSES_FILE))?);
+        writeln!(out, "{}", header())?;
+        Ok(Self {
+            out,
+            dir: dir.to_owned(),
+            line: String::new(),
+            truth,
+            snapshot_row,
+            tally: Arc::default(),
+        })
+    }
+
+    /// The tally, readable while and after the writer runs.
+    pub fn tally(&self) -> Arc<Mutex<PoseTally>> {
+        Arc::clone(&self.tally)
+    }
+}
+
+impl Sink for PoseWriter {
+    type In = Fused;
+
+    fn write(&mut self, item: Fused) -> Result<(), StageError> {
+        let Fused { record: r, overlay } = item;
+        if let Some(picture) = overlay {
+            let dir = self.dir.join(OVERLAYS_DIR);
+            std::fs::create_dir_all(&dir)?;
+            picture.write_png(&dir.join(format!("{:06}.png", r.depth.seq)))?;
+        }
+        let mut tally = self.tally.lock().unwrap_or_else(PoisonError::into_inner);
+        let line = &mut self.line;
+        line.clear();
+        let _ = write!(
+            line,
+            "{},{},{},{},{},{},{},{}",
+            tally.rows,
+            r.depth.seq,
+            Blank(r.color.map(|c| c.seq)),
+            r.depth.host_ns,
+            r.depth.device_ns,
+            Blank(r.color.map(|c| c.device_ns)),
+            r.skew_ns,
+            r.status.name()
+        );
+        let truth = self.truth.get(&r.depth.seq);
+        for (k, j) in r.pose.joints.iter().enumerate() {
+            if j.source == JointSource::Missing {
+                let _ = write!(line, ",,,,,{}", j.source);
+                continue;
+            }
+            let p = j.position_mm;
+            let _ = write!(line, ",{:.2},{:.2},{:.2},{:.3},{}", p.x, p.y, p.z, j.score, j.source);
+            if let Some(t) = truth.and_then(|t| t.get(k)) {
+                let e = (p - t).norm();
+                tally.error_sum_mm[k] += e;
+                tally.error_count[k] += 1;
+                if j.source == JointSource::Paw {
+                    tally.detected_paw_error.0 += e;
+                    tally.detected_paw_error.1 += 1;
+                }
+            }
+        }
+        line.push('\n');
+        self.out.write_all(line.as_bytes())?;
+        tally.rows += 1;
+        *tally.statuses.entry(r.status.name()).or_default() += 1;
+        if !self.truth.is_empty() {
+            tally.pairs.push((r.depth.seq, r.color.map(|c| c.seq)));
+        }
+        if tally.snapshot.is_none() && tally.rows > self.snapshot_row && r.status == PoseStatus::Ok {
+            tally.snapshot = Some(r);
+        }
+        drop(tally);
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<(), StageError> {
+        self.out.flush()?;
+        self.out.get_ref().sync_all()?;
+        Ok(())
+    }
+}

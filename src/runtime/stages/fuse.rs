@@ -1,0 +1,47 @@
+//! The fusion stage: paws and limbs added to the body's joints (see [`crate::vision::fusion`]), and
+//! the picture of every n-th frame. It carries the legs' memory from frame to frame, so the
+//! runner gives it its frames in order.
+
+use super::{Fused, PoseStatus, Posed};
+use crate::core::geometry::Rig;
+use crate::runtime::overlay;
+use crate::runtime::pipeline::{Stage, StageError};
+use crate::vision::fusion::Fuser;
+
+/// Runs a [`Fuser`] on each pose.
+#[derive(Debug, Clone)]
+pub struct FuseStage {
+    fuser: Fuser,
+    rig: Rig,
+    /// Draw a picture of the frames whose depth sequence number is a multiple of this.
+    overlay_every: Option<u64>,
+}
+
+impl FuseStage {
+    pub fn new(fuser: Fuser, rig: Rig, overlay_every: Option<u64>) -> Self {
+        Self {
+            fuser,
+            rig,
+            overlay_every: overlay_every.filter(|&n| n > 0),
+        }
+    }
+}
+
+impl Stage for FuseStage {
+    type In = Posed;
+    type Out = Fused;
+
+    fn process(&mut self, input: Posed, out: &mut Vec<Fused>) -> Result<(), StageError> {
+        let Posed { pair, mut record } = input;
+        // Depth-only pairs keep joints 1-12 (the paper's single depth image mode).
+        if record.status == PoseStatus::Ok && pair.color.is_some() {
+            self.fuser.fuse(record.depth.seq, &mut record.pose, &record.paws);
+        }
+        let overlay = self
+            .overlay_every
+            .filter(|n| record.depth.seq % n == 0)
+            .map(|_| overlay::draw(&self.rig, &pair.depth, pair.color.as_ref(), &record));
+        out.push(Fused { record, overlay });
+        Ok(())
+    }
+}

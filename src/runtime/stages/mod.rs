@@ -1,0 +1,64 @@
+//! The processing stages of the pipeline, one per file. Each is a plain object with a
+//! `process` function the runner calls on its own thread and a unit test can call directly.
+
+pub mod body;
+pub mod fuse;
+pub mod paws;
+pub mod segment;
+
+use crate::core::frame::FramePair;
+use crate::core::pose::Pose;
+use crate::vision::segment::Mouse;
+
+/// A frame pair and the mouse found in its depth frame (`None`: no mouse).
+#[derive(Debug)]
+pub struct Segmented {
+    pub pair: FramePair,
+    pub mouse: Option<Mouse>,
+}
+
+/// What the pipeline says of one frame pair.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PoseStatus {
+    /// The mouse was found and its joints estimated.
+    Ok,
+    /// No mouse in the depth frame (an empty cage, or the mouse hidden).
+    NoMouse,
+}
+
+impl PoseStatus {
+    /// The value of the `status` column.
+    pub fn name(self) -> &'static str {
+        match self {
+            PoseStatus::Ok => "ok",
+            PoseStatus::NoMouse => "no_mouse",
+        }
+    }
+}
+
+/// The pose of one frame pair, with the frames' metadata (the frames themselves are dropped
+/// once the pose is known).
+#[derive(Clone, Debug)]
+pub struct PoseRecord {
+    pub depth: crate::core::frame::Stamp,
+    pub color: Option<crate::core::frame::Stamp>,
+    pub skew_ns: i64,
+    pub status: PoseStatus,
+    pub pose: Pose,
+    /// The paws found in the bottom view (empty without a colour frame or a paw model).
+    pub paws: Vec<crate::vision::paws::PawDetection>,
+}
+
+/// A frame pair and its pose so far, on its way through the stages that add to the pose.
+#[derive(Debug)]
+pub struct Posed {
+    pub pair: FramePair,
+    pub record: PoseRecord,
+}
+
+/// The finished pose of a frame pair, and its picture when one was asked for.
+#[derive(Debug)]
+pub struct Fused {
+    pub record: PoseRecord,
+    pub overlay: Option<crate::core::image::RgbImage>,
+}

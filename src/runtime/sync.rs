@@ -1,0 +1,638 @@
+//! The synchroniser: pairs depth and colour frames by when they were taken.
+//!
+//! Pure code: no threads, no clock reads. Frames go in per camera, in the order the camera
+//! delivered them; pairs, unpaired colour frames and rejected frames come out, each input
+//! exactly once.
+//!
+//! The two cameras have their own clocks with unknown epochs that drift apart by tens of ppm.
+//! Each camera's clock is tied to the host's monotonic clock by a [`ClockModel`]: the lower
+//! envelope of `host_ns - device_ns` (arrival is capture plus a latency that is never below
+//! its minimum), fitted as a line over the per-second minima of the recent past, which follows
+//! both the offset and the drift. A frame's capture time on the common (host) time line is then
+//! `device_ns + offset(device_ns)`; a depth frame pairs with the colour frame nearest to it on
+//! that line, within the tolerance (half a depth frame interval by default). A constant
+//! difference between the two cameras' minimal latencies shifts every colour frame alike; the
+//! config's `color_latency_ns` corrects it when known.
+
+use crate::core::frame::{ColorFrame, DepthFrame, FramePair, Stamp};
+use std::collections::VecDeque;
+
+/// How the synchroniser pairs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SyncConfig {
+    /// Largest capture-time difference of a pair; `None`: half the depth frame interval seen
+    /// so far (1/60 s until two depth frames have arrived).
+    pub tolerance_ns: Option<u64>,
+    /// Whether a colour camera is expected at all. Without one every depth frame goes out at
+    /// once as a depth-only pair.
+    pub color: bool,
+    /// How long (capture time) a depth frame waits for a colour partner before it goes out
+    /// depth-only: a colour camera that stalls must not stall the pipeline.
+    pub max_wait_ns: u64,
+    /// The colour camera's minimal latency minus the depth camera's, when known (ns).
+    pub color_latency_ns: i64,
+}
+
+impl Default for SyncConfig {
+    fn default() -> Self {
+        Self {
+            tolerance_ns: None,
+            color: true,
+            max_wait_ns: 200_000_000,
+            color_latency_ns: 0,
+        }
+    }
+}
+
+/// What the synchroniser emits. Every frame pushed in comes out in exactly one of these.
+#[derive(Debug)]
+pub enum SyncOutput {
+    /// A depth frame, with its colour partner if it has one.
+    Pair(FramePair),
+    /// A colour frame no depth frame claimed.
+    UnpairedColor(ColorFrame),
+    /// A frame refused because it is out of order (its device time or sequence number does
+    /// not follow the previous frame of its camera).
+    Rejected {
+        role: Role,
+        stamp: Stamp,
+        reason: RejectReason,
+    },
+}
+
+/// Which camera a rejected frame came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    Depth,
+    Color,
+}
+
+/// Why a frame was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RejectReason {
+    /// Its sequence number is not above the previous frame's.
+    SequenceNotIncreasing,
+    /// Its device time is not after the previous frame's.
+    TimeNotIncreasing,
+}
+
+impl RejectReason {
+    /// The reason's name in counters and summaries.
+    pub fn name(self) -> &'static str {
+        match self {
+            RejectReason::SequenceNotIncreasing => "seq_out_of_order",
+            RejectReason::TimeNotIncreasing => "time_out_of_order",
+        }
+    }
+}
+
+/// One camera's device clock tied to the host clock.
+#[derive(Clone, Debug, Default)]
+pub struct ClockModel {
+    /// Per block of [`BLOCK_NS`] device time: the device time and `host - device` of the frame
+    /// with the smallest `host - device` (the least delayed arrival), oldest first.
+    minima: VecDeque<(u64, i64)>,
+    /// The line through the completed blocks' minima: `host - device` at device time `t` is
+    /// `.0 + .1 * (t - .2)`.
+    line: Option<(f64, f64, u64)>,
+    /// The smallest `host - device` seen, used until the line exists.
+    lowest: Option<i64>,
+    first_ns: Option<u64>,
+}
+
+/// Length of a block of the lower envelope.
+const BLOCK_NS: u64 = 1_000_000_000;
+/// Blocks the line is fitted over (the recent past only, so that the fit follows changes).
+const BLOCKS: usize = 30;
+
+impl ClockModel {
+    /// Adds a frame's stamp.
+    pub fn observe(&mut self, stamp: Stamp) {
+        let first = *self.first_ns.get_or_insert(stamp.device_ns);
+        let residual = stamp.host_ns as i64 - stamp.device_ns as i64;
+        self.lowest = Some(self.lowest.map_or(residual, |l| l.min(residual)));
+        let block_of = |t: u64| t.saturating_sub(first) / BLOCK_NS;
+        match self.minima.back_mut() {
+            Some(last) if block_of(last.0) == block_of(stamp.device_ns) => {
+                if residual < last.1 {
+                    *last = (stamp.device_ns, residual);
+                }
+            }
+            _ => {
+                self.minima.push_back((stamp.device_ns, residual));
+                if self.minima.len() > BLOCKS {
+                    self.minima.pop_front();
+                }
+                self.refit();
+            }
+        }
+    }
+
+    /// Fits the line through the minima of the completed blocks (all but the newest, which is
+    /// still filling); none before two blocks are complete.
+    fn refit(&mut self) {
+        let done = self.minima.len().saturating_sub(1);
+        let Some(&(t0, _)) = self.minima.front() else {
+            return;
+        };
+        if done < 2 {
+            self.line = None;
+            return;
+        }
+        let pts: Vec<(f64, f64)> = self
+            .minima
+            .iter()
+            .take(done)
+            .map(|&(t, r)| ((t - t0) as f64, r as f64))
+            .collect();
+        let n = pts.len() as f64;
+        let mx = pts.iter().map(|p| p.0).sum::<f64>() / n;
+        let my = pts.iter().map(|p| p.1).sum::<f64>() / n;
+        let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+        let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+        let slope = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+        self.line = Some((my - slope * mx, slope, t0));
+    }
+
+    /// `host - device` at device time `device_ns`: the clocks' offset plus the camera's
+    /// minimal latency. `None` before the first frame.
+    pub fn offset_ns(&self, device_ns: u64) -> Option<i64> {
+        match self.line {
+            Some((a, b, t0)) => Some((a + b * (device_ns as f64 - t0 as f64)).round() as i64),
+            None => self.lowest,
+        }
+    }
+
+    /// The device clock's rate relative to the host's, in ppm (positive: the device runs
+    /// slow), once the line exists.
+    pub fn drift_ppm(&self) -> Option<f64> {
+        self.line.map(|l| l.1 * 1e6)
+    }
+
+    /// A capture time on the host's time line.
+    fn host_time(&self, stamp: Stamp) -> i64 {
+        stamp.device_ns as i64 + self.offset_ns(stamp.device_ns).unwrap_or(0)
+    }
+}
+
+/// A frame waiting for its partner.
+#[derive(Debug)]
+struct Pending<F> {
+    frame: F,
+    stamp: Stamp,
+}
+
+/// Pairs depth and colour frames; see the module documentation.
+#[derive(Debug)]
+pub struct Synchronizer {
+    config: SyncConfig,
+    depth_clock: ClockModel,
+    color_clock: ClockModel,
+    depth: VecDeque<Pending<DepthFrame>>,
+    color: VecDeque<Pending<ColorFrame>>,
+    last_depth: Option<Stamp>,
+    last_color: Option<Stamp>,
+    /// Smallest interval between depth frames per step of their frame counter (device time).
+    depth_interval_ns: Option<u64>,
+    /// The newest capture time seen from each camera (host time line).
+    newest_depth: Option<i64>,
+    newest_color: Option<i64>,
+}
+
+impl Synchronizer {
+    pub fn new(config: SyncConfig) -> Self {
+        Self {
+            config,
+            depth_clock: ClockModel::default(),
+            color_clock: ClockModel::default(),
+            depth: VecDeque::new(),
+            color: VecDeque::new(),
+            last_depth: None,
+            last_color: None,
+            depth_interval_ns: None,
+            newest_depth: None,
+            newest_color: None,
+        }
+    }
+
+    /// The pairing tolerance in use.
+    pub fn tolerance_ns(&self) -> u64 {
+        self.config
+            .tolerance_ns
+            .unwrap_or_else(|| self.depth_interval_ns.unwrap_or(1_000_000_000 / 30) / 2)
+    }
+
+    /// The two cameras' clock models (depth, colour).
+    pub fn clocks(&self) -> (&ClockModel, &ClockModel) {
+        (&self.depth_clock, &self.color_clock)
+    }
+
+    /// Takes a depth frame; whatever can be decided goes to `out`.
+    pub fn push_depth(&mut self, frame: DepthFrame, out: &mut Vec<SyncOutput>) {
+        let stamp = frame.stamp;
+        if let Some(reason) = out_of_order(self.last_depth, stamp) {
+            out.push(SyncOutput::Rejected {
+                role: Role::Depth,
+                stamp,
+                reason,
+            });
+            return;
+        }
+        if let Some(last) = self.last_depth {
+            // Per step of the frame counter, so that dropped frames do not widen it.
+            let steps = stamp.seq.saturating_sub(last.seq).max(1);
+            let dt = (stamp.device_ns - last.device_ns) / steps;
+            self.depth_interval_ns = Some(self.depth_interval_ns.map_or(dt, |i| i.min(dt)));
+        }
+        self.last_depth = Some(stamp);
+        self.depth_clock.observe(stamp);
+        let t = self.depth_clock.host_time(stamp);
+        self.newest_depth = Some(self.newest_depth.map_or(t, |n| n.max(t)));
+        self.depth.push_back(Pending { frame, stamp });
+        self.decide(out, false);
+    }
+
+    /// Takes a colour frame; whatever can be decided goes to `out`.
+    pub fn push_color(&mut self, frame: ColorFrame, out: &mut Vec<SyncOutput>) {
+        let stamp = frame.stamp;
+        if let Some(reason) = out_of_order(self.last_color, stamp) {
+            out.push(SyncOutput::Rejected {
+                role: Role::Color,
+                stamp,
+                reason,
+            });
+            return;
+        }
+        self.last_color = Some(stamp);
+        self.color_clock.observe(stamp);
+        let t = self.color_time(stamp);
+        self.newest_color = Some(self.newest_color.map_or(t, |n| n.max(t)));
+        self.color.push_back(Pending { frame, stamp });
+        self.decide(out, false);
+    }
+
+    /// Emits everything still pending (end of input): depth frames with the best partner they
+    /// have, then the colour frames left over.
+    pub fn flush(&mut self, out: &mut Vec<SyncOutput>) {
+        self.decide(out, true);
+        while let Some(c) = self.color.pop_front() {
+            out.push(SyncOutput::UnpairedColor(c.frame));
+        }
+    }
+
+    fn color_time(&self, stamp: Stamp) -> i64 {
+        self.color_clock.host_time(stamp) - self.config.color_latency_ns
+    }
+
+    /// Decides the oldest pending depth frames whose partner cannot change any more, and
+    /// releases the colour frames no pending or future depth frame can claim.
+    fn decide(&mut self, out: &mut Vec<SyncOutput>, end: bool) {
+        let tol = self.tolerance_ns() as i64;
+        while let Some(d) = self.depth.front() {
+            let td = self.depth_clock.host_time(d.stamp);
+            let ready = end
+                || !self.config.color
+                || self.newest_color.is_some_and(|c| c > td + tol)
+                || self
+                    .newest_depth
+                    .is_some_and(|n| n - td > self.config.max_wait_ns as i64);
+            if !ready {
+                break;
+            }
+            let Some(d) = self.depth.pop_front() else {
+                break;
+            };
+            // Colour frames too old for this depth frame are too old for every later one.
+            while let Some(c) = self.color.front() {
+                if self.color_time(c.stamp) < td - tol {
+                    if let Some(c) = self.color.pop_front() {
+                        out.push(SyncOutput::UnpairedColor(c.frame));
+                    }
+                } else {
+                    break;
+                }
+            }
+            let best = self
+                .color
+                .iter()
+                .enumerate()
+                .map(|(i, c)| (i, self.color_time(c.stamp) - td))
+                .filter(|(_, dt)| dt.abs() <= tol)
+                .min_by_key(|(_, dt)| dt.abs());
+            let (color, skew_ns) = match best {
+                Some((i, dt)) => {
+                    // Frames before the chosen one can no longer pair with anything.
+                    for _ in 0..i {
+                        if let Some(c) = self.color.pop_front() {
+                            out.push(SyncOutput::UnpairedColor(c.frame));
+                        }
+                    }
+                    (self.color.pop_front().map(|c| c.frame), dt)
+                }
+                None => (None, 0),
+            };
+            out.push(SyncOutput::Pair(FramePair {
+                depth: d.frame,
+                color,
+                skew_ns,
+            }));
+        }
+        // Without pending depth frames, colour frames older than the newest depth frame by
+        // more than the tolerance can never pair.
+        if self.depth.is_empty() {
+            if let Some(nd) = self.newest_depth {
+                while let Some(c) = self.color.front() {
+                    if self.color_time(c.stamp) < nd - tol {
+                        if let Some(c) = self.color.pop_front() {
+                            out.push(SyncOutput::UnpairedColor(c.frame));
+                        }
+                    } else {
+                        break;
+                    }
+                }
+            }
+        }
+        // A colour camera far ahead of a stalled depth camera must not pile up frames.
+        while self.color.len() > MAX_PENDING {
+            if let Some(c) = self.color.pop_front() {
+                out.push(SyncOutput::UnpairedColor(c.frame));
+            }
+        }
+    }
+
+    /// Frames waiting for a decision (depth, colour).
+    pub fn pending(&self) -> (usize, usize) {
+        (self.depth.len(), self.color.len())
+    }
+}
+
+/// Most colour frames held while waiting for depth frames.
+const MAX_PENDING: usize = 64;
+
+fn out_of_order(last: Option<Stamp>, stamp: Stamp) -> Option<RejectReason> {
+    let last = last?;
+    if stamp.seq <= last.seq {
+        Some(RejectReason::SequenceNotIncreasing)
+    } else if stamp.device_ns <= last.device_ns {
+        Some(RejectReason::TimeNotIncreasing)
+    } else {
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A camera stream: `(true capture time s, stamp)` with its own clock and latency.
+    #[allow(clippy::too_many_arguments)]
+    fn stream(
+        n: usize,
+        period_s: f64,
+        phase_s: f64,
+        offset_ns: u64,
+        drift_ppm: f64,
+        latency_ms: f64,
+        jitter: &[f64],
+        drops: &[bool],
+    ) -> Vec<(f64, Stamp)> {
+        (0..n)
+            .filter(|&k| !drops[k % drops.len()])
+            .map(|k| {
+                let t = phase_s + k as f64 * period_s;
+                let device_ns = offset_ns + (t * 1e9 * (1.0 + drift_ppm * 1e-6)) as u64;
+                let host_ns = 5_000_000_000 + ((t + latency_ms * 1e-3 * (1.0 + jitter[k % jitter.len()])) * 1e9) as u64;
+                (
+                    t,
+                    Stamp {
+                        seq: k as u64,
+                        device_ns,
+                        host_ns,
+                    },
+                )
+            })
+            .collect()
+    }
+
+    fn depth(stamp: Stamp) -> DepthFrame {
+        DepthFrame::empty(stamp, 1, 1)
+    }
+
+    fn color(stamp: Stamp) -> ColorFrame {
+        ColorFrame {
+            stamp,
+            width: 1,
+            height: 1,
+            format: crate::core::frame::PixelFormat::Mono8,
+            data: vec![0],
+        }
+    }
+
+    /// Feeds both streams in host arrival order and returns everything emitted.
+    fn run(config: SyncConfig, d: &[(f64, Stamp)], c: &[(f64, Stamp)]) -> Vec<SyncOutput> {
+        let mut arrivals: Vec<(u64, bool, Stamp)> = d
+            .iter()
+            .map(|x| (x.1.host_ns, true, x.1))
+            .chain(c.iter().map(|x| (x.1.host_ns, false, x.1)))
+            .collect();
+        arrivals.sort_by_key(|a| (a.0, !a.1));
+        let mut sync = Synchronizer::new(config);
+        let mut out = Vec::new();
+        for (_, is_depth, s) in arrivals {
+            if is_depth {
+                sync.push_depth(depth(s), &mut out);
+            } else {
+                sync.push_color(color(s), &mut out);
+            }
+        }
+        sync.flush(&mut out);
+        out
+    }
+
+    fn true_partner(c: &[(f64, Stamp)], t: f64, period: f64) -> Option<u64> {
+        c.iter()
+            .filter(|x| (x.0 - t).abs() < period / 2.0)
+            .min_by(|a, b| (a.0 - t).abs().total_cmp(&(b.0 - t).abs()))
+            .map(|x| x.1.seq)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(1024))]
+
+        #[test]
+        fn pairs_follow_the_truth_and_account_for_every_frame(
+            n in 10usize..400,
+            phase in 0.15f64..0.35,
+            offsets in (1_000_000_000u64..1_000_000_000_000, 1_000_000_000u64..1_000_000_000_000),
+            drifts in (-40.0f64..40.0, -40.0f64..40.0),
+            jitter in prop::collection::vec(0.0f64..0.5, 1..20),
+            depth_drops in prop::collection::vec(prop::bool::weighted(0.03), 1..50),
+            color_drops in prop::collection::vec(prop::bool::weighted(0.03), 1..50),
+        ) {
+            let period = 1.0 / 30.0;
+            let d = stream(n, period, 0.0, offsets.0, drifts.0, 6.0, &jitter, &depth_drops);
+            let c = stream(n, period, phase * period, offsets.1, drifts.1, 3.0, &jitter, &color_drops);
+            let out = run(SyncConfig::default(), &d, &c);
+            let mut depth_seen = Vec::new();
+            let mut color_seen = Vec::new();
+            for o in &out {
+                match o {
+                    SyncOutput::Pair(p) => {
+                        depth_seen.push(p.depth.stamp.seq);
+                        let truth = d.iter().find(|x| x.1.seq == p.depth.stamp.seq).map(|x| x.0);
+                        let want = truth.and_then(|t| true_partner(&c, t, period));
+                        prop_assert_eq!(p.color.as_ref().map(|f| f.stamp.seq), want);
+                        if let Some(f) = &p.color {
+                            color_seen.push(f.stamp.seq);
+                        }
+                    }
+                    SyncOutput::UnpairedColor(f) => color_seen.push(f.stamp.seq),
+                    SyncOutput::Rejected { .. } => prop_assert!(false, "nothing is out of order here"),
+                }
+            }
+            // Output monotone in depth order, each depth frame once.
+            prop_assert!(depth_seen.windows(2).all(|w| w[0] < w[1]));
+            prop_assert_eq!(depth_seen.len(), d.len());
+            // Every colour frame exactly once.
+            color_seen.sort_unstable();
+            let before = color_seen.len();
+            color_seen.dedup();
+            prop_assert_eq!(before, color_seen.len());
+            prop_assert_eq!(color_seen.len(), c.len());
+        }
+
+        #[test]
+        fn scrambled_input_is_rejected_or_paired_never_lost(
+            seqs in prop::collection::vec((0u64..50, 0u64..2_000_000_000, any::<bool>()), 0..200),
+        ) {
+            let mut sync = Synchronizer::new(SyncConfig::default());
+            let mut out = Vec::new();
+            for &(seq, t, is_depth) in &seqs {
+                let s = Stamp { seq, device_ns: t, host_ns: t };
+                if is_depth { sync.push_depth(depth(s), &mut out) } else { sync.push_color(color(s), &mut out) }
+            }
+            sync.flush(&mut out);
+            let count: usize = out
+                .iter()
+                .map(|o| match o {
+                    SyncOutput::Pair(p) => 1 + usize::from(p.color.is_some()),
+                    _ => 1,
+                })
+                .sum();
+            prop_assert_eq!(count, seqs.len());
+            prop_assert_eq!(sync.pending(), (0, 0));
+        }
+    }
+
+    #[test]
+    fn dropped_depth_frames_do_not_widen_the_tolerance() {
+        // Every other depth frame lost: the frames still come 1/30 s apart per counter step,
+        // so a colour frame 0.85 of an interval away is no partner.
+        let period = 1.0 / 30.0;
+        let d = stream(19, period, 0.0, 1_000_000_000, 0.0, 6.0, &[0.0], &[false, true]);
+        let mut color_drops = vec![false; 19];
+        color_drops[18] = true;
+        let c = stream(19, period, 0.15 * period, 1_000_000_000, 0.0, 3.0, &[0.0], &color_drops);
+        let out = run(SyncConfig::default(), &d, &c);
+        let last = out.iter().rev().find_map(|o| match o {
+            SyncOutput::Pair(p) if p.depth.stamp.seq == 18 => Some(p.color.as_ref().map(|f| f.stamp.seq)),
+            _ => None,
+        });
+        assert_eq!(last, Some(None));
+    }
+
+    #[test]
+    fn a_known_latency_difference_decides_pairs_near_half_an_interval() {
+        // Colour frames half an interval plus 1 ms after the depth frames: each depth frame's
+        // partner is the colour frame before it. The depth camera's transport is 3 ms slower,
+        // which the clock models cannot see; uncorrected, that shifts the colour frames 3 ms
+        // earlier and the frame after wins.
+        let period = 1.0 / 30.0;
+        let d = stream(60, period, 0.0, 1_000_000_000, 10.0, 6.0, &[0.0], &[false]);
+        let c = stream(
+            60,
+            period,
+            0.5 * period + 0.001,
+            5_000_000_000,
+            -10.0,
+            3.0,
+            &[0.0],
+            &[false],
+        );
+        let want: Vec<_> = d.iter().map(|x| (x.1.seq, true_partner(&c, x.0, period))).collect();
+        let pairs = |color_latency_ns| -> Vec<_> {
+            let config = SyncConfig {
+                color_latency_ns,
+                ..SyncConfig::default()
+            };
+            run(config, &d, &c)
+                .iter()
+                .filter_map(|o| match o {
+                    SyncOutput::Pair(p) => Some((p.depth.stamp.seq, p.color.as_ref().map(|f| f.stamp.seq))),
+                    _ => None,
+                })
+                .collect()
+        };
+        assert_ne!(pairs(0), want);
+        assert_eq!(pairs(-3_000_000), want);
+    }
+
+    #[test]
+    fn depth_only_pairs_go_out_at_once() {
+        let mut sync = Synchronizer::new(SyncConfig {
+            color: false,
+            ..SyncConfig::default()
+        });
+        let mut out = Vec::new();
+        sync.push_depth(
+            depth(Stamp {
+                seq: 1,
+                device_ns: 10,
+                host_ns: 20,
+            }),
+            &mut out,
+        );
+        assert!(matches!(&out[..], [SyncOutput::Pair(p)] if p.color.is_none()));
+    }
+
+    #[test]
+    fn a_stalled_color_camera_does_not_hold_depth_frames() {
+        let mut sync = Synchronizer::new(SyncConfig::default());
+        let mut out = Vec::new();
+        for k in 0..30u64 {
+            let t = k * 33_333_333;
+            sync.push_depth(
+                depth(Stamp {
+                    seq: k,
+                    device_ns: t,
+                    host_ns: t,
+                }),
+                &mut out,
+            );
+        }
+        // 200 ms of waiting at most: all but the last six frames are out.
+        assert!(out.len() >= 23, "{} pairs out", out.len());
+    }
+
+    #[test]
+    fn clock_model_follows_offset_and_drift() {
+        let mut m = ClockModel::default();
+        for k in 0..3000u64 {
+            let device_ns = 7_000_000_000 + k * 10_000_000;
+            // host runs 50 ppm faster; latency 2 ms plus up to 1 ms of jitter.
+            let host_ns = (device_ns as f64 * (1.0 + 50e-6)) as u64 + 2_000_000 + (k * 7919 % 1_000_000);
+            m.observe(Stamp {
+                seq: k,
+                device_ns,
+                host_ns,
+            });
+        }
+        let drift = m.drift_ppm().unwrap();
+        assert!((drift - 50.0).abs() < 2.0, "drift {drift} ppm");
+        let t = 7_000_000_000 + 2999 * 10_000_000u64;
+        let want = (t as f64 * 50e-6) as i64 + 2_000_000;
+        let got = m.offset_ns(t).unwrap();
+        assert!((got - want).abs() < 200_000, "offset {got} vs {want}");
+    }
+}

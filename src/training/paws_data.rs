@@ -1,0 +1,204 @@
+//! Training and test material cut from synthetic datasets' bottom views.
+//!
+//! Each bottom view (RGB at the full sensor's 2 px/mm) is first turned into what the camera
+//! really delivers, a Bayer RG mosaic, and then into a grey image at the canonical scale by
+//! the detector's own conversion ([`super::grey`]), so training sees exactly the pixels the
+//! detector will.
+//!
+//! * Positives: windows centred on paws that touch the glass and are visible, augmented by
+//!   a random rotation, a size change of up to 10 %, a shift of up to one pixel, a
+//!   brightness/contrast change and sensor-like noise. Lifted paws are not used: the figure
+//!   that matters is recall on paws on the glass, and a lifted paw seen through fur is a
+//!   different, dimmer pattern.
+//! * Backgrounds: the whole grey view with every paw's box (grown by a pixel) marked as
+//!   excluded; negatives are windows of these that touch no paw (fur, tail, the cage floor),
+//!   drawn by the trainer at every scale the detector runs.
+
+use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
+use crate::synth::dataset::Dataset;
+use crate::synth::views::BottomView;
+use crate::vision::paws::CANONICAL_PX_PER_MM;
+use crate::vision::paws::grey::{GreyImage, Greyer};
+use crate::vision::paws::train::{Background, TrainingSet};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use std::path::Path;
+
+/// Pixels per millimetre of datasets' bottom views (the full 1280x1024 sensor).
+pub const DATASET_PX_PER_MM: f64 = 2.0;
+
+/// A bottom view as the camera delivers it: a Bayer mosaic of the view's region whose
+/// pattern follows the full frame's (red at even x, even y).
+pub fn bottom_frame(view: &BottomView) -> ColorFrame {
+    let r = view.region;
+    let format = match (r.x0 % 2, r.y0 % 2) {
+        (0, 0) => PixelFormat::BayerRg8,
+        (1, 0) => PixelFormat::BayerGr8,
+        (0, _) => PixelFormat::BayerGb8,
+        _ => PixelFormat::BayerBg8,
+    };
+    let (w, h) = (r.width as usize, r.height as usize);
+    let mut data = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            let c = format.bayer_channel(x, y).unwrap_or(1);
+            data.push(view.rgb.get((y * w + x) * 3 + c).copied().unwrap_or(0));
+        }
+    }
+    ColorFrame {
+        stamp: Stamp::default(),
+        width: r.width,
+        height: r.height,
+        format,
+        data,
+    }
+}
+
+/// A bottom view in grey at the canonical scale, and the scale from view pixels to it.
+pub fn canonical_view(view: &BottomView, greyer: &mut Greyer) -> Option<(GreyImage, f64)> {
+    let frame = bottom_frame(view);
+    let mut grey = GreyImage::default();
+    let place = greyer.convert(
+        &frame,
+        (0, 0, frame.width, frame.height),
+        DATASET_PX_PER_MM,
+        CANONICAL_PX_PER_MM,
+        &mut grey,
+    )?;
+    Some((grey, place.frame_px_per_px))
+}
+
+/// How positives are cut.
+#[derive(Clone, Copy, Debug)]
+pub struct CutParams {
+    pub width: usize,
+    pub height: usize,
+    /// Augmented copies per paw (besides the plain one).
+    pub augment: usize,
+    pub seed: u64,
+}
+
+/// Where a window is cut: centred on `(cx, cy)` of the image, turned by `angle` radians,
+/// `scale` image pixels per window pixel.
+#[derive(Clone, Copy, Debug)]
+pub struct Warp {
+    pub cx: f64,
+    pub cy: f64,
+    pub angle: f64,
+    pub scale: f64,
+}
+
+/// Samples the `width x height` window `warp` of `img` bilinearly into `out`.
+pub fn warp_window(img: &GreyImage, warp: Warp, width: usize, height: usize, out: &mut Vec<f32>) {
+    let Warp { cx, cy, angle, scale } = warp;
+    out.clear();
+    let (s, c) = angle.sin_cos();
+    for j in 0..height {
+        for i in 0..width {
+            let u = (i as f64 + 0.5 - width as f64 / 2.0) * scale;
+            let v = (j as f64 + 0.5 - height as f64 / 2.0) * scale;
+            let x = cx + c * u - s * v - 0.5;
+            let y = cy + s * u + c * v - 0.5;
+            out.push(bilinear(img, x, y));
+        }
+    }
+}
+
+fn bilinear(img: &GreyImage, x: f64, y: f64) -> f32 {
+    let x = x.clamp(0.0, (img.width - 1) as f64);
+    let y = y.clamp(0.0, (img.height - 1) as f64);
+    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+    let (x1, y1) = ((x0 + 1).min(img.width - 1), (y0 + 1).min(img.height - 1));
+    let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
+    let p = |x: usize, y: usize| f32::from(img.data[y * img.width + x]);
+    let top = p(x0, y0) * (1.0 - fx) + p(x1, y0) * fx;
+    let bottom = p(x0, y1) * (1.0 - fx) + p(x1, y1) * fx;
+    top * (1.0 - fy) + bottom * fy
+}
+
+/// Reads a dataset's bottom views into positives and backgrounds.
+///
+/// # Errors
+/// When the dataset cannot be read, or holds no visible paw on the glass.
+pub fn load(dir: &Path, params: CutParams) -> Result<TrainingSet, PawDataError> {
+    let ds = Dataset::open(dir)?;
+    let mut set = TrainingSet {
+        width: params.width,
+        height: params.height,
+        ..TrainingSet::default()
+    };
+    let mut greyer = Greyer::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(params.seed ^ 0x9A75_0001);
+    let mut buf = Vec::new();
+    ds.for_each(|sample| {
+        let Some(view) = &sample.bottom else {
+            return Ok(());
+        };
+        let Some((grey, k)) = canonical_view(view, &mut greyer) else {
+            return Ok(());
+        };
+        let (rx, ry) = (f64::from(view.region.x0), f64::from(view.region.y0));
+        let mut excluded = Vec::new();
+        for paw in &view.paws {
+            if paw.x1 <= paw.x0 {
+                continue;
+            }
+            let b = [
+                ((f64::from(paw.x0) - rx) / k) as f32 - 1.0,
+                ((f64::from(paw.y0) - ry) / k) as f32 - 1.0,
+                ((f64::from(paw.x1) - rx) / k) as f32 + 1.0,
+                ((f64::from(paw.y1) - ry) / k) as f32 + 1.0,
+            ];
+            excluded.push(b);
+            if !(paw.contact && paw.visible) {
+                continue;
+            }
+            set.paws += 1;
+            let cx = (f64::from(paw.x0 + paw.x1) / 2.0 - rx) / k;
+            let cy = (f64::from(paw.y0 + paw.y1) / 2.0 - ry) / k;
+            for a in 0..=params.augment {
+                let (angle, scale, dx, dy, gain, offset, noise) = if a == 0 {
+                    (0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0)
+                } else {
+                    (
+                        rng.gen_range(0.0..std::f64::consts::TAU),
+                        rng.gen_range(0.9..1.1),
+                        rng.gen_range(-1.0..1.0),
+                        rng.gen_range(-1.0..1.0),
+                        rng.gen_range(0.8f32..1.2),
+                        rng.gen_range(-8.0f32..8.0),
+                        rng.gen_range(0.0f32..2.5),
+                    )
+                };
+                let warp = Warp {
+                    cx: cx + dx,
+                    cy: cy + dy,
+                    angle,
+                    scale,
+                };
+                warp_window(&grey, warp, params.width, params.height, &mut buf);
+                for v in &buf {
+                    let n: f32 = StandardNormal.sample(&mut rng);
+                    let p = v * gain + offset + n * noise;
+                    set.positives.push((p + 0.5).clamp(0.0, 255.0) as u8);
+                }
+            }
+        }
+        set.backgrounds.push(Background { grey, excluded });
+        Ok(())
+    })?;
+    if set.paws == 0 {
+        return Err(PawDataError::NoPaws { path: dir.to_owned() });
+    }
+    Ok(set)
+}
+
+/// Why a dataset gives no paw material.
+#[derive(Debug, thiserror::Error)]
+pub enum PawDataError {
+    #[error(transparent)]
+    Dataset(#[from] crate::synth::dataset::DatasetError),
+    #[error("dataset {path:?} has no bottom views with paws to train or test on")]
+    NoPaws { path: std::path::PathBuf },
+}

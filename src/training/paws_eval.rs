@@ -1,0 +1,196 @@
+//! Evaluation of a paw detector on a held-back dataset's bottom views.
+//!
+//! Rules, fixed here and documented with the command:
+//! * A detection matches a paw when its centre lies within half the paw box's larger side of
+//!   the box's centre. Detections are matched greedily, surest first, each to the nearest
+//!   paw not matched yet.
+//! * Recall is over paws on the glass that the bottom camera sees (`contact && visible`).
+//! * Precision is over detections: one matching a paw on the glass is a true positive; one
+//!   matching a paw off the glass (or hidden) is neither true nor false, since the paw is
+//!   really there; any other (including a second detection of a matched paw) is false.
+//! * The centre error is the distance, in full-frame pixels, from a true positive's centre
+//!   to its paw box's centre.
+
+use super::paws_data::{DATASET_PX_PER_MM, PawDataError, bottom_frame};
+use crate::synth::dataset::Dataset;
+use crate::vision::paws::{PawDetection, PawDetector};
+use serde::Serialize;
+use std::path::Path;
+
+/// One point of the precision-recall curve: detections with `score >= min_score`.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct CurvePoint {
+    pub min_score: f64,
+    pub precision: f64,
+    pub recall: f64,
+}
+
+/// What `eval paws` reports.
+#[derive(Clone, Debug, Serialize)]
+pub struct PawReport {
+    pub images: usize,
+    /// Paws on the glass and visible (the recall's denominator).
+    pub contact_paws: usize,
+    pub found_contact_paws: usize,
+    pub detections: usize,
+    pub true_positives: usize,
+    pub false_positives: usize,
+    /// Detections of lifted or hidden paws: neither true nor false.
+    pub neutral: usize,
+    pub precision: f64,
+    pub recall: f64,
+    pub f1: f64,
+    pub mean_centre_error_px: f64,
+    /// Detector settings used for the figures above.
+    pub min_neighbors: usize,
+    pub scales: Vec<f64>,
+    /// Precision and recall as the minimum score varies (grouping with `minNeighbors = 0`).
+    pub curve: Vec<CurvePoint>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Outcome {
+    True(f64),
+    False,
+    Neutral,
+}
+
+/// Matches one image's detections to its paws (see the module's rules).
+fn match_image(dets: &mut [PawDetection], paws: &[crate::synth::views::PawBox; 4], out: &mut Vec<(f32, Outcome)>) {
+    dets.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let mut taken = [false; 4];
+    for d in dets.iter() {
+        let (cx, cy) = d.centre();
+        let mut best: Option<(usize, f64)> = None;
+        for (k, p) in paws.iter().enumerate() {
+            if p.x1 <= p.x0 || taken[k] {
+                continue;
+            }
+            let (px, py) = (f64::from(p.x0 + p.x1) / 2.0, f64::from(p.y0 + p.y1) / 2.0);
+            let radius = f64::from((p.x1 - p.x0).max(p.y1 - p.y0)) / 2.0;
+            let dist = (cx - px).hypot(cy - py);
+            if dist <= radius && best.is_none_or(|(_, b)| dist < b) {
+                best = Some((k, dist));
+            }
+        }
+        let outcome = match best {
+            Some((k, dist)) => {
+                taken[k] = true;
+                if paws[k].contact && paws[k].visible {
+                    Outcome::True(dist)
+                } else {
+                    Outcome::Neutral
+                }
+            }
+            None => Outcome::False,
+        };
+        out.push((d.score, outcome));
+    }
+}
+
+fn ratio(a: usize, b: usize) -> f64 {
+    if b == 0 { 0.0 } else { a as f64 / b as f64 }
+}
+
+/// Runs `detector` (as configured) on every bottom view of the dataset at `dir`.
+///
+/// # Errors
+/// When the dataset cannot be read or has no visible paw on the glass.
+pub fn evaluate(detector: &PawDetector, dir: &Path) -> Result<PawReport, PawDataError> {
+    let ds = Dataset::open(dir)?;
+    let mut headline = detector.clone();
+    let mut all = detector.clone();
+    all.set_min_neighbors(0);
+    let mut dets = Vec::new();
+    let mut outcomes = Vec::new();
+    let mut curve_outcomes = Vec::new();
+    let (mut images, mut contact) = (0, 0);
+    ds.for_each(|sample| {
+        let Some(view) = &sample.bottom else {
+            return Ok(());
+        };
+        images += 1;
+        contact += view
+            .paws
+            .iter()
+            .filter(|p| p.contact && p.visible && p.x1 > p.x0)
+            .count();
+        let frame = bottom_frame(view);
+        let roi = (0, 0, frame.width, frame.height);
+        let (rx, ry) = (view.region.x0 as f32, view.region.y0 as f32);
+        let shift = |d: &mut PawDetection| {
+            d.x0 += rx;
+            d.x1 += rx;
+            d.y0 += ry;
+            d.y1 += ry;
+        };
+        headline.detect(&frame, roi, DATASET_PX_PER_MM, &mut dets);
+        dets.iter_mut().for_each(shift);
+        match_image(&mut dets, &view.paws, &mut outcomes);
+        all.detect(&frame, roi, DATASET_PX_PER_MM, &mut dets);
+        dets.iter_mut().for_each(shift);
+        match_image(&mut dets, &view.paws, &mut curve_outcomes);
+        Ok(())
+    })?;
+    if contact == 0 {
+        return Err(PawDataError::NoPaws { path: dir.to_owned() });
+    }
+    let count = |o: &[(f32, Outcome)], min: f32| {
+        let (mut t, mut f, mut n, mut err) = (0, 0, 0, 0.0);
+        for &(s, outcome) in o {
+            if s < min {
+                continue;
+            }
+            match outcome {
+                Outcome::True(d) => {
+                    t += 1;
+                    err += d;
+                }
+                Outcome::False => f += 1,
+                Outcome::Neutral => n += 1,
+            }
+        }
+        (t, f, n, err)
+    };
+    let (tp, fp, neutral, err) = count(&outcomes, f32::NEG_INFINITY);
+    let precision = ratio(tp, tp + fp);
+    let recall = ratio(tp, contact);
+    let f1 = if precision + recall > 0.0 {
+        2.0 * precision * recall / (precision + recall)
+    } else {
+        0.0
+    };
+    let mut thresholds: Vec<f32> = curve_outcomes.iter().map(|o| o.0).collect();
+    thresholds.sort_by(f32::total_cmp);
+    thresholds.dedup();
+    // At most ~60 points, always including the extremes.
+    let stride = (thresholds.len() / 60).max(1);
+    let mut curve = Vec::new();
+    for (i, &t) in thresholds.iter().enumerate() {
+        if i % stride != 0 && i + 1 != thresholds.len() {
+            continue;
+        }
+        let (ct, cf, _, _) = count(&curve_outcomes, t);
+        curve.push(CurvePoint {
+            min_score: f64::from(t),
+            precision: ratio(ct, ct + cf),
+            recall: ratio(ct, contact),
+        });
+    }
+    Ok(PawReport {
+        images,
+        contact_paws: contact,
+        found_contact_paws: tp,
+        detections: outcomes.len(),
+        true_positives: tp,
+        false_positives: fp,
+        neutral,
+        precision,
+        recall,
+        f1,
+        mean_centre_error_px: if tp > 0 { err / tp as f64 } else { 0.0 },
+        min_neighbors: detector.min_neighbors(),
+        scales: detector.scales().to_vec(),
+        curve,
+    })
+}

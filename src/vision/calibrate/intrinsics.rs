@@ -1,0 +1,209 @@
+//! One camera's intrinsics from chessboard views: corners found and refined in each view,
+//! then OpenCV's camera calibration (five distortion coefficients, k3 held at zero, which
+//! suits the lenses of this rig and keeps few views stable).
+
+use super::board::{Board, read_grey};
+use super::storage::YamlWriter;
+use super::{CalibrationError, INTRINSICS_FORMAT_NAME, INTRINSICS_FORMAT_VERSION};
+use crate::core::geometry::Intrinsics;
+use opencv::calib3d;
+use opencv::core::{self, Mat, Point2f, Point3f, Size, TermCriteria, Vector};
+use opencv::prelude::*;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// The fewest views with a board found that `calibrate intrinsics` accepts.
+pub const MIN_VIEWS: usize = 5;
+
+/// Errors specific to intrinsics calibration.
+#[derive(Debug, thiserror::Error)]
+pub enum IntrinsicsError {
+    #[error("no images given")]
+    NoImages,
+    #[error(
+        "image {other:?} is {other_w}x{other_h}, but {first:?} is {first_w}x{first_h}; one camera's views must share a size"
+    )]
+    MixedSizes {
+        first: PathBuf,
+        first_w: i32,
+        first_h: i32,
+        other: PathBuf,
+        other_w: i32,
+        other_h: i32,
+    },
+    #[error("a {board} board was found in only {found} of {total} images, at least {needed} needed (not found in: {})", .skipped.join(", "))]
+    TooFewViews {
+        board: Board,
+        found: usize,
+        total: usize,
+        needed: usize,
+        skipped: Vec<String>,
+    },
+}
+
+/// The result of calibrating one camera from chessboard views.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct IntrinsicsCalibration {
+    pub intrinsics: Intrinsics,
+    /// RMS reprojection error over all corners of all views, pixels.
+    pub rms_px: f64,
+    /// RMS reprojection error of each used view, pixels, in the order of `views`.
+    pub per_view_errors_px: Vec<f64>,
+    /// The views used (file names as given).
+    pub views: Vec<String>,
+    /// The views without a board, skipped.
+    pub skipped: Vec<String>,
+    #[serde(skip)]
+    pub board: Board,
+}
+
+impl IntrinsicsCalibration {
+    /// Writes the OpenCV FileStorage YAML file (`docs/FORMATS.md`) atomically.
+    ///
+    /// # Errors
+    /// OpenCV cannot compose the YAML or the file cannot be written.
+    pub fn save(&self, path: &Path) -> Result<(), CalibrationError> {
+        let mut w = YamlWriter::new(path)?;
+        w.text("format", INTRINSICS_FORMAT_NAME)?;
+        w.int("format_version", INTRINSICS_FORMAT_VERSION)?;
+        super::write_intrinsics(&mut w, &self.intrinsics)?;
+        w.real("rms", self.rms_px)?;
+        if !self.per_view_errors_px.is_empty() {
+            let n = self.per_view_errors_px.len() as i32;
+            w.matrix("per_view_errors", n, 1, &self.per_view_errors_px)?;
+        }
+        if !self.views.is_empty() {
+            w.texts("views", &self.views)?;
+        }
+        w.text("board", &self.board.size_name())?;
+        w.real("square_mm", self.board.square_mm)?;
+        w.finish()
+    }
+}
+
+fn at(m: &impl MatTraitConst, r: i32, c: i32) -> Result<f64, CalibrationError> {
+    m.at_2d::<f64>(r, c).copied().map_err(solve_err("read the calibration"))
+}
+
+fn solve_err(what: &str) -> impl FnOnce(opencv::Error) -> CalibrationError + '_ {
+    move |source| CalibrationError::Solve {
+        what: what.to_owned(),
+        source: source.into(),
+    }
+}
+
+/// Calibrates one camera from chessboard views. Views without a board are skipped and
+/// listed; fewer than [`MIN_VIEWS`] usable views is an error.
+///
+/// # Errors
+/// No images, an unreadable image, images of different sizes, too few views with a board, or
+/// OpenCV failing.
+pub fn calibrate_intrinsics(images: &[PathBuf], board: &Board) -> Result<IntrinsicsCalibration, CalibrationError> {
+    if images.is_empty() {
+        return Err(IntrinsicsError::NoImages.into());
+    }
+    let mut size: Option<(PathBuf, Size)> = None;
+    let mut image_points: Vector<Vector<Point2f>> = Vector::new();
+    let mut views = Vec::new();
+    let mut skipped = Vec::new();
+    for path in images {
+        let grey = read_grey(path)?;
+        let s = grey.size().map_err(solve_err("read an image size"))?;
+        match &size {
+            None => size = Some((path.clone(), s)),
+            Some((first, fs)) if *fs != s => {
+                return Err(IntrinsicsError::MixedSizes {
+                    first: first.clone(),
+                    first_w: fs.width,
+                    first_h: fs.height,
+                    other: path.clone(),
+                    other_w: s.width,
+                    other_h: s.height,
+                }
+                .into());
+            }
+            Some(_) => {}
+        }
+        match board.find_corners(&grey, path)? {
+            Some(corners) => {
+                image_points.push(corners.iter().map(|p| Point2f::new(p.x as f32, p.y as f32)).collect());
+                views.push(path.display().to_string());
+            }
+            None => skipped.push(path.display().to_string()),
+        }
+    }
+    if views.len() < MIN_VIEWS {
+        return Err(IntrinsicsError::TooFewViews {
+            board: *board,
+            found: views.len(),
+            total: images.len(),
+            needed: MIN_VIEWS,
+            skipped,
+        }
+        .into());
+    }
+    let Some((_, size)) = size else {
+        return Err(IntrinsicsError::NoImages.into());
+    };
+    // Any consistent planar object works for intrinsics: the detection order's own grid.
+    let grid: Vector<Point3f> = (0..board.rows)
+        .flat_map(|j| (0..board.cols).map(move |i| (i, j)))
+        .map(|(i, j)| {
+            Point3f::new(
+                (f64::from(i) * board.square_mm) as f32,
+                (f64::from(j) * board.square_mm) as f32,
+                0.0,
+            )
+        })
+        .collect();
+    let object_points: Vector<Vector<Point3f>> = (0..views.len()).map(|_| grid.clone()).collect();
+    let mut k = Mat::default();
+    let mut d = Mat::default();
+    let mut rvecs: Vector<Mat> = Vector::new();
+    let mut tvecs: Vector<Mat> = Vector::new();
+    let mut std_in = Mat::default();
+    let mut std_ex = Mat::default();
+    let mut per_view = Mat::default();
+    let criteria = TermCriteria::new(core::TermCriteria_COUNT + core::TermCriteria_EPS, 100, f64::EPSILON)
+        .map_err(solve_err("set up the calibration"))?;
+    let rms = calib3d::calibrate_camera_extended(
+        &object_points,
+        &image_points,
+        size,
+        &mut k,
+        &mut d,
+        &mut rvecs,
+        &mut tvecs,
+        &mut std_in,
+        &mut std_ex,
+        &mut per_view,
+        calib3d::CALIB_FIX_K3,
+        criteria,
+    )
+    .map_err(solve_err("calibrate the camera"))?;
+    let mut distortion = [0.0; 5];
+    let flat = d.reshape(1, 1).map_err(solve_err("read the distortion"))?;
+    for (i, v) in distortion.iter_mut().enumerate() {
+        if (i as i32) < flat.cols() {
+            *v = at(&flat, 0, i as i32)?;
+        }
+    }
+    let pv = per_view.reshape(1, 1).map_err(solve_err("read the per-view errors"))?;
+    let per_view_errors_px = (0..pv.cols()).map(|i| at(&pv, 0, i)).collect::<Result<Vec<_>, _>>()?;
+    Ok(IntrinsicsCalibration {
+        intrinsics: Intrinsics {
+            width: size.width as u32,
+            height: size.height as u32,
+            fx: at(&k, 0, 0)?,
+            fy: at(&k, 1, 1)?,
+            cx: at(&k, 0, 2)?,
+            cy: at(&k, 1, 2)?,
+            distortion,
+        },
+        rms_px: rms,
+        per_view_errors_px,
+        views,
+        skipped,
+        board: *board,
+    })
+}

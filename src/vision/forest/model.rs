@@ -1,0 +1,454 @@
+//! Forest model files: versioned, checksummed and self-describing.
+//!
+//! ```text
+//! 0   8  magic "MPFOREST"
+//! 8   4  format version (u32, 1)
+//! 12  4  kind (u32): 1 body regression forest, 2 part classification forest
+//! 16  4  length of the description (u32)
+//! 20  n  description: JSON (parameters, training data provenance, skeleton and engine versions)
+//! ..  8  length of the compressed trees (u64)
+//! ..  m  zstd-compressed trees (layout below)
+//! ..  4  CRC-32 of every byte before it
+//! ```
+//! Trees: u32 tree count; per tree u32 node count, nodes (f32 ux, f32 uy, f32 threshold, u32
+//! left, u32 leaf), u32 leaf count, leaves (body: u16 mask of the joints the leaf votes for,
+//! then per voted joint 3 i16 offsets in units of 0.05 mm, u16 weight in units of 1/65535 and
+//! u16 spread in units of 0.25 mm^2 (version 1: 5 f32); parts: 6 f32 class probabilities).
+//! All little-endian.
+//!
+//! Reading checks everything a damaged or foreign file could break: the magic, the version,
+//! the kind, the checksum, every length against what is left, and every child and leaf index
+//! against the arrays, so a tree loaded is one that can be walked.
+
+use super::depth::{BODY_JOINTS, DepthFeature, JointLeaf, JointVote};
+use super::{Forest, NOT_LEAF, Node, Tree};
+use crate::core::skeleton::PART_COUNT;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+const MAGIC: &[u8; 8] = b"MPFOREST";
+/// The model format version this build writes; it also reads version 1 (votes as f32).
+pub const FORMAT_VERSION: u32 = 2;
+/// Resolution of stored vote offsets (mm) and spreads (mm^2) in version 2.
+const OFFSET_UNIT_MM: f32 = 0.05;
+const SPREAD_UNIT_MM2: f32 = 0.25;
+
+/// `v / unit` rounded to the nearest `i16`, saturating.
+fn quantise_i16(v: f32, unit: f32) -> i16 {
+    (v / unit).round().clamp(f32::from(i16::MIN), f32::from(i16::MAX)) as i16
+}
+
+/// `v / unit` rounded into `[lo, u16::MAX]`.
+fn quantise_u16(v: f32, unit: f32, lo: u16) -> u16 {
+    (v / unit).round().clamp(f32::from(lo), f32::from(u16::MAX)) as u16
+}
+/// The largest decompressed tree section accepted (far above any real model).
+const MAX_TREES_BYTES: usize = 1 << 30;
+
+/// What a model file holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelKind {
+    /// Regression of the 12 main-body joints.
+    Body,
+    /// Classification into the six body parts.
+    Parts,
+}
+
+impl ModelKind {
+    fn code(self) -> u32 {
+        match self {
+            ModelKind::Body => 1,
+            ModelKind::Parts => 2,
+        }
+    }
+
+    fn from_code(code: u32) -> Option<Self> {
+        match code {
+            1 => Some(ModelKind::Body),
+            2 => Some(ModelKind::Parts),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::Body => "body forest",
+            ModelKind::Parts => "part forest",
+        }
+    }
+}
+
+/// The self-description stored in a model file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelInfo {
+    pub kind: ModelKind,
+    pub software_version: String,
+    pub skeleton_version: u32,
+    pub engine_version: u32,
+    /// Baseline training parameters.
+    pub train: super::TrainParams,
+    /// Discriminative training parameters, when it was applied.
+    pub discriminative: Option<super::discriminative::DiscriminativeParams>,
+    /// Where the training data came from (dataset directories, their seeds and sizes).
+    pub data: Vec<DataProvenance>,
+    /// Training pixels sampled per image.
+    pub pixels_per_image: usize,
+    /// Thresholds tried per feature.
+    pub thresholds: usize,
+    /// Seconds the training took.
+    pub training_seconds: f64,
+}
+
+/// One training data set.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DataProvenance {
+    /// `train` (D_t) or `discriminative` (D_d).
+    pub role: String,
+    /// The dataset directory's name (not its full path).
+    pub path: String,
+    pub seed: u64,
+    pub images: u64,
+    pub noise: crate::core::noise::DepthNoise,
+    pub engine_version: u32,
+}
+
+/// A loaded model.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Model {
+    Body(ModelInfo, Forest<DepthFeature, JointLeaf>),
+    Parts(ModelInfo, Forest<DepthFeature, Vec<f32>>),
+}
+
+impl Model {
+    pub fn info(&self) -> &ModelInfo {
+        match self {
+            Model::Body(i, _) | Model::Parts(i, _) => i,
+        }
+    }
+}
+
+/// Errors reading or writing model files.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    #[error("cannot {action} {path:?}")]
+    Io {
+        path: PathBuf,
+        action: &'static str,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path:?} is not a mousepose forest model")]
+    Foreign { path: PathBuf },
+    #[error("{path:?} is a forest model of format version {version}; this build reads version {FORMAT_VERSION}")]
+    Version { path: PathBuf, version: u32 },
+    #[error("{path:?} is damaged: {reason}")]
+    Corrupt { path: PathBuf, reason: String },
+    #[error("{path:?} holds a {found}, expected a {expected}")]
+    WrongKind {
+        path: PathBuf,
+        found: &'static str,
+        expected: &'static str,
+    },
+    #[error("{path:?} was trained for skeleton version {found}; this build uses version {expected}")]
+    Skeleton { path: PathBuf, found: u32, expected: u32 },
+}
+
+fn put_u32(out: &mut Vec<u8>, v: u32) {
+    out.extend_from_slice(&v.to_le_bytes());
+}
+
+fn put_f32(out: &mut Vec<u8>, v: f32) {
+    out.extend_from_slice(&v.to_le_bytes());
+}
+
+fn encode_trees<L>(forest: &Forest<DepthFeature, L>, mut leaf: impl FnMut(&mut Vec<u8>, &L)) -> Vec<u8> {
+    let mut out = Vec::new();
+    put_u32(&mut out, forest.trees.len() as u32);
+    for t in &forest.trees {
+        put_u32(&mut out, t.nodes.len() as u32);
+        for n in &t.nodes {
+            put_f32(&mut out, n.feature[0]);
+            put_f32(&mut out, n.feature[1]);
+            put_f32(&mut out, n.threshold);
+            put_u32(&mut out, n.left);
+            put_u32(&mut out, n.leaf);
+        }
+        put_u32(&mut out, t.leaves.len() as u32);
+        for l in &t.leaves {
+            leaf(&mut out, l);
+        }
+    }
+    out
+}
+
+/// Encodes a model file.
+///
+/// # Errors
+/// When the description cannot be serialised or compression fails.
+pub fn encode(model: &Model) -> Result<Vec<u8>, String> {
+    let (info, trees) = match model {
+        Model::Body(info, f) => (
+            info,
+            encode_trees(f, |out, leaf: &JointLeaf| {
+                // Sparse: a bit mask of the joints the leaf votes for, then their votes.
+                let mask = leaf
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, v)| v.weight > 0.0)
+                    .fold(0u16, |m, (j, _)| m | (1 << j));
+                out.extend_from_slice(&mask.to_le_bytes());
+                for v in leaf.iter().filter(|v| v.weight > 0.0) {
+                    for c in v.offset {
+                        out.extend_from_slice(&quantise_i16(c, OFFSET_UNIT_MM).to_le_bytes());
+                    }
+                    out.extend_from_slice(&quantise_u16(v.weight, 1.0 / 65535.0, 1).to_le_bytes());
+                    out.extend_from_slice(&quantise_u16(v.spread, SPREAD_UNIT_MM2, 0).to_le_bytes());
+                }
+            }),
+        ),
+        Model::Parts(info, f) => (
+            info,
+            encode_trees(f, |out, leaf: &Vec<f32>| {
+                for c in 0..PART_COUNT {
+                    put_f32(out, leaf.get(c).copied().unwrap_or(0.0));
+                }
+            }),
+        ),
+    };
+    let description = serde_json::to_vec(info).map_err(|e| e.to_string())?;
+    let compressed = zstd::bulk::compress(&trees, 9).map_err(|e| e.to_string())?;
+    let mut out = Vec::with_capacity(32 + description.len() + compressed.len());
+    out.extend_from_slice(MAGIC);
+    put_u32(&mut out, FORMAT_VERSION);
+    put_u32(&mut out, info.kind.code());
+    put_u32(&mut out, description.len() as u32);
+    out.extend_from_slice(&description);
+    out.extend_from_slice(&(compressed.len() as u64).to_le_bytes());
+    out.extend_from_slice(&compressed);
+    let crc = crc32fast::hash(&out);
+    put_u32(&mut out, crc);
+    Ok(out)
+}
+
+/// Writes a model file (through a temporary file renamed into place, so a crash never leaves
+/// half a model under the final name).
+///
+/// # Errors
+/// When the file cannot be written.
+pub fn save(model: &Model, path: &Path) -> Result<(), ModelError> {
+    let bytes = encode(model).map_err(|reason| ModelError::Corrupt {
+        path: path.to_owned(),
+        reason,
+    })?;
+    let tmp = path.with_extension("forest.partial");
+    let io = |action| {
+        move |source| ModelError::Io {
+            path: path.to_owned(),
+            action,
+            source,
+        }
+    };
+    std::fs::write(&tmp, &bytes).map_err(io("write"))?;
+    std::fs::rename(&tmp, path).map_err(io("write"))
+}
+
+/// A little-endian reader that names what ran short.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], String> {
+        let end = self.at.checked_add(n).filter(|&e| e <= self.bytes.len());
+        let end = end.ok_or_else(|| format!("it ends inside the {what}"))?;
+        let s = &self.bytes[self.at..end];
+        self.at = end;
+        Ok(s)
+    }
+    fn u32(&mut self, what: &str) -> Result<u32, String> {
+        let b = self.take(4, what)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+    fn f32(&mut self, what: &str) -> Result<f32, String> {
+        Ok(f32::from_bits(self.u32(what)?))
+    }
+    fn count(&mut self, what: &str, item_bytes: usize) -> Result<usize, String> {
+        let n = self.u32(what)? as usize;
+        if n.saturating_mul(item_bytes) > self.bytes.len() - self.at {
+            return Err(format!("its {what} ({n}) do not fit in the file"));
+        }
+        Ok(n)
+    }
+}
+
+fn decode_trees<L>(
+    bytes: &[u8],
+    leaf_bytes: usize,
+    mut leaf: impl FnMut(&mut Reader<'_>) -> Result<L, String>,
+) -> Result<Forest<DepthFeature, L>, String> {
+    let mut r = Reader { bytes, at: 0 };
+    let count = r.count("tree count", 8)?;
+    let mut trees = Vec::with_capacity(count);
+    for t in 0..count {
+        let n_nodes = r.count("node count", 20)?;
+        let mut nodes = Vec::with_capacity(n_nodes);
+        for _ in 0..n_nodes {
+            let feature = [r.f32("node")?, r.f32("node")?];
+            let threshold = r.f32("node")?;
+            let left = r.u32("node")?;
+            let leaf = r.u32("node")?;
+            if !feature.iter().chain([&threshold]).all(|v| v.is_finite()) {
+                return Err(format!("tree {t} has a node with a value that is not a number"));
+            }
+            nodes.push(Node {
+                feature,
+                threshold,
+                left,
+                leaf,
+            });
+        }
+        let n_leaves = r.count("leaf count", leaf_bytes)?;
+        let mut leaves = Vec::with_capacity(n_leaves);
+        for _ in 0..n_leaves {
+            leaves.push(leaf(&mut r)?);
+        }
+        if nodes.is_empty() {
+            return Err(format!("tree {t} has no nodes"));
+        }
+        // Every split's children exist and lie after it (so walking always ends); every leaf
+        // index exists.
+        for (i, n) in nodes.iter().enumerate() {
+            let ok = if n.leaf == NOT_LEAF {
+                (n.left as usize) > i && (n.left as usize) + 1 < nodes.len()
+            } else {
+                (n.leaf as usize) < leaves.len()
+            };
+            if !ok {
+                return Err(format!("tree {t} node {i} points outside the tree"));
+            }
+        }
+        trees.push(Tree { nodes, leaves });
+    }
+    if r.at != bytes.len() {
+        return Err("it has bytes after its last tree".to_owned());
+    }
+    Ok(Forest { trees })
+}
+
+/// Reads a model file, checking it is whole, of this format, and of the expected kind.
+///
+/// # Errors
+/// A [`ModelError`] naming the file and what is wrong with it.
+pub fn load(path: &Path, expected: Option<ModelKind>) -> Result<Model, ModelError> {
+    let bytes = std::fs::read(path).map_err(|source| ModelError::Io {
+        path: path.to_owned(),
+        action: "read",
+        source,
+    })?;
+    decode(&bytes, path, expected)
+}
+
+/// Decodes model bytes read from `path` (used in messages).
+///
+/// # Errors
+/// As [`load`].
+pub fn decode(bytes: &[u8], path: &Path, expected: Option<ModelKind>) -> Result<Model, ModelError> {
+    let corrupt = |reason: String| ModelError::Corrupt {
+        path: path.to_owned(),
+        reason,
+    };
+    if bytes.len() < 8 || &bytes[..8] != MAGIC {
+        return Err(ModelError::Foreign { path: path.to_owned() });
+    }
+    let mut r = Reader { bytes, at: 8 };
+    let version = r.u32("header").map_err(corrupt)?;
+    if version != FORMAT_VERSION && version != 1 {
+        return Err(ModelError::Version {
+            path: path.to_owned(),
+            version,
+        });
+    }
+    if bytes.len() < 24 {
+        return Err(corrupt("it is truncated".to_owned()));
+    }
+    let (body, crc) = bytes.split_at(bytes.len() - 4);
+    if crc32fast::hash(body) != u32::from_le_bytes([crc[0], crc[1], crc[2], crc[3]]) {
+        return Err(corrupt(
+            "its checksum does not match (truncated or modified)".to_owned(),
+        ));
+    }
+    let mut r = Reader { bytes: body, at: 12 };
+    let code = r.u32("header").map_err(corrupt)?;
+    let kind = ModelKind::from_code(code).ok_or_else(|| corrupt(format!("unknown model kind {code}")))?;
+    if let Some(expected) = expected.filter(|&e| e != kind) {
+        return Err(ModelError::WrongKind {
+            path: path.to_owned(),
+            found: kind.name(),
+            expected: expected.name(),
+        });
+    }
+    let desc_len = r.u32("header").map_err(corrupt)? as usize;
+    let desc = r.take(desc_len, "description").map_err(corrupt)?;
+    let info: ModelInfo =
+        serde_json::from_slice(desc).map_err(|e| corrupt(format!("its description is unreadable: {e}")))?;
+    if info.skeleton_version != crate::core::skeleton::SKELETON_VERSION {
+        return Err(ModelError::Skeleton {
+            path: path.to_owned(),
+            found: info.skeleton_version,
+            expected: crate::core::skeleton::SKELETON_VERSION,
+        });
+    }
+    let len_bytes = r.take(8, "tree section length").map_err(corrupt)?;
+    let mut l = [0u8; 8];
+    l.copy_from_slice(len_bytes);
+    let len = usize::try_from(u64::from_le_bytes(l)).unwrap_or(usize::MAX);
+    let compressed = r.take(len, "trees").map_err(corrupt)?;
+    let trees = zstd::bulk::decompress(compressed, MAX_TREES_BYTES)
+        .map_err(|e| corrupt(format!("its trees do not decompress: {e}")))?;
+    match kind {
+        ModelKind::Body => {
+            let forest = decode_trees(&trees, 2, |r| {
+                let mut leaf = [JointVote::default(); BODY_JOINTS];
+                let m = r.take(2, "leaf")?;
+                let mask = u16::from_le_bytes([m[0], m[1]]);
+                if mask >> BODY_JOINTS != 0 {
+                    return Err(format!("a leaf votes for joints that do not exist (mask {mask:#06x})"));
+                }
+                for (j, v) in leaf.iter_mut().enumerate().filter(|(j, _)| mask & (1 << j) != 0) {
+                    *v = if version == 1 {
+                        JointVote {
+                            offset: [r.f32("leaf")?, r.f32("leaf")?, r.f32("leaf")?],
+                            weight: r.f32("leaf")?,
+                            spread: r.f32("leaf")?,
+                        }
+                    } else {
+                        let b = r.take(10, "leaf")?;
+                        let i = |k: usize| i16::from_le_bytes([b[k], b[k + 1]]);
+                        let u = |k: usize| u16::from_le_bytes([b[k], b[k + 1]]);
+                        JointVote {
+                            offset: [0, 2, 4].map(|k| f32::from(i(k)) * OFFSET_UNIT_MM),
+                            weight: f32::from(u(6)) / 65535.0,
+                            spread: f32::from(u(8)) * SPREAD_UNIT_MM2,
+                        }
+                    };
+                    if !(v.offset.iter().all(|c| c.is_finite()) && v.weight > 0.0 && v.weight <= 1.0 && v.spread >= 0.0)
+                    {
+                        return Err(format!("a leaf's vote for joint {} is not valid", j + 1));
+                    }
+                }
+                Ok(leaf)
+            })
+            .map_err(corrupt)?;
+            Ok(Model::Body(info, forest))
+        }
+        ModelKind::Parts => {
+            let forest = decode_trees(&trees, PART_COUNT * 4, |r| {
+                (0..PART_COUNT).map(|_| r.f32("leaf")).collect()
+            })
+            .map_err(corrupt)?;
+            Ok(Model::Parts(info, forest))
+        }
+    }
+}

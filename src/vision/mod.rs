@@ -1,0 +1,10 @@
+//! The algorithms of the paper, as pure code: segmentation of the mouse in the depth image,
+//! the forests and their discriminative training, the paw cascade, fusion into 24 joints and
+//! the calibration maths. They know nothing of threads or the command line, and open only the
+//! files they are asked to (models, calibrations).
+
+pub mod calibrate;
+pub mod forest;
+pub mod fusion;
+pub mod paws;
+pub mod segment;
