@@ -4,10 +4,10 @@
 
 use crate::util::mousepose;
 use aravis_ext::FakeCameraConfig;
+use mousepose::app::record::record;
 use mousepose::io::session::{Backend, CameraRole, SessionReader};
 use mousepose::runtime::config::Config;
 use mousepose::runtime::pipeline::Shutdown;
-use mousepose::runtime::record::record;
 use std::path::Path;
 use std::time::{Duration, Instant};
 

@@ -474,8 +474,8 @@ fn segment_ms(rig: &Rig, iterations: u32) -> Result<f64, SegmentError> {
 
 /// Replays a synthetic session fast and paced, and rewrites its frames as the recorder does.
 fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Error>> {
+    use crate::app::replay::{ReplayOptions, replay};
     use crate::io::session::{SessionReader, SessionWriter};
-    use crate::runtime::topology::{ReplayOptions, replay};
     use crate::synth::session::{SessionSpec, write_session};
     let root = std::env::temp_dir().join(format!(".mousepose-bench-{}", std::process::id()));
     let _cleanup = RemoveOnDrop(root.clone());
@@ -537,4 +537,22 @@ impl Drop for RemoveOnDrop {
         // Best effort: a leftover scratch directory in the temporary directory is harmless.
         let _ = std::fs::remove_dir_all(&self.0);
     }
+}
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    /// A short run (a few seconds) instead of the full measurement.
+    #[arg(long)]
+    quick: bool,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `mousepose bench`.
+pub fn command(args: &BenchArgs) -> crate::app::Outcome {
+    let report = run(args.quick);
+    if args.json {
+        return Ok(crate::app::print_json(&report)?);
+    }
+    Ok(crate::app::print(&report.table())?)
 }

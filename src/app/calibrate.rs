@@ -1,15 +1,17 @@
 //! `mousepose calibrate intrinsics|extrinsics` and `mousepose synth chessboard`: arguments
 //! and the commands themselves, kept here so the top-level CLI only delegates.
 
+use crate::app::{Exists, Failure, Outcome, output_failure, print};
 use crate::io::output::Staging;
 use crate::synth::chessboard::{ChessboardSpec, write_chessboards};
+use crate::vision::calibrate::CalibrationError;
 use crate::vision::calibrate::extrinsics::{self, ExtrinsicsView};
 use crate::vision::calibrate::{Board, calibrate_intrinsics, load_intrinsics};
-use anyhow::{Context, Result};
+use anyhow::Context as _;
 use clap::{Args, Subcommand};
 use serde::Serialize;
 use std::fmt::Write as _;
-use std::io::Write as _;
+
 use std::path::{Path, PathBuf};
 
 /// Calibrate the cameras: intrinsics of each, then both posed against a board on the glass.
@@ -121,16 +123,9 @@ pub struct ChessboardArgs {
     pub force: bool,
 }
 
-fn print(text: &str) -> Result<()> {
-    let mut out = std::io::stdout().lock();
-    out.write_all(text.as_bytes())?;
-    out.flush()?;
-    Ok(())
-}
-
-fn refuse_existing(path: &Path, force: bool) -> Result<()> {
+fn refuse_existing(path: &Path, force: bool) -> Outcome {
     if path.exists() && !force {
-        return Err(crate::app::commands::Exists(path.to_owned()).into());
+        return Err(Failure::usage(Exists(path.to_owned())));
     }
     Ok(())
 }
@@ -139,26 +134,31 @@ fn refuse_existing(path: &Path, force: bool) -> Result<()> {
 ///
 /// # Errors
 /// A malformed pattern, or a pattern that matches no file.
-pub fn expand_glob(pattern: &str) -> Result<Vec<PathBuf>> {
-    let paths = glob::glob(pattern).with_context(|| format!("image pattern {pattern:?} is not a valid glob"))?;
+pub fn expand_glob(pattern: &str) -> Result<Vec<PathBuf>, Failure> {
+    let paths = glob::glob(pattern).map_err(|e| {
+        Failure::usage(anyhow::Error::new(e).context(format!("image pattern {pattern:?} is not a valid glob")))
+    })?;
     let mut files: Vec<PathBuf> = paths.filter_map(Result::ok).filter(|p| p.is_file()).collect();
     files.sort();
     if files.is_empty() {
-        anyhow::bail!(UsageError(format!("image pattern {pattern:?} matches no files")));
+        return Err(Failure::usage(anyhow::anyhow!(
+            "image pattern {pattern:?} matches no files"
+        )));
     }
     Ok(files)
 }
 
-/// An argument that cannot work (exit code 1).
-#[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct UsageError(pub String);
+/// A calibration error: the user's when the input cannot work (a board not found, views that
+/// do not fit), the work's otherwise.
+fn calibration_failure(e: CalibrationError) -> Failure {
+    Failure::classed(e.is_input_problem(), e)
+}
 
 /// `mousepose calibrate ...`.
 ///
 /// # Errors
 /// Whatever the command meets; the message names the file at fault.
-pub fn run(command: &CalibrateCommand) -> Result<()> {
+pub fn run(command: &CalibrateCommand) -> Outcome {
     match command {
         CalibrateCommand::Intrinsics(args) => intrinsics(args),
         CalibrateCommand::Extrinsics(args) => extrinsics_command(args),
@@ -182,17 +182,17 @@ struct IntrinsicsJson<'a> {
     source: &'static str,
 }
 
-fn board(size: &str, square_mm: f64) -> Result<Board> {
-    Board::parse(size, square_mm).map_err(|e| UsageError(e.to_string()).into())
+fn board(size: &str, square_mm: f64) -> Result<Board, Failure> {
+    Board::parse(size, square_mm).map_err(Failure::usage)
 }
 
-fn intrinsics(args: &IntrinsicsArgs) -> Result<()> {
+fn intrinsics(args: &IntrinsicsArgs) -> Outcome {
     refuse_existing(&args.out, args.force)?;
     let board = board(&args.board, args.square_mm)?;
     if let Some(uri) = &args.openni {
         let found = crate::vision::calibrate::openni::depth_intrinsics(uri)
             .with_context(|| format!("reading OpenNI device {uri:?}"))?;
-        crate::vision::calibrate::openni::save(&found, &args.out)?;
+        crate::vision::calibrate::openni::save(&found, &args.out).map_err(calibration_failure)?;
         let json = IntrinsicsJson {
             out: args.out.display().to_string(),
             width: found.intrinsics.width,
@@ -209,9 +209,9 @@ fn intrinsics(args: &IntrinsicsArgs) -> Result<()> {
             source: "openni",
         };
         if args.json {
-            return print(&format!("{}\n", serde_json::to_string_pretty(&json)?));
+            return Ok(print(&format!("{}\n", serde_json::to_string_pretty(&json)?))?);
         }
-        return print(&format!(
+        return Ok(print(&format!(
             "{}x{} depth mode, field of view {:.2} x {:.2} degrees: fx {:.2} fy {:.2} cx {:.2} cy {:.2}; written to {:?}\n",
             found.intrinsics.width,
             found.intrinsics.height,
@@ -222,12 +222,12 @@ fn intrinsics(args: &IntrinsicsArgs) -> Result<()> {
             found.intrinsics.cx,
             found.intrinsics.cy,
             args.out
-        ));
+        ))?);
     }
     let pattern = args.images.as_deref().unwrap_or_default();
     let images = expand_glob(pattern)?;
-    let result = calibrate_intrinsics(&images, &board)?;
-    result.save(&args.out)?;
+    let result = calibrate_intrinsics(&images, &board).map_err(calibration_failure)?;
+    result.save(&args.out).map_err(calibration_failure)?;
     let i = &result.intrinsics;
     if args.json {
         let json = IntrinsicsJson {
@@ -245,7 +245,7 @@ fn intrinsics(args: &IntrinsicsArgs) -> Result<()> {
             skipped: &result.skipped,
             source: "chessboard",
         };
-        return print(&format!("{}\n", serde_json::to_string_pretty(&json)?));
+        return Ok(print(&format!("{}\n", serde_json::to_string_pretty(&json)?))?);
     }
     let mut t = String::new();
     let _ = writeln!(t, "{:<40} {:>10}", "view", "rms px");
@@ -268,7 +268,7 @@ fn intrinsics(args: &IntrinsicsArgs) -> Result<()> {
         result.skipped.len(),
         args.out
     );
-    print(&t)
+    Ok(print(&t)?)
 }
 
 #[derive(Serialize)]
@@ -287,18 +287,19 @@ struct PoseError {
     rotation_deg: f64,
 }
 
-fn extrinsics_command(args: &ExtrinsicsArgs) -> Result<()> {
+fn extrinsics_command(args: &ExtrinsicsArgs) -> Outcome {
     refuse_existing(&args.out, args.force)?;
     let board = board(&args.board, args.square_mm)?;
-    board.check_orientable().map_err(|e| UsageError(e.to_string()))?;
+    board.check_orientable().map_err(Failure::usage)?;
     let staging = args
         .report
         .as_deref()
         .map(|dir| Staging::new(dir, args.force))
-        .transpose()?;
-    let view = |file: &Path, image: &Path, serial: &Option<String>| -> Result<ExtrinsicsView> {
+        .transpose()
+        .map_err(output_failure)?;
+    let view = |file: &Path, image: &Path, serial: &Option<String>| -> Result<ExtrinsicsView, Failure> {
         Ok(ExtrinsicsView {
-            intrinsics: load_intrinsics(file)?,
+            intrinsics: load_intrinsics(file).map_err(calibration_failure)?,
             intrinsics_file: file.to_owned(),
             image: image.to_owned(),
             serial: serial.clone(),
@@ -306,8 +307,8 @@ fn extrinsics_command(args: &ExtrinsicsArgs) -> Result<()> {
     };
     let depth = view(&args.depth_intrinsics, &args.depth_image, &args.depth_serial)?;
     let color = view(&args.color_intrinsics, &args.color_image, &args.color_serial)?;
-    let result = extrinsics::calibrate_extrinsics(&depth, &color, &board)?;
-    result.calibration.save(&args.out)?;
+    let result = extrinsics::calibrate_extrinsics(&depth, &color, &board).map_err(calibration_failure)?;
+    result.calibration.save(&args.out).map_err(calibration_failure)?;
     let mut table = String::new();
     let _ = writeln!(
         table,
@@ -327,7 +328,7 @@ fn extrinsics_command(args: &ExtrinsicsArgs) -> Result<()> {
     }
     let error_vs_truth = match &args.truth {
         Some(path) => {
-            let truth = crate::vision::calibrate::RigCalibration::load(path)?;
+            let truth = crate::vision::calibrate::RigCalibration::load(path).map_err(calibration_failure)?;
             let mut errors = std::collections::BTreeMap::new();
             for (name, role) in [
                 ("depth", crate::io::session::CameraRole::Depth),
@@ -362,7 +363,7 @@ fn extrinsics_command(args: &ExtrinsicsArgs) -> Result<()> {
     };
     if let Some(staging) = staging {
         let dir = staging.path();
-        let write = |name: &str, bytes: &[u8]| -> Result<()> {
+        let write = |name: &str, bytes: &[u8]| -> anyhow::Result<()> {
             let path = dir.join(name);
             std::fs::write(&path, bytes).with_context(|| format!("writing {path:?}"))
         };
@@ -376,26 +377,25 @@ fn extrinsics_command(args: &ExtrinsicsArgs) -> Result<()> {
         staging.commit()?;
     }
     if args.json {
-        return print(&format!("{}\n", serde_json::to_string_pretty(&json)?));
+        return Ok(print(&format!("{}\n", serde_json::to_string_pretty(&json)?))?);
     }
     let _ = writeln!(table, "rig calibration written to {:?}", args.out);
-    print(&table)
+    Ok(print(&table)?)
 }
 
 /// `mousepose synth chessboard`.
 ///
 /// # Errors
 /// A bad board, an output directory that may not be replaced, or a render that cannot be written.
-pub fn synth_chessboard(args: &ChessboardArgs) -> Result<()> {
+pub fn synth_chessboard(args: &ChessboardArgs) -> Outcome {
     let board = board(&args.board, args.square_mm)?;
     if ![1, 2, 4].contains(&args.color_binning) {
-        return Err(UsageError(format!(
+        return Err(Failure::usage(anyhow::anyhow!(
             "expected a binning factor of 1, 2 or 4, got {}",
             args.color_binning
-        ))
-        .into());
+        )));
     }
-    let staging = Staging::new(&args.out, args.force)?;
+    let staging = Staging::new(&args.out, args.force).map_err(output_failure)?;
     let spec = ChessboardSpec {
         board,
         views: args.views,

@@ -166,6 +166,9 @@ pub fn hind_limb(
     (knee, ankle)
 }
 
+/// Radius of the paw's sole: a paw resting on the glass has its joint this high.
+pub const PAW_SOLE_MM: f64 = 1.5;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -208,6 +211,3 @@ mod tests {
         assert!(((ankle - paw).norm() - 11.0).abs() < 1e-6);
     }
 }
-
-/// Radius of the paw's sole: a paw resting on the glass has its joint this high.
-pub const PAW_SOLE_MM: f64 = 1.5;

@@ -1,1 +1,101 @@
+//! What became of every frame, per camera: captured = paired + unpaired + dropped (by reason);
+//! frames lost before capture (gaps in the camera's frame counter, damaged buffers or records)
+//! are counted apart. The capture threads, the edges and the sync thread count into one
+//! [`Accounting`]; summaries read it as [`CameraSummary`].
 
+use crate::io::session::CameraRole;
+use crate::runtime::pipeline::{EdgeConfig, EdgeStats};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Mutex, PoisonError};
+
+/// Frames per camera, by what became of them.
+#[derive(Debug, Default)]
+pub struct CameraCounters {
+    /// Frames the source delivered.
+    pub captured: AtomicU64,
+    /// In a pair with a frame of the other camera.
+    pub paired: AtomicU64,
+    /// Processed without a partner (depth-only pairs; colour frames no depth frame claimed).
+    pub unpaired: AtomicU64,
+    /// Delivered but not processed, by reason.
+    pub dropped: Mutex<BTreeMap<String, u64>>,
+    /// Never delivered, by reason (`camera_gap`: missing sequence numbers; the source's own
+    /// losses such as damaged buffers or records).
+    pub lost: Mutex<BTreeMap<String, u64>>,
+}
+
+/// Adds `n` to `reason`'s count (nothing for 0).
+pub fn bump(map: &Mutex<BTreeMap<String, u64>>, reason: &str, n: u64) {
+    if n > 0 {
+        *map.lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .entry(reason.to_owned())
+            .or_default() += n;
+    }
+}
+
+/// Both cameras' counters.
+#[derive(Debug, Default)]
+pub struct Accounting {
+    pub depth: CameraCounters,
+    pub color: CameraCounters,
+}
+
+impl Accounting {
+    pub fn camera(&self, role: CameraRole) -> &CameraCounters {
+        match role {
+            CameraRole::Depth => &self.depth,
+            CameraRole::Color => &self.color,
+        }
+    }
+}
+
+/// One camera in a summary. `captured = paired + unpaired + dropped_total`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct CameraSummary {
+    pub captured: u64,
+    pub paired: u64,
+    pub unpaired: u64,
+    pub dropped: BTreeMap<String, u64>,
+    pub dropped_total: u64,
+    pub lost_before_capture: BTreeMap<String, u64>,
+}
+
+impl CameraSummary {
+    pub fn of(c: &CameraCounters) -> Self {
+        let dropped = c.dropped.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        Self {
+            captured: c.captured.load(Ordering::Relaxed),
+            paired: c.paired.load(Ordering::Relaxed),
+            unpaired: c.unpaired.load(Ordering::Relaxed),
+            dropped_total: dropped.values().sum(),
+            dropped,
+            lost_before_capture: c.lost.lock().unwrap_or_else(PoisonError::into_inner).clone(),
+        }
+    }
+
+    /// Whether every captured frame is accounted for.
+    pub fn adds_up(&self) -> bool {
+        self.captured == self.paired + self.unpaired + self.dropped_total
+    }
+}
+
+/// An edge in a summary.
+#[derive(Clone, Debug, Serialize)]
+pub struct EdgeSummary {
+    pub capacity: usize,
+    pub max_depth: u64,
+    pub dropped_full: u64,
+}
+
+impl EdgeSummary {
+    pub fn of(config: EdgeConfig, stats: &EdgeStats) -> Self {
+        Self {
+            capacity: config.capacity.get(),
+            max_depth: stats.max_depth.load(Ordering::Relaxed),
+            dropped_full: stats.dropped_full.load(Ordering::Relaxed),
+        }
+    }
+}

@@ -10,6 +10,7 @@ pub mod aravis;
 pub mod clock;
 pub mod moseq;
 pub mod openni;
+pub mod rig;
 pub mod session;
 pub mod v4l2;
 
@@ -78,7 +79,7 @@ impl SeqGaps {
 }
 
 /// A frame from either camera of the rig, as the synchroniser takes them.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub enum Captured {
     Depth(DepthFrame),
     Color(ColorFrame),

@@ -1,3 +1,4 @@
-//! Sinks: where the pipeline's results go.
+//! Sinks: where the pipeline's results go: poses (`poses.csv`) and raw frames (the recorder).
 
 pub mod poses;
+pub mod recorder;

@@ -10,7 +10,7 @@ use crate::vision::forest::infer::{BodyEstimator, Pixel, sample_pixels};
 use nalgebra::Point3;
 
 /// Pixels of the mouse run through the forest per frame in the pipeline, at most. Fewer than
-/// the evaluation's [`crate::training::VOTE_BUDGET`] (1,200): on a 10 s synthetic session the
+/// the evaluation's vote budget (1,200, `VOTE_BUDGET` of the training module): on a 10 s synthetic session the
 /// mean error goes from 2.81 mm to 2.92 mm while the stage runs about 4 times faster, which
 /// is what lets replay reach hundreds of pairs per second on two cores.
 pub const PIPELINE_VOTE_BUDGET: usize = 200;

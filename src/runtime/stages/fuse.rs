@@ -4,8 +4,8 @@
 
 use super::{Fused, PoseStatus, Posed};
 use crate::core::geometry::Rig;
-use crate::runtime::overlay;
 use crate::runtime::pipeline::{Stage, StageError};
+use crate::runtime::stages::overlay;
 use crate::vision::fusion::Fuser;
 
 /// Runs a [`Fuser`] on each pose.

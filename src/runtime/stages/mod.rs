@@ -3,6 +3,7 @@
 
 pub mod body;
 pub mod fuse;
+pub mod overlay;
 pub mod paws;
 pub mod segment;
 

@@ -1,32 +1,25 @@
 //! `mousepose record`: the cameras of a rig config written to a session, lossless, as they
-//! deliver.
-//!
-//! ```text
-//!  cap-depth (OpenNI2) ──┐  capture edge (drops when full, counted)
-//!                        ├──────────────────────────────────────────▶ recorder (SessionWriter)
-//!  cap-color (Aravis/V4L2)┘
-//! ```
+//! deliver (the topology with the recorder branch only).
 //!
 //! The session is written in place (not staged): every frame is handed to the operating
 //! system as it is written, so a recorder killed at any moment leaves a session that reads up
 //! to its last complete frame (without the `session_ended` event that marks it complete).
 
-use crate::core::frame::ColorFrame;
-use crate::io::session::{
-    CameraMeta, CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionWriter,
-};
-use crate::runtime::capture::aravis::{AravisColor, AravisConfig, Trigger};
-use crate::runtime::capture::openni::{OpenNiConfig, OpenNiDepth};
-use crate::runtime::capture::v4l2::{V4l2Color, V4l2Config};
-use crate::runtime::capture::{CaptureError, Captured, Clock, FrameSource, SeqGaps};
-use crate::runtime::config::{ColorCamera, Config, DepthCamera, TriggerMode};
-use crate::runtime::pipeline::{PipelineError, Runner, Shutdown, StageError, edge};
-use crate::runtime::topology::{Accounting, CameraSummary, run_source};
+use crate::app::{Failure, parse_seconds, print, print_json};
+use crate::io::session::{CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionWriter};
+use crate::runtime::accounting::CameraSummary;
+use crate::runtime::capture::rig::{open_color, open_depth};
+use crate::runtime::capture::{CaptureError, Clock, FrameSource};
+use crate::runtime::config::{ColorCamera, Config, DepthCamera};
+use crate::runtime::pipeline::{PipelineError, Shutdown};
+use crate::runtime::topology::{Edges, Sources, Topology, TopologyError};
 use crate::vision::calibrate::RigCalibration;
+use anyhow::Context as _;
+use clap::Args;
 use serde::Serialize;
 use std::collections::BTreeMap;
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Why recording failed.
@@ -49,123 +42,13 @@ pub enum RecordError {
     #[error("cannot write the session")]
     Session(#[from] SessionError),
     #[error("cannot start the recording threads")]
-    Threads(#[source] std::io::Error),
+    Threads(#[from] TopologyError),
+    #[error("the recorder thread ended early")]
+    RecorderEnded,
     #[error("recording stopped")]
     Pipeline(#[from] PipelineError),
     #[error("cannot use the rig's calibration")]
     Calibration(#[from] crate::vision::calibrate::CalibrationError),
-}
-
-/// The colour camera of a rig, whichever its driver.
-#[derive(Debug)]
-pub enum ColorSource {
-    Aravis(AravisColor),
-    V4l2(V4l2Color),
-}
-
-impl FrameSource for ColorSource {
-    type Frame = ColorFrame;
-
-    fn meta(&self) -> CameraMeta {
-        match self {
-            ColorSource::Aravis(s) => s.meta(),
-            ColorSource::V4l2(s) => s.meta(),
-        }
-    }
-
-    fn start(&mut self, clock: &Clock) -> Result<(), CaptureError> {
-        match self {
-            ColorSource::Aravis(s) => s.start(clock),
-            ColorSource::V4l2(s) => s.start(clock),
-        }
-    }
-
-    fn next_frame(&mut self, timeout: Duration) -> Result<Option<ColorFrame>, CaptureError> {
-        match self {
-            ColorSource::Aravis(s) => s.next_frame(timeout),
-            ColorSource::V4l2(s) => s.next_frame(timeout),
-        }
-    }
-
-    fn losses(&self) -> Vec<(&'static str, u64)> {
-        match self {
-            ColorSource::Aravis(s) => s.losses(),
-            ColorSource::V4l2(s) => s.losses(),
-        }
-    }
-
-    fn stop(&mut self) -> Result<(), CaptureError> {
-        match self {
-            ColorSource::Aravis(s) => s.stop(),
-            ColorSource::V4l2(s) => s.stop(),
-        }
-    }
-}
-
-/// The depth camera a config names, ready to start (the camera is opened by `start`).
-pub fn open_depth(camera: &DepthCamera) -> OpenNiDepth {
-    match camera {
-        DepthCamera::Openni2 {
-            uri,
-            serial,
-            width,
-            height,
-            fps,
-        } => OpenNiDepth::new(OpenNiConfig {
-            uri: uri.clone(),
-            serial: serial.clone(),
-            width: *width,
-            height: *height,
-            fps: fps.round() as u32,
-        }),
-    }
-}
-
-/// Opens the colour camera a config names (settings are checked against the camera here).
-///
-/// # Errors
-/// The camera cannot be found, opened or configured.
-pub fn open_color(camera: &ColorCamera) -> Result<ColorSource, CaptureError> {
-    match camera {
-        ColorCamera::Aravis {
-            address,
-            serial,
-            pixel_format,
-            region,
-            exposure_us,
-            gain_db,
-            fps,
-            trigger,
-            buffers,
-        } => AravisColor::open(&AravisConfig {
-            address: address.clone(),
-            serial: serial.clone(),
-            pixel_format: *pixel_format,
-            region: *region,
-            exposure_us: *exposure_us,
-            gain_db: *gain_db,
-            fps: *fps,
-            trigger: match trigger {
-                TriggerMode::FreeRun => Trigger::FreeRun,
-                TriggerMode::Line(l) => Trigger::Line(l.clone()),
-            },
-            buffers: *buffers,
-        })
-        .map(ColorSource::Aravis),
-        ColorCamera::V4l2 {
-            device,
-            width,
-            height,
-            fps,
-        } => V4l2Color::open(V4l2Config {
-            device: device.clone(),
-            width: *width,
-            height: *height,
-            fps: *fps,
-            format: None,
-        })
-        .map(ColorSource::V4l2),
-    }
 }
 
 /// One camera of a recording. `captured = recorded + dropped_total`.
@@ -280,39 +163,21 @@ pub fn record(
         })?;
     }
 
-    let (tx, rx, _) = edge::<Captured>(config.capture_edge);
-    let acct = Arc::new(Accounting::default());
-    let mut runner = Runner::new();
-    let shutdown = runner.shutdown();
-    let threads = RecordError::Threads;
-    {
-        let (tx, acct, shutdown, clock) = (tx.clone(), Arc::clone(&acct), shutdown.clone(), clock.clone());
-        runner
-            .spawn("cap-depth", move || {
-                run_source(Started(depth), &clock, Captured::Depth, &tx, &acct, &shutdown)
-            })
-            .map_err(threads)?;
-    }
-    if let Some(color) = color {
-        let (tx, acct, shutdown, clock) = (tx.clone(), Arc::clone(&acct), shutdown.clone(), clock.clone());
-        runner
-            .spawn("cap-color", move || {
-                run_source(color, &clock, Captured::Color, &tx, &acct, &shutdown)
-            })
-            .map_err(threads)?;
-    }
-    drop(tx);
-    let acct_rec = Arc::clone(&acct);
-    let (done_tx, done_rx) = crossbeam_channel::bounded(1);
-    runner
-        .spawn("recorder", move || {
-            let result = write_frames(&mut writer, &rx, &acct_rec);
-            // Hand the writer back to finish it, whatever happened.
-            let _ = done_tx.send(writer);
-            result
-        })
-        .map_err(threads)?;
-
+    let topology = Topology {
+        sources: Sources::Cameras {
+            depth: Box::new(depth),
+            color: color.map(Box::new),
+        },
+        sync: config.sync,
+        edges: Edges {
+            capture: config.capture_edge,
+            stage: config.stage_edge,
+        },
+        processing: None,
+        recorder: Some(writer),
+    };
+    let running = topology.start()?;
+    let shutdown = running.shutdown();
     let start = Instant::now();
     let cpu0 = crate::runtime::capture::clock::process_cpu_s();
     let limit = seconds.map(Duration::from_secs_f64);
@@ -320,20 +185,18 @@ pub fn record(
         std::thread::sleep(Duration::from_millis(20));
     }
     shutdown.request();
-    let joined = runner.join();
+    let finished = running.join();
     let elapsed = start.elapsed().as_secs_f64();
     let cpu = crate::runtime::capture::clock::process_cpu_s() - cpu0;
-    let writer = done_rx.recv().ok();
-    let mut cams = BTreeMap::new();
-    cams.insert("depth", RecordedCamera::from(CameraSummary::of(&acct.depth)));
-    if config.color.is_some() {
-        cams.insert("color", RecordedCamera::from(CameraSummary::of(&acct.color)));
-    }
-    let Some(mut writer) = writer else {
+    let joined = finished.outcome;
+    let cams: BTreeMap<&'static str, RecordedCamera> = finished
+        .cameras
+        .into_iter()
+        .map(|(name, c)| (name, RecordedCamera::from(c)))
+        .collect();
+    let Some(mut writer) = finished.recorder else {
         joined?;
-        return Err(RecordError::Threads(std::io::Error::other(
-            "the recorder thread ended early",
-        )));
+        return Err(RecordError::RecorderEnded);
     };
     for (role, c) in &cams {
         let lost: Vec<String> = c.lost_before_capture.iter().map(|(k, v)| format!("{k} {v}")).collect();
@@ -361,73 +224,6 @@ pub fn record(
         color_bytes: summary.color_bytes,
         cpu_cores: cpu / elapsed.max(1e-9),
     })
-}
-
-/// A source already started by the caller: `start` does nothing more.
-struct Started<S>(S);
-
-impl<S: FrameSource> FrameSource for Started<S> {
-    type Frame = S::Frame;
-
-    fn meta(&self) -> CameraMeta {
-        self.0.meta()
-    }
-
-    fn start(&mut self, _clock: &Clock) -> Result<(), CaptureError> {
-        Ok(())
-    }
-
-    fn next_frame(&mut self, timeout: Duration) -> Result<Option<S::Frame>, CaptureError> {
-        self.0.next_frame(timeout)
-    }
-
-    fn finished(&self) -> bool {
-        self.0.finished()
-    }
-
-    fn losses(&self) -> Vec<(&'static str, u64)> {
-        self.0.losses()
-    }
-
-    fn stop(&mut self) -> Result<(), CaptureError> {
-        self.0.stop()
-    }
-}
-
-/// The recorder thread: writes each frame as it arrives, logging gaps in the cameras'
-/// sequence numbers as dropped frames.
-fn write_frames(
-    writer: &mut SessionWriter,
-    rx: &crossbeam_channel::Receiver<Captured>,
-    acct: &Accounting,
-) -> Result<(), StageError> {
-    let mut gaps = [SeqGaps::default(); 2];
-    for captured in rx.iter() {
-        let (role, stamp) = match &captured {
-            Captured::Depth(f) => (CameraRole::Depth, f.stamp),
-            Captured::Color(f) => (CameraRole::Color, f.stamp),
-        };
-        let slot = usize::from(role == CameraRole::Color);
-        let missing = gaps[slot].observe(stamp.seq);
-        if missing > 0 {
-            writer.log_event(&SessionEvent::FramesDropped {
-                host_ns: stamp.host_ns,
-                role,
-                seq_from: stamp.seq - missing,
-                count: missing,
-                reason: "not delivered (camera gap or full capture queue)".to_owned(),
-            })?;
-        }
-        match &captured {
-            Captured::Depth(f) => writer.write_depth(f)?,
-            Captured::Color(f) => writer.write_color(f)?,
-        }
-        // Kept frames are counted as paired (see `RecordedCamera::from`).
-        acct.camera(role)
-            .paired
-            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    }
-    Ok(())
 }
 
 /// The rig config's calibration file, loaded and checked against the configured camera sizes
@@ -466,6 +262,59 @@ fn prepare_output(out: &Path, force: bool) -> Result<(), RecordError> {
         }
     }
     std::fs::create_dir_all(out).map_err(io)
+}
+
+#[derive(Debug, Args)]
+pub struct RecordArgs {
+    /// The rig configuration.
+    #[arg(long, value_name = "FILE")]
+    pub config: PathBuf,
+    /// The session directory to write.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Stop after this many seconds (otherwise at Ctrl-C or SIGTERM).
+    #[arg(long, value_name = "N", value_parser = parse_seconds, allow_negative_numbers = true)]
+    pub seconds: Option<f64>,
+    /// Print the summary as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// `mousepose record`.
+pub fn command(args: &RecordArgs) -> crate::app::Outcome {
+    let config = Config::load(&args.config).map_err(Failure::usage)?;
+    let stop = Shutdown::default();
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, stop.flag()).context("installing the signal handlers")?;
+    }
+    let summary = record(&config, &args.out, args.seconds, args.force, &stop).map_err(|e| {
+        let usage = matches!(e, RecordError::NotEmpty(_) | RecordError::Calibration(_));
+        Failure::classed(usage, e).context(format!("recording to {:?}", args.out))
+    })?;
+    if args.json {
+        return Ok(print_json(&summary)?);
+    }
+    let mut text = format!(
+        "recorded {:.1} s to {:?}: {} depth frames ({:.1} MB), {} colour frames ({:.1} MB), {:.2} cores\n",
+        summary.seconds,
+        summary.dir,
+        summary.depth_frames,
+        summary.depth_bytes as f64 / 1e6,
+        summary.color_frames,
+        summary.color_bytes as f64 / 1e6,
+        summary.cpu_cores
+    );
+    for (name, c) in &summary.cameras {
+        let _ = writeln!(
+            text,
+            "{name:>6}: captured {}, recorded {}, dropped {} {:?}, lost before capture {:?}",
+            c.captured, c.recorded, c.dropped_total, c.dropped, c.lost_before_capture
+        );
+    }
+    Ok(print(&text)?)
 }
 
 #[cfg(test)]

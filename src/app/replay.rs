@@ -1,0 +1,354 @@
+//! `mousepose replay`: a recorded or synthetic session (or a MoSeq recording) through the same
+//! pipeline the daemon runs, with the cameras swapped for the recording's reader.
+//!
+//! Every frame is accounted for: per camera, captured = paired + unpaired + dropped (by
+//! reason); frames lost before capture (gaps in the camera's sequence numbers, records that
+//! do not decode) are counted apart. `summary.json` holds those counts, the per-stage latency,
+//! the throughput and, for synthetic sessions, the error against the ground truth.
+
+use crate::app::{Failure, print, print_json};
+use crate::core::geometry::Rig;
+use crate::core::image::RgbImage;
+use crate::io::output::{OutputError, Staging};
+use crate::io::session::SessionSource;
+use crate::runtime::accounting::{CameraSummary, EdgeSummary};
+use crate::runtime::models::{Models, ModelsError};
+use crate::runtime::pipeline::{LatencySummary, PipelineError, StageReport};
+use crate::runtime::recording::{Recording, RecordingError};
+use crate::runtime::sink::poses::{POSES_FILE, PoseTally, PoseWriter};
+use crate::runtime::stages::PoseRecord;
+use crate::runtime::topology::{Edges, Processing, Sources, Topology, TopologyError};
+use crate::vision::segment::{Background, SegmentError, SegmenterConfig};
+use clap::Args;
+use serde::Serialize;
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::PoisonError;
+
+/// The file with the run's summary.
+pub const SUMMARY_FILE: &str = "summary.json";
+/// The picture of one frame with its skeleton.
+pub const PICTURE_FILE: &str = "frame.png";
+
+/// What to replay and how.
+#[derive(Clone, Debug)]
+pub struct ReplayOptions {
+    pub session: PathBuf,
+    pub out: PathBuf,
+    /// The models directory; `None`: the bundled defaults.
+    pub models: Option<PathBuf>,
+    pub realtime: bool,
+    /// Body-forest workers; 0: one per core.
+    pub workers: usize,
+    /// Draw every n-th frame (by depth sequence number) into `overlays/`.
+    pub overlays: Option<u64>,
+    /// A rig calibration to use instead of the one the session carries.
+    pub calibration: Option<PathBuf>,
+    pub force: bool,
+}
+
+/// Why a replay failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+    #[error("the session {0:?} has no depth frames")]
+    Empty(PathBuf),
+    #[error(transparent)]
+    Models(#[from] ModelsError),
+    #[error("cannot model the empty cage from the session's depth frames")]
+    Background(#[source] SegmentError),
+    #[error(transparent)]
+    Output(#[from] OutputError),
+    #[error("cannot write {path:?}")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Start(#[from] TopologyError),
+    #[error("the pipeline stopped")]
+    Pipeline(#[from] PipelineError),
+}
+
+/// How the pairs compare with a synthetic session's true pairs.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct PairingCheck {
+    pub truth_pairs: u64,
+    pub matched: u64,
+    pub mismatched: u64,
+}
+
+/// `summary.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReplaySummary {
+    pub session: PathBuf,
+    pub software_version: &'static str,
+    pub body_model: PathBuf,
+    /// The paw cascade, when the models directory has one.
+    pub paw_model: Option<PathBuf>,
+    pub realtime: bool,
+    pub pairs: u64,
+    pub statuses: BTreeMap<&'static str, u64>,
+    pub elapsed_s: f64,
+    pub throughput_pairs_per_s: f64,
+    pub cameras: BTreeMap<&'static str, CameraSummary>,
+    pub stages: Vec<StageReport>,
+    /// From a pair leaving the synchroniser to its row written.
+    pub end_to_end_latency: LatencySummary,
+    pub edges: BTreeMap<&'static str, EdgeSummary>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pairing: Option<PairingCheck>,
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub per_joint_error_mm: BTreeMap<&'static str, f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_error_mm: Option<f64>,
+    /// Mean error per group of joints (`body` 1-12, `limbs` 13-20, `paws` 21-24) and of the
+    /// paws the bottom camera found (`detected_paws`).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub group_error_mm: BTreeMap<&'static str, f64>,
+}
+
+/// The picture of the frame pair of `pose` (see [`crate::runtime::stages::overlay`]); `None`
+/// when its frames cannot be read again.
+fn picture(recording: &Recording, rig: &Rig, pose: &PoseRecord) -> Option<RgbImage> {
+    let depth = recording.depth_frame(pose.depth.seq)?;
+    let color = pose.color.and_then(|c| recording.color_frame(c.seq));
+    Some(crate::runtime::stages::overlay::draw(rig, &depth, color.as_ref(), pose))
+}
+
+/// Frames the background model is built from, spread over the session.
+const BACKGROUND_FRAMES: usize = 31;
+
+/// The empty cage: for a synthetic session the rendered empty cage; otherwise the per-pixel
+/// median of frames spread over the session (a mouse that moves drops out of the median, as
+/// in MoSeq's extraction).
+fn background(recording: &Recording, rig: &Rig) -> Result<Background, ReplayError> {
+    if recording.depth_count() == 0 {
+        return Err(ReplayError::Empty(recording.dir()));
+    }
+    if let Recording::Session(reader) = recording {
+        if reader.meta().source == SessionSource::Synthetic && reader.meta().rig.is_some() {
+            // The generator's empty cage is known exactly: the reference a rig records before
+            // the mouse goes in.
+            let full = crate::core::image::Region::full(&rig.depth.intrinsics);
+            let cage = crate::synth::render::Cage::new(&rig.depth).depth(full);
+            return Background::from_depth(&cage, full, &rig.depth.intrinsics, &SegmenterConfig::default())
+                .map_err(ReplayError::Background);
+        }
+    }
+    let frames = recording.sample_depth(BACKGROUND_FRAMES)?;
+    let mut intrinsics = rig.depth.intrinsics;
+    if let Some(f) = frames.first() {
+        intrinsics.width = f.width;
+        intrinsics.height = f.height;
+    }
+    Background::from_frames(&frames, &intrinsics, &SegmenterConfig::default()).map_err(ReplayError::Background)
+}
+
+/// Runs the replay and writes `poses.csv` and `summary.json` into `options.out`.
+///
+/// # Errors
+/// See [`ReplayError`]; nothing is left at `options.out` on failure.
+pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
+    let recording = Recording::open(&options.session)?;
+    let models = Models::load(options.models.as_deref())?;
+    let (body_model, paw_model) = (models.body_path(), models.paws_path());
+    let rig = match &options.calibration {
+        Some(path) => recording.calibrated_rig(path)?,
+        None => recording.rig(),
+    };
+    let background = background(&recording, &rig)?;
+    let segmenter = SegmenterConfig::default()
+        .build(background)
+        .map_err(ReplayError::Background)?
+        .with_world(rig.depth.world_from_camera);
+    let truth = recording.truth()?;
+    let staging = Staging::new(&options.out, options.force)?;
+    let truth_joints: HashMap<u64, _> = truth
+        .as_ref()
+        .map(|t| t.joints.iter().map(|(seq, _, j)| (*seq, *j)).collect())
+        .unwrap_or_default();
+    let writer =
+        PoseWriter::create(staging.path(), truth_joints, recording.depth_count() as u64 / 2).map_err(|source| {
+            ReplayError::Write {
+                path: staging.path().join(POSES_FILE),
+                source,
+            }
+        })?;
+    let tally = writer.tally();
+    let topology = Topology {
+        sources: Sources::Recording {
+            recording: &recording,
+            realtime: options.realtime,
+        },
+        sync: recording.sync_config(),
+        edges: Edges::replay(),
+        processing: Some(Processing {
+            segmenter,
+            body: models.body,
+            paws: models.paws,
+            rig,
+            workers: options.workers,
+            overlays: options.overlays,
+            poses: writer,
+        }),
+        recorder: None,
+    };
+    let finished = topology.start()?.join();
+    let stages = finished.outcome?;
+
+    let tally: PoseTally = tally.lock().unwrap_or_else(PoisonError::into_inner).clone();
+    let pairing = truth.as_ref().map(|t| {
+        let ours: HashMap<u64, Option<u64>> = tally.pairs.iter().copied().collect();
+        let matched = t.pairs.iter().filter(|(d, c)| ours.get(d) == Some(c)).count() as u64;
+        PairingCheck {
+            truth_pairs: t.pairs.len() as u64,
+            matched,
+            mismatched: t.pairs.len() as u64 - matched,
+        }
+    });
+    let summary = ReplaySummary {
+        session: options.session.clone(),
+        software_version: env!("CARGO_PKG_VERSION"),
+        body_model,
+        paw_model,
+        realtime: options.realtime,
+        pairs: tally.rows,
+        statuses: tally.statuses.clone(),
+        elapsed_s: finished.elapsed_s,
+        throughput_pairs_per_s: tally.rows as f64 / finished.elapsed_s.max(1e-9),
+        cameras: finished.cameras,
+        stages,
+        end_to_end_latency: finished.end_to_end_latency,
+        edges: finished.edges,
+        pairing,
+        per_joint_error_mm: tally.per_joint_error_mm(),
+        mean_error_mm: tally.mean_error_mm(),
+        group_error_mm: tally.group_error_mm(),
+    };
+    if let Some(pose) = &tally.snapshot {
+        let path = staging.path().join(PICTURE_FILE);
+        picture(&recording, &rig, pose)
+            .and_then(|img| img.write_png(&path).ok())
+            .ok_or_else(|| ReplayError::Write {
+                path: path.clone(),
+                source: std::io::Error::other("cannot draw or write the picture"),
+            })?;
+    }
+    let path = staging.path().join(SUMMARY_FILE);
+    let json = serde_json::to_vec_pretty(&summary).map_err(std::io::Error::from);
+    json.and_then(|j| std::fs::write(&path, j))
+        .map_err(|source| ReplayError::Write { path, source })?;
+    staging.commit()?;
+    Ok(summary)
+}
+
+/// The summary as the terminal shows it.
+pub fn summary_text(summary: &ReplaySummary, out: &Path) -> String {
+    let mut text = String::new();
+    let _ = writeln!(
+        text,
+        "{} pairs in {:.2} s ({:.0} pairs/s); poses in {:?}",
+        summary.pairs,
+        summary.elapsed_s,
+        summary.throughput_pairs_per_s,
+        out.join(POSES_FILE)
+    );
+    for (name, c) in &summary.cameras {
+        let _ = writeln!(
+            text,
+            "{name:>6}: captured {}, paired {}, unpaired {}, dropped {} {:?}, lost before capture {:?}",
+            c.captured, c.paired, c.unpaired, c.dropped_total, c.dropped, c.lost_before_capture
+        );
+    }
+    for s in &summary.stages {
+        let _ = writeln!(
+            text,
+            "{:>8}: {} in, {} out, p50 {:.2} ms, p99 {:.2} ms",
+            s.name, s.items_in, s.items_out, s.latency.p50_ms, s.latency.p99_ms
+        );
+    }
+    let _ = writeln!(
+        text,
+        "end to end: p50 {:.2} ms, p99 {:.2} ms",
+        summary.end_to_end_latency.p50_ms, summary.end_to_end_latency.p99_ms
+    );
+    if let Some(p) = &summary.pairing {
+        let _ = writeln!(text, "pairing vs truth: {} of {} pairs match", p.matched, p.truth_pairs);
+    }
+    if summary.paw_model.is_none() && summary.cameras.contains_key("color") {
+        let _ = writeln!(
+            text,
+            "no paw cascade ({}) among the models: paws and limbs are in their default configuration",
+            crate::runtime::models::PAWS_MODEL
+        );
+    }
+    if let Some(mean) = summary.mean_error_mm {
+        let _ = writeln!(text, "mean joint error vs truth: {mean:.2} mm");
+        for (group, e) in &summary.group_error_mm {
+            let _ = writeln!(text, "{group:>14}: {e:.2} mm");
+        }
+    }
+    text
+}
+
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// The session directory (written by `record`, `run` or `synth session`).
+    #[arg(value_name = "SESSION")]
+    pub session: PathBuf,
+    /// The directory to write poses.csv and summary.json into.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// The models directory (body.forest); the bundled models by default.
+    #[arg(long, value_name = "DIR")]
+    pub models: Option<PathBuf>,
+    /// Deliver the frames at the pace they were recorded instead of as fast as possible.
+    #[arg(long)]
+    pub realtime: bool,
+    /// Body-forest worker threads (0: one per core).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=64))]
+    pub workers: u32,
+    /// Draw every N-th frame (depth image with the skeleton, bottom view with the paws, side
+    /// view) into DIR/overlays/.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub overlays: Option<u64>,
+    /// A rig calibration (from `calibrate extrinsics`) to use instead of the session's own.
+    #[arg(long, value_name = "FILE")]
+    pub calibration: Option<PathBuf>,
+    /// Print the summary as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// `mousepose replay`.
+pub fn command(args: &ReplayArgs) -> crate::app::Outcome {
+    let options = ReplayOptions {
+        session: args.session.clone(),
+        out: args.out.clone(),
+        models: args.models.clone(),
+        realtime: args.realtime,
+        workers: args.workers as usize,
+        overlays: args.overlays,
+        calibration: args.calibration.clone(),
+        force: args.force,
+    };
+    let summary = replay(&options).map_err(|e| {
+        let usage = match &e {
+            ReplayError::Output(OutputError::NotEmpty(_) | OutputError::NotADirectory(_)) => true,
+            ReplayError::Recording(RecordingError::Calibration(c)) => c.is_input_problem(),
+            _ => false,
+        };
+        Failure::classed(usage, e).context(format!("replaying {:?}", args.session))
+    })?;
+    if args.json {
+        return Ok(print_json(&summary)?);
+    }
+    Ok(print(&summary_text(&summary, &args.out))?)
+}

@@ -1,0 +1,146 @@
+//! `mousepose synth dataset|session|chessboard`: rendered training data and sessions.
+
+use crate::app::progress;
+use crate::app::{Outcome, output_failure};
+use crate::app::{parse_binning, parse_fps, parse_images, parse_noise_mm, parse_seconds};
+use crate::core::frame::PixelFormat;
+use crate::core::noise::{DepthNoise, NoiseModel};
+use crate::io::output::Staging;
+use crate::synth::dataset::{DatasetSpec, write_dataset};
+use crate::synth::session::{SessionSpec, write_session};
+use anyhow::Context as _;
+use clap::{Args, Subcommand};
+use std::path::PathBuf;
+
+#[derive(Debug, Subcommand)]
+pub enum SynthCommand {
+    /// A training or test set of independent rendered instants.
+    Dataset(DatasetArgs),
+    /// A continuous behaviour sequence written as a recorded session.
+    Session(SessionArgs),
+    /// Rendered chessboard views of both cameras, for testing calibration end to end.
+    Chessboard(crate::app::calibrate::ChessboardArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct NoiseArgs {
+    /// Gaussian depth noise, standard deviation in millimetres.
+    #[arg(long = "noise-mm", value_name = "SIGMA", default_value_t = 0.0, value_parser = parse_noise_mm, allow_negative_numbers = true)]
+    noise_mm: f64,
+}
+
+#[derive(Debug, Args)]
+pub struct DatasetArgs {
+    /// The dataset directory to create.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Number of images.
+    #[arg(long, value_name = "N", value_parser = parse_images, allow_negative_numbers = true)]
+    images: u64,
+    /// Seed of the random poses, placements and noise.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    #[command(flatten)]
+    noise: NoiseArgs,
+    /// Depth camera noise model: none, structured-light or tof.
+    #[arg(long = "noise-model", value_name = "MODEL", default_value = "none")]
+    noise_model: NoiseModel,
+    /// Leave out the bottom colour views (smaller and faster, for body and part training).
+    #[arg(long)]
+    no_bottom: bool,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    force: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct SessionArgs {
+    /// The session directory to create.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Length of the session.
+    #[arg(long, value_name = "N", value_parser = parse_seconds, allow_negative_numbers = true)]
+    seconds: f64,
+    /// Frame rate of both cameras.
+    #[arg(long, value_name = "FPS", default_value_t = 30.0, value_parser = parse_fps, allow_negative_numbers = true)]
+    fps: f64,
+    /// Seed of the behaviour sequence, the clocks and the noise.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    #[command(flatten)]
+    noise: NoiseArgs,
+    /// Depth camera noise model: none, structured-light or tof.
+    #[arg(long = "noise-model", value_name = "MODEL", default_value = "structured-light")]
+    noise_model: NoiseModel,
+    /// Bin the colour camera's 1280x1024 sensor by this factor (1, 2 or 4).
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = parse_binning)]
+    color_binning: u32,
+    /// Depth camera only (the paper's single-depth-image mode).
+    #[arg(long)]
+    no_color: bool,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    force: bool,
+}
+
+/// `mousepose synth ...`.
+pub fn run(command: SynthCommand) -> Outcome {
+    match command {
+        SynthCommand::Dataset(args) => synth_dataset(&args),
+        SynthCommand::Session(args) => synth_session(&args),
+        SynthCommand::Chessboard(args) => crate::app::calibrate::synth_chessboard(&args),
+    }
+}
+
+fn synth_dataset(args: &DatasetArgs) -> Outcome {
+    let staging = Staging::new(&args.out, args.force).map_err(output_failure)?;
+    let spec = DatasetSpec {
+        count: args.images,
+        seed: args.seed,
+        noise: DepthNoise {
+            model: args.noise_model,
+            gaussian_mm: args.noise.noise_mm,
+        },
+        bottom_views: !args.no_bottom,
+    };
+    let bar = progress::bar(spec.count, "rendering");
+    let rig = crate::core::geometry::Rig::default_rig();
+    write_dataset(staging.path(), &rig, &spec, |done| bar.set_position(done))
+        .with_context(|| format!("writing dataset {:?}", args.out))?;
+    bar.finish_and_clear();
+    let out = staging.commit()?;
+    tracing::info!(message = "Dataset written.", path = %out.display(), images = spec.count);
+    Ok(())
+}
+
+fn synth_session(args: &SessionArgs) -> Outcome {
+    let staging = Staging::new(&args.out, args.force).map_err(output_failure)?;
+    let spec = SessionSpec {
+        seconds: args.seconds,
+        fps: args.fps,
+        seed: args.seed,
+        noise: DepthNoise {
+            model: args.noise_model,
+            gaussian_mm: args.noise.noise_mm,
+        },
+        color_binning: args.color_binning,
+        color_format: PixelFormat::BayerRg8,
+        color: !args.no_color,
+    };
+    let bar = progress::bar(0, "rendering");
+    let summary = write_session(staging.path(), &spec, |done, total| {
+        bar.set_length(total);
+        bar.set_position(done);
+    })
+    .with_context(|| format!("writing session {:?}", args.out))?;
+    bar.finish_and_clear();
+    let out = staging.commit()?;
+    tracing::info!(
+        message = "Session written.",
+        path = %out.display(),
+        depth_frames = summary.depth_frames,
+        color_frames = summary.color_frames,
+        preview = %out.join(crate::synth::session::PREVIEW_FILE).display(),
+    );
+    Ok(())
+}

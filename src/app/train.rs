@@ -1,0 +1,258 @@
+//! `mousepose train body|parts|paws`: forests and the paw cascade from synthetic datasets.
+
+use crate::app::progress;
+use crate::app::{Exists, Failure, Outcome, parse_subset};
+use crate::training::{self, PixelParams, Target, TrainJob, TrainProgress};
+use crate::vision::forest::discriminative::{DiscriminativeParams, Scoring};
+use crate::vision::forest::model::{self, Model, ModelKind};
+use crate::vision::forest::{Forest, TrainParams};
+use anyhow::{Context, Result};
+use clap::Args;
+use indicatif::ProgressBar;
+use std::path::PathBuf;
+
+/// What `train` and `eval` work on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModelTarget {
+    /// The body forest: joints 1-12 from the top depth image.
+    Body,
+    /// The part forest: six body-part labels per depth pixel.
+    Parts,
+    /// The paw detector: a boosted cascade of Haar features on the bottom colour view,
+    /// stored as OpenCV cascade XML.
+    Paws,
+}
+
+#[derive(Debug, Args)]
+pub struct TrainArgs {
+    /// Which model.
+    #[arg(value_enum)]
+    pub target: ModelTarget,
+    /// The training dataset (D_t).
+    #[arg(long, value_name = "DIR")]
+    pub data: PathBuf,
+    /// The model file to write.
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// Trees in the forest.
+    #[arg(long, default_value_t = 7, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub trees: u32,
+    /// Maximum tree depth (L).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=40))]
+    pub depth: u32,
+    /// Random tests per split node (m).
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub tests: u32,
+    /// Fewest samples to split a node (l_n).
+    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(2..=1_000_000))]
+    pub leaf: u32,
+    /// A second dataset (D_d) for the paper's discriminative training of the trained forest.
+    #[arg(long, value_name = "DIR")]
+    pub discriminative: Option<PathBuf>,
+    /// Refine this trained baseline (trained on --data) instead of training one first.
+    #[arg(long, value_name = "FILE", requires = "discriminative")]
+    pub from: Option<PathBuf>,
+    /// Passes of discriminative training.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=20))]
+    pub iterations: u32,
+    /// Tree level where discriminative training starts.
+    #[arg(long, default_value_t = 0)]
+    pub start_level: u32,
+    /// Fraction of D_d each tree sees (D'_d); it should hold about as many pixels as D_t, or
+    /// the shrink rule coarsens the trees.
+    #[arg(long, default_value_t = 0.5, value_parser = parse_subset)]
+    pub subset: f64,
+    /// In discriminative training, refit the leaves that stay leaves to D'_d instead of
+    /// keeping what D_t taught them.
+    #[arg(long)]
+    pub refit_leaves: bool,
+    /// Mouse pixels drawn per training image.
+    #[arg(long, default_value_t = 150, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub pixels: u32,
+    /// Seed of the pixel draws and the random tests (paws: of the augmentation and the
+    /// negatives' draws).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Cascade stages at most (paws).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=50))]
+    pub stages: u32,
+    /// Replace the model file if it exists.
+    #[arg(long)]
+    pub force: bool,
+}
+
+struct Bar(ProgressBar);
+
+impl TrainProgress for Bar {
+    fn stage(&self, what: &str, total: u64) {
+        self.0.set_message(what.to_owned());
+        self.0.set_length(total);
+        self.0.set_position(0);
+    }
+
+    fn tick(&self) {
+        self.0.inc(1);
+    }
+}
+
+/// `mousepose train body|parts|paws`.
+pub fn run(args: &TrainArgs) -> Outcome {
+    if args.out.exists() && !args.force {
+        return Err(Failure::usage(Exists(args.out.clone())));
+    }
+    if args.target == ModelTarget::Paws {
+        return Ok(train_paws(args)?);
+    }
+    let params = TrainParams {
+        trees: args.trees as usize,
+        max_depth: args.depth,
+        tests: args.tests as usize,
+        min_leaf: args.leaf as usize,
+        seed: args.seed,
+    };
+    let job = TrainJob {
+        target: match args.target {
+            ModelTarget::Body => Target::Body,
+            ModelTarget::Parts | ModelTarget::Paws => Target::Parts,
+        },
+        train: &args.data,
+        discriminative: args.discriminative.as_deref(),
+        params,
+        disc: DiscriminativeParams {
+            tests: params.tests,
+            min_leaf: params.min_leaf,
+            start_level: args.start_level,
+            iterations: args.iterations as usize,
+            subset: args.subset,
+            refit_leaves: args.refit_leaves,
+            scoring: Scoring::SubtreeError,
+            max_depth: params.max_depth,
+            seed: args.seed ^ 0xD15C,
+        },
+        pixels: PixelParams {
+            per_image: args.pixels as usize,
+            thresholds: 12,
+            seed: args.seed,
+        },
+        from: match &args.from {
+            Some(path) => {
+                let kind = match args.target {
+                    ModelTarget::Body => ModelKind::Body,
+                    ModelTarget::Parts | ModelTarget::Paws => ModelKind::Parts,
+                };
+                Some(model::load(path, Some(kind))?)
+            }
+            None => None,
+        },
+    };
+    let bar = Bar(progress::bar(0, "loading"));
+    let (model, passes) = training::train(&job, &bar).context("training")?;
+    bar.0.finish_and_clear();
+    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
+    }
+    model::save(&model, &args.out)?;
+    let info = model.info();
+    let (trees, nodes, leaves) = match &model {
+        Model::Body(_, f) => counts(f),
+        Model::Parts(_, f) => counts(f),
+    };
+    let changed: usize = passes.iter().map(|p| p.tests_changed).sum();
+    tracing::info!(
+        message = "Model written.",
+        path = %args.out.display(),
+        kind = info.kind.name(),
+        trees,
+        nodes,
+        leaves,
+        seconds = format!("{:.0}", info.training_seconds),
+        discriminative_tests_changed = changed,
+    );
+    Ok(())
+}
+
+fn counts<F, L>(f: &Forest<F, L>) -> (usize, usize, usize) {
+    (
+        f.trees.len(),
+        f.trees.iter().map(|t| t.nodes.len()).sum(),
+        f.trees.iter().map(|t| t.leaves.len()).sum(),
+    )
+}
+
+/// The training parameters `train paws` uses besides its arguments.
+fn paw_params(args: &TrainArgs) -> crate::vision::paws::train::TrainParams {
+    crate::vision::paws::train::TrainParams {
+        stages: args.stages as usize,
+        seed: args.seed,
+        ..crate::vision::paws::train::TrainParams::default()
+    }
+}
+
+/// Augmented copies of each paw window besides the plain one.
+const PAW_AUGMENT: usize = 3;
+
+/// `mousepose train paws`.
+fn train_paws(args: &TrainArgs) -> Result<()> {
+    use crate::training::paws_data as data;
+    use crate::vision::paws::{WINDOW_PX, train, xml};
+    let set = data::load(
+        &args.data,
+        data::CutParams {
+            width: WINDOW_PX as usize,
+            height: WINDOW_PX as usize,
+            augment: PAW_AUGMENT,
+            seed: args.seed,
+        },
+    )
+    .with_context(|| format!("reading training dataset {:?}", args.data))?;
+    tracing::info!(
+        message = "Training windows cut.",
+        paws = set.paws,
+        positives = set.positive_count(),
+        backgrounds = set.backgrounds.len(),
+    );
+    let params = paw_params(args);
+    let bar = progress::bar(params.stages as u64, "stages");
+    let started = std::time::Instant::now();
+    let trained = train::train(&set, &params, &mut |r| {
+        bar.inc(1);
+        bar.set_message(format!("fa {:.4}", r.false_alarm));
+        tracing::debug!(
+            message = "Stage trained.",
+            stage = r.stage,
+            positives = r.positives,
+            negatives = r.negatives,
+            weak = r.weak,
+            hit_rate = r.hit_rate,
+            false_alarm = r.false_alarm,
+            windows_scanned = r.windows_scanned,
+            windows_accepted = r.windows_accepted,
+        );
+    })
+    .context("training the paw cascade")?;
+    bar.finish_and_clear();
+    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
+    }
+    xml::save(&trained.cascade, &args.out)?;
+    let weak: usize = trained.cascade.stages.iter().map(|s| s.weak.len()).sum();
+    if let train::StopReason::NoNegatives { found, scanned } = &trained.stop {
+        tracing::info!(
+            message = "Training stopped early: the backgrounds no longer yield enough windows the cascade accepts.",
+            found,
+            scanned,
+        );
+    }
+    let last = trained.stages.last();
+    tracing::info!(
+        message = "Paw cascade written.",
+        path = %args.out.display(),
+        stages = trained.cascade.stages.len(),
+        weak,
+        features = trained.cascade.features.len(),
+        flat_positives = trained.flat_positives,
+        last_acceptance = last.map_or(0.0, |r| r.windows_accepted as f64 / r.windows_scanned.max(1) as f64),
+        seconds = format!("{:.0}", started.elapsed().as_secs_f64()),
+    );
+    Ok(())
+}

@@ -1,0 +1,128 @@
+//! The models a pipeline runs: the body forest and the paw cascade of a models directory, and
+//! where the bundled ones are.
+
+use crate::vision::forest::infer::{BodyEstimator, VoteSettings};
+use crate::vision::forest::model::{self, Model, ModelError, ModelKind};
+use crate::vision::paws::{PawDetector, PawError};
+use std::path::{Path, PathBuf};
+
+/// The body forest's file name in a models directory.
+pub const BODY_MODEL: &str = "body.forest";
+/// The paw cascade's file name in a models directory.
+pub const PAWS_MODEL: &str = "paws.xml";
+
+/// Why the models cannot be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelsError {
+    #[error("no models directory given and no bundled models found (looked in {0})")]
+    NotFound(String),
+    #[error("cannot load the model {path:?}")]
+    Body {
+        path: PathBuf,
+        #[source]
+        source: ModelError,
+    },
+    #[error("cannot load the paw cascade")]
+    Paws(#[source] PawError),
+}
+
+/// Where the bundled models are: `$MOUSEPOSE_MODELS`, then beside an installed binary
+/// (`<prefix>/share/mousepose/models`), then the source checkout the binary was built from.
+///
+/// # Errors
+/// None of them holds a body forest.
+pub fn default_models_dir() -> Result<PathBuf, ModelsError> {
+    let mut candidates = Vec::new();
+    if let Some(dir) = std::env::var_os("MOUSEPOSE_MODELS") {
+        candidates.push(PathBuf::from(dir));
+    }
+    if let Ok(exe) = std::env::current_exe() {
+        if let Some(prefix) = exe.parent().and_then(Path::parent) {
+            candidates.push(prefix.join("share/mousepose/models"));
+        }
+    }
+    candidates.push(Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/models"));
+    candidates
+        .iter()
+        .find(|d| d.join(BODY_MODEL).is_file())
+        .cloned()
+        .ok_or_else(|| {
+            ModelsError::NotFound(
+                candidates
+                    .iter()
+                    .map(|d| format!("{d:?}"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            )
+        })
+}
+
+/// The models of a directory, loaded.
+#[derive(Debug)]
+pub struct Models {
+    pub dir: PathBuf,
+    pub body: BodyEstimator,
+    /// `None` when the directory has no paw cascade, so that older model directories still
+    /// work (the limbs then take their default configuration).
+    pub paws: Option<PawDetector>,
+}
+
+impl Models {
+    /// Loads the models of `dir`, or of the bundled directory when `None`.
+    ///
+    /// # Errors
+    /// No bundled models, or a model file missing, damaged or of the wrong kind.
+    pub fn load(dir: Option<&Path>) -> Result<Self, ModelsError> {
+        let dir = match dir {
+            Some(dir) => dir.to_path_buf(),
+            None => default_models_dir()?,
+        };
+        Ok(Self {
+            body: load_body(&dir)?,
+            paws: load_paws(&dir)?,
+            dir,
+        })
+    }
+
+    /// The body forest's file.
+    pub fn body_path(&self) -> PathBuf {
+        self.dir.join(BODY_MODEL)
+    }
+
+    /// The paw cascade's file, when there is one.
+    pub fn paws_path(&self) -> Option<PathBuf> {
+        self.paws.is_some().then(|| self.dir.join(PAWS_MODEL))
+    }
+}
+
+/// Loads the body forest of a models directory.
+///
+/// # Errors
+/// The file is missing, damaged, or not a body forest.
+pub fn load_body(models: &Path) -> Result<BodyEstimator, ModelsError> {
+    let path = models.join(BODY_MODEL);
+    match model::load(&path, Some(ModelKind::Body)) {
+        Ok(Model::Body(_, forest)) => Ok(BodyEstimator::new(forest, VoteSettings::default())),
+        Ok(Model::Parts(..)) => Err(ModelsError::Body {
+            source: ModelError::WrongKind {
+                path: path.clone(),
+                found: "parts",
+                expected: "body",
+            },
+            path,
+        }),
+        Err(source) => Err(ModelsError::Body { path, source }),
+    }
+}
+
+/// Loads the paw cascade of a models directory; `None` when the directory has none.
+///
+/// # Errors
+/// The file is there but is not a cascade we can run.
+pub fn load_paws(models: &Path) -> Result<Option<PawDetector>, ModelsError> {
+    let path = models.join(PAWS_MODEL);
+    if !path.exists() {
+        return Ok(None);
+    }
+    PawDetector::load(&path).map(Some).map_err(ModelsError::Paws)
+}
