@@ -7,6 +7,7 @@ mod capture_openni;
 mod capture_v4l2;
 mod cli;
 mod forest;
+mod packaging;
 mod paws;
 mod record;
 mod replay;
