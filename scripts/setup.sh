@@ -14,8 +14,10 @@ packages=(
   libopencv-dev opencv-data
   # video export and import
   ffmpeg
-  # unit and rules checks
+  # unit and rules checks (scripts/check-units)
   systemd udev
+  # the Debian package (scripts/package: dpkg-shlibdeps, strip)
+  dpkg-dev binutils
 )
 
 missing=()
