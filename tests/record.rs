@@ -30,7 +30,7 @@ fn depth_and_gige_colour_are_recorded_with_their_metadata() {
     let summary = record(&config(&text), &out, Some(1.5), false, &Shutdown::default()).unwrap();
     for (name, c) in &summary.cameras {
         assert!(c.captured >= 20, "{name}: {c:?}");
-        assert_eq!(c.captured, c.recorded + c.dropped_total, "{name}: {c:?}");
+        assert!(c.recording_adds_up(), "{name}: {c:?}");
     }
     let r = SessionReader::open(&out).unwrap();
     assert!(r.complete());

@@ -6,13 +6,14 @@
 //! to its last complete frame (without the `session_ended` event that marks it complete).
 
 use crate::app::{Failure, parse_seconds, print, print_json};
+use crate::io::output::Staging;
 use crate::io::session::{CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionWriter};
 use crate::runtime::accounting::CameraSummary;
-use crate::runtime::capture::rig::{open_color, open_depth};
+use crate::runtime::capture::rig::{Started, open_color, open_depth};
 use crate::runtime::capture::{CaptureError, Clock, FrameSource};
 use crate::runtime::config::{ColorCamera, Config, DepthCamera};
 use crate::runtime::pipeline::{PipelineError, Shutdown};
-use crate::runtime::topology::{Edges, Sources, Topology, TopologyError};
+use crate::runtime::topology::{Edges, Epochs, Sources, Topology, TopologyError};
 use crate::vision::calibrate::RigCalibration;
 use anyhow::Context as _;
 use clap::Args;
@@ -31,6 +32,8 @@ pub enum RecordError {
         #[source]
         source: CaptureError,
     },
+    #[error("a recording lasts more than 0 and at most 86400 seconds, not {0}")]
+    Seconds(f64),
     #[error("the output {0:?} exists and is not empty (use --force to replace it)")]
     NotEmpty(PathBuf),
     #[error("cannot create the output {path:?}")]
@@ -47,31 +50,10 @@ pub enum RecordError {
     RecorderEnded,
     #[error("recording stopped")]
     Pipeline(#[from] PipelineError),
+    #[error(transparent)]
+    Staging(#[from] crate::io::output::OutputError),
     #[error("cannot use the rig's calibration")]
     Calibration(#[from] crate::vision::calibrate::CalibrationError),
-}
-
-/// One camera of a recording. `captured = recorded + dropped_total`.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct RecordedCamera {
-    pub captured: u64,
-    pub recorded: u64,
-    pub dropped: BTreeMap<String, u64>,
-    pub dropped_total: u64,
-    pub lost_before_capture: BTreeMap<String, u64>,
-}
-
-impl From<CameraSummary> for RecordedCamera {
-    /// The recorder counts each frame written as "paired" (kept).
-    fn from(c: CameraSummary) -> Self {
-        Self {
-            captured: c.captured,
-            recorded: c.paired,
-            dropped: c.dropped,
-            dropped_total: c.dropped_total,
-            lost_before_capture: c.lost_before_capture,
-        }
-    }
 }
 
 /// What a recording wrote, per camera.
@@ -79,8 +61,8 @@ impl From<CameraSummary> for RecordedCamera {
 pub struct RecordSummary {
     pub dir: PathBuf,
     pub seconds: f64,
-    /// Per camera: captured = recorded + dropped.
-    pub cameras: BTreeMap<&'static str, RecordedCamera>,
+    /// Per camera: captured = recorded + not recorded.
+    pub cameras: BTreeMap<&'static str, CameraSummary>,
     pub depth_frames: u64,
     pub color_frames: u64,
     pub depth_bytes: u64,
@@ -121,8 +103,15 @@ pub fn record(
     force: bool,
     stop: &Shutdown,
 ) -> Result<RecordSummary, RecordError> {
+    let limit = match seconds {
+        Some(s) if !(s > 0.0 && s <= 86_400.0) => return Err(RecordError::Seconds(s)),
+        s => s.map(Duration::from_secs_f64),
+    };
     let calibration = load_calibration(config)?;
-    prepare_output(out, force)?;
+    // A session replaced with --force is written beside it and moved into place only once
+    // frames were recorded: a camera that fails to open leaves the old session as it was.
+    let staging = prepare_output(out, force)?;
+    let dir = staging.as_ref().map_or(out, Staging::path);
     let mut depth = open_depth(&config.depth);
     let color = config
         .color
@@ -151,7 +140,7 @@ pub fn record(
         calibration.check_matches(&meta)?;
         meta.rig = Some(calibration.rig());
     }
-    let mut writer = SessionWriter::create(out, &meta)?;
+    let mut writer = SessionWriter::create(dir, &meta)?;
     let host_ns = clock.now_ns();
     writer.log_event(&SessionEvent::SessionStarted { host_ns })?;
     for c in &meta.cameras {
@@ -165,8 +154,9 @@ pub fn record(
 
     let topology = Topology {
         sources: Sources::Cameras {
-            depth: Box::new(depth),
-            color: color.map(Box::new),
+            depth: Box::new(Started(depth)),
+            color: color.map(|c| Box::new(c) as Box<dyn FrameSource<Frame = _>>),
+            epochs: Epochs::default(),
         },
         sync: config.sync,
         edges: Edges {
@@ -174,13 +164,12 @@ pub fn record(
             stage: config.stage_edge,
         },
         processing: None,
-        recorder: Some(writer),
+        recorder: Some(Box::new(writer)),
     };
     let running = topology.start()?;
     let shutdown = running.shutdown();
     let start = Instant::now();
     let cpu0 = crate::runtime::capture::clock::process_cpu_s();
-    let limit = seconds.map(Duration::from_secs_f64);
     while !stop.requested() && !shutdown.requested() && limit.is_none_or(|l| start.elapsed() < l) {
         std::thread::sleep(Duration::from_millis(20));
     }
@@ -189,33 +178,34 @@ pub fn record(
     let elapsed = start.elapsed().as_secs_f64();
     let cpu = crate::runtime::capture::clock::process_cpu_s() - cpu0;
     let joined = finished.outcome;
-    let cams: BTreeMap<&'static str, RecordedCamera> = finished
-        .cameras
-        .into_iter()
-        .map(|(name, c)| (name, RecordedCamera::from(c)))
-        .collect();
+    let cams = finished.cameras;
     let Some(mut writer) = finished.recorder else {
         joined?;
         return Err(RecordError::RecorderEnded);
     };
     for (role, c) in &cams {
         let lost: Vec<String> = c.lost_before_capture.iter().map(|(k, v)| format!("{k} {v}")).collect();
-        let dropped: Vec<String> = c.dropped.iter().map(|(k, v)| format!("{k} {v}")).collect();
+        let dropped: Vec<String> = c.not_recorded.iter().map(|(k, v)| format!("{k} {v}")).collect();
         writer.log_event(&SessionEvent::Note {
             host_ns: clock.now_ns(),
             message: format!(
-                "{role}: captured {}, recorded {}, dropped [{}], lost before capture [{}]",
+                "{role}: captured {}, recorded {}, not recorded [{}], lost before capture [{}]",
                 c.captured,
-                c.recorded,
+                c.recorded.unwrap_or(0),
                 dropped.join(", "),
                 lost.join(", ")
             ),
         })?;
     }
+    let finished = writer.finish();
+    // What was recorded is kept even when the run failed.
+    if let Some(staging) = staging {
+        staging.commit()?;
+    }
     joined?;
-    let summary = writer.finish()?;
+    let summary = finished?;
     Ok(RecordSummary {
-        dir: summary.dir,
+        dir: out.to_owned(),
         seconds: elapsed,
         cameras: cams,
         depth_frames: summary.depth_frames,
@@ -247,7 +237,10 @@ fn load_calibration(config: &Config) -> Result<Option<RigCalibration>, RecordErr
     Ok(Some(calibration))
 }
 
-fn prepare_output(out: &Path, force: bool) -> Result<(), RecordError> {
+/// Makes `out` ready: an absent or empty directory is written in place (so that a recorder
+/// killed at any moment leaves its frames where the user looks); one to replace (`force`) gets
+/// a staging directory beside it.
+fn prepare_output(out: &Path, force: bool) -> Result<Option<Staging>, RecordError> {
     let io = |source| RecordError::Output {
         path: out.to_owned(),
         source,
@@ -258,10 +251,11 @@ fn prepare_output(out: &Path, force: bool) -> Result<(), RecordError> {
             if !force {
                 return Err(RecordError::NotEmpty(out.to_owned()));
             }
-            std::fs::remove_dir_all(out).map_err(io)?;
+            return Ok(Some(Staging::new(out, true)?));
         }
     }
-    std::fs::create_dir_all(out).map_err(io)
+    std::fs::create_dir_all(out).map_err(io)?;
+    Ok(None)
 }
 
 #[derive(Debug, Args)]
@@ -291,7 +285,10 @@ pub fn command(args: &RecordArgs) -> crate::app::Outcome {
         signal_hook::flag::register(signal, stop.flag()).context("installing the signal handlers")?;
     }
     let summary = record(&config, &args.out, args.seconds, args.force, &stop).map_err(|e| {
-        let usage = matches!(e, RecordError::NotEmpty(_) | RecordError::Calibration(_));
+        let usage = matches!(
+            e,
+            RecordError::NotEmpty(_) | RecordError::Calibration(_) | RecordError::Seconds(_)
+        );
         Failure::classed(usage, e).context(format!("recording to {:?}", args.out))
     })?;
     if args.json {
@@ -310,8 +307,12 @@ pub fn command(args: &RecordArgs) -> crate::app::Outcome {
     for (name, c) in &summary.cameras {
         let _ = writeln!(
             text,
-            "{name:>6}: captured {}, recorded {}, dropped {} {:?}, lost before capture {:?}",
-            c.captured, c.recorded, c.dropped_total, c.dropped, c.lost_before_capture
+            "{name:>6}: captured {}, recorded {}, not recorded {} {:?}, lost before capture {:?}",
+            c.captured,
+            c.recorded.unwrap_or(0),
+            c.not_recorded_total,
+            c.not_recorded,
+            c.lost_before_capture
         );
     }
     Ok(print(&text)?)

@@ -193,7 +193,7 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
             rig,
             workers: options.workers,
             overlays: options.overlays,
-            poses: writer,
+            poses: Box::new(writer),
         }),
         recorder: None,
     };

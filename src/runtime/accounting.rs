@@ -1,5 +1,6 @@
-//! What became of every frame, per camera: captured = paired + unpaired + dropped (by reason);
-//! frames lost before capture (gaps in the camera's frame counter, damaged buffers or records)
+//! What became of every frame, per camera: on the processing branch captured = paired +
+//! unpaired + dropped (by reason); on the recorder branch captured = recorded + not recorded
+//! (by reason); frames lost before capture (gaps in the camera's frame counter, damaged buffers or records)
 //! are counted apart. The capture threads, the edges and the sync thread count into one
 //! [`Accounting`]; summaries read it as [`CameraSummary`].
 
@@ -21,6 +22,11 @@ pub struct CameraCounters {
     pub unpaired: AtomicU64,
     /// Delivered but not processed, by reason.
     pub dropped: Mutex<BTreeMap<String, u64>>,
+    /// Written by the recorder.
+    pub recorded: AtomicU64,
+    /// Delivered but not written by the recorder, by reason (its queue full, disk low, a
+    /// write error).
+    pub not_recorded: Mutex<BTreeMap<String, u64>>,
     /// Never delivered, by reason (`camera_gap`: missing sequence numbers; the source's own
     /// losses such as damaged buffers or records).
     pub lost: Mutex<BTreeMap<String, u64>>,
@@ -52,7 +58,9 @@ impl Accounting {
     }
 }
 
-/// One camera in a summary. `captured = paired + unpaired + dropped_total`.
+/// One camera in a run's report (`record`, `replay` and `run` alike). With processing,
+/// `captured = paired + unpaired + dropped_total`; with a recorder,
+/// `captured = recorded + not_recorded_total`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct CameraSummary {
     pub captured: u64,
@@ -61,24 +69,42 @@ pub struct CameraSummary {
     pub dropped: BTreeMap<String, u64>,
     pub dropped_total: u64,
     pub lost_before_capture: BTreeMap<String, u64>,
+    /// Frames the recorder wrote, when there was one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub recorded: Option<u64>,
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub not_recorded: BTreeMap<String, u64>,
+    pub not_recorded_total: u64,
 }
 
 impl CameraSummary {
-    pub fn of(c: &CameraCounters) -> Self {
-        let dropped = c.dropped.lock().unwrap_or_else(PoisonError::into_inner).clone();
+    /// The counters of a run with or without processing and a recorder.
+    pub fn of(c: &CameraCounters, processing: bool, recorder: bool) -> Self {
+        let read = |m: &Mutex<BTreeMap<String, u64>>| m.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        let dropped = if processing { read(&c.dropped) } else { BTreeMap::new() };
+        let not_recorded = if recorder { read(&c.not_recorded) } else { BTreeMap::new() };
         Self {
             captured: c.captured.load(Ordering::Relaxed),
             paired: c.paired.load(Ordering::Relaxed),
             unpaired: c.unpaired.load(Ordering::Relaxed),
             dropped_total: dropped.values().sum(),
             dropped,
-            lost_before_capture: c.lost.lock().unwrap_or_else(PoisonError::into_inner).clone(),
+            lost_before_capture: read(&c.lost),
+            recorded: recorder.then(|| c.recorded.load(Ordering::Relaxed)),
+            not_recorded_total: not_recorded.values().sum(),
+            not_recorded,
         }
     }
 
-    /// Whether every captured frame is accounted for.
+    /// Whether every captured frame is accounted for on the processing branch.
     pub fn adds_up(&self) -> bool {
         self.captured == self.paired + self.unpaired + self.dropped_total
+    }
+
+    /// Whether every captured frame is accounted for on the recorder branch.
+    pub fn recording_adds_up(&self) -> bool {
+        self.recorded
+            .is_some_and(|r| self.captured == r + self.not_recorded_total)
     }
 }
 

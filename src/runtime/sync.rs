@@ -271,6 +271,21 @@ impl Synchronizer {
         self.decide(out, false);
     }
 
+    /// Forgets what was learnt of a camera's clock, after it was reopened: its device clock
+    /// and frame counter may start again from anywhere. Frames of it still pending stay.
+    pub fn restart(&mut self, role: Role) {
+        match role {
+            Role::Depth => {
+                self.depth_clock = ClockModel::default();
+                self.last_depth = None;
+            }
+            Role::Color => {
+                self.color_clock = ClockModel::default();
+                self.last_color = None;
+            }
+        }
+    }
+
     /// Emits everything still pending (end of input): depth frames with the best partner they
     /// have, then the colour frames left over.
     pub fn flush(&mut self, out: &mut Vec<SyncOutput>) {
@@ -634,5 +649,34 @@ mod tests {
         let want = (t as f64 * 50e-6) as i64 + 2_000_000;
         let got = m.offset_ns(t).unwrap();
         assert!((got - want).abs() < 200_000, "offset {got} vs {want}");
+    }
+
+    #[test]
+    fn a_reopened_camera_whose_clock_starts_again_pairs_after_a_restart() {
+        let config = SyncConfig::default();
+        let mut sync = Synchronizer::new(config);
+        let mut out = Vec::new();
+        let stamp = |seq: u64, device_ms: u64, host_ms: u64| Stamp {
+            seq,
+            device_ns: device_ms * 1_000_000,
+            host_ns: host_ms * 1_000_000,
+        };
+        for k in 0..30u64 {
+            sync.push_depth(depth(stamp(k, 10_000 + 33 * k, 1_000 + 33 * k)), &mut out);
+            sync.push_color(color(stamp(k, 50_000 + 33 * k, 1_001 + 33 * k)), &mut out);
+        }
+        // The colour camera comes back counting from 0 with its clock at 0.
+        sync.restart(Role::Color);
+        out.clear();
+        for k in 30..60u64 {
+            sync.push_depth(depth(stamp(k, 10_000 + 33 * k, 1_000 + 33 * k)), &mut out);
+            sync.push_color(color(stamp(k - 30, 33 * (k - 30), 1_001 + 33 * k)), &mut out);
+        }
+        assert!(!out.iter().any(|o| matches!(o, SyncOutput::Rejected { .. })));
+        let paired = out
+            .iter()
+            .filter(|o| matches!(o, SyncOutput::Pair(p) if p.color.is_some()))
+            .count();
+        assert!(paired >= 25, "{paired} pairs after the restart");
     }
 }

@@ -15,23 +15,21 @@
 //! deliver and the gaps in their frame counters, the edges what they drop, the sync thread
 //! what it pairs, leaves unpaired or rejects.
 
-use crate::core::frame::FramePair;
+use crate::core::frame::{ColorFrame, DepthFrame, FramePair};
 use crate::core::geometry::Rig;
-use crate::io::session::{CameraRole, SessionWriter};
+use crate::io::session::CameraRole;
 use crate::runtime::accounting::{Accounting, CameraSummary, EdgeSummary, bump};
-use crate::runtime::capture::openni::OpenNiDepth;
-use crate::runtime::capture::rig::{ColorSource, Started};
 use crate::runtime::capture::session::SessionPlayer;
 use crate::runtime::capture::{Captured, Clock, FrameSource, SeqGaps, Stamped};
 use crate::runtime::pipeline::{
-    EdgeConfig, EdgeSender, EdgeStats, Histogram, LatencySummary, PipelineError, Runner, Sent, Shutdown, StageError,
-    StageReport, Tracked, edge,
+    EdgeConfig, EdgeSender, EdgeStats, Histogram, LatencySummary, PipelineError, Runner, Sent, Shutdown, Sink,
+    StageError, StageReport, Tracked, edge,
 };
 use crate::runtime::recording::{Recording, RecordingError};
-use crate::runtime::sink::poses::PoseWriter;
-use crate::runtime::sink::recorder::write_frames;
+use crate::runtime::sink::recorder::{FrameRecorder, write_frames};
 use crate::runtime::stages::body::{BodyStage, PIPELINE_VOTE_BUDGET};
 use crate::runtime::stages::fuse::FuseStage;
+use crate::runtime::stages::Fused;
 use crate::runtime::stages::paws::PawStage;
 use crate::runtime::stages::segment::SegmentStage;
 use crate::runtime::sync::{Role, SyncConfig, SyncOutput, Synchronizer};
@@ -42,21 +40,27 @@ use crate::vision::segment::Segmenter;
 use crossbeam_channel::Receiver;
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 /// Where the frames come from.
 #[derive(Debug)]
 pub enum Sources<'a> {
-    /// The rig's cameras: the depth camera already started (so its metadata is known), the
-    /// colour camera opened.
+    /// The rig's cameras: for `record` the depth camera already started (so its metadata is
+    /// known) and the colour camera opened; for `run` both supervised.
     Cameras {
-        depth: Box<OpenNiDepth>,
-        color: Option<Box<ColorSource>>,
+        depth: Box<dyn FrameSource<Frame = DepthFrame>>,
+        color: Option<Box<dyn FrameSource<Frame = ColorFrame>>>,
+        /// Per camera (depth, colour): goes up each time the camera is reopened, so that the
+        /// synchroniser learns its clock again (see `capture::supervise`).
+        epochs: Epochs,
     },
     /// A recording read back: as fast as the pipeline takes it, or at its recorded pace.
     Recording { recording: &'a Recording, realtime: bool },
 }
+
+/// Reopen counters of the two cameras (depth, colour); see [`Sources::Cameras`].
+pub type Epochs = [Arc<AtomicU64>; 2];
 
 /// The sizes and policies of the edges.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -88,7 +92,8 @@ pub struct Processing {
     pub workers: usize,
     /// Draw every n-th frame (by depth sequence number) into the pose writer's `overlays/`.
     pub overlays: Option<u64>,
-    pub poses: PoseWriter,
+    /// Where the poses go: `poses.csv` of one directory, or chunk after chunk.
+    pub poses: Box<dyn Sink<In = Fused>>,
 }
 
 /// A pipeline to start.
@@ -100,7 +105,7 @@ pub struct Topology<'a> {
     /// The processing branch; `None` to only record.
     pub processing: Option<Processing>,
     /// The lossless recorder branch, fed straight from the capture threads.
-    pub recorder: Option<SessionWriter>,
+    pub recorder: Option<Box<dyn FrameRecorder>>,
 }
 
 /// Why a pipeline could not start.
@@ -118,10 +123,12 @@ pub struct Running {
     runner: Runner,
     acct: Arc<Accounting>,
     color: bool,
+    /// Whether the run processes frames, and whether it records them.
+    branches: (bool, bool),
     started: Instant,
     edges: Vec<(&'static str, EdgeConfig, Arc<EdgeStats>)>,
     end_to_end: Arc<Histogram>,
-    recorder: Option<Receiver<SessionWriter>>,
+    recorder: Option<Receiver<Box<dyn FrameRecorder>>>,
 }
 
 /// What a finished pipeline did.
@@ -135,12 +142,13 @@ pub struct Finished {
     pub end_to_end_latency: LatencySummary,
     pub edges: BTreeMap<&'static str, EdgeSummary>,
     pub elapsed_s: f64,
-    /// The recorder's writer, handed back to be finished.
-    pub recorder: Option<SessionWriter>,
+    /// The recorder, handed back to be finished.
+    pub recorder: Option<Box<dyn FrameRecorder>>,
 }
 
-/// One capture thread's outputs: each edge, and the reason a frame it drops is counted under.
-type Outputs = Vec<(EdgeSender<Captured>, &'static str)>;
+/// One capture thread's outputs: each edge, and whether it feeds the recorder (whose drops
+/// are counted as not recorded) rather than processing (dropped).
+type Outputs = Vec<(EdgeSender<Captured>, bool)>;
 
 impl Topology<'_> {
     /// Starts every thread, sources first.
@@ -163,35 +171,37 @@ impl Topology<'_> {
         let mut edge_stats = Vec::new();
         let mut outputs: Outputs = Vec::new();
         let mut recorder_done = None;
+        let branches = (processing.is_some(), recorder.is_some());
 
         let mut processing_input = None;
         if processing.is_some() {
             let (tx, rx, stats) = edge::<Captured>(edges.capture);
             edge_stats.push(("capture", edges.capture, stats));
-            outputs.push((tx, "queue_full"));
+            outputs.push((tx, false));
             processing_input = Some(rx);
         }
         let mut recorder_branch = None;
         if let Some(writer) = recorder {
             let (tx, rx, stats) = edge::<Captured>(edges.capture);
-            let reason = if processing.is_some() {
-                edge_stats.push(("recorder", edges.capture, stats));
-                "recorder_queue_full"
-            } else {
-                "queue_full"
-            };
-            outputs.push((tx, reason));
+            edge_stats.push(("recorder", edges.capture, stats));
+            outputs.push((tx, true));
             recorder_branch = Some((writer, rx));
         }
 
+        let mut epochs = Epochs::default();
         let color = match sources {
-            Sources::Cameras { depth, color } => {
+            Sources::Cameras {
+                depth,
+                color,
+                epochs: reopened,
+            } => {
+                epochs = reopened;
                 let has_color = color.is_some();
                 let clock = Clock::Monotonic;
                 spawn_source(
                     &mut runner,
                     "cap-depth",
-                    Started(*depth),
+                    depth,
                     &clock,
                     Captured::Depth,
                     &outputs,
@@ -202,7 +212,7 @@ impl Topology<'_> {
                     spawn_source(
                         &mut runner,
                         "cap-color",
-                        *color,
+                        color,
                         &clock,
                         Captured::Color,
                         &outputs,
@@ -235,7 +245,7 @@ impl Topology<'_> {
             recorder_done = Some(done_rx);
             runner
                 .spawn("recorder", move || {
-                    let result = write_frames(&mut writer, &rx, &acct);
+                    let result = write_frames(writer.as_mut(), &rx, &acct);
                     // Hand the writer back to finish it, whatever happened.
                     let _ = done_tx.send(writer);
                     result
@@ -263,7 +273,7 @@ impl Topology<'_> {
             ]);
             let acct_sync = Arc::clone(&acct);
             runner
-                .spawn("sync", move || run_sync(sync, &cap_rx, &pair_tx, &acct_sync))
+                .spawn("sync", move || run_sync(sync, &cap_rx, &pair_tx, &acct_sync, &epochs))
                 .map_err(threads)?;
             runner
                 .stage("segment", vec![SegmentStage::new(p.segmenter)], &pair_rx, &seg_tx)
@@ -293,6 +303,7 @@ impl Topology<'_> {
             runner,
             acct,
             color,
+            branches,
             started,
             edges: edge_stats,
             end_to_end,
@@ -312,9 +323,10 @@ impl Running {
         let outcome = self.runner.join();
         let elapsed_s = self.started.elapsed().as_secs_f64();
         let mut cameras = BTreeMap::new();
-        cameras.insert("depth", CameraSummary::of(&self.acct.depth));
+        let (processing, recording) = self.branches;
+        cameras.insert("depth", CameraSummary::of(&self.acct.depth, processing, recording));
         if self.color {
-            cameras.insert("color", CameraSummary::of(&self.acct.color));
+            cameras.insert("color", CameraSummary::of(&self.acct.color, processing, recording));
         }
         Finished {
             outcome,
@@ -378,7 +390,7 @@ fn run_source<S: FrameSource>(
         let slot = usize::from(role == CameraRole::Color);
         bump(&counters.lost, "camera_gap", gaps[slot].observe(frame.stamp().seq));
         let mut frame = Some(frame);
-        for (k, (tx, reason)) in outputs.iter().enumerate() {
+        for (k, (tx, recorder)) in outputs.iter().enumerate() {
             let item = if k + 1 == outputs.len() {
                 frame.take()
             } else {
@@ -387,7 +399,8 @@ fn run_source<S: FrameSource>(
             let Some(item) = item else { break };
             match tx.send(item) {
                 Sent::Delivered => {}
-                Sent::DroppedFull => bump(&counters.dropped, reason, 1),
+                Sent::DroppedFull if *recorder => bump(&counters.not_recorded, "queue_full", 1),
+                Sent::DroppedFull => bump(&counters.dropped, "queue_full", 1),
                 Sent::Closed => break 'frames,
             }
         }
@@ -410,8 +423,10 @@ fn run_sync(
     rx: &Receiver<Captured>,
     tx: &EdgeSender<Tracked<FramePair>>,
     acct: &Accounting,
+    epochs: &Epochs,
 ) -> Result<(), StageError> {
     let mut sync = Synchronizer::new(config);
+    let mut seen_epochs = [0u64; 2];
     let mut out = Vec::new();
     let mut index = 0u64;
     let mut emit = |out: &mut Vec<SyncOutput>| -> bool {
@@ -444,6 +459,16 @@ fn run_sync(
         true
     };
     for captured in rx.iter() {
+        let (slot, role) = match &captured {
+            Captured::Depth(_) => (0, Role::Depth),
+            Captured::Color(_) => (1, Role::Color),
+        };
+        // A camera reopened since its last frame: its clock and counter start again.
+        let epoch = epochs[slot].load(Ordering::Acquire);
+        if epoch != seen_epochs[slot] {
+            seen_epochs[slot] = epoch;
+            sync.restart(role);
+        }
         match captured {
             Captured::Depth(f) => sync.push_depth(f, &mut out),
             Captured::Color(f) => sync.push_color(f, &mut out),

@@ -12,6 +12,7 @@ pub mod moseq;
 pub mod openni;
 pub mod rig;
 pub mod session;
+pub mod supervise;
 pub mod v4l2;
 
 pub use clock::Clock;
@@ -115,7 +116,7 @@ impl Stamped for ColorFrame {
 ///
 /// Lifecycle: `start` once, `next_frame` until shutdown or an error, `stop` once. Each call
 /// happens on the source's own thread; nothing else touches the source meanwhile.
-pub trait FrameSource: Send + 'static {
+pub trait FrameSource: Send + std::fmt::Debug + 'static {
     type Frame: Stamped + Send + 'static;
 
     /// What the session metadata says of this camera (model, serial, mode). Valid after `start`.
@@ -152,6 +153,29 @@ pub trait FrameSource: Send + 'static {
     /// # Errors
     /// The driver failed to stop cleanly (the frames already returned stay valid).
     fn stop(&mut self) -> Result<(), CaptureError>;
+}
+
+/// A source chosen at run time (a camera started by the caller, or a supervised one).
+impl<S: FrameSource + ?Sized> FrameSource for Box<S> {
+    type Frame = S::Frame;
+    fn meta(&self) -> CameraMeta {
+        (**self).meta()
+    }
+    fn start(&mut self, clock: &Clock) -> Result<(), CaptureError> {
+        (**self).start(clock)
+    }
+    fn next_frame(&mut self, timeout: Duration) -> Result<Option<Self::Frame>, CaptureError> {
+        (**self).next_frame(timeout)
+    }
+    fn finished(&self) -> bool {
+        (**self).finished()
+    }
+    fn losses(&self) -> Vec<(&'static str, u64)> {
+        (**self).losses()
+    }
+    fn stop(&mut self) -> Result<(), CaptureError> {
+        (**self).stop()
+    }
 }
 
 /// A camera a backend can see, as `mousepose devices` lists it.

@@ -33,7 +33,7 @@ pub trait Stage: Send + 'static {
 }
 
 /// The end of the pipeline: writes what reaches it.
-pub trait Sink: Send + 'static {
+pub trait Sink: Send + std::fmt::Debug + 'static {
     type In: Send + 'static;
     /// # Errors
     /// The item cannot be written.
@@ -41,6 +41,17 @@ pub trait Sink: Send + 'static {
     /// # Errors
     /// What was written cannot be made durable.
     fn flush(&mut self) -> Result<(), StageError>;
+}
+
+/// A sink chosen at run time (one file, or chunk after chunk).
+impl<K: Sink + ?Sized> Sink for Box<K> {
+    type In = K::In;
+    fn write(&mut self, item: Self::In) -> Result<(), StageError> {
+        (**self).write(item)
+    }
+    fn flush(&mut self) -> Result<(), StageError> {
+        (**self).flush()
+    }
 }
 
 /// An item with its place in the run and the instant it entered the pipeline.
@@ -139,7 +150,10 @@ impl Runner {
     ) -> std::io::Result<()> {
         let (shutdown, failed) = (self.shutdown.clone(), self.failed.clone());
         let handle = std::thread::Builder::new().name(name.to_owned()).spawn(move || {
-            let result = body();
+            // A panic is a failure like any other: it stops the whole run, which is then
+            // reported failed, instead of leaving the other workers going on without it.
+            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(body))
+                .unwrap_or_else(|panic| Err(format!("panicked: {}", panic_message(panic.as_ref())).into()));
             if result.is_err() {
                 failed.request();
                 shutdown.request();
@@ -210,7 +224,7 @@ impl Runner {
                     }
                     stats.items_in.fetch_add(1, Ordering::Relaxed);
                     if in_order {
-                        order.push(tracked, &mut ready);
+                        order.push(tracked, &mut ready)?;
                     } else {
                         ready.push(tracked);
                     }
@@ -270,7 +284,7 @@ impl Runner {
                     return Ok(());
                 }
                 st.items_in.fetch_add(1, Ordering::Relaxed);
-                order.push(t, &mut ready);
+                order.push(t, &mut ready)?;
                 for t in ready.drain(..) {
                     write(t, &mut sink)?;
                 }
@@ -295,17 +309,9 @@ impl Runner {
         let Runner { threads, stages, .. } = self;
         let mut first: Option<PipelineError> = None;
         for (name, handle) in threads {
-            let result = match handle.join() {
-                Ok(r) => r,
-                Err(panic) => {
-                    let what = panic
-                        .downcast_ref::<&str>()
-                        .map(|s| (*s).to_owned())
-                        .or_else(|| panic.downcast_ref::<String>().cloned())
-                        .unwrap_or_else(|| "unknown panic".to_owned());
-                    Err(format!("panicked: {what}").into())
-                }
-            };
+            let result = handle
+                .join()
+                .unwrap_or_else(|panic| Err(format!("panicked: {}", panic_message(panic.as_ref())).into()));
             if let (Err(source), None) = (result, &first) {
                 first = Some(PipelineError { name, source });
             }
@@ -317,11 +323,26 @@ impl Runner {
     }
 }
 
+/// What a panic carried, as text.
+fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
+    panic
+        .downcast_ref::<&str>()
+        .map(|s| (*s).to_owned())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown panic".to_owned())
+}
+
+/// Items a reorder buffer holds at most while it waits for a late one. Every edge before it is
+/// bounded, so only a worker stuck on one item lets later items pile up here: past this many,
+/// the run fails (and a daemon is restarted) instead of growing without limit.
+pub const REORDER_LIMIT: usize = 1024;
+
 /// Puts items back in index order (indices start at 0 and have no gaps).
 #[derive(Debug)]
 struct Reorder<T> {
     held: BTreeMap<u64, Tracked<T>>,
     next: u64,
+    limit: usize,
 }
 
 impl<T> Default for Reorder<T> {
@@ -329,18 +350,31 @@ impl<T> Default for Reorder<T> {
         Self {
             held: BTreeMap::new(),
             next: 0,
+            limit: REORDER_LIMIT,
         }
     }
 }
 
 impl<T> Reorder<T> {
     /// Takes an item and appends those now due to `due`, in order.
-    fn push(&mut self, t: Tracked<T>, due: &mut Vec<Tracked<T>>) {
+    ///
+    /// # Errors
+    /// More than the limit of items wait for one that has not come.
+    fn push(&mut self, t: Tracked<T>, due: &mut Vec<Tracked<T>>) -> Result<(), StageError> {
         self.held.insert(t.index, t);
         while let Some(t) = self.held.remove(&self.next) {
             self.next += 1;
             due.push(t);
         }
+        if self.held.len() > self.limit {
+            return Err(format!(
+                "item {} has not come after {} later ones: a worker is stuck",
+                self.next,
+                self.held.len()
+            )
+            .into());
+        }
+        Ok(())
     }
 
     /// At the end of the input: an error when an item never arrived.
@@ -386,6 +420,7 @@ mod tests {
         }
     }
 
+    #[derive(Debug)]
     struct Collect(Arc<std::sync::Mutex<Vec<u32>>>);
 
     impl Sink for Collect {
@@ -483,5 +518,60 @@ mod tests {
         assert!(e.name.starts_with("double"), "{}", e.name);
         assert!(e.source.to_string().contains("cannot double 100"));
         assert!(got.len() < 1_000, "{} items written after the failure", got.len());
+    }
+
+    /// Doubles its input and panics on one.
+    struct PanicsOn(u32);
+
+    impl Stage for PanicsOn {
+        type In = u32;
+        type Out = u32;
+        fn process(&mut self, input: u32, out: &mut Vec<u32>) -> Result<(), StageError> {
+            assert_ne!(input, self.0, "a bug in a stage");
+            out.push(input * 2);
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_panicking_worker_fails_the_run_instead_of_leaving_the_others_going() {
+        let (src_tx, src_rx, _) = edge(EdgeConfig::block(4));
+        let (out_tx, out_rx, _) = edge(EdgeConfig::block(4));
+        let got = Arc::new(std::sync::Mutex::new(Vec::new()));
+        let mut runner = Runner::new();
+        let shutdown = runner.shutdown();
+        runner
+            .spawn("source", move || {
+                for i in 0..100_000u32 {
+                    if shutdown.requested() || src_tx.send(Tracked::new(u64::from(i), i)) == Sent::Closed {
+                        break;
+                    }
+                }
+                Ok(())
+            })
+            .unwrap();
+        runner
+            .stage("double", vec![PanicsOn(50), PanicsOn(50)], &src_rx, &out_tx)
+            .unwrap();
+        drop((src_rx, out_tx));
+        runner
+            .sink("collect", Collect(Arc::clone(&got)), out_rx, Arc::default())
+            .unwrap();
+        let e = runner.join().unwrap_err();
+        assert!(e.name.starts_with("double"), "{}", e.name);
+        assert!(e.source.to_string().contains("a bug in a stage"), "{}", e.source);
+        assert!(got.lock().unwrap().len() < 1_000);
+    }
+
+    #[test]
+    fn a_reorder_buffer_waiting_on_a_stuck_item_fails_instead_of_growing() {
+        let mut order = Reorder::default();
+        let mut due = Vec::new();
+        for i in 1..=REORDER_LIMIT as u64 {
+            order.push(Tracked::new(i, ()), &mut due).unwrap();
+        }
+        assert!(due.is_empty());
+        let e = order.push(Tracked::new(REORDER_LIMIT as u64 + 1, ()), &mut due).unwrap_err();
+        assert!(e.to_string().contains("item 0 has not come"), "{e}");
     }
 }

@@ -2,15 +2,55 @@
 //! lossless, each handed to the operating system at once so that a recorder killed at any
 //! moment leaves a session that reads up to its last complete frame.
 
-use crate::io::session::{CameraRole, SessionEvent, SessionWriter};
-use crate::runtime::accounting::Accounting;
+use crate::io::session::{CameraRole, SessionError, SessionEvent, SessionSummary, SessionWriter};
+use crate::runtime::accounting::{Accounting, bump};
 use crate::runtime::capture::{Captured, SeqGaps};
 use crate::runtime::pipeline::StageError;
 
+/// Where the recorder branch writes: one session ([`SessionWriter`]), or chunk after chunk.
+pub trait FrameRecorder: Send + std::fmt::Debug + 'static {
+    /// Writes a frame. `Ok(Some(reason))`: the frame was deliberately not written (recording
+    /// paused), and is counted as dropped for that reason.
+    ///
+    /// # Errors
+    /// The frame cannot be written and recording cannot go on.
+    fn write(&mut self, frame: &Captured) -> Result<Option<&'static str>, SessionError>;
+
+    /// Logs an event in the session being written.
+    ///
+    /// # Errors
+    /// The event cannot be written.
+    fn log_event(&mut self, event: &SessionEvent) -> Result<(), SessionError>;
+
+    /// Closes the (last) session cleanly and says what it holds.
+    ///
+    /// # Errors
+    /// The session cannot be closed.
+    fn finish(self: Box<Self>) -> Result<SessionSummary, SessionError>;
+}
+
+impl FrameRecorder for SessionWriter {
+    fn write(&mut self, frame: &Captured) -> Result<Option<&'static str>, SessionError> {
+        match frame {
+            Captured::Depth(f) => self.write_depth(f)?,
+            Captured::Color(f) => self.write_color(f)?,
+        }
+        Ok(None)
+    }
+
+    fn log_event(&mut self, event: &SessionEvent) -> Result<(), SessionError> {
+        SessionWriter::log_event(self, event)
+    }
+
+    fn finish(self: Box<Self>) -> Result<SessionSummary, SessionError> {
+        SessionWriter::finish(*self)
+    }
+}
+
 /// The recorder thread: writes each frame as it arrives, logging gaps in the cameras'
-/// sequence numbers as dropped frames.
+/// sequence numbers as dropped frames. Written frames are counted as `recorded`.
 pub fn write_frames(
-    writer: &mut SessionWriter,
+    writer: &mut dyn FrameRecorder,
     rx: &crossbeam_channel::Receiver<Captured>,
     acct: &Accounting,
 ) -> Result<(), StageError> {
@@ -31,14 +71,15 @@ pub fn write_frames(
                 reason: "not delivered (camera gap or full capture queue)".to_owned(),
             })?;
         }
-        match &captured {
-            Captured::Depth(f) => writer.write_depth(f)?,
-            Captured::Color(f) => writer.write_color(f)?,
+        let counters = acct.camera(role);
+        match writer.write(&captured)? {
+            None => {
+                counters
+                    .recorded
+                    .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            }
+            Some(reason) => bump(&counters.not_recorded, reason, 1),
         }
-        // Kept frames are counted as paired (see `RecordedCamera::from`).
-        acct.camera(role)
-            .paired
-            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     }
     Ok(())
 }

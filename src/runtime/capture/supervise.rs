@@ -1,0 +1,414 @@
+//! A camera kept open for a daemon: [`Supervised`] wraps a camera's opener and, when the camera
+//! errors, disappears or goes silent, closes it and opens it again with exponential backoff,
+//! while its capture thread (and the other camera's) keeps running.
+//!
+//! What the outside sees of a supervised camera is its [`CameraHealth`]: its state, its outages
+//! with their start, end and frame counts, and the session events to log. Frames keep sequence
+//! numbers that only grow across reconnections (a camera that comes back counts from 0 again),
+//! and the camera's `epoch` goes up at each reconnection so that the synchroniser starts its
+//! clock model for that camera again.
+
+use crate::core::frame::{ColorFrame, DepthFrame, Stamp};
+use crate::io::session::{CameraMeta, CameraRole, SessionEvent};
+use crate::runtime::capture::{CaptureError, Clock, FrameSource, Stamped};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+/// When a camera counts as gone, and how often to try it again.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Reconnect {
+    /// No frame for this long: the camera is closed and opened again.
+    pub stall: Duration,
+    /// The first wait before opening again; doubled after each failure...
+    pub first_wait: Duration,
+    /// ...up to this.
+    pub max_wait: Duration,
+}
+
+impl Default for Reconnect {
+    fn default() -> Self {
+        Self {
+            stall: Duration::from_secs(2),
+            first_wait: Duration::from_millis(250),
+            max_wait: Duration::from_secs(10),
+        }
+    }
+}
+
+/// A camera's state, as the status shows it.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case", tag = "state", content = "reason")]
+pub enum CameraState {
+    /// Not opened yet.
+    Opening,
+    /// Delivering frames.
+    Streaming,
+    /// Closed after a fault, being tried again; the reason is the last fault.
+    Away(String),
+}
+
+/// One time a camera was away.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct Outage {
+    /// Host clock (ns) when the camera was taken for gone, and when its first frame came back
+    /// (`None` while it is still away).
+    pub start_ns: u64,
+    pub end_ns: Option<u64>,
+    /// What went wrong first.
+    pub reason: String,
+    /// Frames the camera had delivered before it went away, and attempts to open it again.
+    pub frames_before: u64,
+    pub attempts: u64,
+}
+
+/// What a supervised camera tells the rest of the daemon.
+#[derive(Debug, Default, Serialize)]
+pub struct CameraHealth {
+    pub state: Option<CameraState>,
+    /// Frames delivered since the daemon started.
+    pub frames: u64,
+    pub outages: Vec<Outage>,
+    /// The camera's metadata from its latest opening.
+    #[serde(skip)]
+    pub meta: Option<CameraMeta>,
+    /// Events for the recorder to log in the session, oldest first.
+    #[serde(skip)]
+    pub events: Vec<SessionEvent>,
+}
+
+/// A [`CameraHealth`] shared between a capture thread and its readers.
+pub type SharedHealth = Arc<Mutex<CameraHealth>>;
+
+/// Locks a health record (a reader that panicked cannot leave it half-written: every update is
+/// a few field stores).
+pub fn lock(health: &SharedHealth) -> std::sync::MutexGuard<'_, CameraHealth> {
+    health.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Opens one camera (not started).
+pub type Opener<S> = Box<dyn FnMut() -> Result<S, CaptureError> + Send>;
+
+/// A camera that is reopened whenever it fails; see the module documentation.
+pub struct Supervised<S: FrameSource> {
+    role: CameraRole,
+    open: Opener<S>,
+    policy: Reconnect,
+    current: Option<S>,
+    clock: Option<Clock>,
+    wait: Duration,
+    next_try: Instant,
+    last_frame: Instant,
+    /// Added to the camera's own sequence numbers so that they keep growing.
+    seq_offset: u64,
+    next_seq: u64,
+    /// The frame size of the first frame: frames of another size are skipped and counted.
+    size: Option<(u32, u32)>,
+    /// Losses of the camera's earlier openings, and the wrong-sized frames.
+    losses: BTreeMap<&'static str, u64>,
+    health: SharedHealth,
+    epoch: Arc<AtomicU64>,
+    ended: bool,
+}
+
+impl<S: FrameSource> std::fmt::Debug for Supervised<S> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Supervised")
+            .field("role", &self.role)
+            .field("open", &self.current.is_some())
+            .field("wait", &self.wait)
+            .finish_non_exhaustive()
+    }
+}
+
+/// A camera's frame as a supervisor handles it: its size, and its stamp to renumber.
+pub trait CameraFrame: Stamped {
+    fn size(&self) -> (u32, u32);
+    fn stamp_mut(&mut self) -> &mut Stamp;
+}
+
+impl CameraFrame for DepthFrame {
+    fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+    fn stamp_mut(&mut self) -> &mut Stamp {
+        &mut self.stamp
+    }
+}
+
+impl CameraFrame for ColorFrame {
+    fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+    fn stamp_mut(&mut self) -> &mut Stamp {
+        &mut self.stamp
+    }
+}
+
+impl<S> Supervised<S>
+where
+    S: FrameSource,
+    S::Frame: CameraFrame,
+{
+    /// A camera opened by `open`; `epoch` goes up at each reconnection.
+    pub fn new(role: CameraRole, open: Opener<S>, policy: Reconnect, epoch: Arc<AtomicU64>) -> Self {
+        let now = Instant::now();
+        Self {
+            role,
+            open,
+            policy,
+            current: None,
+            clock: None,
+            wait: policy.first_wait,
+            next_try: now,
+            last_frame: now,
+            seq_offset: 0,
+            next_seq: 0,
+            size: None,
+            losses: BTreeMap::new(),
+            health: Arc::new(Mutex::new(CameraHealth {
+                state: Some(CameraState::Opening),
+                ..CameraHealth::default()
+            })),
+            epoch,
+            ended: false,
+        }
+    }
+
+    /// The camera's health, shared.
+    pub fn health(&self) -> SharedHealth {
+        Arc::clone(&self.health)
+    }
+
+    /// Tries to open and start the camera now; on failure it is away until the next try.
+    fn try_open(&mut self, clock: &Clock) {
+        let opened = (self.open)().and_then(|mut s| s.start(clock).map(|()| s));
+        let now = Instant::now();
+        let host_ns = clock.now_ns();
+        let mut h = lock(&self.health);
+        match opened {
+            Ok(source) => {
+                let meta = source.meta();
+                let back = matches!(h.state, Some(CameraState::Away(_)));
+                if let Some(outage) = h.outages.last_mut().filter(|o| o.end_ns.is_none()) {
+                    outage.end_ns = Some(host_ns);
+                }
+                if back {
+                    tracing::info!(camera = %self.role, "camera back: reopened after an outage");
+                    h.events.push(SessionEvent::CameraReconnected { host_ns, role: self.role });
+                    self.epoch.fetch_add(1, Ordering::Release);
+                } else {
+                    tracing::info!(camera = %self.role, model = %meta.model, serial = %meta.serial, "camera open");
+                }
+                h.events.push(SessionEvent::CameraOpened {
+                    host_ns,
+                    role: self.role,
+                    model: meta.model.clone(),
+                    serial: meta.serial.clone(),
+                });
+                h.meta = Some(meta);
+                h.state = Some(CameraState::Streaming);
+                // The camera may count from 0 again: carry on from the last number given out.
+                self.seq_offset = u64::MAX;
+                self.current = Some(source);
+                self.last_frame = now;
+                self.wait = self.policy.first_wait;
+            }
+            Err(e) => {
+                let reason = error_chain(&e);
+                if let Some(outage) = h.outages.last_mut().filter(|o| o.end_ns.is_none()) {
+                    outage.attempts += 1;
+                }
+                if h.state != Some(CameraState::Away(reason.clone())) {
+                    tracing::warn!(camera = %self.role, retry_s = self.wait.as_secs_f64(), "cannot open the camera: {reason}");
+                    if h.state == Some(CameraState::Opening) {
+                        let frames_before = h.frames;
+                        h.outages.push(Outage {
+                            start_ns: host_ns,
+                            end_ns: None,
+                            reason: reason.clone(),
+                            frames_before,
+                            attempts: 1,
+                        });
+                    }
+                    h.state = Some(CameraState::Away(reason));
+                }
+                self.next_try = now + self.wait;
+                self.wait = (self.wait * 2).min(self.policy.max_wait);
+            }
+        }
+    }
+
+    /// Closes the camera after a fault and starts an outage.
+    fn lose(&mut self, reason: String, clock: &Clock) {
+        if let Some(mut source) = self.current.take() {
+            for (why, n) in source.losses() {
+                *self.losses.entry(why).or_default() += n;
+            }
+            if let Err(e) = source.stop() {
+                tracing::debug!(camera = %self.role, "closing the lost camera: {}", error_chain(&e));
+            }
+        }
+        let host_ns = clock.now_ns();
+        let mut h = lock(&self.health);
+        tracing::warn!(camera = %self.role, frames = h.frames, "camera lost: {reason}");
+        h.events.push(SessionEvent::CameraDisconnected {
+            host_ns,
+            role: self.role,
+            reason: reason.clone(),
+        });
+        let frames_before = h.frames;
+        h.outages.push(Outage {
+            start_ns: host_ns,
+            end_ns: None,
+            reason: reason.clone(),
+            frames_before,
+            attempts: 0,
+        });
+        h.state = Some(CameraState::Away(reason));
+        self.wait = self.policy.first_wait;
+        self.next_try = Instant::now() + self.wait;
+    }
+
+    /// Renumbers and checks a frame; `None` for a frame of another size than the first.
+    fn accept(&mut self, mut frame: S::Frame) -> Option<S::Frame> {
+        let size = frame.size();
+        if *self.size.get_or_insert(size) != size {
+            let n = self.losses.entry("wrong_size").or_default();
+            if *n == 0 {
+                tracing::warn!(camera = %self.role, ?size, expected = ?self.size, "frames of another size are skipped and counted");
+            }
+            *n += 1;
+            return None;
+        }
+        let stamp = frame.stamp_mut();
+        if self.seq_offset == u64::MAX {
+            self.seq_offset = self.next_seq.saturating_sub(stamp.seq);
+        }
+        let seq = stamp.seq.saturating_add(self.seq_offset);
+        if seq < self.next_seq {
+            // A camera that numbers its frames backwards: keep the numbers growing.
+            self.seq_offset += self.next_seq - seq;
+        }
+        stamp.seq = seq.max(self.next_seq);
+        self.next_seq = stamp.seq + 1;
+        lock(&self.health).frames += 1;
+        Some(frame)
+    }
+}
+
+/// An error and its causes on one line.
+pub fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        text.push_str(": ");
+        text.push_str(&s.to_string());
+        source = s.source();
+    }
+    text
+}
+
+impl<S> FrameSource for Supervised<S>
+where
+    S: FrameSource,
+    S::Frame: CameraFrame,
+{
+    type Frame = S::Frame;
+
+    /// The metadata of the latest opening; before any, what the opener would give is unknown,
+    /// so the role alone (with an empty model) stands in.
+    fn meta(&self) -> CameraMeta {
+        match (&self.current, &lock(&self.health).meta) {
+            (Some(s), _) => s.meta(),
+            (None, Some(m)) => m.clone(),
+            (None, None) => CameraMeta {
+                role: self.role,
+                backend: crate::io::session::Backend::Synthetic,
+                model: String::new(),
+                serial: String::new(),
+                firmware: String::new(),
+                width: 0,
+                height: 0,
+                pixel_format: match self.role {
+                    CameraRole::Depth => crate::io::session::codec::FrameFormat::Depth16,
+                    CameraRole::Color => crate::io::session::codec::FrameFormat::Color(crate::core::frame::PixelFormat::Mono8),
+                },
+                fps: 0.0,
+            },
+        }
+    }
+
+    /// Tries the camera once; a camera that cannot be opened is not an error here, it is away.
+    fn start(&mut self, clock: &Clock) -> Result<(), CaptureError> {
+        self.clock = Some(clock.clone());
+        self.try_open(clock);
+        Ok(())
+    }
+
+    fn next_frame(&mut self, timeout: Duration) -> Result<Option<S::Frame>, CaptureError> {
+        let Some(clock) = self.clock.clone() else {
+            return Ok(None);
+        };
+        let Some(source) = self.current.as_mut() else {
+            let now = Instant::now();
+            if now < self.next_try {
+                std::thread::sleep(timeout.min(self.next_try - now));
+                return Ok(None);
+            }
+            self.try_open(&clock);
+            return Ok(None);
+        };
+        match source.next_frame(timeout) {
+            Ok(Some(frame)) => {
+                self.last_frame = Instant::now();
+                Ok(self.accept(frame))
+            }
+            Ok(None) if source.finished() => {
+                self.ended = true;
+                Ok(None)
+            }
+            Ok(None) => {
+                if self.last_frame.elapsed() >= self.policy.stall {
+                    let silent = self.last_frame.elapsed().as_secs_f64();
+                    self.lose(format!("no frame for {silent:.1} s"), &clock);
+                }
+                Ok(None)
+            }
+            Err(e) => {
+                self.lose(error_chain(&e), &clock);
+                Ok(None)
+            }
+        }
+    }
+
+    /// Only a recording used as a camera (a `.oni` file) ends.
+    fn finished(&self) -> bool {
+        self.ended
+    }
+
+    fn losses(&self) -> Vec<(&'static str, u64)> {
+        let mut all = self.losses.clone();
+        if let Some(s) = &self.current {
+            for (why, n) in s.losses() {
+                *all.entry(why).or_default() += n;
+            }
+        }
+        all.into_iter().collect()
+    }
+
+    fn stop(&mut self) -> Result<(), CaptureError> {
+        match self.current.take() {
+            Some(mut s) => {
+                for (why, n) in s.losses() {
+                    *self.losses.entry(why).or_default() += n;
+                }
+                s.stop()
+            }
+            None => Ok(()),
+        }
+    }
+}
+
