@@ -71,26 +71,6 @@ pub struct RecordSummary {
     pub cpu_cores: f64,
 }
 
-fn now_utc() -> String {
-    // Seconds since the epoch, rendered as RFC 3339 without a date library.
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
-    let days = secs / 86_400;
-    let (h, m, s) = (secs % 86_400 / 3600, secs % 3600 / 60, secs % 60);
-    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
-    let z = days as i64 + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let mo = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(mo <= 2);
-    format!("{y:04}-{mo:02}-{d:02}T{h:02}:{m:02}:{s:02}Z")
-}
-
 /// Records the cameras of `config` into `out` until `seconds` have passed (if given) or
 /// `stop` is requested (a signal), whichever comes first.
 ///
@@ -130,7 +110,7 @@ pub fn record(
     })?;
     let mut cameras = vec![depth.meta()];
     cameras.extend(color.as_ref().map(FrameSource::meta));
-    let mut meta = SessionMeta::new(now_utc(), SessionSource::Recorded, cameras);
+    let mut meta = SessionMeta::new(crate::runtime::capture::clock::utc_now(), SessionSource::Recorded, cameras);
     meta.notes = format!("recorded with rig config {:?}", config.path);
     if meta.camera(CameraRole::Color).is_some() {
         meta.color_latency_ns = Some(config.sync.color_latency_ns);
@@ -203,7 +183,7 @@ pub fn record(
         staging.commit()?;
     }
     joined?;
-    let summary = finished?;
+    let summary = finished?.ok_or(RecordError::RecorderEnded)?;
     Ok(RecordSummary {
         dir: out.to_owned(),
         seconds: elapsed,
@@ -316,14 +296,4 @@ pub fn command(args: &RecordArgs) -> crate::app::Outcome {
         );
     }
     Ok(print(&text)?)
-}
-
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn utc_dates_render_as_rfc3339() {
-        let s = super::now_utc();
-        assert_eq!(s.len(), 20, "{s}");
-        assert!(s.starts_with("20") && s.ends_with('Z'));
-    }
 }

@@ -17,6 +17,7 @@ use crate::runtime::pipeline::{LatencySummary, PipelineError, StageReport};
 use crate::runtime::recording::{Recording, RecordingError};
 use crate::runtime::sink::poses::{POSES_FILE, PoseTally, PoseWriter};
 use crate::runtime::stages::PoseRecord;
+use crate::runtime::stages::segment::SegmentStage;
 use crate::runtime::topology::{Edges, Processing, Sources, Topology, TopologyError};
 use crate::vision::segment::{Background, SegmentError, SegmenterConfig};
 use clap::Args;
@@ -187,7 +188,7 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         sync: recording.sync_config(),
         edges: Edges::replay(),
         processing: Some(Processing {
-            segmenter,
+            segment: SegmentStage::new(segmenter),
             body: models.body,
             paws: models.paws,
             rig,

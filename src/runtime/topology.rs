@@ -36,7 +36,6 @@ use crate::runtime::sync::{Role, SyncConfig, SyncOutput, Synchronizer};
 use crate::vision::forest::infer::BodyEstimator;
 use crate::vision::fusion::{Fuser, FusionConfig};
 use crate::vision::paws::PawDetector;
-use crate::vision::segment::Segmenter;
 use crossbeam_channel::Receiver;
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -84,7 +83,8 @@ impl Edges {
 /// The processing branch: segmentation, the body forest, the paw cascade, fusion, poses.
 #[derive(Debug)]
 pub struct Processing {
-    pub segmenter: Segmenter,
+    /// Segmentation with a known background, or one learnt live.
+    pub segment: SegmentStage,
     pub body: BodyEstimator,
     pub paws: Option<PawDetector>,
     pub rig: Rig,
@@ -276,7 +276,7 @@ impl Topology<'_> {
                 .spawn("sync", move || run_sync(sync, &cap_rx, &pair_tx, &acct_sync, &epochs))
                 .map_err(threads)?;
             runner
-                .stage("segment", vec![SegmentStage::new(p.segmenter)], &pair_rx, &seg_tx)
+                .stage("segment", vec![p.segment], &pair_rx, &seg_tx)
                 .map_err(threads)?;
             drop((pair_rx, seg_tx));
             let body = BodyStage::new(p.body, p.rig.depth, PIPELINE_VOTE_BUDGET);

@@ -198,6 +198,14 @@ impl SessionWriter {
         &self.dir
     }
 
+    /// Whether the session has frames of `role` (its metadata declares the camera).
+    pub fn has_camera(&self, role: CameraRole) -> bool {
+        match role {
+            CameraRole::Depth => self.depth.is_some(),
+            CameraRole::Color => self.color.is_some(),
+        }
+    }
+
     fn stream(&mut self, role: CameraRole) -> Result<&mut StreamWriter> {
         let stream = match role {
             CameraRole::Depth => self.depth.as_mut(),

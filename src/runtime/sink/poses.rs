@@ -142,6 +142,15 @@ impl PoseWriter {
         })
     }
 
+    /// Hands the rows written so far to the operating system (without waiting for the disk),
+    /// so that a process killed next leaves them in the file.
+    ///
+    /// # Errors
+    /// The rows cannot be written.
+    pub fn hand_over(&mut self) -> std::io::Result<()> {
+        self.out.flush()
+    }
+
     /// The tally, readable while and after the writer runs.
     pub fn tally(&self) -> Arc<Mutex<PoseTally>> {
         Arc::clone(&self.tally)

@@ -22,11 +22,11 @@ pub trait FrameRecorder: Send + std::fmt::Debug + 'static {
     /// The event cannot be written.
     fn log_event(&mut self, event: &SessionEvent) -> Result<(), SessionError>;
 
-    /// Closes the (last) session cleanly and says what it holds.
+    /// Closes the (last) session cleanly and says what it holds (`None`: no session was open).
     ///
     /// # Errors
     /// The session cannot be closed.
-    fn finish(self: Box<Self>) -> Result<SessionSummary, SessionError>;
+    fn finish(self: Box<Self>) -> Result<Option<SessionSummary>, SessionError>;
 }
 
 impl FrameRecorder for SessionWriter {
@@ -42,8 +42,8 @@ impl FrameRecorder for SessionWriter {
         SessionWriter::log_event(self, event)
     }
 
-    fn finish(self: Box<Self>) -> Result<SessionSummary, SessionError> {
-        SessionWriter::finish(*self)
+    fn finish(self: Box<Self>) -> Result<Option<SessionSummary>, SessionError> {
+        SessionWriter::finish(*self).map(Some)
     }
 }
 

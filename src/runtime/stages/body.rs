@@ -46,12 +46,20 @@ impl Stage for BodyStage {
     type Out = Posed;
 
     fn process(&mut self, input: Segmented, out: &mut Vec<Posed>) -> Result<(), StageError> {
-        let Segmented { pair, mouse } = input;
+        let Segmented {
+            pair,
+            mouse,
+            background,
+        } = input;
         let mut record = PoseRecord {
             depth: pair.depth.stamp,
             color: pair.color.as_ref().map(|c| c.stamp),
             skew_ns: pair.skew_ns,
-            status: PoseStatus::NoMouse,
+            status: if background {
+                PoseStatus::NoMouse
+            } else {
+                PoseStatus::NoBackground
+            },
             pose: Pose::default(),
             paws: Vec::new(),
         };

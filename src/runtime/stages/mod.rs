@@ -16,6 +16,8 @@ use crate::vision::segment::Mouse;
 pub struct Segmented {
     pub pair: FramePair,
     pub mouse: Option<Mouse>,
+    /// False while a live run has no background model yet (no floor in view).
+    pub background: bool,
 }
 
 /// What the pipeline says of one frame pair.
@@ -25,6 +27,8 @@ pub enum PoseStatus {
     Ok,
     /// No mouse in the depth frame (an empty cage, or the mouse hidden).
     NoMouse,
+    /// No empty-cage model yet: a live run whose depth view shows no floor so far.
+    NoBackground,
 }
 
 impl PoseStatus {
@@ -33,6 +37,7 @@ impl PoseStatus {
         match self {
             PoseStatus::Ok => "ok",
             PoseStatus::NoMouse => "no_mouse",
+            PoseStatus::NoBackground => "no_background",
         }
     }
 }

@@ -1,0 +1,433 @@
+//! A live run's output, chunk after chunk: `DIR/<start>/chunk-0000/`, `chunk-0001/`, ... Each
+//! chunk is a session of its own (when the run records) with its own `poses.csv` and, once
+//! closed, `summary.json`; a chunk cut by a crash reads back up to its last frame and row.
+//!
+//! [`Chunks`] is the one place that decides where chunks begin (every `period`, and early
+//! when a camera appears that the current chunk's session does not hold) and creates their
+//! directories; the recorder ([`ChunkRecorder`]) and the pose sink ([`ChunkPoses`]) each follow
+//! it by the host time of what they write. A full disk pauses raw recording ([`DiskWatch`]);
+//! a write error pauses it and starts a new chunk later; poses go on either way, and none of
+//! this stops the run.
+
+use crate::io::session::{CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionSummary, SessionWriter};
+use crate::runtime::capture::supervise::{SharedHealth, error_chain, lock};
+use crate::runtime::capture::{Captured, Stamped};
+use crate::runtime::pipeline::{Sink, StageError};
+use crate::runtime::sink::poses::{PoseTally, PoseWriter};
+use crate::runtime::stages::Fused;
+use serde::Serialize;
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+/// The summary of a closed chunk.
+pub const CHUNK_SUMMARY_FILE: &str = "summary.json";
+
+/// What every chunk's session says of the rig.
+#[derive(Clone, Debug)]
+pub struct ChunkPlan {
+    /// The run's directory (`DIR/<start>`).
+    pub root: PathBuf,
+    pub period: Duration,
+    /// Whether raw frames are recorded.
+    pub record: bool,
+    /// The cameras, whose metadata the chunks' sessions carry.
+    pub cameras: Vec<SharedHealth>,
+    /// The rest of each session's metadata (cameras and creation time are filled per chunk).
+    pub meta: SessionMeta,
+}
+
+#[derive(Debug, Default)]
+struct Opened {
+    /// Host time each chunk begins at.
+    starts: Vec<u64>,
+    /// Sessions created for the recorder, not taken yet.
+    writers: HashMap<usize, SessionWriter>,
+}
+
+/// Where chunks begin; see the module documentation.
+#[derive(Debug)]
+pub struct Chunks {
+    plan: ChunkPlan,
+    opened: Mutex<Opened>,
+}
+
+impl Chunks {
+    pub fn new(plan: ChunkPlan) -> Arc<Self> {
+        Arc::new(Self {
+            plan,
+            opened: Mutex::default(),
+        })
+    }
+
+    /// The directory of chunk `index`.
+    pub fn dir(&self, index: usize) -> PathBuf {
+        self.plan.root.join(format!("chunk-{index:04}"))
+    }
+
+    /// Chunks begun so far.
+    pub fn count(&self) -> usize {
+        self.opened.lock().unwrap_or_else(PoisonError::into_inner).starts.len()
+    }
+
+    /// The chunk that holds `host_ns`, beginning a new one when the current one is over.
+    pub fn at(&self, host_ns: u64) -> usize {
+        let mut opened = self.opened.lock().unwrap_or_else(PoisonError::into_inner);
+        let period = u64::try_from(self.plan.period.as_nanos()).unwrap_or(u64::MAX);
+        match opened.starts.last() {
+            Some(&last) if host_ns < last.saturating_add(period) => {}
+            _ => self.begin(&mut opened, host_ns),
+        }
+        opened.starts.partition_point(|&s| s <= host_ns).saturating_sub(1)
+    }
+
+    /// Begins a new chunk at `host_ns` now, whatever the period says; returns its index.
+    pub fn split(&self, host_ns: u64) -> usize {
+        let mut opened = self.opened.lock().unwrap_or_else(PoisonError::into_inner);
+        self.begin(&mut opened, host_ns);
+        opened.starts.len() - 1
+    }
+
+    /// The session created for chunk `index`, for the recorder to take.
+    pub fn take_writer(&self, index: usize) -> Option<SessionWriter> {
+        self.opened
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .writers
+            .remove(&index)
+    }
+
+    fn begin(&self, opened: &mut Opened, host_ns: u64) {
+        let index = opened.starts.len();
+        let start = opened.starts.last().map_or(host_ns, |&last| host_ns.max(last));
+        opened.starts.push(start);
+        let dir = self.dir(index);
+        if let Err(e) = std::fs::create_dir_all(&dir) {
+            tracing::error!(chunk = index, "cannot create {dir:?}: {e}");
+            return;
+        }
+        tracing::info!(chunk = index, "chunk {dir:?} begun");
+        if !self.plan.record {
+            return;
+        }
+        let mut meta = self.plan.meta.clone();
+        meta.created = crate::runtime::capture::clock::utc_now();
+        meta.cameras = self.plan.cameras.iter().filter_map(|h| lock(h).meta.clone()).collect();
+        let created = SessionWriter::create(&dir, &meta).and_then(|mut w| {
+            w.log_event(&SessionEvent::SessionStarted { host_ns: start })?;
+            Ok(w)
+        });
+        match created {
+            Ok(w) => {
+                opened.writers.insert(index, w);
+            }
+            Err(e) => tracing::error!(chunk = index, "cannot start the chunk's session: {}", error_chain(&e)),
+        }
+    }
+}
+
+/// Free space on the output's file system, checked once a second: below the threshold
+/// recording pauses, and resumes above it plus a margin.
+#[derive(Debug)]
+pub struct DiskWatch {
+    path: PathBuf,
+    /// The threshold is the larger of these.
+    min_free_bytes: u64,
+    min_free_share: f64,
+    low: bool,
+    checked: Option<Instant>,
+}
+
+/// Space above the threshold before recording resumes, as a share of the threshold.
+const DISK_MARGIN: f64 = 0.1;
+
+impl DiskWatch {
+    pub fn new(path: &Path, min_free_bytes: u64, min_free_share: f64) -> Self {
+        Self {
+            path: path.to_owned(),
+            min_free_bytes,
+            min_free_share,
+            low: false,
+            checked: None,
+        }
+    }
+
+    /// Whether free space is low now (logging each change).
+    pub fn low(&mut self) -> bool {
+        if self.checked.is_some_and(|t| t.elapsed() < Duration::from_secs(1)) {
+            return self.low;
+        }
+        self.checked = Some(Instant::now());
+        let Ok(st) = rustix::fs::statvfs(&self.path) else {
+            return self.low;
+        };
+        let free = st.f_bavail.saturating_mul(st.f_frsize);
+        let total = st.f_blocks.saturating_mul(st.f_frsize);
+        let threshold = self.min_free_bytes.max((total as f64 * self.min_free_share) as u64);
+        let gb = |b: u64| b as f64 / 1e9;
+        if !self.low && free < threshold {
+            self.low = true;
+            tracing::warn!(free_gb = gb(free), threshold_gb = gb(threshold), "disk space low: raw recording paused, poses go on");
+        } else if self.low && free as f64 > threshold as f64 * (1.0 + DISK_MARGIN) {
+            self.low = false;
+            tracing::info!(free_gb = gb(free), "disk space back: raw recording resumed");
+        }
+        self.low
+    }
+}
+
+/// How long recording pauses after a write error before it tries a new chunk.
+const WRITE_RETRY: Duration = Duration::from_secs(10);
+
+/// The recorder branch of a live run: frames into the current chunk's session.
+#[derive(Debug)]
+pub struct ChunkRecorder {
+    chunks: Arc<Chunks>,
+    index: usize,
+    writer: Option<SessionWriter>,
+    disk: DiskWatch,
+    /// Set after a write error: nothing is written before then.
+    paused_until: Option<Instant>,
+    cameras: Vec<SharedHealth>,
+}
+
+impl ChunkRecorder {
+    pub fn new(chunks: Arc<Chunks>, disk: DiskWatch, cameras: Vec<SharedHealth>) -> Self {
+        Self {
+            chunks,
+            index: usize::MAX,
+            writer: None,
+            disk,
+            paused_until: None,
+            cameras,
+        }
+    }
+
+    /// Closes the current chunk's session cleanly.
+    fn close(&mut self) -> Option<SessionSummary> {
+        let writer = self.writer.take()?;
+        match writer.finish() {
+            Ok(s) => Some(s),
+            Err(e) => {
+                tracing::error!(chunk = self.index, "cannot close the chunk's session: {}", error_chain(&e));
+                None
+            }
+        }
+    }
+
+    fn switch(&mut self, index: usize) {
+        self.close();
+        self.index = index;
+        self.writer = self.chunks.take_writer(index);
+    }
+
+    /// The cameras' events (outages, reopenings) into the session.
+    fn log_camera_events(&mut self) -> Result<(), SessionError> {
+        for h in &self.cameras {
+            let events = std::mem::take(&mut lock(h).events);
+            if let Some(w) = &mut self.writer {
+                for e in &events {
+                    w.log_event(e)?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl crate::runtime::sink::recorder::FrameRecorder for ChunkRecorder {
+    fn write(&mut self, frame: &Captured) -> Result<Option<&'static str>, SessionError> {
+        let host_ns = frame.stamp().host_ns;
+        let role = match frame {
+            Captured::Depth(_) => CameraRole::Depth,
+            Captured::Color(_) => CameraRole::Color,
+        };
+        if self.paused_until.is_some_and(|t| Instant::now() < t) {
+            return Ok(Some("write_error"));
+        }
+        let mut index = self.chunks.at(host_ns);
+        if self.paused_until.take().is_some()
+            || (self.index != usize::MAX && self.writer.as_ref().is_some_and(|w| !w.has_camera(role)))
+        {
+            // After a write error, or for a camera the chunk's session does not hold (one
+            // that opened after the chunk began): a new chunk.
+            index = self.chunks.split(host_ns);
+        }
+        if self.index == usize::MAX || index > self.index {
+            self.switch(index);
+        }
+        if self.disk.low() {
+            return Ok(Some("disk_low"));
+        }
+        let result = self
+            .log_camera_events()
+            .and_then(|()| match &mut self.writer {
+                Some(w) => w.write(frame).map(|_| true),
+                None => Ok(false),
+            });
+        match result {
+            Ok(true) => Ok(None),
+            Ok(false) => Ok(Some("write_error")),
+            Err(e) => {
+                // The frames written so far stay readable: the store appends whole records.
+                tracing::error!(chunk = self.index, retry_s = WRITE_RETRY.as_secs(), "recording paused: {}", error_chain(&e));
+                self.writer = None;
+                self.paused_until = Some(Instant::now() + WRITE_RETRY);
+                Ok(Some("write_error"))
+            }
+        }
+    }
+
+    fn log_event(&mut self, event: &SessionEvent) -> Result<(), SessionError> {
+        match &mut self.writer {
+            Some(w) => w.log_event(event),
+            None => Ok(()),
+        }
+    }
+
+    fn finish(mut self: Box<Self>) -> Result<Option<SessionSummary>, SessionError> {
+        // Events of a camera lost at the very end still belong to the last chunk.
+        self.log_camera_events()?;
+        Ok(self.close())
+    }
+}
+
+/// What `summary.json` of a chunk says.
+#[derive(Debug, Serialize)]
+pub struct ChunkSummary {
+    pub chunk: usize,
+    pub rows: u64,
+    pub statuses: BTreeMap<&'static str, u64>,
+    /// Host times (ns) of the first and last pose.
+    pub first_host_ns: Option<u64>,
+    pub last_host_ns: Option<u64>,
+    /// Rows that could not be written.
+    pub rows_lost: u64,
+}
+
+/// The latest pose and counts, for the status line (and the live page).
+#[derive(Clone, Debug, Default)]
+pub struct Live {
+    pub rows: u64,
+    pub latest: Option<crate::runtime::stages::PoseRecord>,
+    pub statuses: BTreeMap<&'static str, u64>,
+    pub chunk: usize,
+}
+
+/// The pose sink of a live run: `poses.csv` of the current chunk, and the live status.
+#[derive(Debug)]
+pub struct ChunkPoses {
+    chunks: Arc<Chunks>,
+    index: usize,
+    writer: Option<(PoseWriter, Arc<Mutex<PoseTally>>)>,
+    first_ns: Option<u64>,
+    last_ns: Option<u64>,
+    rows_lost: u64,
+    live: Arc<Mutex<Live>>,
+}
+
+impl ChunkPoses {
+    pub fn new(chunks: Arc<Chunks>, live: Arc<Mutex<Live>>) -> Self {
+        Self {
+            chunks,
+            index: usize::MAX,
+            writer: None,
+            first_ns: None,
+            last_ns: None,
+            rows_lost: 0,
+            live,
+        }
+    }
+
+    /// Finishes the current chunk's `poses.csv` and writes its `summary.json`.
+    fn close(&mut self) {
+        if self.index == usize::MAX {
+            return;
+        }
+        let mut tally = PoseTally::default();
+        if let Some((mut w, t)) = self.writer.take() {
+            if let Err(e) = w.flush() {
+                tracing::error!(chunk = self.index, "cannot finish poses.csv: {e}");
+            }
+            tally = t.lock().unwrap_or_else(PoisonError::into_inner).clone();
+        }
+        let summary = ChunkSummary {
+            chunk: self.index,
+            rows: tally.rows,
+            statuses: tally.statuses,
+            first_host_ns: self.first_ns.take(),
+            last_host_ns: self.last_ns.take(),
+            rows_lost: std::mem::take(&mut self.rows_lost),
+        };
+        let path = self.chunks.dir(self.index).join(CHUNK_SUMMARY_FILE);
+        let written = serde_json::to_vec_pretty(&summary)
+            .map_err(std::io::Error::other)
+            .and_then(|text| std::fs::write(&path, text));
+        if let Err(e) = written {
+            tracing::error!(chunk = self.index, "cannot write {path:?}: {e}");
+        }
+        tracing::info!(chunk = self.index, rows = summary.rows, "chunk closed");
+    }
+
+    fn open(&mut self, index: usize) {
+        self.close();
+        self.index = index;
+        let dir = self.chunks.dir(index);
+        match PoseWriter::create(&dir, HashMap::new(), u64::MAX) {
+            Ok(w) => {
+                let tally = w.tally();
+                self.writer = Some((w, tally));
+            }
+            Err(e) => tracing::error!(chunk = index, "cannot create poses.csv in {dir:?}: {e}"),
+        }
+    }
+}
+
+impl Sink for ChunkPoses {
+    type In = Fused;
+
+    fn write(&mut self, item: Fused) -> Result<(), StageError> {
+        let host_ns = item.record.depth.host_ns;
+        let index = self.chunks.at(host_ns);
+        if self.index == usize::MAX || index > self.index {
+            self.open(index);
+        }
+        self.first_ns.get_or_insert(host_ns);
+        self.last_ns = Some(host_ns);
+        let record = item.record.clone();
+        let written = match &mut self.writer {
+            Some((w, _)) => w.write(item).and_then(|()| w.hand_over().map_err(Into::into)),
+            None => Err("no poses.csv open".into()),
+        };
+        if let Err(e) = written {
+            if self.rows_lost == 0 {
+                tracing::error!(chunk = self.index, "cannot write poses: {e}");
+            }
+            self.rows_lost += 1;
+            // Try again in the next chunk.
+            self.writer = None;
+        }
+        let mut live = self.live.lock().unwrap_or_else(PoisonError::into_inner);
+        live.rows += 1;
+        *live.statuses.entry(record.status.name()).or_default() += 1;
+        live.latest = Some(record);
+        live.chunk = self.index;
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<(), StageError> {
+        self.close();
+        Ok(())
+    }
+}
+
+/// The metadata every chunk's session starts from (cameras and start time are added per
+/// chunk).
+pub fn chunk_meta(notes: String, rig: Option<crate::core::geometry::Rig>, color_latency_ns: Option<i64>) -> SessionMeta {
+    let mut meta = SessionMeta::new(String::new(), SessionSource::Recorded, Vec::new());
+    meta.notes = notes;
+    meta.rig = rig;
+    meta.color_latency_ns = color_latency_ns;
+    meta
+}
