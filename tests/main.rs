@@ -12,6 +12,7 @@ mod packaging;
 mod paws;
 mod record;
 mod replay;
+mod run;
 mod segment;
 mod session;
 mod synth;

@@ -11,6 +11,7 @@ pub mod experiment;
 pub mod progress;
 pub mod record;
 pub mod replay;
+pub mod run;
 pub mod synth;
 pub mod train;
 
@@ -50,6 +51,9 @@ enum Command {
     Replay(replay::ReplayArgs),
     /// Record the rig's cameras to a session (lossless), until --seconds or Ctrl-C/SIGTERM.
     Record(record::RecordArgs),
+    /// The daemon: capture, process and record the rig's cameras, through camera faults,
+    /// until SIGTERM.
+    Run(run::RunArgs),
     /// List the cameras each backend sees (GigE cameras only at configured addresses).
     Devices(devices::DevicesArgs),
     /// Calibrate the cameras: intrinsics of each, then the rig against a board on the glass.
@@ -176,6 +180,16 @@ pub(crate) fn parse_binning(s: &str) -> Result<u32, String> {
 fn init_logging() {
     let journald = std::env::var_os("JOURNAL_STREAM").is_some();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into());
+    if journald {
+        // Under systemd: structured events straight to the journal (fields kept), falling
+        // back to plain lines on stderr (which the journal takes too) without a journal socket.
+        if let Ok(layer) = tracing_journald::layer() {
+            use tracing_subscriber::layer::SubscriberExt as _;
+            let subscriber = tracing_subscriber::registry().with(filter).with(layer);
+            drop(tracing::subscriber::set_global_default(subscriber));
+            return;
+        }
+    }
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
@@ -222,6 +236,7 @@ fn run(cli: Cli) -> Outcome {
         Command::Bench(args) => bench::command(&args),
         Command::Replay(args) => replay::command(&args),
         Command::Record(args) => record::command(&args),
+        Command::Run(args) => run::command(&args),
         Command::Devices(args) => devices::command(&args),
         Command::Calibrate(command) => calibrate::run(&command),
     }

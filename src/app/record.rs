@@ -110,7 +110,11 @@ pub fn record(
     })?;
     let mut cameras = vec![depth.meta()];
     cameras.extend(color.as_ref().map(FrameSource::meta));
-    let mut meta = SessionMeta::new(crate::runtime::capture::clock::utc_now(), SessionSource::Recorded, cameras);
+    let mut meta = SessionMeta::new(
+        crate::runtime::capture::clock::utc_now(),
+        SessionSource::Recorded,
+        cameras,
+    );
     meta.notes = format!("recorded with rig config {:?}", config.path);
     if meta.camera(CameraRole::Color).is_some() {
         meta.color_latency_ns = Some(config.sync.color_latency_ns);

@@ -82,7 +82,11 @@ impl CameraSummary {
     pub fn of(c: &CameraCounters, processing: bool, recorder: bool) -> Self {
         let read = |m: &Mutex<BTreeMap<String, u64>>| m.lock().unwrap_or_else(PoisonError::into_inner).clone();
         let dropped = if processing { read(&c.dropped) } else { BTreeMap::new() };
-        let not_recorded = if recorder { read(&c.not_recorded) } else { BTreeMap::new() };
+        let not_recorded = if recorder {
+            read(&c.not_recorded)
+        } else {
+            BTreeMap::new()
+        };
         Self {
             captured: c.captured.load(Ordering::Relaxed),
             paired: c.paired.load(Ordering::Relaxed),

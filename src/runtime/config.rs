@@ -46,7 +46,7 @@ struct RawConfig {
     #[serde(default)]
     output: RawOutput,
     #[serde(default)]
-    http: RawHttp,
+    reconnect: RawReconnect,
 }
 
 #[derive(Debug, Deserialize)]
@@ -124,13 +124,25 @@ struct RawCalibration {
 #[serde(deny_unknown_fields)]
 struct RawOutput {
     dir: Option<PathBuf>,
-    record: Option<bool>,
+    record: Option<RawRecord>,
+    chunk_minutes: Option<f64>,
+    min_free_gb: Option<f64>,
+    min_free_percent: Option<f64>,
+}
+
+/// `record = true` / `false`, or `"always"` / `"never"`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum RawRecord {
+    Flag(bool),
+    Mode(String),
 }
 
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawHttp {
-    address: Option<String>,
+struct RawReconnect {
+    stall_ms: Option<f64>,
+    max_wait_ms: Option<f64>,
 }
 
 fn default_depth_width() -> u32 {
@@ -217,9 +229,17 @@ pub struct Config {
     pub body_workers: usize,
     pub models_dir: Option<PathBuf>,
     pub calibration: Option<PathBuf>,
+    /// Where `run` writes its runs (`DIR/<start>/chunk-NNNN`).
     pub output_dir: PathBuf,
+    /// Whether `run` records raw frames.
     pub record: bool,
-    pub http_address: std::net::SocketAddr,
+    /// Length of a chunk of a live run.
+    pub chunk: std::time::Duration,
+    /// Raw recording pauses below the larger of these free on the output's file system.
+    pub min_free_bytes: u64,
+    pub min_free_share: f64,
+    /// When a camera counts as gone, and the longest wait between tries to reopen it.
+    pub reconnect: crate::runtime::capture::supervise::Reconnect,
 }
 
 impl Config {
@@ -354,13 +374,40 @@ impl Checker<'_> {
                 format!("must be at most 64, not {body_workers}"),
             ));
         }
-        let http = raw.http.address.unwrap_or_else(|| "127.0.0.1:8080".to_owned());
-        let http_address = http.parse().map_err(|_| {
-            self.bad(
-                "http.address",
-                format!("must be an address and port like 127.0.0.1:8080, not {http:?}"),
-            )
-        })?;
+        let o = raw.output;
+        let record = match o.record {
+            None | Some(RawRecord::Flag(true)) => true,
+            Some(RawRecord::Flag(false)) => false,
+            Some(RawRecord::Mode(m)) => match m.as_str() {
+                "always" => true,
+                "never" => false,
+                _ => return Err(self.bad("output.record", format!("must be \"always\" or \"never\", not {m:?}"))),
+            },
+        };
+        let chunk_minutes = self.positive("output.chunk_minutes", o.chunk_minutes.unwrap_or(60.0), 1440.0)?;
+        let min_free_gb = o.min_free_gb.unwrap_or(5.0);
+        if !(min_free_gb.is_finite() && (0.0..=1e6).contains(&min_free_gb)) {
+            return Err(self.bad(
+                "output.min_free_gb",
+                format!("must be from 0 to 1000000, not {min_free_gb}"),
+            ));
+        }
+        let min_free_percent = o.min_free_percent.unwrap_or(5.0);
+        if !(min_free_percent.is_finite() && (0.0..=90.0).contains(&min_free_percent)) {
+            return Err(self.bad(
+                "output.min_free_percent",
+                format!("must be from 0 to 90, not {min_free_percent}"),
+            ));
+        }
+        let r = raw.reconnect;
+        let stall_ms = self.positive("reconnect.stall_ms", r.stall_ms.unwrap_or(2000.0), 600_000.0)?;
+        let max_wait_ms = self.positive("reconnect.max_wait_ms", r.max_wait_ms.unwrap_or(10_000.0), 600_000.0)?;
+        let secs = |ms: f64| std::time::Duration::from_secs_f64(ms / 1000.0);
+        let reconnect = crate::runtime::capture::supervise::Reconnect {
+            stall: secs(stall_ms),
+            first_wait: secs(250.0_f64.min(max_wait_ms)),
+            max_wait: secs(max_wait_ms),
+        };
         Ok(Config {
             path: self.path.to_owned(),
             depth,
@@ -372,9 +419,12 @@ impl Checker<'_> {
             body_workers,
             models_dir: raw.models.dir,
             calibration: raw.calibration.file,
-            output_dir: raw.output.dir.unwrap_or_else(|| PathBuf::from("/var/lib/mousepose")),
-            record: raw.output.record.unwrap_or(true),
-            http_address,
+            output_dir: o.dir.unwrap_or_else(|| PathBuf::from("/var/lib/mousepose/sessions")),
+            record,
+            chunk: std::time::Duration::from_secs_f64(chunk_minutes * 60.0),
+            min_free_bytes: (min_free_gb * 1e9) as u64,
+            min_free_share: min_free_percent / 100.0,
+            reconnect,
         })
     }
 
@@ -468,6 +518,25 @@ mod tests {
         let c = parse(text).unwrap();
         assert!(matches!(c.color, Some(ColorCamera::Aravis { .. })));
         assert_eq!(c.capture_edge.when_full, WhenFull::DropNewest);
+        assert_eq!(c.chunk, std::time::Duration::from_secs(3600));
+        assert_eq!(c.reconnect.stall, std::time::Duration::from_secs(2));
+    }
+
+    #[test]
+    fn output_and_reconnect_settings_are_checked() {
+        let base = "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n";
+        let c = parse(&format!("{base}[output]\nrecord = \"never\"\nchunk_minutes = 0.5\n")).unwrap();
+        assert!(!c.record);
+        assert_eq!(c.chunk, std::time::Duration::from_secs(30));
+        for (text, key) in [
+            ("[output]\nrecord = \"sometimes\"\n", "output.record"),
+            ("[output]\nchunk_minutes = 0\n", "output.chunk_minutes"),
+            ("[output]\nmin_free_percent = 99\n", "output.min_free_percent"),
+            ("[reconnect]\nstall_ms = -1\n", "reconnect.stall_ms"),
+        ] {
+            let e = parse(&format!("{base}{text}")).unwrap_err().to_string();
+            assert!(e.contains(key), "{e}");
+        }
     }
 
     #[test]

@@ -27,9 +27,9 @@ use crate::runtime::pipeline::{
 };
 use crate::runtime::recording::{Recording, RecordingError};
 use crate::runtime::sink::recorder::{FrameRecorder, write_frames};
+use crate::runtime::stages::Fused;
 use crate::runtime::stages::body::{BodyStage, PIPELINE_VOTE_BUDGET};
 use crate::runtime::stages::fuse::FuseStage;
-use crate::runtime::stages::Fused;
 use crate::runtime::stages::paws::PawStage;
 use crate::runtime::stages::segment::SegmentStage;
 use crate::runtime::sync::{Role, SyncConfig, SyncOutput, Synchronizer};

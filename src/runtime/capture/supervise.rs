@@ -70,6 +70,10 @@ pub struct CameraHealth {
     pub state: Option<CameraState>,
     /// Frames delivered since the daemon started.
     pub frames: u64,
+    /// When the capture thread last came by (it does at least every read timeout): a thread
+    /// stuck in a driver call stops updating it.
+    #[serde(skip)]
+    pub alive: Option<Instant>,
     pub outages: Vec<Outage>,
     /// The camera's metadata from its latest opening.
     #[serde(skip)]
@@ -197,7 +201,10 @@ where
                 }
                 if back {
                     tracing::info!(camera = %self.role, "camera back: reopened after an outage");
-                    h.events.push(SessionEvent::CameraReconnected { host_ns, role: self.role });
+                    h.events.push(SessionEvent::CameraReconnected {
+                        host_ns,
+                        role: self.role,
+                    });
                     self.epoch.fetch_add(1, Ordering::Release);
                 } else {
                     tracing::info!(camera = %self.role, model = %meta.model, serial = %meta.serial, "camera open");
@@ -334,7 +341,9 @@ where
                 height: 0,
                 pixel_format: match self.role {
                     CameraRole::Depth => crate::io::session::codec::FrameFormat::Depth16,
-                    CameraRole::Color => crate::io::session::codec::FrameFormat::Color(crate::core::frame::PixelFormat::Mono8),
+                    CameraRole::Color => {
+                        crate::io::session::codec::FrameFormat::Color(crate::core::frame::PixelFormat::Mono8)
+                    }
                 },
                 fps: 0.0,
             },
@@ -352,6 +361,7 @@ where
         let Some(clock) = self.clock.clone() else {
             return Ok(None);
         };
+        lock(&self.health).alive = Some(Instant::now());
         let Some(source) = self.current.as_mut() else {
             let now = Instant::now();
             if now < self.next_try {
@@ -411,4 +421,3 @@ where
         }
     }
 }
-

@@ -571,7 +571,9 @@ mod tests {
             order.push(Tracked::new(i, ()), &mut due).unwrap();
         }
         assert!(due.is_empty());
-        let e = order.push(Tracked::new(REORDER_LIMIT as u64 + 1, ()), &mut due).unwrap_err();
+        let e = order
+            .push(Tracked::new(REORDER_LIMIT as u64 + 1, ()), &mut due)
+            .unwrap_err();
         assert!(e.to_string().contains("item 0 has not come"), "{e}");
     }
 }

@@ -9,7 +9,9 @@
 //! a write error pauses it and starts a new chunk later; poses go on either way, and none of
 //! this stops the run.
 
-use crate::io::session::{CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionSummary, SessionWriter};
+use crate::io::session::{
+    CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionSummary, SessionWriter,
+};
 use crate::runtime::capture::supervise::{SharedHealth, error_chain, lock};
 use crate::runtime::capture::{Captured, Stamped};
 use crate::runtime::pipeline::{Sink, StageError};
@@ -168,7 +170,11 @@ impl DiskWatch {
         let gb = |b: u64| b as f64 / 1e9;
         if !self.low && free < threshold {
             self.low = true;
-            tracing::warn!(free_gb = gb(free), threshold_gb = gb(threshold), "disk space low: raw recording paused, poses go on");
+            tracing::warn!(
+                free_gb = gb(free),
+                threshold_gb = gb(threshold),
+                "disk space low: raw recording paused, poses go on"
+            );
         } else if self.low && free as f64 > threshold as f64 * (1.0 + DISK_MARGIN) {
             self.low = false;
             tracing::info!(free_gb = gb(free), "disk space back: raw recording resumed");
@@ -210,7 +216,11 @@ impl ChunkRecorder {
         match writer.finish() {
             Ok(s) => Some(s),
             Err(e) => {
-                tracing::error!(chunk = self.index, "cannot close the chunk's session: {}", error_chain(&e));
+                tracing::error!(
+                    chunk = self.index,
+                    "cannot close the chunk's session: {}",
+                    error_chain(&e)
+                );
                 None
             }
         }
@@ -260,18 +270,21 @@ impl crate::runtime::sink::recorder::FrameRecorder for ChunkRecorder {
         if self.disk.low() {
             return Ok(Some("disk_low"));
         }
-        let result = self
-            .log_camera_events()
-            .and_then(|()| match &mut self.writer {
-                Some(w) => w.write(frame).map(|_| true),
-                None => Ok(false),
-            });
+        let result = self.log_camera_events().and_then(|()| match &mut self.writer {
+            Some(w) => w.write(frame).map(|_| true),
+            None => Ok(false),
+        });
         match result {
             Ok(true) => Ok(None),
             Ok(false) => Ok(Some("write_error")),
             Err(e) => {
                 // The frames written so far stay readable: the store appends whole records.
-                tracing::error!(chunk = self.index, retry_s = WRITE_RETRY.as_secs(), "recording paused: {}", error_chain(&e));
+                tracing::error!(
+                    chunk = self.index,
+                    retry_s = WRITE_RETRY.as_secs(),
+                    "recording paused: {}",
+                    error_chain(&e)
+                );
                 self.writer = None;
                 self.paused_until = Some(Instant::now() + WRITE_RETRY);
                 Ok(Some("write_error"))
@@ -424,7 +437,11 @@ impl Sink for ChunkPoses {
 
 /// The metadata every chunk's session starts from (cameras and start time are added per
 /// chunk).
-pub fn chunk_meta(notes: String, rig: Option<crate::core::geometry::Rig>, color_latency_ns: Option<i64>) -> SessionMeta {
+pub fn chunk_meta(
+    notes: String,
+    rig: Option<crate::core::geometry::Rig>,
+    color_latency_ns: Option<i64>,
+) -> SessionMeta {
     let mut meta = SessionMeta::new(String::new(), SessionSource::Recorded, Vec::new());
     meta.notes = notes;
     meta.rig = rig;

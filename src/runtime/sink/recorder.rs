@@ -74,9 +74,7 @@ pub fn write_frames(
         let counters = acct.camera(role);
         match writer.write(&captured)? {
             None => {
-                counters
-                    .recorded
-                    .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                counters.recorded.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             }
             Some(reason) => bump(&counters.not_recorded, reason, 1),
         }

@@ -18,13 +18,19 @@ pub const FOOTPRINT_MARGIN_MM: f64 = 18.0;
 pub struct PawStage {
     detector: Option<PawDetector>,
     color: Camera,
+    /// Whether the colour frames' size was found not to match (said once).
+    warned: bool,
 }
 
 impl PawStage {
     /// A stage for the bottom camera `color`; without a detector it finds no paws (the
     /// fusion then puts every limb in its default configuration).
     pub fn new(detector: Option<PawDetector>, color: Camera) -> Self {
-        Self { detector, color }
+        Self {
+            detector,
+            color,
+            warned: false,
+        }
     }
 }
 
@@ -84,11 +90,21 @@ impl Stage for PawStage {
         if let (Some(detector), Some(color), PoseStatus::Ok) = (&mut self.detector, &pair.color, record.status) {
             let i = &self.color.intrinsics;
             if (color.width, color.height) != (i.width, i.height) {
-                return Err(format!(
-                    "colour frame {} is {}x{} but the calibration's colour camera is {}x{}",
-                    color.stamp.seq, color.width, color.height, i.width, i.height
-                )
-                .into());
+                // The rig's colour camera is another size (a live rig without a calibration
+                // for this camera mode): no paws rather than paws in the wrong place. The
+                // joints then come from the fusion's defaults, as without a paw model.
+                if !self.warned {
+                    self.warned = true;
+                    tracing::warn!(
+                        "colour frames are {}x{} but the rig's colour camera is {}x{}: no paw detection (calibrate this camera)",
+                        color.width,
+                        color.height,
+                        i.width,
+                        i.height
+                    );
+                }
+                out.push(input);
+                return Ok(());
             }
             if let Some((roi, px_per_mm)) = footprint(&record.pose, &self.color, FOOTPRINT_MARGIN_MM) {
                 detector.detect(color, roi, px_per_mm, &mut record.paws);

@@ -127,7 +127,10 @@ impl Stage for SegmentStage {
                 match learner.build() {
                     Ok(s) => {
                         if self.segmenter.is_none() {
-                            tracing::info!(frames = learner.frames, "background found: floor fitted to the depth view");
+                            tracing::info!(
+                                frames = learner.frames,
+                                "background found: floor fitted to the depth view"
+                            );
                         }
                         self.segmenter = Some(s);
                     }

@@ -1,0 +1,319 @@
+//! `mousepose run`: the daemon. Opens the configured cameras, processes live, records, and
+//! keeps going through camera faults and a full disk until SIGTERM (or `--seconds`).
+//!
+//! Under systemd (`Type=notify`) it says READY=1 once the cameras were tried (running degraded
+//! when one cannot be opened, with STATUS= saying why), WATCHDOG=1 only while the pipeline
+//! makes progress, and STATUS= with the frame rate and counts every few seconds.
+
+use crate::app::{Failure, print, print_json};
+use crate::core::geometry::Rig;
+use crate::io::session::CameraRole;
+use crate::runtime::accounting::CameraSummary;
+use crate::runtime::capture::rig::{ColorSource, open_color, open_depth};
+use crate::runtime::capture::supervise::{CameraHealth, CameraState, Outage, SharedHealth, Supervised, lock};
+use crate::runtime::capture::{CaptureError, FrameSource};
+use crate::runtime::config::{Config, DepthCamera};
+use crate::runtime::models::Models;
+use crate::runtime::pipeline::{LatencySummary, Shutdown, StageReport};
+use crate::runtime::sink::chunks::{ChunkPlan, ChunkPoses, ChunkRecorder, Chunks, DiskWatch, Live, chunk_meta};
+use crate::runtime::stages::segment::SegmentStage;
+use crate::runtime::topology::{Edges, Epochs, Processing, Sources, Topology};
+use crate::vision::calibrate::RigCalibration;
+use crate::vision::segment::SegmenterConfig;
+use anyhow::Context as _;
+use clap::Args;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// The rig configuration.
+    #[arg(long, value_name = "FILE")]
+    pub config: PathBuf,
+    /// Stop after this many seconds (a daemon runs until SIGTERM).
+    #[arg(long, value_name = "N", value_parser = crate::app::parse_seconds, allow_negative_numbers = true)]
+    pub seconds: Option<f64>,
+    /// Print the final report as one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// One camera in the report.
+#[derive(Debug, Serialize)]
+pub struct RunCamera {
+    #[serde(flatten)]
+    pub frames: CameraSummary,
+    pub state: Option<CameraState>,
+    pub outages: Vec<Outage>,
+}
+
+/// What a run did.
+#[derive(Debug, Serialize)]
+pub struct RunReport {
+    /// The run's directory, holding its chunks.
+    pub dir: PathBuf,
+    pub seconds: f64,
+    pub chunks: usize,
+    pub poses: u64,
+    pub statuses: BTreeMap<&'static str, u64>,
+    pub cameras: BTreeMap<&'static str, RunCamera>,
+    pub stages: Vec<StageReport>,
+    /// From a pair leaving the synchroniser to its row handed to the operating system.
+    pub end_to_end_latency: LatencySummary,
+    /// CPU time the process used per second (1.0 = one core busy).
+    pub cpu_cores: f64,
+}
+
+/// The rig: the configured calibration, or the default rig with the depth intrinsics scaled to
+/// the configured depth mode.
+fn live_rig(config: &Config) -> anyhow::Result<Rig> {
+    if let Some(path) = &config.calibration {
+        return Ok(RigCalibration::load(path)
+            .with_context(|| format!("the calibration named by {:?}", config.path))?
+            .rig());
+    }
+    let mut rig = Rig::default_rig();
+    let DepthCamera::Openni2 { width, height, .. } = &config.depth;
+    let i = &mut rig.depth.intrinsics;
+    let scale = f64::from(*width) / f64::from(i.width);
+    (i.fx, i.fy, i.cx, i.cy) = (i.fx * scale, i.fy * scale, i.cx * scale, i.cy * scale);
+    (i.width, i.height) = (*width, *height);
+    Ok(rig)
+}
+
+/// Run directories are named by their start, UTC, sortable and without colons.
+fn run_name() -> String {
+    crate::runtime::capture::clock::utc_now().replace([':', '-'], "")
+}
+
+fn notify(states: &[sd_notify::NotifyState<'_>]) {
+    if let Err(e) = sd_notify::notify(states) {
+        tracing::debug!("cannot notify systemd: {e}");
+    }
+}
+
+/// One line on the cameras and the poses, for STATUS= and the log.
+fn status_line(healths: &[(&str, SharedHealth)], live: &Live, fps: f64) -> String {
+    let cams: Vec<String> = healths
+        .iter()
+        .map(|(name, h)| match &lock(h).state {
+            Some(CameraState::Streaming) => format!("{name} streaming"),
+            Some(CameraState::Opening) => format!("{name} opening"),
+            Some(CameraState::Away(why)) => format!("{name} away ({why})"),
+            None => format!("{name} ?"),
+        })
+        .collect();
+    let degraded = if live.statuses.contains_key("no_background")
+        && live.latest.as_ref().is_some_and(|p| p.status.name() == "no_background")
+    {
+        ", degraded: no floor in the depth view yet"
+    } else {
+        ""
+    };
+    format!(
+        "{}; {fps:.1} poses/s, {} poses, chunk {}{degraded}",
+        cams.join(", "),
+        live.rows,
+        live.chunk
+    )
+}
+
+/// Runs the daemon until `stop` (a signal), `seconds`, or a failure of the pipeline itself.
+///
+/// # Errors
+/// The output directory cannot be made, or a pipeline component failed (the report is still
+/// logged).
+pub fn run(
+    config: &Config,
+    models: Models,
+    rig: Rig,
+    seconds: Option<f64>,
+    stop: &Shutdown,
+) -> anyhow::Result<RunReport> {
+    let root = config.output_dir.join(run_name());
+    std::fs::create_dir_all(&root).with_context(|| format!("cannot create the run directory {root:?}"))?;
+    tracing::info!(dir = ?root, record = config.record, "run started");
+
+    let epochs = Epochs::default();
+    let depth_config = config.depth.clone();
+    let depth = Supervised::new(
+        CameraRole::Depth,
+        Box::new(move || Ok(open_depth(&depth_config))),
+        config.reconnect,
+        Arc::clone(&epochs[0]),
+    );
+    let color = config.color.clone().map(|color_config| {
+        let open = move || -> Result<ColorSource, CaptureError> { open_color(&color_config) };
+        Supervised::new(
+            CameraRole::Color,
+            Box::new(open),
+            config.reconnect,
+            Arc::clone(&epochs[1]),
+        )
+    });
+    let mut healths = vec![("depth", depth.health())];
+    healths.extend(color.as_ref().map(|c| ("color", c.health())));
+    let shared: Vec<SharedHealth> = healths.iter().map(|(_, h)| Arc::clone(h)).collect();
+
+    let notes = format!("recorded by `mousepose run` with rig config {:?}", config.path);
+    let latency = config.color.as_ref().map(|_| config.sync.color_latency_ns);
+    let chunks = Chunks::new(ChunkPlan {
+        root: root.clone(),
+        period: config.chunk,
+        record: config.record,
+        cameras: shared.clone(),
+        meta: chunk_meta(notes, config.calibration.as_ref().map(|_| rig.clone()), latency),
+    });
+    let live = Arc::new(Mutex::new(Live::default()));
+    let recorder = config.record.then(|| {
+        let disk = DiskWatch::new(&root, config.min_free_bytes, config.min_free_share);
+        Box::new(ChunkRecorder::new(Arc::clone(&chunks), disk, shared.clone())) as Box<_>
+    });
+    let segment = SegmentStage::learning(
+        SegmenterConfig::default(),
+        rig.depth.intrinsics,
+        rig.depth.world_from_camera,
+    );
+    let topology = Topology {
+        sources: Sources::Cameras {
+            depth: Box::new(depth),
+            color: color.map(|c| Box::new(c) as Box<dyn FrameSource<Frame = _>>),
+            epochs,
+        },
+        sync: config.sync,
+        edges: Edges {
+            capture: config.capture_edge,
+            stage: config.stage_edge,
+        },
+        processing: Some(Processing {
+            segment,
+            body: models.body,
+            paws: models.paws,
+            rig,
+            workers: config.body_workers,
+            overlays: None,
+            poses: Box::new(ChunkPoses::new(Arc::clone(&chunks), Arc::clone(&live))),
+        }),
+        recorder,
+    };
+    let cpu0 = crate::runtime::capture::clock::process_cpu_s();
+    let started = Instant::now();
+    let running = topology.start()?;
+    let shutdown = running.shutdown();
+
+    // Ready once every camera was tried (opened, or known to be away).
+    while !stop.requested() && healths.iter().any(|(_, h)| lock(h).state == Some(CameraState::Opening)) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let snapshot = || live.lock().unwrap_or_else(PoisonError::into_inner).clone();
+    let status = status_line(&healths, &snapshot(), 0.0);
+    notify(&[sd_notify::NotifyState::Ready, sd_notify::NotifyState::Status(&status)]);
+    tracing::info!("ready: {status}");
+
+    let limit = seconds.map(Duration::from_secs_f64);
+    let (mut last_rows, mut last_captured, mut last_tick) = (0u64, 0u64, Instant::now());
+    let mut last_status = Instant::now();
+    let mut last_line = String::new();
+    while !stop.requested() && !shutdown.requested() && limit.is_none_or(|l| started.elapsed() < l) {
+        std::thread::sleep(Duration::from_millis(100));
+        if last_tick.elapsed() < Duration::from_secs(1) {
+            continue;
+        }
+        let now = snapshot();
+        let captured = lock(&healths[0].1).frames;
+        let capture_alive = lock(&healths[0].1)
+            .alive
+            .is_some_and(|t| t.elapsed() < Duration::from_secs(5));
+        // Alive: poses came out, or no depth frame went in (camera away; the capture thread
+        // itself still comes by). Frames going in without poses coming out is a stuck stage:
+        // no ping, and systemd restarts the daemon.
+        if now.rows > last_rows || (captured == last_captured && capture_alive) {
+            notify(&[sd_notify::NotifyState::Watchdog]);
+        }
+        let fps = (now.rows - last_rows) as f64 / last_tick.elapsed().as_secs_f64();
+        (last_rows, last_captured, last_tick) = (now.rows, captured, Instant::now());
+        if last_status.elapsed() >= Duration::from_secs(5) {
+            let line = status_line(&healths, &now, fps);
+            notify(&[sd_notify::NotifyState::Status(&line)]);
+            last_line = line;
+            last_status = Instant::now();
+        }
+    }
+    notify(&[sd_notify::NotifyState::Stopping]);
+    tracing::info!(last = %last_line, "stopping");
+    shutdown.request();
+    let finished = running.join();
+    let elapsed = started.elapsed().as_secs_f64();
+    let cpu = crate::runtime::capture::clock::process_cpu_s() - cpu0;
+    if let Some(recorder) = finished.recorder {
+        if let Err(e) = recorder.finish() {
+            tracing::error!("cannot close the last chunk's session: {e}");
+        }
+    }
+    let stages = finished.outcome?;
+    let live = snapshot();
+    let mut cameras = BTreeMap::new();
+    for (name, frames) in finished.cameras {
+        let health = healths.iter().find(|(n, _)| *n == name).map(|(_, h)| lock(h));
+        let (state, outages) = health.map_or((None, Vec::new()), |h: std::sync::MutexGuard<'_, CameraHealth>| {
+            (h.state.clone(), h.outages.clone())
+        });
+        cameras.insert(name, RunCamera { frames, state, outages });
+    }
+    let report = RunReport {
+        dir: root,
+        seconds: elapsed,
+        chunks: chunks.count(),
+        poses: live.rows,
+        statuses: live.statuses,
+        cameras,
+        stages,
+        end_to_end_latency: finished.end_to_end_latency,
+        cpu_cores: cpu / elapsed.max(1e-9),
+    };
+    tracing::info!(poses = report.poses, chunks = report.chunks, "run ended");
+    Ok(report)
+}
+
+/// `mousepose run`.
+pub fn command(args: &RunArgs) -> crate::app::Outcome {
+    let config = Config::load(&args.config).map_err(Failure::usage)?;
+    let models = Models::load(config.models_dir.as_deref()).map_err(Failure::usage)?;
+    let rig = live_rig(&config).map_err(Failure::usage)?;
+    let stop = Shutdown::default();
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, stop.flag()).context("installing the signal handlers")?;
+    }
+    let report = run(&config, models, rig, args.seconds, &stop)?;
+    if args.json {
+        return Ok(print_json(&report)?);
+    }
+    let mut text = format!(
+        "ran {:.1} s into {:?}: {} chunks, {} poses {:?}, {:.2} cores, latency p99 {:.2} ms\n",
+        report.seconds,
+        report.dir,
+        report.chunks,
+        report.poses,
+        report.statuses,
+        report.cpu_cores,
+        report.end_to_end_latency.p99_ms
+    );
+    for (name, c) in &report.cameras {
+        use std::fmt::Write as _;
+        let _ = writeln!(
+            text,
+            "{name:>6}: captured {}, paired {}, unpaired {}, dropped {:?}, recorded {}, not recorded {:?}, outages {}",
+            c.frames.captured,
+            c.frames.paired,
+            c.frames.unpaired,
+            c.frames.dropped,
+            c.frames.recorded.unwrap_or(0),
+            c.frames.not_recorded,
+            c.outages.len()
+        );
+    }
+    Ok(print(&text)?)
+}
