@@ -33,7 +33,10 @@ fn fake_camera() -> Guard {
     );
     let deadline = Instant::now() + Duration::from_secs(10);
     while UdpSocket::bind(("127.0.0.1", aravis_ext::GVCP_PORT)).is_ok() {
-        assert!(child.0.try_wait().unwrap().is_none(), "the fake camera program exited");
+        assert!(
+            child.0.try_wait().expect("test set-up").is_none(),
+            "the fake camera program exited"
+        );
         assert!(Instant::now() < deadline, "the fake camera program never listened");
         std::thread::sleep(Duration::from_millis(20));
     }
@@ -54,7 +57,7 @@ fn rig(dir: &Path, color: bool) -> PathBuf {
         );
     }
     let path = dir.join("rig.toml");
-    std::fs::write(&path, text).unwrap();
+    std::fs::write(&path, text).expect("test set-up");
     path
 }
 
@@ -69,16 +72,19 @@ fn daemon(rig: &Path, notify: Option<&Path>) -> Guard {
     if let Some(socket) = notify {
         cmd.env("NOTIFY_SOCKET", socket);
     }
-    Guard(cmd.spawn().unwrap())
+    Guard(cmd.spawn().expect("test set-up"))
 }
 
 /// The run's chunk directories, in order.
 fn chunks(out: &Path) -> Vec<PathBuf> {
-    let mut runs: Vec<PathBuf> = std::fs::read_dir(out).unwrap().map(|e| e.unwrap().path()).collect();
+    let mut runs: Vec<PathBuf> = std::fs::read_dir(out)
+        .expect("test set-up")
+        .map(|e| e.expect("test set-up").path())
+        .collect();
     assert_eq!(runs.len(), 1, "{runs:?}");
     let mut chunks: Vec<PathBuf> = std::fs::read_dir(runs.remove(0))
-        .unwrap()
-        .map(|e| e.unwrap().path())
+        .expect("test set-up")
+        .map(|e| e.expect("test set-up").path())
         .collect();
     chunks.sort();
     chunks
@@ -87,15 +93,33 @@ fn chunks(out: &Path) -> Vec<PathBuf> {
 /// Sends SIGTERM and waits (at most `limit`) for the exit; returns its status and stdout.
 fn terminate(mut child: Guard, limit: Duration) -> (std::process::ExitStatus, String, String) {
     let pid = child.0.id().to_string();
-    assert!(Command::new("kill").args(["-TERM", &pid]).status().unwrap().success());
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .expect("test set-up")
+            .success()
+    );
     let deadline = Instant::now() + limit;
     loop {
-        if let Some(status) = child.0.try_wait().unwrap() {
+        if let Some(status) = child.0.try_wait().expect("test set-up") {
             let mut out = String::new();
             let mut err = String::new();
             use std::io::Read as _;
-            child.0.stdout.take().unwrap().read_to_string(&mut out).unwrap();
-            child.0.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+            child
+                .0
+                .stdout
+                .take()
+                .expect("test set-up")
+                .read_to_string(&mut out)
+                .expect("test set-up");
+            child
+                .0
+                .stderr
+                .take()
+                .expect("test set-up")
+                .read_to_string(&mut err)
+                .expect("test set-up");
             return (status, out, err);
         }
         assert!(

@@ -165,7 +165,7 @@ pub fn run(
         period: config.chunk,
         record: config.record,
         cameras: shared.clone(),
-        meta: chunk_meta(notes, config.calibration.as_ref().map(|_| rig.clone()), latency),
+        meta: chunk_meta(notes, config.calibration.as_ref().map(|_| rig), latency),
     });
     let live = Arc::new(Mutex::new(Live::default()));
     let recorder = config.record.then(|| {
