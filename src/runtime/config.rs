@@ -166,6 +166,27 @@ fn default_buffers() -> usize {
 
 // ---- the checked form -----------------------------------------------------------------------
 
+/// When a camera counts as gone, and how often to try it again.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Reconnect {
+    /// No frame for this long: the camera is closed and opened again.
+    pub stall: std::time::Duration,
+    /// The first wait before opening again; doubled after each failure...
+    pub first_wait: std::time::Duration,
+    /// ...up to this.
+    pub max_wait: std::time::Duration,
+}
+
+impl Default for Reconnect {
+    fn default() -> Self {
+        Self {
+            stall: std::time::Duration::from_secs(2),
+            first_wait: std::time::Duration::from_millis(250),
+            max_wait: std::time::Duration::from_secs(10),
+        }
+    }
+}
+
 /// The depth camera.
 #[derive(Clone, Debug, PartialEq)]
 pub enum DepthCamera {
@@ -239,7 +260,7 @@ pub struct Config {
     pub min_free_bytes: u64,
     pub min_free_share: f64,
     /// When a camera counts as gone, and the longest wait between tries to reopen it.
-    pub reconnect: crate::runtime::capture::supervise::Reconnect,
+    pub reconnect: Reconnect,
 }
 
 impl Config {
@@ -403,7 +424,7 @@ impl Checker<'_> {
         let stall_ms = self.positive("reconnect.stall_ms", r.stall_ms.unwrap_or(2000.0), 600_000.0)?;
         let max_wait_ms = self.positive("reconnect.max_wait_ms", r.max_wait_ms.unwrap_or(10_000.0), 600_000.0)?;
         let secs = |ms: f64| std::time::Duration::from_secs_f64(ms / 1000.0);
-        let reconnect = crate::runtime::capture::supervise::Reconnect {
+        let reconnect = Reconnect {
             stall: secs(stall_ms),
             first_wait: secs(250.0_f64.min(max_wait_ms)),
             max_wait: secs(max_wait_ms),

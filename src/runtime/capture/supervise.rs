@@ -17,26 +17,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
-/// When a camera counts as gone, and how often to try it again.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Reconnect {
-    /// No frame for this long: the camera is closed and opened again.
-    pub stall: Duration,
-    /// The first wait before opening again; doubled after each failure...
-    pub first_wait: Duration,
-    /// ...up to this.
-    pub max_wait: Duration,
-}
-
-impl Default for Reconnect {
-    fn default() -> Self {
-        Self {
-            stall: Duration::from_secs(2),
-            first_wait: Duration::from_millis(250),
-            max_wait: Duration::from_secs(10),
-        }
-    }
-}
+pub use crate::runtime::config::Reconnect;
 
 /// A camera's state, as the status shows it.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize)]
