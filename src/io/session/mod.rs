@@ -3,7 +3,7 @@
 //! ```text
 //! SESSION/
 //!   session.toml           metadata (meta.rs), written first
-//!   depth/frames.mpstore   depth frames, one record each (store.rs, codec.rs)
+//!   depth/frames.mpstore   depth frames, one record each (io::store, codec/)
 //!   depth/index.mpindex    seq -> record offset, written at the end
 //!   depth/timestamps.csv   seq,device_ns,host_ns per frame written
 //!   color/...              the same for the colour camera, absent in depth-only sessions

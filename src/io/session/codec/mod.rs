@@ -8,18 +8,21 @@
 //!
 //! Decoding trusts nothing: the header's size, format and length must agree, and
 //! decompression is bounded by the length the header announces (itself capped).
+//!
+//! This file holds the encoder and the decoders; `header` holds the frame header and what its
+//! codes mean (pixel formats, codecs), and `delta` the undoing of the delta filter, with SSE2
+//! where the target has it.
 
-use crate::core::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
-use serde::{Deserialize, Deserializer, Serialize, Serializer};
+mod delta;
+mod header;
+
+pub use header::{Codec, FRAME_HEADER_LEN, FrameFormat, FrameHeader, MAX_PIXEL_BYTES, UnknownFormatName, peek_seq};
+
+use delta::{undo_byte_delta, undo_sample_delta};
+
+use crate::core::frame::{ColorFrame, DepthFrame, Stamp};
 use std::fmt;
 use std::io;
-use std::str::FromStr;
-
-/// Length of the frame header at the start of every frame payload.
-pub const FRAME_HEADER_LEN: usize = 40;
-
-/// The most pixel bytes one frame may hold (256 MiB).
-pub const MAX_PIXEL_BYTES: u32 = 256 << 20;
 
 /// Errors of encoding and decoding frame payloads. The session reader adds the file and the
 /// frame's position.
@@ -63,219 +66,6 @@ pub enum CodecError {
 }
 
 type Result<T, E = CodecError> = std::result::Result<T, E>;
-
-/// The pixel format of a stored frame: depth (`u16` millimetres) or one of the colour
-/// formats. Its name (`depth16`, `mono8`, `bayer_rg8`, ...) is what session metadata uses.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum FrameFormat {
-    Depth16,
-    Color(PixelFormat),
-}
-
-impl FrameFormat {
-    /// The code in the frame header.
-    pub fn code(self) -> u8 {
-        match self {
-            FrameFormat::Depth16 => 0,
-            FrameFormat::Color(PixelFormat::Mono8) => 1,
-            FrameFormat::Color(PixelFormat::Rgb8) => 2,
-            FrameFormat::Color(PixelFormat::BayerRg8) => 3,
-            FrameFormat::Color(PixelFormat::BayerGr8) => 4,
-            FrameFormat::Color(PixelFormat::BayerGb8) => 5,
-            FrameFormat::Color(PixelFormat::BayerBg8) => 6,
-        }
-    }
-
-    /// The format with a header code, if there is one.
-    pub fn from_code(code: u8) -> Option<FrameFormat> {
-        Some(match code {
-            0 => FrameFormat::Depth16,
-            1 => FrameFormat::Color(PixelFormat::Mono8),
-            2 => FrameFormat::Color(PixelFormat::Rgb8),
-            3 => FrameFormat::Color(PixelFormat::BayerRg8),
-            4 => FrameFormat::Color(PixelFormat::BayerGr8),
-            5 => FrameFormat::Color(PixelFormat::BayerGb8),
-            6 => FrameFormat::Color(PixelFormat::BayerBg8),
-            _ => return None,
-        })
-    }
-
-    /// Bytes per pixel.
-    pub fn bytes_per_pixel(self) -> usize {
-        match self {
-            FrameFormat::Depth16 => 2,
-            FrameFormat::Color(format) => format.bytes_per_pixel(),
-        }
-    }
-
-    /// `depth16` or the colour format's name.
-    pub fn name(self) -> &'static str {
-        match self {
-            FrameFormat::Depth16 => "depth16",
-            FrameFormat::Color(format) => format.name(),
-        }
-    }
-}
-
-impl fmt::Display for FrameFormat {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// A name that is not a stored pixel format.
-#[derive(Debug, thiserror::Error)]
-#[error("unknown pixel format {0:?} (expected depth16, mono8, rgb8, bayer_rg8, bayer_gr8, bayer_gb8 or bayer_bg8)")]
-pub struct UnknownFormatName(pub String);
-
-impl FromStr for FrameFormat {
-    type Err = UnknownFormatName;
-
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        if s == "depth16" {
-            return Ok(FrameFormat::Depth16);
-        }
-        PixelFormat::ALL
-            .iter()
-            .find(|f| f.name() == s)
-            .map(|&f| FrameFormat::Color(f))
-            .ok_or_else(|| UnknownFormatName(s.to_owned()))
-    }
-}
-
-impl Serialize for FrameFormat {
-    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        serializer.serialize_str(self.name())
-    }
-}
-
-impl<'de> Deserialize<'de> for FrameFormat {
-    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        let name = String::deserialize(deserializer)?;
-        name.parse().map_err(serde::de::Error::custom)
-    }
-}
-
-/// How the pixels of a frame payload are stored.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum Codec {
-    /// As they are.
-    Raw,
-    /// zstd-compressed.
-    Zstd,
-    /// zstd-compressed after the horizontal delta filter (the default).
-    #[default]
-    DeltaZstd,
-}
-
-impl Codec {
-    /// The code in the frame header.
-    pub fn code(self) -> u8 {
-        match self {
-            Codec::Raw => 0,
-            Codec::Zstd => 1,
-            Codec::DeltaZstd => 2,
-        }
-    }
-
-    /// The codec with a header code, if there is one.
-    pub fn from_code(code: u8) -> Option<Codec> {
-        match code {
-            0 => Some(Codec::Raw),
-            1 => Some(Codec::Zstd),
-            2 => Some(Codec::DeltaZstd),
-            _ => None,
-        }
-    }
-}
-
-/// The decoded frame header of a payload.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct FrameHeader {
-    pub stamp: Stamp,
-    pub width: u16,
-    pub height: u16,
-    pub format: FrameFormat,
-    pub codec: Codec,
-    /// Length of the pixel data before compression and filtering.
-    pub pixel_bytes: u32,
-}
-
-impl FrameHeader {
-    fn to_bytes(self) -> [u8; FRAME_HEADER_LEN] {
-        let mut b = [0u8; FRAME_HEADER_LEN];
-        b[0..8].copy_from_slice(&self.stamp.seq.to_le_bytes());
-        b[8..16].copy_from_slice(&self.stamp.device_ns.to_le_bytes());
-        b[16..24].copy_from_slice(&self.stamp.host_ns.to_le_bytes());
-        b[24..26].copy_from_slice(&self.width.to_le_bytes());
-        b[26..28].copy_from_slice(&self.height.to_le_bytes());
-        b[28] = self.format.code();
-        b[29] = self.codec.code();
-        b[32..36].copy_from_slice(&self.pixel_bytes.to_le_bytes());
-        b
-    }
-
-    /// Parses and checks the header at the start of a payload: known format and codec, and a
-    /// pixel length that matches the size and format and is within [`MAX_PIXEL_BYTES`].
-    ///
-    /// # Errors
-    /// The [`CodecError`] naming the first check that fails.
-    pub fn parse(payload: &[u8]) -> Result<Self> {
-        let b: &[u8; FRAME_HEADER_LEN] = payload
-            .get(..FRAME_HEADER_LEN)
-            .and_then(|h| h.try_into().ok())
-            .ok_or(CodecError::ShortPayload { len: payload.len() })?;
-        let u64_at = |at: usize| {
-            u64::from_le_bytes([
-                b[at],
-                b[at + 1],
-                b[at + 2],
-                b[at + 3],
-                b[at + 4],
-                b[at + 5],
-                b[at + 6],
-                b[at + 7],
-            ])
-        };
-        let stamp = Stamp {
-            seq: u64_at(0),
-            device_ns: u64_at(8),
-            host_ns: u64_at(16),
-        };
-        let width = u16::from_le_bytes([b[24], b[25]]);
-        let height = u16::from_le_bytes([b[26], b[27]]);
-        let format = FrameFormat::from_code(b[28]).ok_or(CodecError::UnknownFormat(b[28]))?;
-        let codec = Codec::from_code(b[29]).ok_or(CodecError::UnknownCodec(b[29]))?;
-        let pixel_bytes = u32::from_le_bytes([b[32], b[33], b[34], b[35]]);
-        let expected = u64::from(width) * u64::from(height) * format.bytes_per_pixel() as u64;
-        if expected != u64::from(pixel_bytes) {
-            return Err(CodecError::LengthMismatch {
-                width,
-                height,
-                format,
-                expected,
-                stated: pixel_bytes,
-            });
-        }
-        if pixel_bytes > MAX_PIXEL_BYTES {
-            return Err(CodecError::TooManyBytes(expected));
-        }
-        Ok(Self {
-            stamp,
-            width,
-            height,
-            format,
-            codec,
-            pixel_bytes,
-        })
-    }
-}
-
-/// The sequence number at the start of a payload, if it is long enough to hold one; for
-/// naming a frame in errors even when the rest of its header is bad.
-pub fn peek_seq(payload: &[u8]) -> Option<u64> {
-    payload.get(..8).and_then(|b| b.try_into().ok()).map(u64::from_le_bytes)
-}
 
 /// Encodes frames into payloads with one codec and zstd level, reusing its compression
 /// context between frames. Equal frames always give equal payloads.
@@ -510,116 +300,10 @@ pub fn decode_color(payload: &[u8]) -> Result<ColorFrame> {
     })
 }
 
-/// Undoes the horizontal delta filter on one row of bytes: each byte becomes the wrapping sum
-/// of itself and every byte to its left. Sixteen bytes at a time with SSE2: a byte-wise prefix
-/// sum in four shifted additions, plus the running total of the row so far, which is carried
-/// in a register (one addition per sixteen bytes on the loop's critical path). Several times
-/// faster than byte by byte.
-#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
-fn undo_byte_delta(line: &mut [u8]) {
-    use safe_arch::{
-        add_i8_m128i, byte_shl_imm_u128_m128i, m128i, shuffle_ai_f32_all_m128i, unpack_high_i8_m128i,
-        unpack_high_i16_m128i, zeroed_m128i,
-    };
-    // Every byte of `carry` holds the row's sum up to the current chunk.
-    let mut carry = zeroed_m128i();
-    let mut left = 0u8;
-    let mut chunks = line.chunks_exact_mut(16);
-    for chunk in &mut chunks {
-        let mut bytes = [0u8; 16];
-        bytes.copy_from_slice(chunk);
-        let mut x = m128i::from(bytes);
-        x = add_i8_m128i(x, byte_shl_imm_u128_m128i::<1>(x));
-        x = add_i8_m128i(x, byte_shl_imm_u128_m128i::<2>(x));
-        x = add_i8_m128i(x, byte_shl_imm_u128_m128i::<4>(x));
-        x = add_i8_m128i(x, byte_shl_imm_u128_m128i::<8>(x));
-        chunk.copy_from_slice(&<[u8; 16]>::from(add_i8_m128i(x, carry)));
-        left = chunk[15];
-        // The chunk's own total (its last byte) in every byte.
-        let high = unpack_high_i16_m128i(unpack_high_i8_m128i(x, x), unpack_high_i8_m128i(x, x));
-        carry = add_i8_m128i(carry, shuffle_ai_f32_all_m128i::<0xFF>(high));
-    }
-    undo_byte_delta_tail(chunks.into_remainder(), left);
-}
-
-/// Undoes the horizontal delta filter on one row of bytes: each byte becomes the wrapping sum
-/// of itself and every byte to its left. Eight bytes at a time (a byte-wise prefix sum inside
-/// a `u64`, without carries between bytes), several times faster than byte by byte.
-#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
-fn undo_byte_delta(line: &mut [u8]) {
-    /// Byte-wise wrapping addition of two `u64`s.
-    fn add_bytes(a: u64, b: u64) -> u64 {
-        const LOW: u64 = 0x7f7f_7f7f_7f7f_7f7f;
-        ((a & LOW) + (b & LOW)) ^ ((a ^ b) & !LOW)
-    }
-    let mut left = 0u8;
-    let mut chunks = line.chunks_exact_mut(8);
-    for chunk in &mut chunks {
-        let mut bytes = [0u8; 8];
-        bytes.copy_from_slice(chunk);
-        let mut x = u64::from_le_bytes(bytes);
-        x = add_bytes(x, x << 8);
-        x = add_bytes(x, x << 16);
-        x = add_bytes(x, x << 32);
-        x = add_bytes(x, u64::from_le_bytes([left; 8]));
-        chunk.copy_from_slice(&x.to_le_bytes());
-        left = chunk[7];
-    }
-    undo_byte_delta_tail(chunks.into_remainder(), left);
-}
-
-/// Undoes the horizontal delta filter on one row of depth samples: `bytes` holds the row's
-/// little-endian `u16` differences, `out` receives the samples, each the wrapping sum of its
-/// difference and every difference to its left. Eight samples at a time with SSE2, as
-/// [`undo_byte_delta`] does sixteen bytes.
-#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
-fn undo_sample_delta(bytes: &[u8], out: &mut [u16]) {
-    use safe_arch::{
-        add_i16_m128i, byte_shl_imm_u128_m128i, m128i, shuffle_ai_f32_all_m128i, unpack_high_i16_m128i, zeroed_m128i,
-    };
-    let mut carry = zeroed_m128i();
-    let mut left = 0u16;
-    let mut chunks = bytes.chunks_exact(16);
-    let mut outs = out.chunks_exact_mut(8);
-    for (chunk, o) in (&mut chunks).zip(&mut outs) {
-        let mut b = [0u8; 16];
-        b.copy_from_slice(chunk);
-        let mut x = m128i::from(b);
-        x = add_i16_m128i(x, byte_shl_imm_u128_m128i::<2>(x));
-        x = add_i16_m128i(x, byte_shl_imm_u128_m128i::<4>(x));
-        x = add_i16_m128i(x, byte_shl_imm_u128_m128i::<8>(x));
-        o.copy_from_slice(&<[u16; 8]>::from(add_i16_m128i(x, carry)));
-        left = o[7];
-        carry = add_i16_m128i(carry, shuffle_ai_f32_all_m128i::<0xFF>(unpack_high_i16_m128i(x, x)));
-    }
-    undo_sample_delta_tail(chunks.remainder(), outs.into_remainder(), left);
-}
-
-/// Undoes the horizontal delta filter on one row of depth samples (see the SSE2 version).
-#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
-fn undo_sample_delta(bytes: &[u8], out: &mut [u16]) {
-    undo_sample_delta_tail(bytes, out, 0);
-}
-
-/// The last samples of a row that do not fill a vector, `left` the sample before them.
-fn undo_sample_delta_tail(bytes: &[u8], out: &mut [u16], mut left: u16) {
-    for (v, b) in out.iter_mut().zip(bytes.chunks_exact(2)) {
-        left = left.wrapping_add(u16::from_le_bytes([b[0], b[1]]));
-        *v = left;
-    }
-}
-
-/// The last bytes of a row that do not fill a vector, `left` the byte before them.
-fn undo_byte_delta_tail(rest: &mut [u8], mut left: u8) {
-    for v in rest {
-        *v = v.wrapping_add(left);
-        left = *v;
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::core::frame::PixelFormat;
 
     fn depth(w: u32, h: u32) -> DepthFrame {
         let data = (0..w * h)
@@ -634,43 +318,6 @@ mod tests {
             width: w,
             height: h,
             data,
-        }
-    }
-
-    #[test]
-    fn the_fast_sample_delta_undo_matches_the_sample_by_sample_one() {
-        for len in [0usize, 1, 7, 8, 9, 17, 640, 1283] {
-            let deltas: Vec<u16> = (0..len).map(|i| (i.wrapping_mul(2_654_435_761) >> 11) as u16).collect();
-            let bytes: Vec<u8> = deltas.iter().flat_map(|d| d.to_le_bytes()).collect();
-            let mut fast = vec![0u16; len];
-            undo_sample_delta(&bytes, &mut fast);
-            let mut left = 0u16;
-            let slow: Vec<u16> = deltas
-                .iter()
-                .map(|&d| {
-                    left = left.wrapping_add(d);
-                    left
-                })
-                .collect();
-            assert_eq!(fast, slow, "row of {len}");
-        }
-    }
-
-    #[test]
-    fn the_fast_delta_undo_matches_the_byte_by_byte_one() {
-        for len in [0usize, 1, 7, 8, 9, 17, 640, 1283] {
-            let deltas: Vec<u8> = (0..len).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect();
-            let mut fast = deltas.clone();
-            undo_byte_delta(&mut fast);
-            let mut left = 0u8;
-            let slow: Vec<u8> = deltas
-                .iter()
-                .map(|d| {
-                    left = left.wrapping_add(*d);
-                    left
-                })
-                .collect();
-            assert_eq!(fast, slow, "{len} bytes");
         }
     }
 
@@ -781,15 +428,5 @@ mod tests {
             data: vec![],
         };
         assert!(matches!(enc.encode_depth(&frame), Err(CodecError::TooLarge { .. })));
-    }
-
-    #[test]
-    fn format_names_parse_back() {
-        for code in 0..7 {
-            let f = FrameFormat::from_code(code).unwrap();
-            assert_eq!(f.name().parse::<FrameFormat>().unwrap(), f);
-        }
-        assert!(FrameFormat::from_code(7).is_none());
-        assert!("yuv422".parse::<FrameFormat>().is_err());
     }
 }

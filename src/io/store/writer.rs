@@ -1,0 +1,148 @@
+//! Writing a record file ([`RecordWriter`]): the file header at creation, then each record as
+//! one write of its header and payload.
+
+use super::format::{
+    FILE_HEADER_LEN, FILE_MAGIC, FORMAT_VERSION, Kind, MAX_PAYLOAD_LEN, RECORD_HEADER_LEN, record_header,
+};
+use super::{Result, StoreError, io_error};
+use std::fs::{File, OpenOptions};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+/// Writes a record file: the file header at creation, then one record per [`append`].
+///
+/// Each record goes out as a single `write_all` of header and payload; [`flush`] hands the
+/// buffered bytes to the operating system (cheap enough to call after every frame) so a
+/// killed process leaves every flushed record readable, and [`sync`] also waits for the disk.
+///
+/// [`append`]: RecordWriter::append
+/// [`flush`]: RecordWriter::flush
+/// [`sync`]: RecordWriter::sync
+#[derive(Debug)]
+pub struct RecordWriter {
+    path: PathBuf,
+    kind: Kind,
+    out: BufWriter<File>,
+    /// Bytes written so far, headers included: the offset of the next record.
+    position: u64,
+    /// Header and payload of the record being written, reused between records.
+    scratch: Vec<u8>,
+    failed: bool,
+}
+
+impl RecordWriter {
+    /// Creates a new record file (it must not exist yet) and writes its header.
+    ///
+    /// # Errors
+    /// [`StoreError::Io`] when the file exists already or can not be created or written.
+    pub fn create(path: impl AsRef<Path>, kind: Kind) -> Result<Self> {
+        let path = path.as_ref();
+        let file = OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(path)
+            .map_err(io_error(path, "create"))?;
+        let mut out = BufWriter::with_capacity(256 << 10, file);
+        let mut header = [0u8; 16];
+        header[0..8].copy_from_slice(&FILE_MAGIC);
+        header[8..12].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
+        header[12..16].copy_from_slice(&kind.code().to_le_bytes());
+        out.write_all(&header).map_err(io_error(path, "write"))?;
+        out.flush().map_err(io_error(path, "write"))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            kind,
+            out,
+            position: FILE_HEADER_LEN,
+            scratch: Vec::new(),
+            failed: false,
+        })
+    }
+
+    /// Appends one record and returns its offset (where its header starts).
+    ///
+    /// # Errors
+    /// [`StoreError::PayloadTooLarge`] above [`MAX_PAYLOAD_LEN`]; [`StoreError::Io`] when
+    /// writing fails, after which the writer refuses further records
+    /// ([`StoreError::WriterFailed`]) since the file's end is no longer known.
+    pub fn append(&mut self, payload: &[u8]) -> Result<u64> {
+        if self.failed {
+            return Err(StoreError::WriterFailed {
+                path: self.path.clone(),
+            });
+        }
+        let len = u32::try_from(payload.len())
+            .ok()
+            .filter(|&len| len <= MAX_PAYLOAD_LEN)
+            .ok_or_else(|| StoreError::PayloadTooLarge {
+                path: self.path.clone(),
+                len: payload.len(),
+            })?;
+        self.scratch.clear();
+        self.scratch.extend_from_slice(&record_header(payload, len));
+        self.scratch.extend_from_slice(payload);
+        if let Err(source) = self.out.write_all(&self.scratch) {
+            self.failed = true;
+            return Err(StoreError::Io {
+                path: self.path.clone(),
+                action: "write",
+                source,
+            });
+        }
+        let offset = self.position;
+        self.position += RECORD_HEADER_LEN + u64::from(len);
+        Ok(offset)
+    }
+
+    /// Hands buffered records to the operating system (no disk sync).
+    ///
+    /// # Errors
+    /// [`StoreError::Io`] when writing fails.
+    pub fn flush(&mut self) -> Result<()> {
+        if let Err(source) = self.out.flush() {
+            self.failed = true;
+            return Err(StoreError::Io {
+                path: self.path.clone(),
+                action: "write",
+                source,
+            });
+        }
+        Ok(())
+    }
+
+    /// Flushes and waits until the file's data is on disk.
+    ///
+    /// # Errors
+    /// [`StoreError::Io`] when writing or syncing fails.
+    pub fn sync(&mut self) -> Result<()> {
+        self.flush()?;
+        self.out.get_ref().sync_all().map_err(io_error(&self.path, "sync"))
+    }
+
+    /// The file's length once everything appended is flushed: the offset of the next record.
+    pub fn position(&self) -> u64 {
+        self.position
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn kind(&self) -> Kind {
+        self.kind
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn oversized_payload_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut w = RecordWriter::create(dir.path().join("x"), Kind::ColorFrames).unwrap();
+        let big = vec![0u8; MAX_PAYLOAD_LEN as usize + 1];
+        assert!(matches!(w.append(&big), Err(StoreError::PayloadTooLarge { .. })));
+        assert!(RecordWriter::create(dir.path().join("x"), Kind::ColorFrames).is_err());
+    }
+}

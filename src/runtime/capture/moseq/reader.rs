@@ -1,0 +1,255 @@
+//! Reading the depth file: the frame size of `depth.dat` from `metadata.json`, and that of
+//! `depth.avi` from `ffprobe`; frames read from `depth.dat` as they are, or from an `ffmpeg`
+//! child decoding `depth.avi`, whose output a named thread cuts into whole frames.
+
+use super::{MoseqDepth, MoseqError};
+use std::fs::File;
+use std::io::{self, BufReader, Read};
+use std::path::Path;
+use std::process::{Child, ChildStderr, Command, Stdio};
+use std::sync::mpsc;
+
+/// The frame size `metadata.json` gives (`DepthResolution`), `None` when the file or the key
+/// is absent.
+///
+/// # Errors
+/// The file exists but cannot be read, is not JSON, or its `DepthResolution` is not two
+/// positive integers.
+pub fn metadata_resolution(path: &Path) -> Result<Option<(u32, u32)>, MoseqError> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(None),
+        Err(source) => {
+            return Err(MoseqError::Io {
+                path: path.to_owned(),
+                source,
+            });
+        }
+    };
+    let value: serde_json::Value = serde_json::from_str(&text).map_err(|source| MoseqError::Metadata {
+        path: path.to_owned(),
+        source,
+    })?;
+    let Some(resolution) = value.get("DepthResolution") else {
+        return Ok(None);
+    };
+    let size = |i: usize| {
+        resolution
+            .get(i)
+            .and_then(serde_json::Value::as_u64)
+            .and_then(|v| u32::try_from(v).ok())
+            .filter(|&v| v > 0)
+    };
+    match (resolution.as_array().map(Vec::len), size(0), size(1)) {
+        (Some(2), Some(w), Some(h)) => Ok(Some((w, h))),
+        _ => Err(MoseqError::Resolution {
+            path: path.to_owned(),
+            value: resolution.to_string(),
+        }),
+    }
+}
+
+/// What frames are read from while the source runs.
+#[derive(Debug)]
+pub(super) enum Reader {
+    Raw(BufReader<File>),
+    Video(VideoDecoder),
+}
+
+/// The ffmpeg child and the named thread that reads its output into whole frames.
+#[derive(Debug)]
+pub(super) struct VideoDecoder {
+    child: Child,
+    pub(super) frames: Option<mpsc::Receiver<Result<Vec<u16>, MoseqError>>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl MoseqDepth {
+    pub(super) fn spawn_decoder(&self) -> Result<VideoDecoder, MoseqError> {
+        let mut child = Command::new(&self.config.ffmpeg)
+            .args(["-nostdin", "-v", "error", "-i"])
+            .arg(&self.depth_path)
+            .args(["-map", "0:v:0", "-f", "rawvideo", "-pix_fmt", "gray16le", "-"])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .map_err(|source| MoseqError::Spawn {
+                program: self.config.ffmpeg.clone(),
+                source,
+            })?;
+        let (Some(stdout), Some(stderr)) = (child.stdout.take(), child.stderr.take()) else {
+            kill_and_reap(&mut child);
+            return Err(MoseqError::Spawn {
+                program: self.config.ffmpeg.clone(),
+                source: io::Error::other("no pipe to the child"),
+            });
+        };
+        let (sender, receiver) = mpsc::sync_channel(2);
+        let samples = self.frame_samples();
+        let program = self.config.ffmpeg.clone();
+        let path = self.depth_path.clone();
+        let thread = std::thread::Builder::new()
+            .name("moseq-ffmpeg".to_owned())
+            .spawn(move || decode_frames(stdout, stderr, samples, &program, &path, &sender))
+            .map_err(|source| MoseqError::Spawn {
+                program: self.config.ffmpeg.clone(),
+                source,
+            });
+        match thread {
+            Ok(thread) => Ok(VideoDecoder {
+                child,
+                frames: Some(receiver),
+                thread: Some(thread),
+            }),
+            Err(e) => {
+                kill_and_reap(&mut child);
+                Err(e)
+            }
+        }
+    }
+}
+
+/// Runs on the decoder thread: reads whole frames from ffmpeg's output and sends them until
+/// the output ends, the receiver is gone or an error occurs (sent as the last item).
+fn decode_frames(
+    mut stdout: impl Read,
+    mut stderr: ChildStderr,
+    samples: usize,
+    program: &Path,
+    path: &Path,
+    sender: &mpsc::SyncSender<Result<Vec<u16>, MoseqError>>,
+) {
+    let mut bytes = vec![0u8; samples * 2];
+    loop {
+        match read_full(&mut stdout, &mut bytes) {
+            Ok(n) if n == bytes.len() => {
+                let frame = bytes
+                    .chunks_exact(2)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                    .collect();
+                if sender.send(Ok(frame)).is_err() {
+                    return;
+                }
+            }
+            Ok(n) => {
+                // End of output: clean after whole frames, otherwise ffmpeg failed.
+                let mut text = String::new();
+                let _ = stderr.read_to_string(&mut text);
+                let text = text.trim();
+                if n != 0 || !text.is_empty() {
+                    let stderr = if text.is_empty() {
+                        format!("output ended {n} bytes into a frame")
+                    } else {
+                        text.chars().take(1000).collect()
+                    };
+                    let _ = sender.send(Err(MoseqError::Tool {
+                        program: program.to_owned(),
+                        path: path.to_owned(),
+                        stderr,
+                    }));
+                }
+                return;
+            }
+            Err(source) => {
+                let _ = sender.send(Err(MoseqError::Io {
+                    path: path.to_owned(),
+                    source,
+                }));
+                return;
+            }
+        }
+    }
+}
+
+/// Reads until `buf` is full or the input ends; returns the number of bytes read.
+pub(super) fn read_full(reader: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
+    let mut filled = 0;
+    while filled < buf.len() {
+        let Some(rest) = buf.get_mut(filled..) else { break };
+        match reader.read(rest) {
+            Ok(0) => break,
+            Ok(n) => filled += n,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(filled)
+}
+
+/// Kills a child process (it may have ended already) and waits for it, so that no zombie stays.
+fn kill_and_reap(child: &mut Child) {
+    if let Err(error) = child.kill() {
+        tracing::debug!(message = "Child already ended.", %error);
+    }
+    if let Err(error) = child.wait() {
+        tracing::warn!(message = "Could not reap a child process.", %error);
+    }
+}
+
+impl VideoDecoder {
+    fn shut(&mut self) {
+        // Dropping the receiver first unblocks a thread waiting to send; killing ffmpeg closes
+        // the pipe the thread reads.
+        self.frames = None;
+        kill_and_reap(&mut self.child);
+        if let Some(thread) = self.thread.take()
+            && thread.join().is_err()
+        {
+            tracing::error!(message = "The ffmpeg reader thread panicked.");
+        }
+    }
+}
+
+impl Drop for VideoDecoder {
+    fn drop(&mut self) {
+        self.shut();
+    }
+}
+
+/// Width, height and (when the container knows it) frame count of the first video stream.
+pub(super) fn probe(ffprobe: &Path, path: &Path) -> Result<(u32, u32, Option<u64>), MoseqError> {
+    let output = Command::new(ffprobe)
+        .args(["-v", "error", "-select_streams", "v:0"])
+        .args(["-show_entries", "stream=width,height,nb_frames", "-of", "json"])
+        .arg(path)
+        .stdin(Stdio::null())
+        .output()
+        .map_err(|source| MoseqError::Spawn {
+            program: ffprobe.to_owned(),
+            source,
+        })?;
+    if !output.status.success() {
+        return Err(MoseqError::Tool {
+            program: ffprobe.to_owned(),
+            path: path.to_owned(),
+            stderr: String::from_utf8_lossy(&output.stderr)
+                .trim()
+                .chars()
+                .take(1000)
+                .collect(),
+        });
+    }
+    let text = String::from_utf8_lossy(&output.stdout).into_owned();
+    let bad = || MoseqError::Probe {
+        path: path.to_owned(),
+        output: text.chars().take(1000).collect(),
+    };
+    let value: serde_json::Value = serde_json::from_str(&text).map_err(|_| bad())?;
+    let stream = value.get("streams").and_then(|s| s.get(0)).ok_or_else(bad)?;
+    let dim = |key: &str| {
+        stream
+            .get(key)
+            .and_then(serde_json::Value::as_u64)
+            .and_then(|v| u32::try_from(v).ok())
+            .filter(|&v| v > 0)
+    };
+    let (Some(width), Some(height)) = (dim("width"), dim("height")) else {
+        return Err(bad());
+    };
+    let frames = stream
+        .get("nb_frames")
+        .and_then(serde_json::Value::as_str)
+        .and_then(|s| s.parse().ok());
+    Ok((width, height, frames))
+}

@@ -1,0 +1,191 @@
+//! The empty cage as the depth camera sees it ([`Background`]): a per-pixel median depth,
+//! made from frames of the empty cage or from one depth image of it (a rendered cage), with
+//! the rays of its pixels and the floor plane fitted to it, and refreshed from frames without
+//! a mouse.
+
+use super::floor::fit_floor;
+use super::{FloorPlane, SegmentError, SegmenterConfig, check_buffer, check_frame};
+use crate::core::frame::DepthFrame;
+use crate::core::geometry::Intrinsics;
+use crate::core::image::Region;
+use nalgebra::Point2;
+use std::fmt;
+
+/// The empty cage as the depth camera sees it: a per-pixel median depth over a region of the
+/// image (the whole image, or a crop), the rays of its pixels, and the floor plane fitted to it.
+#[derive(Clone)]
+pub struct Background {
+    pub(super) region: Region,
+    pub(super) intrinsics: Intrinsics,
+    /// Median depth (mm), 0 where the empty cage gives no reading.
+    pub(super) depth: Vec<f32>,
+    /// Each pixel's ray `(x, y, 1)` in the camera frame.
+    pub(super) rays: Vec<[f32; 2]>,
+    pub(super) floor: FloorPlane,
+    updates: usize,
+    pub(super) refit_every: usize,
+    pub(super) step_mm: f32,
+    pub(super) floor_tolerance_mm: f32,
+}
+
+impl fmt::Debug for Background {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Background")
+            .field("region", &self.region)
+            .field("floor", &self.floor)
+            .field("updates", &self.updates)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Background {
+    /// A background from the per-pixel median of `frames` (full images from the camera with
+    /// `intrinsics`) of the empty cage. A pixel with a reading in fewer than half the frames
+    /// has none in the model. A mouse that moves while the frames are taken does not matter; a
+    /// still one sits in the model (and its place never counts as foreground).
+    ///
+    /// # Errors
+    /// No frames, a frame of another size than `intrinsics`, bad settings, or no floor plane
+    /// in the median (see [`Background::from_depth`]).
+    pub fn from_frames(
+        frames: &[DepthFrame],
+        intrinsics: &Intrinsics,
+        config: &SegmenterConfig,
+    ) -> Result<Self, SegmentError> {
+        if frames.is_empty() {
+            return Err(SegmentError::NoFrames);
+        }
+        let region = Region::full(intrinsics);
+        for f in frames {
+            check_frame(f, region)?;
+        }
+        let mut values = Vec::with_capacity(frames.len());
+        let median: Vec<f32> = (0..region.len())
+            .map(|i| {
+                values.clear();
+                values.extend(frames.iter().filter_map(|f| f.data.get(i).copied().filter(|&v| v > 0)));
+                if values.len() * 2 < frames.len() {
+                    return 0.0;
+                }
+                let mid = values.len() / 2;
+                values.select_nth_unstable(mid).1.to_owned().into()
+            })
+            .collect();
+        Self::from_depth(&median, region, intrinsics, config)
+    }
+
+    /// A background from one depth image of the empty cage over `region` of the camera's image
+    /// (mm, 0 = no reading), such as a rendered cage: `Cage::new(&rig.depth).depth(region)`.
+    ///
+    /// # Errors
+    /// A region outside the image, a buffer of the wrong length, bad intrinsics or settings,
+    /// or no floor plane: fewer than a fifth of the readings on one plane facing the camera.
+    pub fn from_depth(
+        depth: &[f32],
+        region: Region,
+        intrinsics: &Intrinsics,
+        config: &SegmenterConfig,
+    ) -> Result<Self, SegmentError> {
+        config.validate()?;
+        check_intrinsics(intrinsics)?;
+        check_buffer(depth.len(), region, Region::full(intrinsics))?;
+        let depth: Vec<f32> = depth
+            .iter()
+            .map(|&z| if z.is_finite() && z > 0.0 { z } else { 0.0 })
+            .collect();
+        let mut rays = Vec::with_capacity(region.len());
+        for y in region.y0..region.y0 + region.height {
+            for x in region.x0..region.x0 + region.width {
+                let r = intrinsics.ray(&Point2::new(f64::from(x), f64::from(y)));
+                rays.push([r.x as f32, r.y as f32]);
+            }
+        }
+        let floor = fit_floor(&depth, &rays, f64::from(config.floor_tolerance_mm))?;
+        Ok(Self {
+            region,
+            intrinsics: *intrinsics,
+            depth,
+            rays,
+            floor,
+            updates: 0,
+            refit_every: config.background_frames,
+            step_mm: config.background_step_mm,
+            floor_tolerance_mm: config.floor_tolerance_mm,
+        })
+    }
+
+    /// The part of the image the model covers.
+    pub fn region(&self) -> Region {
+        self.region
+    }
+
+    /// The camera's intrinsics.
+    pub fn intrinsics(&self) -> &Intrinsics {
+        &self.intrinsics
+    }
+
+    /// The fitted floor plane, in the camera frame.
+    pub fn floor_plane(&self) -> FloorPlane {
+        self.floor
+    }
+
+    /// The model's depth (mm, 0 = no reading), row-major over [`Background::region`].
+    pub fn depth(&self) -> &[f32] {
+        &self.depth
+    }
+
+    /// Refreshes the model with a full frame. Only frames without a mouse count
+    /// (`mouse_present` false): each moves every pixel's running median towards the new
+    /// reading by at most `background_step_mm`, and the floor is fitted again after
+    /// `background_frames` such updates. Returns whether the model changed.
+    ///
+    /// # Errors
+    /// A frame of another size than the model, or no floor plane in the refreshed model (the
+    /// model keeps the new depths and its previous plane).
+    pub fn update(&mut self, frame: &DepthFrame, mouse_present: bool) -> Result<bool, SegmentError> {
+        check_frame(frame, self.region)?;
+        if mouse_present {
+            return Ok(false);
+        }
+        let step = self.step_mm;
+        for (b, &d) in self.depth.iter_mut().zip(&frame.data) {
+            if d == 0 {
+                continue;
+            }
+            let d = f32::from(d);
+            if *b <= 0.0 {
+                *b = d;
+            } else {
+                *b += (d - *b).clamp(-step, step);
+            }
+        }
+        self.updates += 1;
+        if self.updates >= self.refit_every {
+            self.updates = 0;
+            self.floor = fit_floor(&self.depth, &self.rays, f64::from(self.floor_tolerance_mm))?;
+        }
+        Ok(true)
+    }
+}
+
+fn check_intrinsics(i: &Intrinsics) -> Result<(), SegmentError> {
+    let ok = i.width > 0
+        && i.height > 0
+        && i.fx.is_finite()
+        && i.fy.is_finite()
+        && i.fx > 0.0
+        && i.fy > 0.0
+        && i.cx.is_finite()
+        && i.cy.is_finite()
+        && i.distortion.iter().all(|k| k.is_finite());
+    if ok {
+        Ok(())
+    } else {
+        Err(SegmentError::Intrinsics {
+            reason: format!(
+                "{}x{} pixels, focal lengths {} and {} px, centre ({}, {})",
+                i.width, i.height, i.fx, i.fy, i.cx, i.cy
+            ),
+        })
+    }
+}

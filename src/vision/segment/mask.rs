@@ -1,0 +1,383 @@
+//! Steps 1 to 4 of a frame: the strong mask with its pixels counted in tiles, the box of the
+//! densest cluster of tiles, the pixels on depth jumps around it, the floor's noise, the
+//! largest strong component in the box (OpenCV), and that component grown into the tail. What
+//! comes out is the grown mask, left in the segmenter's buffers for the last steps.
+
+use super::{Bounds, FloorPlane, Grid, SegmentError, Segmenter, cv_err, mat_over, mat_over_mut, same_buffer};
+use opencv::core::{self as cv, Mat, MatTraitConst};
+use opencv::imgproc;
+
+/// Side of the square tiles in which strong pixels are counted to find the mouse.
+const TILE: usize = 16;
+/// A tile with at least this many strong pixels may hold the mouse.
+const DENSE_TILE_PX: u32 = 8;
+/// A reading further than this (mm) from one of its four neighbours' lies on a depth jump,
+/// where a time-of-flight camera mixes the two depths ("flying pixels").
+const JUMP_MM: u16 = 6;
+/// Half the length (pixels) of the lines along which a ridge is looked for.
+const RIDGE_HALF_PX: isize = 2;
+/// Grown pixels connected among themselves in smaller groups than this are noise along the
+/// body's edge, not a tail.
+const MIN_BRANCH_PX: usize = 8;
+
+impl Segmenter {
+    /// Pass 1: the strong mask over the region, its pixels counted per tile.
+    pub(super) fn classify(&mut self, depth: &[u16], g: &Grid) {
+        let tiles_x = g.w.div_ceil(TILE);
+        let tiles_y = g.h.div_ceil(TILE);
+        let s = &mut self.scratch;
+        s.tiles.clear();
+        s.tiles.resize(tiles_x * tiles_y, 0);
+        s.column_counts.clear();
+        s.column_counts.resize(g.w, 0);
+        for y in 0..g.h {
+            let src = &depth[y * g.w..(y + 1) * g.w];
+            let at = (g.oy + y) * g.bg_w + g.ox;
+            let lo = &self.lo[at..at + g.w];
+            let hs = &self.hi_strong[at..at + g.w];
+            let strong = &mut s.strong[y * g.w..(y + 1) * g.w];
+            for (((o, &d), &l), &h) in strong.iter_mut().zip(src).zip(lo).zip(hs) {
+                *o = u8::from((d >= l) & (d <= h));
+            }
+            // Column counts over a row of tiles (at most 16 each, so bytes do), summed per
+            // tile at its last row.
+            for (c, &v) in s.column_counts.iter_mut().zip(strong.iter()) {
+                *c += v;
+            }
+            if y % TILE == TILE - 1 || y + 1 == g.h {
+                let row = &mut s.tiles[(y / TILE) * tiles_x..(y / TILE + 1) * tiles_x];
+                for (t, chunk) in row.iter_mut().zip(s.column_counts.chunks(TILE)) {
+                    *t = chunk.iter().map(|&v| u32::from(v)).sum();
+                }
+                s.column_counts.fill(0);
+            }
+        }
+    }
+
+    /// The box (region pixels) of the 8-connected cluster of dense tiles holding the most
+    /// strong pixels, and that box grown by one tile; `None` when no tile is dense. (Strong
+    /// pixels of the mouse outside the first box join it when it grows.)
+    pub(super) fn densest_tiles(&mut self, g: &Grid) -> Option<(Bounds, Bounds)> {
+        let tiles_x = g.w.div_ceil(TILE);
+        let tiles_y = g.h.div_ceil(TILE);
+        let s = &mut self.scratch;
+        s.tile_cluster.clear();
+        s.tile_cluster.resize(s.tiles.len(), 0);
+        let mut best: Option<(u32, Bounds)> = None;
+        let mut next = 0;
+        for start in 0..s.tiles.len() {
+            if s.tiles[start] < DENSE_TILE_PX || s.tile_cluster[start] != 0 {
+                continue;
+            }
+            next += 1;
+            s.tile_cluster[start] = next;
+            s.stack.clear();
+            s.stack.push(start as u32);
+            let mut sum = 0;
+            let mut b = Bounds::empty();
+            while let Some(t) = s.stack.pop() {
+                let t = t as usize;
+                let (tx, ty) = (t % tiles_x, t / tiles_x);
+                sum += s.tiles[t];
+                b.add(tx, ty);
+                let mut around = [0; 8];
+                let count = neighbours8(t, tiles_x, tiles_y, &mut around);
+                for &n in &around[..count] {
+                    if s.tiles[n] >= DENSE_TILE_PX && s.tile_cluster[n] == 0 {
+                        s.tile_cluster[n] = next;
+                        s.stack.push(n as u32);
+                    }
+                }
+            }
+            if best.is_none_or(|(s, _)| sum > s) {
+                best = Some((sum, b));
+            }
+        }
+        let (_, t) = best?;
+        let core = Bounds {
+            x0: t.x0 * TILE,
+            y0: t.y0 * TILE,
+            x1: (t.x1 * TILE).min(g.w),
+            y1: (t.y1 * TILE).min(g.h),
+        };
+        let around = Bounds {
+            x0: t.x0.saturating_sub(1) * TILE,
+            y0: t.y0.saturating_sub(1) * TILE,
+            x1: ((t.x1 + 1) * TILE).min(g.w),
+            y1: ((t.y1 + 1) * TILE).min(g.h),
+        };
+        Some((core, around))
+    }
+
+    /// Marks (`scratch.jump`) the pixels inside `search` on a depth jump: their reading may
+    /// mix the two sides, so their neighbours off the jump decide them later.
+    pub(super) fn mark_jumps(&mut self, depth: &[u16], g: &Grid, search: Bounds) {
+        let s = &mut self.scratch;
+        if let Some(old) = s.jump.get_mut(s.jump_span.clone()) {
+            old.fill(0);
+        }
+        s.jump_span = search.y0 * g.w..search.y1 * g.w;
+        let (x0, x1) = (search.x0.max(1), search.x1.min(g.w.saturating_sub(1)));
+        if x0 >= x1 {
+            return;
+        }
+        for y in search.y0.max(1)..search.y1.min(g.h.saturating_sub(1)) {
+            let row = y * g.w;
+            let up = &depth[row - g.w + x0..row - g.w + x1];
+            let down = &depth[row + g.w + x0..row + g.w + x1];
+            let left = &depth[row + x0 - 1..row + x1 - 1];
+            let right = &depth[row + x0 + 1..row + x1 + 1];
+            let centre = &depth[row + x0..row + x1];
+            let out = &mut s.jump[row + x0..row + x1];
+            let cells = out.iter_mut().zip(centre).zip(left).zip(right).zip(up).zip(down);
+            for (((((o, &d), &l), &r), &u), &w) in cells {
+                let far = |v: u16| (v != 0) & (v.abs_diff(d) > JUMP_MM);
+                *o = u8::from((d != 0) & (far(l) | far(r) | far(u) | far(w)));
+            }
+        }
+    }
+
+    /// The standard deviation (mm) of the floor's readings around the mouse.
+    pub(super) fn floor_noise(&self, depth: &[u16], g: &Grid, search: Bounds) -> f32 {
+        let FloorPlane { normal, offset_mm } = self.background.floor;
+        let (nx, ny, nz, c) = (normal.x as f32, normal.y as f32, normal.z as f32, offset_mm as f32);
+        let top = self.config.min_height_mm;
+        // Readings below the floor are floor and noise, never the mouse: with the noise
+        // symmetric, `sigma^2 = 2 * sum(h^2, h < 0) / floor readings`. (Depths come in whole
+        // millimetres, so this, not a median, is what measures a noise of a millimetre or two.)
+        // Every other row is enough.
+        let (mut sum, mut below, mut level) = (0f64, 0usize, 0usize);
+        for y in (search.y0..search.y1).step_by(2) {
+            let at = (g.oy + y) * g.bg_w + g.ox;
+            let rays = &self.background.rays[at + search.x0..at + search.x1];
+            let row = &depth[y * g.w + search.x0..y * g.w + search.x1];
+            let (mut row_sum, mut row_below, mut row_level) = (0f32, 0u32, 0u32);
+            for (&d, r) in row.iter().zip(rays) {
+                let h = (nx * r[0] + ny * r[1] + nz) * f32::from(d) + c;
+                let read = d != 0;
+                let under = read & (h < -0.5) & (h > -top);
+                row_sum += if under { h * h } else { 0.0 };
+                row_below += u32::from(under);
+                row_level += u32::from(read & (h.abs() <= 0.5));
+            }
+            sum += f64::from(row_sum);
+            below += row_below as usize;
+            level += row_level as usize;
+        }
+        let floor = 2 * below + level;
+        if floor < 100 {
+            return 0.0;
+        }
+        (2.0 * sum / floor as f64).sqrt() as f32
+    }
+
+    /// The largest 8-connected component of strong pixels inside `search` (OpenCV): its label
+    /// in `scratch.labels` (laid out over `search`), or `None` when there is none.
+    pub(super) fn largest_component(&mut self, g: &Grid, search: Bounds) -> Result<Option<i32>, SegmentError> {
+        let s = &mut self.scratch;
+        let full = mat_over(&s.strong, g.h, g.w)?;
+        let roi = Mat::roi(&full, search.rect()?).map_err(cv_err("Mat::roi"))?;
+        let labels_ptr = s.labels.as_ptr();
+        let mut labels = mat_over_mut(&mut s.labels, search.height(), search.width())?;
+        let count =
+            imgproc::connected_components_with_stats(&roi, &mut labels, &mut s.stats, &mut s.centroids, 8, cv::CV_32S)
+                .map_err(cv_err("connectedComponentsWithStats"))?;
+        same_buffer(&labels, labels_ptr, "connectedComponentsWithStats")?;
+        drop(labels);
+        let mut best = None;
+        let mut best_area = 0;
+        for label in 1..count {
+            let area = *s
+                .stats
+                .at_2d::<i32>(label, imgproc::CC_STAT_AREA)
+                .map_err(cv_err("Mat::at_2d"))?;
+            if area > best_area {
+                best_area = area;
+                best = Some(label);
+            }
+        }
+        Ok(best)
+    }
+
+    /// Puts the seed component into the mask and grows it into connected pixels at least
+    /// `grow_mm` above the floor, or on a ridge at least `ridge_mm` high, then drops small
+    /// groups of grown pixels. Returns the mask's box; the mask is left in `scratch.mask`.
+    pub(super) fn grow(
+        &mut self,
+        depth: &[u16],
+        g: &Grid,
+        search: Bounds,
+        seed: i32,
+        grow_mm: f32,
+        ridge_mm: f32,
+    ) -> Bounds {
+        let FloorPlane { normal, offset_mm } = self.background.floor;
+        let (nx, ny, nz, c) = (normal.x as f32, normal.y as f32, normal.z as f32, offset_mm as f32);
+        let margin = grow_mm.min(self.config.background_margin_mm);
+        let bg = &self.background;
+        let height = |i: usize, d: f32| -> f32 {
+            let at = (g.oy + i / g.w) * g.bg_w + g.ox + i % g.w;
+            bg.rays
+                .get(at)
+                .map_or(f32::NEG_INFINITY, |r| (nx * r[0] + ny * r[1] + nz) * d + c)
+        };
+        // Height above the floor, or above the background where that is nearer (a wall).
+        let above = |i: usize, d: f32| -> f32 {
+            let at = (g.oy + i / g.w) * g.bg_w + g.ox + i % g.w;
+            let (Some(r), Some(&b)) = (bg.rays.get(at), bg.depth.get(at)) else {
+                return f32::NEG_INFINITY;
+            };
+            let a = nx * r[0] + ny * r[1] + nz;
+            let h = a * d + c;
+            if b > 0.0 { h.min(a * (d - b)) } else { h }
+        };
+        let bg_at = |i: usize| {
+            bg.depth
+                .get((g.oy + i / g.w) * g.bg_w + g.ox + i % g.w)
+                .copied()
+                .unwrap_or(0.0)
+        };
+        let accept = |i: usize, strong: &[u8], jump: &[u8]| -> bool {
+            let d = depth[i];
+            if d == 0 {
+                return false;
+            }
+            let d = f32::from(d);
+            let h = height(i, d);
+            let b = bg_at(i);
+            if h >= grow_mm && (b <= 0.0 || d <= b - margin) {
+                return true;
+            }
+            if !ridge_mm.is_finite() || above(i, d) < 0.0 {
+                return false;
+            }
+            // A ridge: along some direction, the median height of the five pixels centred
+            // here (without the body's strong pixels) is high enough.
+            let (x, y) = ((i % g.w) as isize, (i / g.w) as isize);
+            let mut best = f32::NEG_INFINITY;
+            for (dx, dy) in [(1isize, 0isize), (0, 1), (1, 1), (1, -1)] {
+                let mut v = [0f32; 11];
+                let mut n = 0;
+                for k in -RIDGE_HALF_PX..=RIDGE_HALF_PX {
+                    let (px, py) = (x + k * dx, y + k * dy);
+                    if px < 0 || py < 0 || px >= g.w as isize || py >= g.h as isize {
+                        continue;
+                    }
+                    let j = py as usize * g.w + px as usize;
+                    if depth[j] == 0 || strong[j] != 0 || jump[j] != 0 {
+                        continue;
+                    }
+                    v[n] = above(j, f32::from(depth[j]));
+                    n += 1;
+                }
+                if n as isize > RIDGE_HALF_PX {
+                    let vs = &mut v[..n];
+                    vs.sort_by(f32::total_cmp);
+                    best = best.max(vs[n / 2]);
+                }
+            }
+            best >= ridge_mm
+        };
+        let s = &mut self.scratch;
+        let sw = search.width();
+        let mut b = Bounds::empty();
+        s.stack.clear();
+        for y in search.y0..search.y1 {
+            let labels = &s.labels[(y - search.y0) * sw..(y - search.y0 + 1) * sw];
+            for (x, &l) in (search.x0..search.x1).zip(labels) {
+                if l == seed {
+                    let i = y * g.w + x;
+                    s.mask[i] = 1;
+                    s.stack.push(i as u32);
+                    b.add(x, y);
+                }
+            }
+        }
+        // Mask values while growing: 1 seed, 2 grown, 4 tried and refused.
+        s.grown.clear();
+        s.refused.clear();
+        while let Some(i) = s.stack.pop() {
+            let mut around = [0; 8];
+            let count = neighbours8(i as usize, g.w, g.h, &mut around);
+            for &n in &around[..count] {
+                if s.mask[n] != 0 {
+                    continue;
+                }
+                if accept(n, &s.strong, &s.jump) {
+                    s.mask[n] = 2;
+                    s.stack.push(n as u32);
+                    s.grown.push(n as u32);
+                } else {
+                    s.mask[n] = 4;
+                    s.refused.push(n as u32);
+                }
+            }
+        }
+        for &i in &s.refused {
+            s.mask[i as usize] = 0;
+        }
+        // Grown pixels form branches (8-connected among themselves); the small ones are noise
+        // along the body's edge, the long ones the tail.
+        for k in 0..s.grown.len() {
+            let start = s.grown[k] as usize;
+            if s.mask[start] != 2 {
+                continue;
+            }
+            s.mask[start] = 3;
+            s.branch.clear();
+            s.branch.push(start as u32);
+            let mut next = 0;
+            while let Some(&i) = s.branch.get(next) {
+                next += 1;
+                let mut around = [0; 8];
+                let count = neighbours8(i as usize, g.w, g.h, &mut around);
+                for &n in &around[..count] {
+                    if s.mask[n] == 2 {
+                        s.mask[n] = 3;
+                        s.branch.push(n as u32);
+                    }
+                }
+            }
+            let keep = s.branch.len() >= MIN_BRANCH_PX;
+            for &i in &s.branch {
+                let i = i as usize;
+                s.mask[i] = u8::from(keep);
+                if keep {
+                    b.add(i % g.w, i / g.w);
+                }
+            }
+        }
+        b
+    }
+}
+
+/// The indices of the neighbours of cell `i` of a row-major `w` x `h` grid: fills `out` and
+/// returns how many there are (8 inside, fewer along the edges).
+#[inline]
+fn neighbours8(i: usize, w: usize, h: usize, out: &mut [usize; 8]) -> usize {
+    let (x, y) = (i % w, i / w);
+    if x > 0 && y > 0 && x + 1 < w && y + 1 < h {
+        *out = [i - w - 1, i - w, i - w + 1, i - 1, i + 1, i + w - 1, i + w, i + w + 1];
+        return 8;
+    }
+    let mut n = 0;
+    for (dx, dy) in [
+        (-1isize, -1isize),
+        (0, -1),
+        (1, -1),
+        (-1, 0),
+        (1, 0),
+        (-1, 1),
+        (0, 1),
+        (1, 1),
+    ] {
+        if let (Some(nx), Some(ny)) = (x.checked_add_signed(dx), y.checked_add_signed(dy))
+            && nx < w
+            && ny < h
+        {
+            out[n] = ny * w + nx;
+            n += 1;
+        }
+    }
+    n
+}
