@@ -212,7 +212,7 @@ fn settings_are_applied_or_refused_with_the_camera_range() {
 }
 
 /// Kills and reaps the fake camera program however the test ends.
-struct ChildGuard(Child);
+pub(crate) struct ChildGuard(pub(crate) Child);
 
 impl Drop for ChildGuard {
     fn drop(&mut self) {
@@ -225,12 +225,13 @@ fn gvcp_port_taken() -> bool {
     UdpSocket::bind(("127.0.0.1", GVCP_PORT)).is_err()
 }
 
-#[test]
-fn a_lossy_camera_program_gives_only_whole_frames_and_counts_the_rest() {
-    let _port = take_port();
+/// Starts the `arv-fake-gv-camera-0.8` program on 127.0.0.1 with `args` and waits until it
+/// listens. Take the port first ([`take_port`]).
+pub(crate) fn start_fake_program(args: &[&str]) -> ChildGuard {
     let mut child = ChildGuard(
         Command::new("arv-fake-gv-camera-0.8")
-            .args(["-i", "127.0.0.1", "-s", "MP-LOSSY", "-r", "200"])
+            .args(["-i", "127.0.0.1"])
+            .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(Stdio::null())
@@ -239,10 +240,18 @@ fn a_lossy_camera_program_gives_only_whole_frames_and_counts_the_rest() {
     );
     let deadline = Instant::now() + Duration::from_secs(10);
     while !gvcp_port_taken() {
-        assert!(child.0.try_wait().unwrap().is_none(), "the fake camera program exited");
+        let exited = child.0.try_wait().expect("the fake camera program can be waited for");
+        assert!(exited.is_none(), "the fake camera program exited");
         assert!(Instant::now() < deadline, "the fake camera program never listened");
         std::thread::sleep(Duration::from_millis(20));
     }
+    child
+}
+
+#[test]
+fn a_lossy_camera_program_gives_only_whole_frames_and_counts_the_rest() {
+    let _port = take_port();
+    let child = start_fake_program(&["-s", "MP-LOSSY", "-r", "200"]);
 
     let mut source = AravisColor::open(&config(Some((0, 0, 256, 64)))).unwrap();
     assert_eq!(source.meta().serial, "MP-LOSSY");

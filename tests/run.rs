@@ -2,45 +2,16 @@
 //! the `arv-fake-gv-camera-0.8` program on 127.0.0.1 (opened by address, no discovery), killed
 //! and started again mid-run. systemd's notifications are read from a socket of the test's.
 
-use crate::capture_aravis::take_port;
+use crate::capture_aravis::{ChildGuard, start_fake_program, take_port};
 use crate::util::{mousepose, repo_root};
 use mousepose::io::session::SessionReader;
-use std::net::UdpSocket;
 use std::os::unix::net::UnixDatagram;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// Kills and reaps a child process however the test ends.
-struct Guard(Child);
-
-impl Drop for Guard {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn fake_camera() -> Guard {
-    let mut child = Guard(
-        Command::new("arv-fake-gv-camera-0.8")
-            .args(["-i", "127.0.0.1", "-s", "MP-RUN"])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("arv-fake-gv-camera-0.8 runs (package aravis-tools)"),
-    );
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while UdpSocket::bind(("127.0.0.1", aravis_ext::GVCP_PORT)).is_ok() {
-        assert!(
-            child.0.try_wait().expect("test set-up").is_none(),
-            "the fake camera program exited"
-        );
-        assert!(Instant::now() < deadline, "the fake camera program never listened");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    child
+fn fake_camera() -> ChildGuard {
+    start_fake_program(&["-s", "MP-RUN"])
 }
 
 fn rig(dir: &Path, color: bool) -> PathBuf {
@@ -61,7 +32,7 @@ fn rig(dir: &Path, color: bool) -> PathBuf {
     path
 }
 
-fn daemon(rig: &Path, notify: Option<&Path>) -> Guard {
+fn daemon(rig: &Path, notify: Option<&Path>) -> ChildGuard {
     let mut cmd = mousepose();
     cmd.args(["run", "--json", "--config"])
         .arg(rig)
@@ -72,7 +43,7 @@ fn daemon(rig: &Path, notify: Option<&Path>) -> Guard {
     if let Some(socket) = notify {
         cmd.env("NOTIFY_SOCKET", socket);
     }
-    Guard(cmd.spawn().expect("test set-up"))
+    ChildGuard(cmd.spawn().expect("test set-up"))
 }
 
 /// The run's chunk directories, in order.
@@ -91,7 +62,7 @@ fn chunks(out: &Path) -> Vec<PathBuf> {
 }
 
 /// Sends SIGTERM and waits (at most `limit`) for the exit; returns its status and stdout.
-fn terminate(mut child: Guard, limit: Duration) -> (std::process::ExitStatus, String, String) {
+fn terminate(mut child: ChildGuard, limit: Duration) -> (std::process::ExitStatus, String, String) {
     let pid = child.0.id().to_string();
     assert!(
         Command::new("kill")

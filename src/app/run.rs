@@ -10,12 +10,13 @@ use crate::core::geometry::Rig;
 use crate::io::session::CameraRole;
 use crate::runtime::accounting::CameraSummary;
 use crate::runtime::capture::rig::{ColorSource, open_color, open_depth};
-use crate::runtime::capture::supervise::{CameraHealth, CameraState, Outage, SharedHealth, Supervised, lock};
+use crate::runtime::capture::supervise::{CameraState, Outage, SharedHealth, Supervised, lock};
 use crate::runtime::capture::{CaptureError, FrameSource};
 use crate::runtime::config::{Config, DepthCamera};
 use crate::runtime::models::Models;
 use crate::runtime::pipeline::{LatencySummary, Shutdown, StageReport};
 use crate::runtime::sink::chunks::{ChunkPlan, ChunkPoses, ChunkRecorder, Chunks, DiskWatch, Live, chunk_meta};
+use crate::runtime::stages::PoseStatus;
 use crate::runtime::stages::segment::SegmentStage;
 use crate::runtime::topology::{Edges, Epochs, Processing, Sources, Topology};
 use crate::vision::calibrate::RigCalibration;
@@ -106,8 +107,10 @@ fn status_line(healths: &[(&str, SharedHealth)], live: &Live, fps: f64) -> Strin
             None => format!("{name} ?"),
         })
         .collect();
-    let degraded = if live.statuses.contains_key("no_background")
-        && live.latest.as_ref().is_some_and(|p| p.status.name() == "no_background")
+    let degraded = if live
+        .latest
+        .as_ref()
+        .is_some_and(|p| p.status == PoseStatus::NoBackground)
     {
         ", degraded: no floor in the depth view yet"
     } else {
@@ -257,10 +260,13 @@ pub fn run(
     let live = snapshot();
     let mut cameras = BTreeMap::new();
     for (name, frames) in finished.cameras {
-        let health = healths.iter().find(|(n, _)| *n == name).map(|(_, h)| lock(h));
-        let (state, outages) = health.map_or((None, Vec::new()), |h: std::sync::MutexGuard<'_, CameraHealth>| {
-            (h.state.clone(), h.outages.clone())
-        });
+        let (state, outages) = match healths.iter().find(|(n, _)| *n == name) {
+            Some((_, h)) => {
+                let h = lock(h);
+                (h.state.clone(), h.outages.clone())
+            }
+            None => (None, Vec::new()),
+        };
         cameras.insert(name, RunCamera { frames, state, outages });
     }
     let report = RunReport {

@@ -4,7 +4,7 @@
 //! Vision cameras are looked for only at the addresses a rig config names (Aravis 0.8 cannot
 //! limit its discovery to one network interface, so no discovery is run at all).
 
-use crate::runtime::capture::{CaptureError, DeviceInfo};
+use crate::runtime::capture::{DeviceInfo, error_chain};
 use crate::runtime::config::{ColorCamera, Config};
 use serde::Serialize;
 
@@ -18,17 +18,6 @@ pub struct BackendDevices {
     pub error: Option<String>,
     /// What the listing covers (e.g. which addresses were probed).
     pub scope: String,
-}
-
-fn chain(e: &CaptureError) -> String {
-    let mut text = e.to_string();
-    let mut source = std::error::Error::source(e);
-    while let Some(s) = source {
-        text.push_str(": ");
-        text.push_str(&s.to_string());
-        source = s.source();
-    }
-    text
 }
 
 /// Lists every backend's cameras; GigE cameras only at the addresses `config` names.
@@ -46,7 +35,7 @@ pub fn list(config: Option<&Config>) -> Vec<BackendDevices> {
     vec![
         BackendDevices {
             backend: "openni2",
-            error: openni.as_ref().err().map(chain),
+            error: openni.as_ref().err().map(|e| error_chain(e)),
             devices: openni.unwrap_or_default(),
             scope: "USB depth cameras and the drivers' virtual devices".to_owned(),
         },

@@ -10,7 +10,7 @@
 
 use crate::core::frame::{ColorFrame, DepthFrame, Stamp};
 use crate::io::session::{CameraMeta, CameraRole, SessionEvent};
-use crate::runtime::capture::{CaptureError, Clock, FrameSource, Stamped};
+use crate::runtime::capture::{CaptureError, Clock, FrameSource, Stamped, error_chain};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -285,18 +285,6 @@ where
         lock(&self.health).frames += 1;
         Some(frame)
     }
-}
-
-/// An error and its causes on one line.
-pub fn error_chain(e: &dyn std::error::Error) -> String {
-    let mut text = e.to_string();
-    let mut source = e.source();
-    while let Some(s) = source {
-        text.push_str(": ");
-        text.push_str(&s.to_string());
-        source = s.source();
-    }
-    text
 }
 
 impl<S> FrameSource for Supervised<S>

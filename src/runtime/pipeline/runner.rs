@@ -540,13 +540,21 @@ mod tests {
         let got = Arc::new(std::sync::Mutex::new(Vec::new()));
         let mut runner = Runner::new();
         let shutdown = runner.shutdown();
+        let stopped = Arc::new(AtomicBool::new(false));
+        let seen = Arc::clone(&stopped);
         runner
             .spawn("source", move || {
-                for i in 0..100_000u32 {
-                    if shutdown.requested() || src_tx.send(Tracked::new(u64::from(i), i)) == Sent::Closed {
+                for i in 0..100u32 {
+                    if src_tx.send(Tracked::new(u64::from(i), i)) == Sent::Closed {
                         break;
                     }
                 }
+                // Nothing else fails: only the panic itself can ask the source to stop.
+                let deadline = Instant::now() + std::time::Duration::from_secs(10);
+                while !shutdown.requested() && Instant::now() < deadline {
+                    std::thread::sleep(std::time::Duration::from_millis(10));
+                }
+                seen.store(shutdown.requested(), Ordering::Relaxed);
                 Ok(())
             })
             .unwrap();
@@ -561,6 +569,7 @@ mod tests {
         assert!(e.name.starts_with("double"), "{}", e.name);
         assert!(e.source.to_string().contains("a bug in a stage"), "{}", e.source);
         assert!(got.lock().unwrap().len() < 1_000);
+        assert!(stopped.load(Ordering::Relaxed), "the panic did not stop the source");
     }
 
     #[test]

@@ -12,8 +12,8 @@
 use crate::io::session::{
     CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionSummary, SessionWriter,
 };
-use crate::runtime::capture::supervise::{SharedHealth, error_chain, lock};
-use crate::runtime::capture::{Captured, Stamped};
+use crate::runtime::capture::supervise::{SharedHealth, lock};
+use crate::runtime::capture::{Captured, Stamped, error_chain};
 use crate::runtime::pipeline::{Sink, StageError};
 use crate::runtime::sink::poses::{PoseTally, PoseWriter};
 use crate::runtime::stages::Fused;
