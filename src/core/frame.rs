@@ -6,6 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
+use std::sync::Arc;
 
 /// When and in which order a frame was produced.
 ///
@@ -156,8 +157,9 @@ impl fmt::Debug for ColorFrame {
 /// tolerance): the pose then has joints 1-12 only.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FramePair {
-    pub depth: DepthFrame,
-    pub color: Option<ColorFrame>,
+    /// Shared with the recorder branch, never copied.
+    pub depth: Arc<DepthFrame>,
+    pub color: Option<Arc<ColorFrame>>,
     /// Colour time minus depth time on the depth device's clock, after offset and drift
     /// correction; 0 without colour.
     pub skew_ns: i64,

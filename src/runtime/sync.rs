@@ -16,6 +16,7 @@
 
 use crate::core::frame::{ColorFrame, DepthFrame, FramePair, Stamp};
 use std::collections::VecDeque;
+use std::sync::Arc;
 
 /// How the synchroniser pairs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -50,7 +51,7 @@ pub enum SyncOutput {
     /// A depth frame, with its colour partner if it has one.
     Pair(FramePair),
     /// A colour frame no depth frame claimed.
-    UnpairedColor(ColorFrame),
+    UnpairedColor(Arc<ColorFrame>),
     /// A frame refused because it is out of order (its device time or sequence number does
     /// not follow the previous frame of its camera).
     Rejected {
@@ -188,8 +189,8 @@ pub struct Synchronizer {
     config: SyncConfig,
     depth_clock: ClockModel,
     color_clock: ClockModel,
-    depth: VecDeque<Pending<DepthFrame>>,
-    color: VecDeque<Pending<ColorFrame>>,
+    depth: VecDeque<Pending<Arc<DepthFrame>>>,
+    color: VecDeque<Pending<Arc<ColorFrame>>>,
     last_depth: Option<Stamp>,
     last_color: Option<Stamp>,
     /// Smallest interval between depth frames per step of their frame counter (device time).
@@ -228,7 +229,7 @@ impl Synchronizer {
     }
 
     /// Takes a depth frame; whatever can be decided goes to `out`.
-    pub fn push_depth(&mut self, frame: DepthFrame, out: &mut Vec<SyncOutput>) {
+    pub fn push_depth(&mut self, frame: Arc<DepthFrame>, out: &mut Vec<SyncOutput>) {
         let stamp = frame.stamp;
         if let Some(reason) = out_of_order(self.last_depth, stamp) {
             out.push(SyncOutput::Rejected {
@@ -253,7 +254,7 @@ impl Synchronizer {
     }
 
     /// Takes a colour frame; whatever can be decided goes to `out`.
-    pub fn push_color(&mut self, frame: ColorFrame, out: &mut Vec<SyncOutput>) {
+    pub fn push_color(&mut self, frame: Arc<ColorFrame>, out: &mut Vec<SyncOutput>) {
         let stamp = frame.stamp;
         if let Some(reason) = out_of_order(self.last_color, stamp) {
             out.push(SyncOutput::Rejected {
@@ -430,18 +431,18 @@ mod tests {
             .collect()
     }
 
-    fn depth(stamp: Stamp) -> DepthFrame {
-        DepthFrame::empty(stamp, 1, 1)
+    fn depth(stamp: Stamp) -> Arc<DepthFrame> {
+        Arc::new(DepthFrame::empty(stamp, 1, 1))
     }
 
-    fn color(stamp: Stamp) -> ColorFrame {
-        ColorFrame {
+    fn color(stamp: Stamp) -> Arc<ColorFrame> {
+        Arc::new(ColorFrame {
             stamp,
             width: 1,
             height: 1,
             format: crate::core::frame::PixelFormat::Mono8,
             data: vec![0],
-        }
+        })
     }
 
     /// Feeds both streams in host arrival order and returns everything emitted.

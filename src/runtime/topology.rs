@@ -203,7 +203,7 @@ impl Topology<'_> {
                     "cap-depth",
                     depth,
                     &clock,
-                    Captured::Depth,
+                    |f| Captured::Depth(Arc::new(f)),
                     &outputs,
                     &acct,
                 )
@@ -214,7 +214,7 @@ impl Topology<'_> {
                         "cap-color",
                         color,
                         &clock,
-                        Captured::Color,
+                        |f| Captured::Color(Arc::new(f)),
                         &outputs,
                         &acct,
                     )
@@ -231,7 +231,7 @@ impl Topology<'_> {
                     }
                     Recording::Moseq { config, .. } => {
                         let source = Recording::moseq(config)?;
-                        spawn_source(&mut runner, "replay", source, &clock, Captured::Depth, &outputs, &acct)
+                        spawn_source(&mut runner, "replay", source, &clock, |f| Captured::Depth(Arc::new(f)), &outputs, &acct)
                     }
                 }
                 .map_err(threads)?;

@@ -20,6 +20,7 @@ pub use openni::{OpenNiConfig, OpenNiDepth};
 
 use crate::core::frame::{ColorFrame, DepthFrame, Stamp};
 use crate::io::session::meta::CameraMeta;
+use std::sync::Arc;
 use std::time::Duration;
 
 /// Why a source failed. A bad frame is not an error (it is counted in [`FrameSource::losses`]);
@@ -94,8 +95,8 @@ impl SeqGaps {
 /// A frame from either camera of the rig, as the synchroniser takes them.
 #[derive(Clone, Debug)]
 pub enum Captured {
-    Depth(DepthFrame),
-    Color(ColorFrame),
+    Depth(Arc<DepthFrame>),
+    Color(Arc<ColorFrame>),
 }
 
 impl Stamped for Captured {

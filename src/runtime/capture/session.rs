@@ -10,6 +10,7 @@ use crate::io::session::meta::{CameraMeta, CameraRole};
 use crate::io::session::{ColorFrames, DepthFrames};
 use crate::io::session::{SessionError, SessionReader};
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Both cameras of a session, merged by host arrival time.
@@ -142,9 +143,9 @@ impl FrameSource for SessionPlayer {
             clock.advance_to(host_ns);
         }
         Ok(if depth_first {
-            self.next_depth.take().map(Captured::Depth)
+            self.next_depth.take().map(|f| Captured::Depth(Arc::new(f)))
         } else {
-            self.next_color.take().map(Captured::Color)
+            self.next_color.take().map(|f| Captured::Color(Arc::new(f)))
         })
     }
 

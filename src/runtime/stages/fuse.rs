@@ -40,7 +40,7 @@ impl Stage for FuseStage {
         let overlay = self
             .overlay_every
             .filter(|n| record.depth.seq % n == 0)
-            .map(|_| overlay::draw(&self.rig, &pair.depth, pair.color.as_ref(), &record));
+            .map(|_| overlay::draw(&self.rig, &pair.depth, pair.color.as_deref(), &record));
         out.push(Fused { record, overlay });
         Ok(())
     }
