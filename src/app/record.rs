@@ -11,7 +11,7 @@ use crate::io::session::{CameraRole, SessionError, SessionEvent, SessionMeta, Se
 use crate::runtime::accounting::CameraSummary;
 use crate::runtime::capture::rig::{Started, open_color, open_depth};
 use crate::runtime::capture::{CaptureError, Clock, FrameSource};
-use crate::runtime::config::{ColorCamera, Config, DepthCamera};
+use crate::runtime::config::{ColorCamera, Config};
 use crate::runtime::pipeline::{PipelineError, Shutdown};
 use crate::runtime::topology::{Edges, Epochs, Sources, Topology, TopologyError};
 use crate::vision::calibrate::RigCalibration;
@@ -92,22 +92,17 @@ pub fn record(
     // frames were recorded: a camera that fails to open leaves the old session as it was.
     let staging = prepare_output(out, force)?;
     let dir = staging.as_ref().map_or(out, Staging::path);
-    let mut depth = open_depth(&config.depth);
+    let camera = |role| move |source| RecordError::Camera { role, source };
+    let mut depth = open_depth(&config.depth).map_err(camera(CameraRole::Depth))?;
     let color = config
         .color
         .as_ref()
         .map(open_color)
         .transpose()
-        .map_err(|source| RecordError::Camera {
-            role: CameraRole::Color,
-            source,
-        })?;
+        .map_err(camera(CameraRole::Color))?;
     let clock = Clock::Monotonic;
     // Start the depth camera here so that its metadata (model, serial, mode) is known.
-    depth.start(&clock).map_err(|source| RecordError::Camera {
-        role: CameraRole::Depth,
-        source,
-    })?;
+    depth.start(&clock).map_err(camera(CameraRole::Depth))?;
     let mut cameras = vec![depth.meta()];
     cameras.extend(color.as_ref().map(FrameSource::meta));
     let mut meta = SessionMeta::new(
@@ -208,8 +203,8 @@ fn load_calibration(config: &Config) -> Result<Option<RigCalibration>, RecordErr
     };
     let calibration = RigCalibration::load(path)?;
     let target = format!("rig config {:?}", config.path);
-    let DepthCamera::Openni2 { width, height, .. } = &config.depth;
-    calibration.check_camera(CameraRole::Depth, *width, *height, None, &target)?;
+    let (width, height, _) = config.depth.mode();
+    calibration.check_camera(CameraRole::Depth, width, height, None, &target)?;
     let color_size = match &config.color {
         Some(ColorCamera::V4l2 { width, height, .. }) => Some((*width, *height)),
         Some(ColorCamera::Aravis { region, .. }) => region.map(|(_, _, w, h)| (w, h)),

@@ -68,20 +68,23 @@ pub struct RunReport {
     pub cpu_cores: f64,
 }
 
-/// The rig: the configured calibration, or the default rig with the depth intrinsics scaled to
-/// the configured depth mode.
+/// The rig: the configured calibration, the one a replayed session was made with, or the
+/// default rig with the depth intrinsics scaled to the configured depth mode.
 fn live_rig(config: &Config) -> anyhow::Result<Rig> {
     if let Some(path) = &config.calibration {
         return Ok(RigCalibration::load(path)
             .with_context(|| format!("the calibration named by {:?}", config.path))?
             .rig());
     }
+    if let DepthCamera::Session { rig: Some(rig), .. } = &config.depth {
+        return Ok(*rig);
+    }
     let mut rig = Rig::default_rig();
-    let DepthCamera::Openni2 { width, height, .. } = &config.depth;
+    let (width, height, _) = config.depth.mode();
     let i = &mut rig.depth.intrinsics;
-    let scale = f64::from(*width) / f64::from(i.width);
+    let scale = f64::from(width) / f64::from(i.width);
     (i.fx, i.fy, i.cx, i.cy) = (i.fx * scale, i.fy * scale, i.cx * scale, i.cy * scale);
-    (i.width, i.height) = (*width, *height);
+    (i.width, i.height) = (width, height);
     Ok(rig)
 }
 
@@ -144,7 +147,7 @@ pub fn run(
     let depth_config = config.depth.clone();
     let depth = Supervised::new(
         CameraRole::Depth,
-        Box::new(move || Ok(open_depth(&depth_config))),
+        Box::new(move || open_depth(&depth_config)),
         config.reconnect,
         Arc::clone(&epochs[0]),
     );

@@ -55,6 +55,8 @@ struct RawDepth {
     backend: String,
     uri: Option<String>,
     serial: Option<String>,
+    /// The session directory of the `session` backend.
+    path: Option<PathBuf>,
     #[serde(default = "default_depth_width")]
     width: u32,
     #[serde(default = "default_depth_height")]
@@ -198,6 +200,28 @@ pub enum DepthCamera {
         height: u32,
         fps: f64,
     },
+    /// The depth frames of a recorded session, played at their recorded pace and looped: a rig
+    /// without a depth camera, for trying the daemon and for benchmarks. The mode is the
+    /// session's.
+    Session {
+        path: PathBuf,
+        width: u32,
+        height: u32,
+        fps: f64,
+        /// The rig the session was recorded or rendered with, if it says.
+        rig: Option<crate::core::geometry::Rig>,
+    },
+}
+
+impl DepthCamera {
+    /// The depth mode: width, height, frames per second.
+    pub fn mode(&self) -> (u32, u32, f64) {
+        match self {
+            DepthCamera::Openni2 { width, height, fps, .. } | DepthCamera::Session { width, height, fps, .. } => {
+                (*width, *height, *fps)
+            }
+        }
+    }
 }
 
 /// How the colour camera is triggered.
@@ -351,12 +375,39 @@ impl Checker<'_> {
                     fps: self.positive("depth.fps", d.fps, 1000.0)?,
                 }
             }
-            other => return Err(self.bad("depth.backend", format!("must be \"openni2\", not {other:?}"))),
+            "session" => {
+                let Some(path) = d.path else {
+                    return Err(self.bad("depth", "needs `path`: the recorded session to play"));
+                };
+                let reader = crate::io::session::SessionReader::open(&path).map_err(|e| {
+                    self.bad(
+                        "depth.path",
+                        format!(
+                            "is not a readable session: {}",
+                            crate::runtime::capture::error_chain(&e)
+                        ),
+                    )
+                })?;
+                let Some(camera) = reader.meta().camera(crate::io::session::CameraRole::Depth) else {
+                    return Err(self.bad("depth.path", format!("{path:?} has no depth camera")));
+                };
+                DepthCamera::Session {
+                    width: camera.width,
+                    height: camera.height,
+                    fps: camera.fps,
+                    rig: reader.meta().rig,
+                    path,
+                }
+            }
+            other => {
+                return Err(self.bad(
+                    "depth.backend",
+                    format!("must be \"openni2\" or \"session\", not {other:?}"),
+                ));
+            }
         };
         let color = raw.color.map(|c| self.color(c)).transpose()?;
-        let fps = match &depth {
-            DepthCamera::Openni2 { fps, .. } => *fps,
-        };
+        let (_, _, fps) = depth.mode();
         let ms = |key: &str, v: Option<f64>| -> Result<Option<f64>, ConfigError> {
             v.map(|v| self.positive(key, v, 10_000.0)).transpose()
         };

@@ -231,7 +231,15 @@ impl Topology<'_> {
                     }
                     Recording::Moseq { config, .. } => {
                         let source = Recording::moseq(config)?;
-                        spawn_source(&mut runner, "replay", source, &clock, |f| Captured::Depth(Arc::new(f)), &outputs, &acct)
+                        spawn_source(
+                            &mut runner,
+                            "replay",
+                            source,
+                            &clock,
+                            |f| Captured::Depth(Arc::new(f)),
+                            &outputs,
+                            &acct,
+                        )
                     }
                 }
                 .map_err(threads)?;

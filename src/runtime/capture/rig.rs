@@ -1,10 +1,11 @@
 //! The cameras a rig config names, opened through their drivers: the depth camera (OpenNI2)
 //! and the colour camera (Aravis or V4L2), as [`FrameSource`]s.
 
-use crate::core::frame::ColorFrame;
+use crate::core::frame::{ColorFrame, DepthFrame};
 use crate::io::session::CameraMeta;
 use crate::runtime::capture::aravis::{AravisColor, AravisConfig, Trigger};
 use crate::runtime::capture::openni::{OpenNiConfig, OpenNiDepth};
+use crate::runtime::capture::session::LoopedDepth;
 use crate::runtime::capture::v4l2::{V4l2Color, V4l2Config};
 use crate::runtime::capture::{CaptureError, Clock, FrameSource};
 use crate::runtime::config::{ColorCamera, DepthCamera, TriggerMode};
@@ -56,23 +57,27 @@ impl FrameSource for ColorSource {
     }
 }
 
-/// The depth camera a config names, ready to start (the camera is opened by `start`).
-pub fn open_depth(camera: &DepthCamera) -> OpenNiDepth {
-    match camera {
+/// The depth camera a config names, ready to start (an OpenNI2 camera is opened by `start`).
+///
+/// # Errors
+/// A recorded session named as the depth camera cannot be read.
+pub fn open_depth(camera: &DepthCamera) -> Result<Box<dyn FrameSource<Frame = DepthFrame>>, CaptureError> {
+    Ok(match camera {
         DepthCamera::Openni2 {
             uri,
             serial,
             width,
             height,
             fps,
-        } => OpenNiDepth::new(OpenNiConfig {
+        } => Box::new(OpenNiDepth::new(OpenNiConfig {
             uri: uri.clone(),
             serial: serial.clone(),
             width: *width,
             height: *height,
             fps: fps.round() as u32,
-        }),
-    }
+        })),
+        DepthCamera::Session { path, .. } => Box::new(LoopedDepth::open(path)?),
+    })
 }
 
 /// Opens the colour camera a config names (settings are checked against the camera here).

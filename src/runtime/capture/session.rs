@@ -165,3 +165,162 @@ impl FrameSource for SessionPlayer {
         Ok(())
     }
 }
+
+/// The depth camera of a recorded session, played as a live camera: at the recorded pace,
+/// stamped with the live host clock, from the start again when it ends. A rig without a depth
+/// camera (`[depth] backend = "session"`): for trying the daemon, demonstrations and
+/// benchmarks fed at camera pace.
+///
+/// Frame counters and device times keep growing across loops, so the synchroniser sees one
+/// long, steady stream; gaps in the recorded frame counter are kept.
+#[derive(Debug)]
+pub struct LoopedDepth {
+    dir: PathBuf,
+    meta: CameraMeta,
+    reader: Option<SessionReader>,
+    frames: Option<DepthFrames>,
+    clock: Option<Clock>,
+    /// A frame read but not yet due.
+    pending: Option<DepthFrame>,
+    /// Recorded (seq, device time) of this loop's first frame, and when that frame was due.
+    first: Option<(u64, u64, Instant)>,
+    /// Added to this loop's (seq, device time) so that both keep growing across loops.
+    offset: (u64, u64),
+    /// The last frame delivered: (seq, device time, when it was due).
+    last: Option<(u64, u64, Instant)>,
+    interval_ns: u64,
+    corrupt: u64,
+}
+
+impl LoopedDepth {
+    /// A source over the depth frames of the session in `dir`.
+    ///
+    /// # Errors
+    /// The session cannot be opened, or has no depth frames.
+    pub fn open(dir: &std::path::Path) -> Result<Self, CaptureError> {
+        let reader = open_reader(dir)?;
+        let none = |what: &str| CaptureError::NotFound {
+            backend: "session",
+            id: format!("{} in {dir:?}", what),
+        };
+        let mut meta = reader
+            .meta()
+            .camera(CameraRole::Depth)
+            .cloned()
+            .ok_or_else(|| none("a depth camera"))?;
+        if reader.depth_count() == 0 {
+            return Err(none("a depth frame"));
+        }
+        meta.model = format!("{} (replayed)", meta.model);
+        let interval_ns = (1e9 / meta.fps.max(1.0)) as u64;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            meta,
+            reader: Some(reader),
+            frames: None,
+            clock: None,
+            pending: None,
+            first: None,
+            offset: (0, 0),
+            last: None,
+            interval_ns,
+            corrupt: 0,
+        })
+    }
+
+    /// The next recorded frame, from the start again after the last one.
+    fn next_recorded(&mut self) -> Result<DepthFrame, CaptureError> {
+        let Some(reader) = &self.reader else {
+            return Err(CaptureError::Disconnected {
+                backend: "session",
+                id: format!("{:?}", self.dir),
+                reason: "stopped".into(),
+            });
+        };
+        for _ in 0..2 {
+            let frames = self.frames.get_or_insert_with(|| reader.depth_frames());
+            for item in frames.by_ref() {
+                match item {
+                    Ok(frame) => return Ok(frame),
+                    Err(SessionError::Frame { .. }) => self.corrupt += 1,
+                    Err(source) => {
+                        return Err(CaptureError::Recording {
+                            path: self.dir.clone(),
+                            source: Box::new(source),
+                        });
+                    }
+                }
+            }
+            // The end: the next loop starts one frame interval after this one's last frame.
+            self.frames = None;
+            self.first = None;
+            if let Some((seq, device_ns, _)) = self.last {
+                self.offset = (seq + 1, device_ns + self.interval_ns);
+            }
+        }
+        Err(CaptureError::NotFound {
+            backend: "session",
+            id: format!("a readable depth frame in {:?}", self.dir),
+        })
+    }
+}
+
+fn open_reader(dir: &std::path::Path) -> Result<SessionReader, CaptureError> {
+    SessionReader::open(dir).map_err(|source| CaptureError::Recording {
+        path: dir.to_path_buf(),
+        source: Box::new(source),
+    })
+}
+
+impl FrameSource for LoopedDepth {
+    type Frame = DepthFrame;
+
+    fn meta(&self) -> CameraMeta {
+        self.meta.clone()
+    }
+
+    fn start(&mut self, clock: &Clock) -> Result<(), CaptureError> {
+        if self.reader.is_none() {
+            self.reader = Some(open_reader(&self.dir)?);
+        }
+        self.clock = Some(clock.clone());
+        Ok(())
+    }
+
+    fn next_frame(&mut self, timeout: Duration) -> Result<Option<DepthFrame>, CaptureError> {
+        let mut frame = match self.pending.take() {
+            Some(f) => f,
+            None => self.next_recorded()?,
+        };
+        let interval = Duration::from_nanos(self.interval_ns);
+        let after_last = self.last.map_or_else(Instant::now, |(_, _, due)| due + interval);
+        let (seq0, device0, due0) = *self
+            .first
+            .get_or_insert((frame.stamp.seq, frame.stamp.device_ns, after_last));
+        let since = frame.stamp.device_ns.saturating_sub(device0);
+        let due = due0 + Duration::from_nanos(since);
+        let wait = due.saturating_duration_since(Instant::now());
+        if wait > timeout {
+            std::thread::sleep(timeout);
+            self.pending = Some(frame);
+            return Ok(None);
+        }
+        std::thread::sleep(wait);
+        frame.stamp.seq = self.offset.0 + frame.stamp.seq.saturating_sub(seq0);
+        frame.stamp.device_ns = self.offset.1 + since;
+        frame.stamp.host_ns = self.clock.as_ref().map_or(0, Clock::now_ns);
+        self.last = Some((frame.stamp.seq, frame.stamp.device_ns, due));
+        Ok(Some(frame))
+    }
+
+    fn losses(&self) -> Vec<(&'static str, u64)> {
+        vec![("corrupt", self.corrupt)]
+    }
+
+    fn stop(&mut self) -> Result<(), CaptureError> {
+        self.reader = None;
+        self.frames = None;
+        self.pending = None;
+        Ok(())
+    }
+}
