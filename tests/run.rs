@@ -15,9 +15,26 @@ fn fake_camera() -> ChildGuard {
 }
 
 fn rig(dir: &Path, color: bool) -> PathBuf {
+    rig_with(dir, DUMMY_DEPTH, color, "min_free_percent = 0\n")
+}
+
+/// OpenNI2's Dummy device: frames without a floor or a mouse.
+const DUMMY_DEPTH: &str = "backend = \"openni2\"\nuri = \"Dummy\"\nwidth = 320\nheight = 240\nfps = 30\n";
+
+/// The fixture session's depth frames (a mouse from the first frame), played at camera pace.
+fn session_depth() -> String {
+    format!(
+        "backend = \"session\"\npath = {:?}\n",
+        repo_root().join("fixtures/sessions/synthetic-small")
+    )
+}
+
+/// A rig config in `dir` with the depth table `depth`, the fake camera as colour camera if
+/// `color`, and `output` added to the `[output]` table.
+fn rig_with(dir: &Path, depth: &str, color: bool, output: &str) -> PathBuf {
     let mut text = format!(
-        "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\nwidth = 320\nheight = 240\nfps = 30\n\
-         [output]\ndir = {:?}\nchunk_minutes = 0.05\nmin_free_gb = 0\nmin_free_percent = 0\n\
+        "[depth]\n{depth}\
+         [output]\ndir = {:?}\nchunk_minutes = 0.05\nmin_free_gb = 0\n{output}\
          [reconnect]\nstall_ms = 1000\nmax_wait_ms = 1000\n",
         dir.join("out")
     );
@@ -213,4 +230,276 @@ fn a_bad_config_is_exit_code_1_naming_the_key() {
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("output.chunk_minutes"), "{err}");
+}
+
+/// Sends `signal` (`STOP`, `CONT`, `KILL`...) to a child.
+fn signal(child: &ChildGuard, signal: &str) {
+    let status = Command::new("kill")
+        .arg(format!("-{signal}"))
+        .arg(child.0.id().to_string())
+        .status()
+        .expect("test set-up");
+    assert!(status.success());
+}
+
+fn report(out: &str) -> serde_json::Value {
+    serde_json::from_str(out).unwrap_or_else(|e| panic!("{e}: {out}"))
+}
+
+/// Every frame of `camera` in the report is accounted for by both branches.
+fn assert_accounted(camera: &serde_json::Value) {
+    let n = |key: &str| camera[key].as_u64().unwrap_or_else(|| panic!("no {key}: {camera:#}"));
+    assert_eq!(
+        n("captured"),
+        n("paired") + n("unpaired") + n("dropped_total"),
+        "{camera:#}"
+    );
+    assert_eq!(n("captured"), n("recorded") + n("not_recorded_total"), "{camera:#}");
+}
+
+#[test]
+fn a_frozen_colour_camera_is_an_outage_while_depth_keeps_flowing() {
+    let _port = take_port();
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = rig_with(tmp.path(), &session_depth(), true, "");
+    let camera = fake_camera();
+    let daemon = daemon(&rig, None);
+    std::thread::sleep(Duration::from_secs(5));
+    signal(&camera, "STOP");
+    std::thread::sleep(Duration::from_secs(4));
+    signal(&camera, "CONT");
+    std::thread::sleep(Duration::from_secs(8));
+    let (status, out, err) = terminate(daemon, Duration::from_secs(30));
+    drop(camera);
+    assert!(status.success(), "{status}: {err}");
+    let report = report(&out);
+    let color = &report["cameras"]["color"];
+    let outage = &color["outages"][0];
+    assert!(
+        outage["reason"].as_str().is_some_and(|r| r.contains("no frame")),
+        "{report:#}"
+    );
+    assert!(outage["end_ns"].is_u64(), "the camera never came back: {report:#}");
+    let before = outage["frames_before"].as_u64().unwrap();
+    assert!(before > 30, "{report:#}");
+    assert!(color["captured"].as_u64().unwrap() > before + 30, "{report:#}");
+    // Depth went on through the outage: about 30 frames a second for the whole run.
+    let depth = &report["cameras"]["depth"];
+    assert!(depth["captured"].as_u64().unwrap() > 350, "{report:#}");
+    assert!(report["statuses"]["ok"].as_u64().unwrap_or(0) > 300, "{report:#}");
+    assert_accounted(depth);
+    assert_accounted(color);
+}
+
+#[test]
+fn a_restart_right_after_sigkill_says_the_camera_is_held_and_takes_it_back() {
+    let _port = take_port();
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = rig_with(tmp.path(), &session_depth(), true, "");
+    let camera = fake_camera();
+    let first = daemon(&rig, None);
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !std::fs::read_dir(tmp.path().join("out"))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .any(|run| run.path().join("chunk-0001").is_dir())
+    {
+        assert!(Instant::now() < deadline, "the first daemon never rotated a chunk");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    signal(&first, "KILL");
+    drop(first);
+    let second = daemon(&rig, None);
+    std::thread::sleep(Duration::from_secs(12));
+    let (status, out, err) = terminate(second, Duration::from_secs(30));
+    drop(camera);
+    assert!(status.success(), "{status}: {err}");
+    assert!(err.contains("is held"), "the held camera was not reported: {err}");
+    let report = report(&out);
+    let color = &report["cameras"]["color"];
+    assert!(color["captured"].as_u64().unwrap() > 100, "{report:#}");
+    assert_eq!(color["state"]["state"], "streaming", "{report:#}");
+}
+
+#[test]
+fn lossy_packets_are_counted_and_every_chunk_replays() {
+    let _port = take_port();
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = rig_with(tmp.path(), &session_depth(), true, "");
+    let camera = start_fake_program(&["-s", "MP-LOSSY", "-r", "50"]);
+    let daemon = daemon(&rig, None);
+    std::thread::sleep(Duration::from_secs(10));
+    let (status, out, err) = terminate(daemon, Duration::from_secs(30));
+    drop(camera);
+    assert!(status.success(), "{status}: {err}");
+    let report = report(&out);
+    let color = &report["cameras"]["color"];
+    let lost: u64 = color["lost_before_capture"]
+        .as_object()
+        .unwrap()
+        .values()
+        .filter_map(serde_json::Value::as_u64)
+        .sum();
+    assert!(lost > 0, "no incomplete frame was counted: {report:#}");
+    assert_accounted(color);
+    assert_accounted(&report["cameras"]["depth"]);
+
+    let chunks = chunks(&tmp.path().join("out"));
+    assert!(chunks.len() >= 3, "{chunks:?}");
+    // The mouse is there from the first frame, in a background learnt live: found within a
+    // second.
+    let rows: Vec<String> = chunks
+        .iter()
+        .flat_map(|c| {
+            let text = std::fs::read_to_string(c.join("poses.csv")).unwrap();
+            text.lines().skip(1).map(str::to_owned).collect::<Vec<_>>()
+        })
+        .collect();
+    assert!(rows.iter().take(30).any(|l| l.contains(",ok,")), "{rows:#?}");
+    for chunk in &chunks {
+        let session = SessionReader::open(chunk).unwrap_or_else(|e| panic!("{chunk:?}: {e}"));
+        assert!(session.complete(), "{chunk:?} was not closed");
+        let replayed = tmp.path().join("replayed");
+        let run = mousepose()
+            .arg("replay")
+            .arg(chunk)
+            .arg("--out")
+            .arg(&replayed)
+            .args(["--force", "--json"])
+            .env("MOUSEPOSE_MODELS", repo_root().join("fixtures/models"))
+            .output()
+            .unwrap();
+        assert!(
+            run.status.success(),
+            "{chunk:?}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let rows = std::fs::read_to_string(replayed.join("poses.csv"))
+            .unwrap()
+            .lines()
+            .count()
+            - 1;
+        assert_eq!(rows, session.depth_count(), "{chunk:?}");
+    }
+}
+
+/// A small tmpfs mounted at a directory for the life of the guard (needs root).
+struct Tmpfs(PathBuf);
+
+impl Tmpfs {
+    fn mount(dir: &Path, size: &str) -> Self {
+        std::fs::create_dir_all(dir).expect("test set-up");
+        let status = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "mousepose-test"])
+            .arg(dir)
+            .status()
+            .expect("test set-up");
+        assert!(status.success(), "cannot mount a tmpfs at {dir:?}");
+        Tmpfs(dir.to_owned())
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg("-l").arg(&self.0).status();
+    }
+}
+
+fn is_root() -> bool {
+    Command::new("id")
+        .arg("-u")
+        .output()
+        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0")
+}
+
+/// Runs the daemon (depth only, from the fixture session) on a 24 MB tmpfs for `seconds`;
+/// returns its report and log, and the chunks left on the disk.
+fn run_on_small_disk(output: &str, seconds: u64) -> (serde_json::Value, String, Vec<PathBuf>) {
+    let tmp = tempfile::tempdir().unwrap();
+    let _disk = Tmpfs::mount(&tmp.path().join("out"), "24m");
+    let rig = rig_with(tmp.path(), &session_depth(), false, output);
+    let daemon = daemon(&rig, None);
+    std::thread::sleep(Duration::from_secs(seconds));
+    let (status, out, err) = terminate(daemon, Duration::from_secs(30));
+    assert!(status.success(), "{status}: {err}");
+    let report = report(&out);
+    let chunks = chunks(&tmp.path().join("out"));
+    for chunk in &chunks[..1] {
+        // Closed before the disk filled: whole, every frame readable.
+        let session = SessionReader::open(chunk).unwrap_or_else(|e| panic!("{chunk:?}: {e}"));
+        assert_eq!(
+            session.depth_frames().filter(|f| f.is_ok()).count(),
+            session.depth_count()
+        );
+        assert!(session.depth_count() > 0, "{chunk:?}");
+    }
+    (report, err, chunks)
+}
+
+#[test]
+fn a_full_disk_pauses_recording_and_the_daemon_lives_on() {
+    if !is_root() {
+        eprintln!("skipped: mounting a small tmpfs needs root");
+        return;
+    }
+    // No threshold: the disk fills up and the writes fail (ENOSPC).
+    let (report, err, _) = run_on_small_disk("min_free_percent = 0\n", 14);
+    let depth = &report["cameras"]["depth"];
+    assert!(
+        depth["not_recorded"]["write_error"].as_u64().unwrap_or(0) > 0,
+        "{report:#}"
+    );
+    assert!(err.contains("recording paused"), "{err}");
+    assert!(report["poses"].as_u64().unwrap() > 300, "{report:#}");
+    assert_accounted(depth);
+
+    // Half of the disk as the threshold: recording pauses before the disk is full.
+    let (report, err, _) = run_on_small_disk("min_free_percent = 50\n", 10);
+    let depth = &report["cameras"]["depth"];
+    assert!(
+        depth["not_recorded"]["disk_low"].as_u64().unwrap_or(0) > 0,
+        "{report:#}"
+    );
+    assert!(depth["not_recorded"].get("write_error").is_none(), "{report:#}");
+    assert!(err.contains("disk space low"), "{err}");
+    assert_eq!(report["poses_not_written"], 0, "{report:#}");
+}
+
+#[test]
+fn with_a_background_reference_a_mouse_present_from_the_first_frame_is_found_at_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = rig_with(tmp.path(), &session_depth(), false, "");
+    // The fixture session is a rendering: its reference is the rendered empty cage.
+    let run = mousepose()
+        .args(["run", "--seconds", "3", "--json", "--config"])
+        .arg(&rig)
+        .arg("--background")
+        .arg(repo_root().join("fixtures/sessions/synthetic-small"))
+        .env("MOUSEPOSE_MODELS", repo_root().join("fixtures/models"))
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let poses = std::fs::read_to_string(chunks(&tmp.path().join("out"))[0].join("poses.csv")).unwrap();
+    let first = poses.lines().nth(1).expect("a pose");
+    assert!(first.contains(",ok,"), "{first}");
+
+    // A recorded reference of another size than the camera is refused before anything opens.
+    let recorded = chunks(&tmp.path().join("out")).remove(0);
+    let other = tmp.path().join("rig-small.toml");
+    std::fs::write(
+        &other,
+        "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\nwidth = 320\nheight = 240\n",
+    )
+    .unwrap();
+    let run = mousepose()
+        .args(["run", "--seconds", "3", "--config"])
+        .arg(&other)
+        .arg("--background")
+        .arg(&recorded)
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(err.contains("640x480") && err.contains("320x240"), "{err}");
 }

@@ -126,7 +126,7 @@ const BACKGROUND_FRAMES: usize = 31;
 /// The empty cage: for a synthetic session the rendered empty cage; otherwise the per-pixel
 /// median of frames spread over the session (a mouse that moves drops out of the median, as
 /// in MoSeq's extraction).
-fn background(recording: &Recording, rig: &Rig) -> Result<Background, ReplayError> {
+pub(crate) fn background(recording: &Recording, rig: &Rig) -> Result<Background, ReplayError> {
     if recording.depth_count() == 0 {
         return Err(ReplayError::Empty(recording.dir()));
     }

@@ -15,12 +15,13 @@ use crate::runtime::capture::{CaptureError, FrameSource};
 use crate::runtime::config::{Config, DepthCamera};
 use crate::runtime::models::Models;
 use crate::runtime::pipeline::{LatencySummary, Shutdown, StageReport};
+use crate::runtime::recording::Recording;
 use crate::runtime::sink::chunks::{ChunkPlan, ChunkPoses, ChunkRecorder, Chunks, DiskWatch, Live, chunk_meta};
 use crate::runtime::stages::PoseStatus;
 use crate::runtime::stages::segment::SegmentStage;
 use crate::runtime::topology::{Edges, Epochs, Processing, Sources, Topology};
 use crate::vision::calibrate::RigCalibration;
-use crate::vision::segment::SegmenterConfig;
+use crate::vision::segment::{Segmenter, SegmenterConfig};
 use anyhow::Context as _;
 use clap::Args;
 use serde::Serialize;
@@ -37,6 +38,10 @@ pub struct RunArgs {
     /// Stop after this many seconds (a daemon runs until SIGTERM).
     #[arg(long, value_name = "N", value_parser = crate::app::parse_seconds, allow_negative_numbers = true)]
     pub seconds: Option<f64>,
+    /// A session recorded with the cage empty, as the background reference (instead of the
+    /// config's `[segment] background`, or of learning the background live).
+    #[arg(long, value_name = "DIR")]
+    pub background: Option<PathBuf>,
     /// Print the final report as one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -59,6 +64,8 @@ pub struct RunReport {
     pub seconds: f64,
     pub chunks: usize,
     pub poses: u64,
+    /// Poses that could not be written to `poses.csv` (a full disk, a write error).
+    pub poses_not_written: u64,
     pub statuses: BTreeMap<&'static str, u64>,
     pub cameras: BTreeMap<&'static str, RunCamera>,
     pub stages: Vec<StageReport>,
@@ -88,9 +95,23 @@ fn live_rig(config: &Config) -> anyhow::Result<Rig> {
     Ok(rig)
 }
 
-/// Run directories are named by their start, UTC, sortable and without colons.
-fn run_name() -> String {
-    crate::runtime::capture::clock::utc_now().replace([':', '-'], "")
+/// Creates the run's directory, named by its start (UTC, sortable, without colons); a run
+/// started within the same second as the previous one (a restart) gets `-2`, `-3`...
+fn create_run_dir(output: &std::path::Path) -> anyhow::Result<PathBuf> {
+    std::fs::create_dir_all(output).with_context(|| format!("cannot create the output directory {output:?}"))?;
+    let name = crate::runtime::capture::clock::utc_now().replace([':', '-'], "");
+    for k in 1.. {
+        let dir = match k {
+            1 => output.join(&name),
+            k => output.join(format!("{name}-{k}")),
+        };
+        match std::fs::create_dir(&dir) {
+            Ok(()) => return Ok(dir),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && k < 100 => {}
+            Err(e) => return Err(e).with_context(|| format!("cannot create the run directory {dir:?}")),
+        }
+    }
+    unreachable!("the loop returns")
 }
 
 fn notify(states: &[sd_notify::NotifyState<'_>]) {
@@ -127,6 +148,43 @@ fn status_line(healths: &[(&str, SharedHealth)], live: &Live, fps: f64) -> Strin
     )
 }
 
+/// Segmentation against the configured background reference, or learning the background live.
+///
+/// # Errors
+/// The reference cannot be read, or is not of the depth camera's size.
+pub fn segment_stage(config: &Config, rig: &Rig) -> anyhow::Result<SegmentStage> {
+    Ok(match &config.background {
+        Some(dir) => SegmentStage::new(reference_background(dir, &config.depth, rig)?),
+        None => SegmentStage::learning(
+            SegmenterConfig::default(),
+            rig.depth.intrinsics,
+            rig.depth.world_from_camera,
+        ),
+    })
+}
+
+/// The segmenter with the empty cage of the reference session `dir`.
+fn reference_background(dir: &std::path::Path, depth: &DepthCamera, rig: &Rig) -> anyhow::Result<Segmenter> {
+    let what = || format!("the background reference {dir:?}");
+    let recording = Recording::open(dir).with_context(what)?;
+    let background = crate::app::replay::background(&recording, rig).with_context(what)?;
+    let (width, height, _) = depth.mode();
+    let i = background.intrinsics();
+    if (i.width, i.height) != (width, height) {
+        anyhow::bail!(
+            "{} is {}x{} but the depth camera is configured for {width}x{height}",
+            what(),
+            i.width,
+            i.height
+        );
+    }
+    tracing::info!(reference = ?dir, "background from a reference recorded with the cage empty");
+    Ok(SegmenterConfig::default()
+        .build(background)
+        .with_context(what)?
+        .with_world(rig.depth.world_from_camera))
+}
+
 /// Runs the daemon until `stop` (a signal), `seconds`, or a failure of the pipeline itself.
 ///
 /// # Errors
@@ -136,11 +194,11 @@ pub fn run(
     config: &Config,
     models: Models,
     rig: Rig,
+    segment: SegmentStage,
     seconds: Option<f64>,
     stop: &Shutdown,
 ) -> anyhow::Result<RunReport> {
-    let root = config.output_dir.join(run_name());
-    std::fs::create_dir_all(&root).with_context(|| format!("cannot create the run directory {root:?}"))?;
+    let root = create_run_dir(&config.output_dir)?;
     tracing::info!(dir = ?root, record = config.record, "run started");
 
     let epochs = Epochs::default();
@@ -178,11 +236,6 @@ pub fn run(
         let disk = DiskWatch::new(&root, config.min_free_bytes, config.min_free_share);
         Box::new(ChunkRecorder::new(Arc::clone(&chunks), disk, shared.clone())) as Box<_>
     });
-    let segment = SegmentStage::learning(
-        SegmenterConfig::default(),
-        rig.depth.intrinsics,
-        rig.depth.world_from_camera,
-    );
     let topology = Topology {
         sources: Sources::Cameras {
             depth: Box::new(depth),
@@ -277,6 +330,7 @@ pub fn run(
         seconds: elapsed,
         chunks: chunks.count(),
         poses: live.rows,
+        poses_not_written: live.rows_lost,
         statuses: live.statuses,
         cameras,
         stages,
@@ -289,14 +343,18 @@ pub fn run(
 
 /// `mousepose run`.
 pub fn command(args: &RunArgs) -> crate::app::Outcome {
-    let config = Config::load(&args.config).map_err(Failure::usage)?;
+    let mut config = Config::load(&args.config).map_err(Failure::usage)?;
+    if let Some(dir) = &args.background {
+        config.background = Some(dir.clone());
+    }
     let models = Models::load(config.models_dir.as_deref()).map_err(Failure::usage)?;
     let rig = live_rig(&config).map_err(Failure::usage)?;
+    let segment = segment_stage(&config, &rig).map_err(Failure::usage)?;
     let stop = Shutdown::default();
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(signal, stop.flag()).context("installing the signal handlers")?;
     }
-    let report = run(&config, models, rig, args.seconds, &stop)?;
+    let report = run(&config, models, rig, segment, args.seconds, &stop)?;
     if args.json {
         return Ok(print_json(&report)?);
     }

@@ -44,6 +44,8 @@ struct RawConfig {
     #[serde(default)]
     calibration: RawCalibration,
     #[serde(default)]
+    segment: RawSegment,
+    #[serde(default)]
     output: RawOutput,
     #[serde(default)]
     reconnect: RawReconnect,
@@ -120,6 +122,12 @@ struct RawModels {
 #[serde(deny_unknown_fields)]
 struct RawCalibration {
     file: Option<PathBuf>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSegment {
+    background: Option<PathBuf>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -274,6 +282,9 @@ pub struct Config {
     pub body_workers: usize,
     pub models_dir: Option<PathBuf>,
     pub calibration: Option<PathBuf>,
+    /// A session recorded with the cage empty: `run`'s background reference. Without it the
+    /// background is learnt from the live frames.
+    pub background: Option<PathBuf>,
     /// Where `run` writes its runs (`DIR/<start>/chunk-NNNN`).
     pub output_dir: PathBuf,
     /// Whether `run` records raw frames.
@@ -491,6 +502,7 @@ impl Checker<'_> {
             body_workers,
             models_dir: raw.models.dir,
             calibration: raw.calibration.file,
+            background: raw.segment.background,
             output_dir: o.dir.unwrap_or_else(|| PathBuf::from("/var/lib/mousepose/sessions")),
             record,
             chunk: std::time::Duration::from_secs_f64(chunk_minutes * 60.0),

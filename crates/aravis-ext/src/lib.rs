@@ -91,12 +91,17 @@ pub fn local_address_for(device: Ipv4Addr) -> std::io::Result<Ipv4Addr> {
 ///
 /// # Errors
 /// No route to the address, no GigE Vision camera answering there, or a camera that cannot
-/// be controlled (its GenICam description is unreadable, another host controls it).
+/// be controlled (its GenICam description is unreadable, another application controls it).
 pub fn open_gv_camera(device: Ipv4Addr) -> Result<aravis::Camera, OpenError> {
     let local = local_address_for(device).map_err(|source| OpenError::NoRoute { device, source })?;
     let local = gio::InetAddress::from(IpAddr::V4(local));
     let remote = gio::InetAddress::from(IpAddr::V4(device));
     let gv_device = aravis::GvDevice::new(&local, &remote).map_err(|source| OpenError::Device { device, source })?;
+    // Aravis opens a camera it cannot take control of read-only, without an error: a stream
+    // from it would never start.
+    if !gv_device.is_controller() {
+        return Err(OpenError::Held { device });
+    }
     aravis::Camera::with_device(&gv_device).map_err(|source| OpenError::Device { device, source })
 }
 
@@ -109,6 +114,12 @@ pub enum OpenError {
         #[source]
         source: std::io::Error,
     },
+    /// Another application controls the camera, or a process that controlled it ended less
+    /// than the camera's heartbeat timeout ago (typically a few seconds).
+    #[error(
+        "the camera at {device} is controlled by another application (or by one that ended less than the camera's heartbeat timeout ago)"
+    )]
+    Held { device: Ipv4Addr },
     #[error("no GigE Vision camera answers at {device}")]
     Device {
         device: Ipv4Addr,

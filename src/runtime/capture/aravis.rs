@@ -141,6 +141,12 @@ fn open_by_address(id: &str, address: &str) -> Result<Camera, CaptureError> {
             backend: BACKEND,
             id: id.to_owned(),
         },
+        aravis_ext::OpenError::Held { .. } => CaptureError::Held {
+            backend: BACKEND,
+            id: id.to_owned(),
+            reason: "another application controls it (or one that ended less than the camera's heartbeat timeout ago)"
+                .into(),
+        },
         aravis_ext::OpenError::Device { source, .. } => {
             driver(id, format!("no GigE Vision camera answers at {ip}"))(source)
         }

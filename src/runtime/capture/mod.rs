@@ -47,6 +47,13 @@ pub enum CaptureError {
         #[source]
         source: Option<Box<dyn std::error::Error + Send + Sync>>,
     },
+    /// Another application controls the camera; it may be free again later.
+    #[error("{backend} camera {id:?} is held: {reason}")]
+    Held {
+        backend: &'static str,
+        id: String,
+        reason: String,
+    },
     /// The camera stopped delivering frames (unplugged, powered off, network lost).
     #[error("{backend} camera {id:?} disconnected: {reason}")]
     Disconnected {

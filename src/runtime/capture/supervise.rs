@@ -40,7 +40,8 @@ pub struct Outage {
     pub end_ns: Option<u64>,
     /// What went wrong first.
     pub reason: String,
-    /// Frames the camera had delivered before it went away, and attempts to open it again.
+    /// Frames the camera had delivered before it went away, and attempts to open it again
+    /// (the successful one included).
     pub frames_before: u64,
     pub attempts: u64,
 }
@@ -176,9 +177,11 @@ where
         match opened {
             Ok(source) => {
                 let meta = source.meta();
-                let back = matches!(h.state, Some(CameraState::Away(_)));
+                // Back: it was open before (not merely failing to open the first time).
+                let back = h.meta.is_some();
                 if let Some(outage) = h.outages.last_mut().filter(|o| o.end_ns.is_none()) {
                     outage.end_ns = Some(host_ns);
+                    outage.attempts += 1;
                 }
                 if back {
                     tracing::info!(camera = %self.role, "camera back: reopened after an outage");
@@ -388,5 +391,158 @@ where
             }
             None => Ok(()),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::VecDeque;
+
+    /// What a scripted camera does at each read.
+    #[derive(Clone, Copy, Debug)]
+    enum Step {
+        /// A frame of this width with this camera frame number.
+        Frame(u32, u64),
+        Fail,
+    }
+
+    #[derive(Debug)]
+    struct Scripted(VecDeque<Step>);
+
+    impl FrameSource for Scripted {
+        type Frame = DepthFrame;
+        fn meta(&self) -> CameraMeta {
+            CameraMeta {
+                role: CameraRole::Depth,
+                backend: crate::io::session::Backend::Synthetic,
+                model: "scripted".into(),
+                serial: String::new(),
+                firmware: String::new(),
+                width: 4,
+                height: 1,
+                pixel_format: crate::io::session::codec::FrameFormat::Depth16,
+                fps: 30.0,
+            }
+        }
+        fn start(&mut self, _clock: &Clock) -> Result<(), CaptureError> {
+            Ok(())
+        }
+        fn next_frame(&mut self, _timeout: Duration) -> Result<Option<DepthFrame>, CaptureError> {
+            match self.0.pop_front() {
+                Some(Step::Frame(width, seq)) => {
+                    let stamp = Stamp {
+                        seq,
+                        device_ns: seq,
+                        host_ns: seq,
+                    };
+                    Ok(Some(DepthFrame::empty(stamp, width, 1)))
+                }
+                Some(Step::Fail) => Err(CaptureError::Disconnected {
+                    backend: "scripted",
+                    id: "0".into(),
+                    reason: "unplugged".into(),
+                }),
+                None => Ok(None),
+            }
+        }
+        fn stop(&mut self) -> Result<(), CaptureError> {
+            Ok(())
+        }
+    }
+
+    /// A supervised camera whose openings are `openings` in turn (`None`: the opening fails).
+    fn supervised(openings: Vec<Option<Vec<Step>>>) -> (Supervised<Scripted>, Arc<AtomicU64>) {
+        let mut openings = VecDeque::from(openings);
+        let open = move || match openings.pop_front().flatten() {
+            Some(steps) => Ok(Scripted(steps.into())),
+            None => Err(CaptureError::NotFound {
+                backend: "scripted",
+                id: "0".into(),
+            }),
+        };
+        let policy = Reconnect {
+            stall: Duration::from_millis(30),
+            first_wait: Duration::from_millis(1),
+            max_wait: Duration::from_millis(4),
+        };
+        let epoch = Arc::new(AtomicU64::new(0));
+        let s = Supervised::new(CameraRole::Depth, Box::new(open), policy, Arc::clone(&epoch));
+        (s, epoch)
+    }
+
+    /// Reads until `n` frames came out (or a second passed); their frame numbers.
+    fn read(s: &mut Supervised<Scripted>, n: usize) -> Vec<u64> {
+        let deadline = Instant::now() + Duration::from_secs(1);
+        let mut seqs = Vec::new();
+        while seqs.len() < n && Instant::now() < deadline {
+            if let Some(f) = s.next_frame(Duration::from_millis(1)).unwrap() {
+                seqs.push(f.stamp.seq);
+            }
+        }
+        seqs
+    }
+
+    #[test]
+    fn frames_of_another_size_are_skipped_and_counted() {
+        use Step::Frame;
+        let (mut s, _) = supervised(vec![Some(vec![Frame(4, 0), Frame(8, 1), Frame(8, 2), Frame(4, 3)])]);
+        s.start(&Clock::replay(0)).unwrap();
+        assert_eq!(read(&mut s, 2), vec![0, 3]);
+        assert_eq!(s.losses(), vec![("wrong_size", 2)]);
+        assert_eq!(lock(&s.health()).frames, 2);
+    }
+
+    #[test]
+    fn a_failing_camera_is_reopened_and_its_frame_numbers_keep_growing() {
+        use Step::{Fail, Frame};
+        let (mut s, epoch) = supervised(vec![
+            Some(vec![Frame(4, 10), Frame(4, 11), Fail]),
+            None,
+            None,
+            Some(vec![Frame(4, 0), Frame(4, 1)]),
+        ]);
+        s.start(&Clock::replay(0)).unwrap();
+        assert_eq!(read(&mut s, 4), vec![10, 11, 12, 13]);
+        assert_eq!(epoch.load(Ordering::Acquire), 1, "one reconnection");
+        let h = s.health();
+        let h = lock(&h);
+        assert_eq!(h.state, Some(CameraState::Streaming));
+        assert_eq!(h.outages.len(), 1, "{:?}", h.outages);
+        let outage = &h.outages[0];
+        assert_eq!((outage.frames_before, outage.attempts), (2, 3));
+        assert!(
+            outage.end_ns.is_some() && outage.reason.contains("unplugged"),
+            "{outage:?}"
+        );
+        let kinds: Vec<String> = h
+            .events
+            .iter()
+            .map(|e| serde_json::to_value(e).unwrap()["kind"].as_str().unwrap().to_owned())
+            .collect();
+        assert_eq!(
+            kinds,
+            [
+                "camera_opened",
+                "camera_disconnected",
+                "camera_reconnected",
+                "camera_opened"
+            ]
+        );
+    }
+
+    #[test]
+    fn a_silent_camera_is_an_outage_after_the_stall_time() {
+        let (mut s, _) = supervised(vec![Some(vec![Step::Frame(4, 0)]), None]);
+        s.start(&Clock::replay(0)).unwrap();
+        assert_eq!(read(&mut s, 1), vec![0]);
+        let deadline = Instant::now() + Duration::from_secs(1);
+        while !matches!(lock(&s.health()).state, Some(CameraState::Away(_))) {
+            assert!(Instant::now() < deadline, "the silence was never noticed");
+            s.next_frame(Duration::from_millis(1)).unwrap();
+        }
+        let h = s.health();
+        let h = lock(&h);
+        assert!(h.outages[0].reason.starts_with("no frame for"), "{:?}", h.outages);
     }
 }

@@ -322,7 +322,9 @@ pub struct ChunkSummary {
 /// The latest pose and counts, for the status line (and the live page).
 #[derive(Clone, Debug, Default)]
 pub struct Live {
+    /// Poses made, and those of them that could not be written (disk full, write error).
     pub rows: u64,
+    pub rows_lost: u64,
     pub latest: Option<crate::runtime::stages::PoseRecord>,
     pub statuses: BTreeMap<&'static str, u64>,
     pub chunk: usize,
@@ -421,8 +423,10 @@ impl Sink for ChunkPoses {
             // Try again in the next chunk.
             self.writer = None;
         }
+        let lost = self.writer.is_none();
         let mut live = self.live.lock().unwrap_or_else(PoisonError::into_inner);
         live.rows += 1;
+        live.rows_lost += u64::from(lost);
         *live.statuses.entry(record.status.name()).or_default() += 1;
         live.latest = Some(record);
         live.chunk = self.index;

@@ -99,8 +99,13 @@ fn rgb_at(frame: &ColorFrame, x: u32, y: u32) -> [u8; 3] {
 fn bottom_panel(rig: &Rig, frame: &ColorFrame, record: &PoseRecord) -> RgbImage {
     let (x0, y0, x1, y1) = footprint(&record.pose, &rig.color, FOOTPRINT_MARGIN_MM)
         .map_or((0, 0, frame.width, frame.height), |(roi, _)| roi);
+    // Within the frame, even when the rig's colour camera is not this frame's (uncalibrated).
+    let (x0, y0) = (
+        x0.min(frame.width.saturating_sub(1)),
+        y0.min(frame.height.saturating_sub(1)),
+    );
     let (x1, y1) = (x1.min(frame.width), y1.min(frame.height));
-    let (w, h) = ((x1 - x0).max(1), (y1 - y0).max(1));
+    let (w, h) = (x1.saturating_sub(x0).max(1), y1.saturating_sub(y0).max(1));
     let k = f64::from(PANEL) / f64::from(h);
     let out_w = ((f64::from(w) * k).round() as u32).clamp(1, 2 * PANEL);
     let mut native = Vec::with_capacity(w as usize * h as usize * 3);
