@@ -416,7 +416,7 @@ fn is_root() -> bool {
 /// Runs the daemon (depth only, from the fixture session) on a 24 MB tmpfs for `seconds`;
 /// returns its report and log, and the chunks left on the disk.
 fn run_on_small_disk(output: &str, seconds: u64) -> (serde_json::Value, String, Vec<PathBuf>) {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = tempfile::tempdir().expect("test set-up");
     let _disk = Tmpfs::mount(&tmp.path().join("out"), "24m");
     let rig = rig_with(tmp.path(), &session_depth(), false, output);
     let daemon = daemon(&rig, None);

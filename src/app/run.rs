@@ -84,7 +84,7 @@ fn live_rig(config: &Config) -> anyhow::Result<Rig> {
             .rig());
     }
     if let DepthCamera::Session { rig: Some(rig), .. } = &config.depth {
-        return Ok(*rig);
+        return Ok(**rig);
     }
     let mut rig = Rig::default_rig();
     let (width, height, _) = config.depth.mode();

@@ -217,7 +217,7 @@ pub enum DepthCamera {
         height: u32,
         fps: f64,
         /// The rig the session was recorded or rendered with, if it says.
-        rig: Option<crate::core::geometry::Rig>,
+        rig: Option<Box<crate::core::geometry::Rig>>,
     },
 }
 
@@ -406,7 +406,7 @@ impl Checker<'_> {
                     width: camera.width,
                     height: camera.height,
                     fps: camera.fps,
-                    rig: reader.meta().rig,
+                    rig: reader.meta().rig.map(Box::new),
                     path,
                 }
             }
