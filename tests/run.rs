@@ -503,3 +503,39 @@ fn with_a_background_reference_a_mouse_present_from_the_first_frame_is_found_at_
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(err.contains("640x480") && err.contains("320x240"), "{err}");
 }
+
+#[test]
+fn a_write_error_pauses_recording_and_keeps_what_was_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = rig_with(tmp.path(), &session_depth(), false, "");
+    // Writes past 3 MB fail (EFBIG): the frame file of the first chunk breaks after about a
+    // second of frames. SIGXFSZ is ignored, as a daemon's would be.
+    let run = Command::new("bash")
+        .arg("-c")
+        .arg("trap '' XFSZ; ulimit -f 3072; exec \"$0\" run --seconds 5 --json --config \"$1\"")
+        .arg(env!("CARGO_BIN_EXE_mousepose"))
+        .arg(&rig)
+        .env("MOUSEPOSE_MODELS", repo_root().join("fixtures/models"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(err.contains("recording paused"), "{err}");
+    let report = report(&String::from_utf8_lossy(&run.stdout));
+    let depth = &report["cameras"]["depth"];
+    assert!(
+        depth["not_recorded"]["write_error"].as_u64().unwrap_or(0) > 0,
+        "{report:#}"
+    );
+    assert!(depth["recorded"].as_u64().unwrap() > 0, "{report:#}");
+    assert_accounted(depth);
+    assert!(report["poses"].as_u64().unwrap() > 100, "{report:#}");
+    // What was written before the error reads back, every frame whole.
+    let chunk = &chunks(&tmp.path().join("out"))[0];
+    let session = SessionReader::open(chunk).unwrap();
+    assert!(session.depth_count() > 0);
+    assert_eq!(
+        session.depth_frames().filter(|f| f.is_ok()).count(),
+        session.depth_count()
+    );
+}
