@@ -100,18 +100,18 @@ fn live_rig(config: &Config) -> anyhow::Result<Rig> {
 fn create_run_dir(output: &std::path::Path) -> anyhow::Result<PathBuf> {
     std::fs::create_dir_all(output).with_context(|| format!("cannot create the output directory {output:?}"))?;
     let name = crate::runtime::capture::clock::utc_now().replace([':', '-'], "");
-    for k in 1.. {
+    for k in 1..=100 {
         let dir = match k {
             1 => output.join(&name),
             k => output.join(format!("{name}-{k}")),
         };
         match std::fs::create_dir(&dir) {
             Ok(()) => return Ok(dir),
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && k < 100 => {}
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
             Err(e) => return Err(e).with_context(|| format!("cannot create the run directory {dir:?}")),
         }
     }
-    unreachable!("the loop returns")
+    anyhow::bail!("cannot create a run directory in {output:?}: 100 runs began within the second {name}")
 }
 
 fn notify(states: &[sd_notify::NotifyState<'_>]) {

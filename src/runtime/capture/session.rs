@@ -324,3 +324,34 @@ impl FrameSource for LoopedDepth {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_looped_session_keeps_counting_across_its_end_at_camera_pace() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/sessions/synthetic-small");
+        let mut source = LoopedDepth::open(&dir).unwrap();
+        let frames = SessionReader::open(&dir).unwrap().depth_count();
+        source.start(&Clock::Monotonic).unwrap();
+        let started = Instant::now();
+        let mut stamps = Vec::new();
+        while stamps.len() < frames + 5 {
+            if let Some(f) = source.next_frame(Duration::from_millis(100)).unwrap() {
+                stamps.push(f.stamp);
+            }
+        }
+        for pair in stamps.windows(2) {
+            let (a, b) = (pair[0], pair[1]);
+            assert!(
+                b.seq > a.seq && b.device_ns > a.device_ns && b.host_ns >= a.host_ns,
+                "{a:?} {b:?}"
+            );
+        }
+        // Paced: (frames + 4) intervals of a 30 fps camera, give or take a slow machine.
+        let span = stamps[stamps.len() - 1].device_ns - stamps[0].device_ns;
+        assert!(started.elapsed() >= Duration::from_nanos(span) - Duration::from_millis(50));
+        assert_eq!(source.losses(), vec![("corrupt", 0)]);
+    }
+}
