@@ -204,3 +204,22 @@ fn clap_lives_in_the_app_folder_only() {
         .collect();
     assert!(outside.is_empty(), "clap is used outside src/app/: {outside:?}");
 }
+
+#[test]
+fn unsafe_code_in_src_is_only_the_simd_kernel_module() {
+    let src = repo_root().join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let with_unsafe: Vec<String> = files
+        .iter()
+        .filter(|f| {
+            let text = std::fs::read_to_string(f).expect("a source file is readable");
+            text.lines()
+                .map(str::trim_start)
+                .filter(|l| !l.starts_with("//"))
+                .any(|l| l.contains("unsafe {") || l.contains("unsafe fn") || l.contains("allow(unsafe_code)"))
+        })
+        .map(|f| f.strip_prefix(&src).expect("under src/").display().to_string())
+        .collect();
+    assert_eq!(with_unsafe, ["vision/forest/simd.rs"]);
+}

@@ -85,8 +85,12 @@ pub struct ForestBench {
     pub trees: usize,
     /// Mouse pixels per frame in the measurement.
     pub pixels_per_frame: f64,
-    /// All of a frame's mouse pixels through every tree to a leaf, ms.
+    /// The traversal kernel in use on this processor (`avx2` or `portable`).
+    pub kernel: String,
+    /// All of a frame's mouse pixels through every tree to a leaf, ms, with that kernel...
     pub traverse_ms_per_frame: f64,
+    /// ...and with the portable one.
+    pub traverse_portable_ms_per_frame: f64,
     /// The run-time estimate (sampled pixels, votes, aggregation), ms.
     pub estimate_ms_per_frame: f64,
 }
@@ -124,7 +128,13 @@ impl BenchReport {
                 let _ = writeln!(
                     s,
                     "{:<40} {:>12.3}",
-                    "forest traversal ms/frame, 1 core", f.traverse_ms_per_frame
+                    format!("forest traversal ms/frame, 1 core, {}", f.kernel),
+                    f.traverse_ms_per_frame
+                );
+                let _ = writeln!(
+                    s,
+                    "{:<40} {:>12.3}",
+                    "forest traversal ms/frame, portable", f.traverse_portable_ms_per_frame
                 );
                 let _ = writeln!(
                     s,
@@ -367,6 +377,7 @@ pub fn bundled_body_model() -> Option<std::path::PathBuf> {
 fn bench_forest(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: bool) -> Option<ForestBench> {
     use crate::vision::forest::infer::{BodyEstimator, Pixel, VoteSettings, sample_pixels};
     use crate::vision::forest::model::{Model, ModelKind, load};
+    use crate::vision::forest::simd::Kernel;
     let path = bundled_body_model()?;
     let Ok(Model::Body(_, forest)) = load(&path, Some(ModelKind::Body)) else {
         return None;
@@ -400,16 +411,24 @@ fn bench_forest(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: b
     let rounds = if quick { 3 } else { 10 };
     let mut sink = 0usize;
     let per_frame = |start: Instant| start.elapsed().as_secs_f64() * 1000.0 / frames.len() as f64;
-    let mut traverse_ms = f64::INFINITY;
-    for _ in 0..rounds {
-        let start = Instant::now();
-        for (f, pixels) in frames.iter().zip(&all) {
-            estimator.leaves(f, pixels, |leaves| {
-                sink = sink.wrapping_add(leaves.iter().map(|&l| l as usize).sum::<usize>());
-            });
+    let kernel = estimator.kernel();
+    let mut traverse = |estimator: &mut BodyEstimator| {
+        let mut best = f64::INFINITY;
+        for _ in 0..rounds {
+            let start = Instant::now();
+            for (f, pixels) in frames.iter().zip(&all) {
+                estimator.leaves(f, pixels, |leaves| {
+                    sink = sink.wrapping_add(leaves.iter().map(|&l| l as usize).sum::<usize>());
+                });
+            }
+            best = best.min(per_frame(start));
         }
-        traverse_ms = traverse_ms.min(per_frame(start));
-    }
+        best
+    };
+    estimator.set_kernel(Kernel::Portable);
+    let traverse_portable_ms = traverse(&mut estimator);
+    estimator.set_kernel(kernel);
+    let traverse_ms = traverse(&mut estimator);
     let mut buffer = Vec::new();
     let mut estimate_ms = f64::INFINITY;
     for _ in 0..rounds {
@@ -426,7 +445,9 @@ fn bench_forest(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: b
         model: path.display().to_string(),
         trees,
         pixels_per_frame: all.iter().map(Vec::len).sum::<usize>() as f64 / all.len() as f64,
+        kernel: format!("{kernel:?}").to_lowercase(),
         traverse_ms_per_frame: traverse_ms,
+        traverse_portable_ms_per_frame: traverse_portable_ms,
         estimate_ms_per_frame: estimate_ms,
     })
 }

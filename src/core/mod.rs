@@ -1,5 +1,6 @@
 //! Plain types every layer shares: frames and their stamps, the skeleton and poses, cameras and
-//! the rig, the limbs' kinematics, RGB pictures. Nothing here reads a file, a clock or a thread.
+//! the rig, the limbs' kinematics, RGB pictures, errors on one line. Nothing here reads a file,
+//! a clock or a thread.
 
 pub mod frame;
 pub mod geometry;
@@ -9,3 +10,15 @@ pub mod noise;
 pub mod pose;
 pub mod rng;
 pub mod skeleton;
+
+/// An error and its causes on one line.
+pub fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        text.push_str(": ");
+        text.push_str(&s.to_string());
+        source = s.source();
+    }
+    text
+}

@@ -393,10 +393,7 @@ impl Checker<'_> {
                 let reader = crate::io::session::SessionReader::open(&path).map_err(|e| {
                     self.bad(
                         "depth.path",
-                        format!(
-                            "is not a readable session: {}",
-                            crate::runtime::capture::error_chain(&e)
-                        ),
+                        format!("is not a readable session: {}", crate::core::error_chain(&e)),
                     )
                 })?;
                 let Some(camera) = reader.meta().camera(crate::io::session::CameraRole::Depth) else {

@@ -70,17 +70,7 @@ pub enum CaptureError {
     },
 }
 
-/// An error and its causes on one line.
-pub fn error_chain(e: &dyn std::error::Error) -> String {
-    let mut text = e.to_string();
-    let mut source = e.source();
-    while let Some(s) = source {
-        text.push_str(": ");
-        text.push_str(&s.to_string());
-        source = s.source();
-    }
-    text
-}
+pub use crate::core::error_chain;
 
 /// Frames missing from one camera's sequence numbers (the camera's own drops, or frames lost
 /// on the way).

@@ -13,6 +13,7 @@
 //! the first frame has sized them.
 
 use super::depth::{BODY_JOINTS, DepthFeature, DepthImage, JointLeaf};
+use super::simd::{self, Kernel, PixelLanes};
 use super::{Forest, PackedTree, Traversal, Tree};
 use crate::core::geometry::Intrinsics;
 use crate::core::skeleton::Joint;
@@ -90,9 +91,10 @@ pub struct BodyEstimator {
 #[derive(Clone, Debug)]
 struct Router {
     trees: Vec<PackedTree<DepthFeature>>,
+    kernel: Kernel,
     traversal: Traversal,
-    /// Each pixel's inverse depth, which scales every probe offset.
-    inverse: Vec<f32>,
+    lanes: PixelLanes,
+    leaves: Vec<u32>,
 }
 
 impl Router {
@@ -105,16 +107,20 @@ impl Router {
         pixels: &[Pixel],
         mut visit: impl FnMut(&'f Tree<DepthFeature, JointLeaf>, &[u32]),
     ) {
-        self.inverse.clear();
-        self.inverse.extend(pixels.iter().map(|px| 1.0 / px.depth));
-        let inverse = &self.inverse;
+        self.lanes.clear();
+        for px in pixels {
+            self.lanes.push(px.x, px.y, px.depth);
+        }
         for (tree, packed) in forest.trees.iter().zip(&self.trees) {
-            let value = |s: usize, u: &DepthFeature| {
-                let px = &pixels[s];
-                image.feature_scaled(px.x, px.y, px.depth, inverse[s], u)
-            };
-            packed.leaf_indices(pixels.len(), value, &mut self.traversal);
-            visit(tree, self.traversal.leaves());
+            simd::leaf_indices(
+                self.kernel,
+                packed,
+                image,
+                &self.lanes,
+                &mut self.traversal,
+                &mut self.leaves,
+            );
+            visit(tree, &self.leaves);
         }
     }
 }
@@ -123,8 +129,10 @@ impl BodyEstimator {
     pub fn new(forest: Forest<DepthFeature, JointLeaf>, settings: VoteSettings) -> Self {
         let router = Router {
             trees: forest.trees.iter().map(Tree::packed).collect(),
+            kernel: Kernel::detect(),
             traversal: Traversal::default(),
-            inverse: Vec::new(),
+            lanes: PixelLanes::default(),
+            leaves: Vec::new(),
         };
         Self {
             forest,
@@ -134,6 +142,19 @@ impl BodyEstimator {
             points: Vec::new(),
             router,
             tail_end: TailEnd::default(),
+        }
+    }
+
+    /// The traversal code in use: AVX2 where the processor has it (see [`simd`]).
+    pub fn kernel(&self) -> Kernel {
+        self.router.kernel
+    }
+
+    /// Traverses with `kernel` from now on (benchmarks compare them; [`Kernel::Avx2`] only on a
+    /// processor that has it, or it is ignored).
+    pub fn set_kernel(&mut self, kernel: Kernel) {
+        if kernel == Kernel::Portable || Kernel::detect() == kernel {
+            self.router.kernel = kernel;
         }
     }
 

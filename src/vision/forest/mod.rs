@@ -12,6 +12,7 @@ pub mod depth;
 pub mod discriminative;
 pub mod infer;
 pub mod model;
+pub mod simd;
 pub mod train;
 
 use rand::Rng;
@@ -158,8 +159,10 @@ impl<F: Copy, L> Tree<F, L> {
 const PACKED_LEAF: u32 = 1 << 31;
 
 /// A node as traversal reads it: the child index and the leaf index share one word, so a
-/// node with a two-float feature fills 16 bytes and four share a cache line.
+/// node with a two-float feature fills 16 bytes and four share a cache line. `repr(C)`: the
+/// AVX2 traversal ([`simd`]) gathers the fields by their offsets.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub struct PackedNode<F> {
     feature: F,
     threshold: f32,
@@ -175,6 +178,19 @@ pub struct PackedTree<F> {
 }
 
 impl<F> PackedTree<F> {
+    /// The leaf index one sample reaches (`value(feature)` is the feature's value for it).
+    #[inline]
+    pub fn leaf_index_of(&self, mut value: impl FnMut(&F) -> f32) -> u32 {
+        let mut i = 0usize;
+        loop {
+            let node = &self.nodes[i];
+            if node.next & PACKED_LEAF != 0 {
+                return node.next & !PACKED_LEAF;
+            }
+            i = (node.next + u32::from(value(&node.feature) <= node.threshold)) as usize;
+        }
+    }
+
     /// The leaf index each of `count` samples reaches, in `scratch.leaves()` (`value(s,
     /// feature)` is the feature's value for sample `s`). Level by level: every sample still
     /// on its way takes one step down per pass, so the memory loads of many samples overlap

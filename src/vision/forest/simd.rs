@@ -1,0 +1,346 @@
+//! The body forest's traversal in AVX2: eight pixels go down a tree together, their nodes and
+//! probed depths fetched with gather instructions. The one module of mousepose outside the
+//! camera crates with `unsafe`, for the intrinsics.
+//!
+//! [`Kernel::detect`] picks AVX2 at run time when the processor has it; every other processor
+//! takes the portable path ([`PackedTree::leaf_indices`]). Both give the same leaf for every
+//! pixel, bit for bit: the arithmetic is the portable path's, operation by operation (a
+//! multiply then an add, never fused; the same truncation to a pixel index; the same
+//! comparison), which the tests check on random trees and images.
+#![allow(unsafe_code)]
+
+use super::PackedTree;
+use super::depth::{DepthFeature, DepthImage};
+
+/// Which traversal code runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kernel {
+    /// Plain Rust, any processor.
+    Portable,
+    /// AVX2 gathers, eight pixels at a time (x86-64 processors that have it).
+    Avx2,
+}
+
+impl Kernel {
+    /// The fastest kernel this processor runs.
+    pub fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if is_x86_feature_detected!("avx2") {
+            return Kernel::Avx2;
+        }
+        Kernel::Portable
+    }
+}
+
+/// Pixels to route, one array per coordinate (what vector loads want).
+#[derive(Clone, Debug, Default)]
+pub struct PixelLanes {
+    pub x: Vec<f32>,
+    pub y: Vec<f32>,
+    pub depth: Vec<f32>,
+    /// `1 / depth`, which scales every probe offset.
+    pub inverse: Vec<f32>,
+}
+
+impl PixelLanes {
+    pub fn clear(&mut self) {
+        self.x.clear();
+        self.y.clear();
+        self.depth.clear();
+        self.inverse.clear();
+    }
+
+    pub fn push(&mut self, x: f32, y: f32, depth: f32) {
+        self.x.push(x);
+        self.y.push(y);
+        self.depth.push(depth);
+        self.inverse.push(1.0 / depth);
+    }
+
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    /// The value of feature `u` for pixel `s`: the portable path's arithmetic.
+    #[inline]
+    pub fn feature(&self, image: &DepthImage, s: usize, u: &DepthFeature) -> f32 {
+        image.feature_scaled(self.x[s], self.y[s], self.depth[s], self.inverse[s], u)
+    }
+}
+
+/// The leaf index each pixel of `lanes` reaches in `tree`, into `leaves` (resized to the
+/// number of pixels), with `kernel`; the portable path uses `scratch`.
+pub fn leaf_indices(
+    kernel: Kernel,
+    tree: &PackedTree<DepthFeature>,
+    image: &DepthImage,
+    lanes: &PixelLanes,
+    scratch: &mut super::Traversal,
+    leaves: &mut Vec<u32>,
+) {
+    let n = lanes.len();
+    leaves.clear();
+    match kernel {
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx2 if !tree.nodes.is_empty() => {
+            leaves.resize(n, 0);
+            let whole = n - n % 8;
+            // SAFETY: `Kernel::Avx2` is only made by `detect` when the processor has AVX2
+            // (or by tests that checked it), and the slices hold `whole` pixels.
+            unsafe { avx2::leaves(tree, image, lanes, &mut leaves[..whole]) };
+            for (s, leaf) in leaves.iter_mut().enumerate().skip(whole) {
+                *leaf = tree.leaf_index_of(|u| lanes.feature(image, s, u));
+            }
+        }
+        _ => {
+            tree.leaf_indices(n, |s, u| lanes.feature(image, s, u), scratch);
+            leaves.extend_from_slice(scratch.leaves());
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::super::depth::{BACKGROUND_MM, DepthFeature, DepthImage};
+    use super::super::{PACKED_LEAF, PackedNode, PackedTree};
+    use super::PixelLanes;
+    use std::arch::x86_64::*;
+
+    // A node is four 32-bit words: the feature's two offsets, the threshold, then the child
+    // or flagged leaf index (`PackedNode` is `repr(C)`).
+    const _: () = assert!(size_of::<PackedNode<DepthFeature>>() == 16);
+
+    /// Groups of eight pixels that go down the tree side by side: their gathers are
+    /// independent, so the processor overlaps their memory loads.
+    const GROUPS: usize = 4;
+
+    /// What every step reads: the tree, the image and constants.
+    struct Walk<'a> {
+        nodes: *const f32,
+        depth: &'a [f32],
+        corner: (__m256, __m256),
+        size: (__m256i, __m256i),
+        background: __m256,
+        leaf_bit: __m256i,
+    }
+
+    /// Eight pixels on their way: their coordinates, their nodes (a lane stays on its leaf
+    /// once there) and, once there, their flagged leaf indices.
+    #[derive(Clone, Copy)]
+    struct Group {
+        x: __m256,
+        y: __m256,
+        depth: __m256,
+        inverse: __m256,
+        at: __m256i,
+        result: __m256i,
+    }
+
+    /// Routes the first `out.len()` pixels (a multiple of 8) down `tree`.
+    ///
+    /// # Safety
+    /// The processor must have AVX2; `lanes` must hold at least `out.len()` pixels and the
+    /// tree's child indices must point inside it (as every tree that is built or loaded does).
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn leaves(
+        tree: &PackedTree<DepthFeature>,
+        image: &DepthImage,
+        lanes: &PixelLanes,
+        out: &mut [u32],
+    ) {
+        let region = image.region;
+        let walk = Walk {
+            nodes: tree.nodes.as_ptr().cast::<f32>(),
+            depth: &image.depth,
+            corner: (_mm256_set1_ps(region.x0 as f32), _mm256_set1_ps(region.y0 as f32)),
+            size: (
+                _mm256_set1_epi32(region.width as i32),
+                _mm256_set1_epi32(region.height as i32),
+            ),
+            background: _mm256_set1_ps(BACKGROUND_MM),
+            leaf_bit: _mm256_set1_epi32(PACKED_LEAF as i32),
+        };
+        for (b, block) in out.chunks_mut(8 * GROUPS).enumerate() {
+            let count = block.len() / 8;
+            let load = |k: usize, v: &[f32]| {
+                let o = (b * GROUPS + k.min(count - 1)) * 8;
+                // SAFETY: `o + 8 <= out.len() <= v.len()` (a missing group repeats the last).
+                unsafe { _mm256_loadu_ps(v.as_ptr().add(o)) }
+            };
+            let mut groups: [Group; GROUPS] = std::array::from_fn(|k| Group {
+                x: load(k, &lanes.x),
+                y: load(k, &lanes.y),
+                depth: load(k, &lanes.depth),
+                inverse: load(k, &lanes.inverse),
+                at: _mm256_setzero_si256(),
+                result: _mm256_setzero_si256(),
+            });
+            loop {
+                let mut moving = false;
+                for g in &mut groups {
+                    // SAFETY: the caller's promises, passed on.
+                    moving |= unsafe { step(&walk, g) };
+                }
+                if !moving {
+                    break;
+                }
+            }
+            for (g, chunk) in groups.iter().zip(block.chunks_exact_mut(8)) {
+                let leaf = _mm256_andnot_si256(walk.leaf_bit, g.result);
+                // SAFETY: `chunk` is eight u32s.
+                unsafe { _mm256_storeu_si256(chunk.as_mut_ptr().cast(), leaf) };
+            }
+        }
+    }
+
+    /// Moves each lane of `g` not on a leaf one level down; whether any lane moved.
+    ///
+    /// # Safety
+    /// AVX2; every lane's node index is inside the tree (the root, a child index read from a
+    /// split node, or a leaf it stays on).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn step(walk: &Walk<'_>, g: &mut Group) -> bool {
+        let zero = _mm256_setzero_si256();
+        // Each lane's node as one 16-byte load, then transposed: faster than four gathers.
+        let mut at = [0u32; 8];
+        // SAFETY: `at` is eight u32s.
+        unsafe { _mm256_storeu_si256(at.as_mut_ptr().cast(), g.at) };
+        // SAFETY: the nodes of `g.at` are inside the tree, so are their four words.
+        let node = |k: usize| unsafe { _mm_loadu_ps(walk.nodes.add(at[k] as usize * 4)) };
+        let (r0, r1) = (_mm256_set_m128(node(4), node(0)), _mm256_set_m128(node(5), node(1)));
+        let (r2, r3) = (_mm256_set_m128(node(6), node(2)), _mm256_set_m128(node(7), node(3)));
+        let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpackhi_ps(r0, r1));
+        let (t2, t3) = (_mm256_unpacklo_ps(r2, r3), _mm256_unpackhi_ps(r2, r3));
+        let u0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+        let u1 = _mm256_shuffle_ps::<0xEE>(t0, t2);
+        let threshold = _mm256_shuffle_ps::<0x44>(t1, t3);
+        let next = _mm256_castps_si256(_mm256_shuffle_ps::<0xEE>(t1, t3));
+        let moving = _mm256_cmpeq_epi32(_mm256_and_si256(next, walk.leaf_bit), zero);
+        g.result = _mm256_blendv_epi8(next, g.result, moving);
+        if _mm256_movemask_ps(_mm256_castsi256_ps(moving)) == 0 {
+            return false;
+        }
+        // `probe(x + u0 * inv, y + u1 * inv)`, relative to the region's corner: a multiply
+        // then an add, as the portable path computes it.
+        let rx = _mm256_sub_ps(_mm256_add_ps(g.x, _mm256_mul_ps(u0, g.inverse)), walk.corner.0);
+        let ry = _mm256_sub_ps(_mm256_add_ps(g.y, _mm256_mul_ps(u1, g.inverse)), walk.corner.1);
+        let nonnegative = _mm256_castps_si256(_mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GE_OQ>(rx, _mm256_setzero_ps()),
+            _mm256_cmp_ps::<_CMP_GE_OQ>(ry, _mm256_setzero_ps()),
+        ));
+        // Truncation as `as u32` does for what is inside; too large a value becomes i32::MIN,
+        // outside like the saturated u32 of the portable path.
+        let (xi, yi) = (_mm256_cvttps_epi32(rx), _mm256_cvttps_epi32(ry));
+        let minus_one = _mm256_set1_epi32(-1);
+        let inside = _mm256_and_si256(
+            _mm256_and_si256(_mm256_cmpgt_epi32(walk.size.0, xi), _mm256_cmpgt_epi32(xi, minus_one)),
+            _mm256_and_si256(_mm256_cmpgt_epi32(walk.size.1, yi), _mm256_cmpgt_epi32(yi, minus_one)),
+        );
+        let read = _mm256_and_si256(_mm256_and_si256(inside, nonnegative), moving);
+        let pixel = _mm256_add_epi32(_mm256_mullo_epi32(yi, walk.size.0), xi);
+        // SAFETY: only the lanes of `read` are loaded, whose pixel is inside the region, so
+        // inside `depth` (width * height floats).
+        let probed = unsafe {
+            _mm256_mask_i32gather_ps::<4>(walk.background, walk.depth.as_ptr(), pixel, _mm256_castsi256_ps(read))
+        };
+        let value = _mm256_sub_ps(probed, g.depth);
+        // The right child (left + 1) when value <= threshold: subtracting the all-ones mask
+        // adds one.
+        let right = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LE_OQ>(value, threshold));
+        g.at = _mm256_blendv_epi8(g.at, _mm256_sub_epi32(next, right), moving);
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::depth::{BACKGROUND_MM, DepthImage};
+    use super::super::{NOT_LEAF, Node, Traversal, Tree};
+    use super::*;
+    use crate::core::image::Region;
+    use rand::{Rng, SeedableRng};
+
+    /// A random tree of up to `depth` levels with probe offsets up to ±40,000 px·mm (about ±70 px at 570 mm) and thresholds
+    /// around the depth differences a mouse shows (some infinite and NaN).
+    fn random_tree(rng: &mut impl Rng, depth: u32) -> Tree<DepthFeature, ()> {
+        let mut nodes = Vec::new();
+        let mut leaves = Vec::new();
+        // Breadth-first: node i's children at 2i + 1 and 2i + 2.
+        let count = (1usize << (depth + 1)) - 1;
+        for i in 0..count {
+            let leaf = 2 * i + 1 >= count || rng.gen_bool(0.05);
+            // Whole millimetres half of the time, so that values equal to the threshold occur.
+            let threshold = match rng.gen_range(0..50) {
+                0 => f32::NAN,
+                1 => f32::INFINITY,
+                k if k % 2 == 0 => rng.gen_range(-80..80) as f32,
+                _ => rng.gen_range(-80.0..80.0),
+            };
+            nodes.push(Node {
+                feature: [rng.gen_range(-40_000.0..40_000.0), rng.gen_range(-40_000.0..40_000.0)],
+                threshold,
+                left: (2 * i + 1) as u32,
+                leaf: if leaf {
+                    leaves.push(());
+                    leaves.len() as u32 - 1
+                } else {
+                    NOT_LEAF
+                },
+            });
+        }
+        let mut tree = Tree { nodes, leaves };
+        tree.compact();
+        tree
+    }
+
+    fn random_image(rng: &mut impl Rng) -> DepthImage {
+        let region = Region {
+            x0: rng.gen_range(0..300),
+            y0: rng.gen_range(0..200),
+            width: rng.gen_range(1..120),
+            height: rng.gen_range(1..90),
+        };
+        let depth = (0..region.width * region.height)
+            .map(|_| {
+                if rng.gen_bool(0.3) {
+                    BACKGROUND_MM
+                } else {
+                    rng.gen_range(540..600) as f32
+                }
+            })
+            .collect();
+        DepthImage { region, depth }
+    }
+
+    #[test]
+    fn avx2_and_portable_reach_the_same_leaves() {
+        if Kernel::detect() != Kernel::Avx2 {
+            eprintln!("skipped: this processor has no AVX2");
+            return;
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x51AD);
+        let (mut scratch, mut lanes) = (Traversal::default(), PixelLanes::default());
+        let (mut portable, mut avx2) = (Vec::new(), Vec::new());
+        for round in 0..200 {
+            let depth = rng.gen_range(0..12);
+            let tree = random_tree(&mut rng, depth).packed();
+            let image = random_image(&mut rng);
+            lanes.clear();
+            for _ in 0..rng.gen_range(0..100) {
+                // Pixels on and around the region, some on its exact edges.
+                let r = image.region;
+                let x = r.x0 as f32 + rng.gen_range(-5..r.width as i32 + 5) as f32 + 0.5;
+                let y = r.y0 as f32 + rng.gen_range(-5..r.height as i32 + 5) as f32 + 0.5;
+                lanes.push(x, y, rng.gen_range(530..610) as f32);
+            }
+            leaf_indices(Kernel::Portable, &tree, &image, &lanes, &mut scratch, &mut portable);
+            leaf_indices(Kernel::Avx2, &tree, &image, &lanes, &mut scratch, &mut avx2);
+            assert_eq!(portable, avx2, "round {round}");
+        }
+    }
+}
