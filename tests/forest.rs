@@ -3,10 +3,10 @@
 use crate::util::repo_root;
 use mousepose::training::{PixelParams, Target, TrainJob, TrainProgress};
 use mousepose::vision::forest::classify::{ClassObjective, argmax};
-use mousepose::vision::forest::discriminative::{DiscriminativeParams, Scoring, refine_tree};
+use mousepose::vision::forest::discriminative::{DiscriminativeParams, refine_tree};
 use mousepose::vision::forest::model::{self, Model, ModelError, ModelKind};
 use mousepose::vision::forest::train::{train_forest, train_tree};
-use mousepose::vision::forest::{SplitSpace, TrainParams};
+use mousepose::vision::forest::{NOT_LEAF, Node, SplitSpace, TrainParams, Tree};
 use rand::Rng;
 
 /// Points in the unit square; features are the two coordinates, thresholds uniform.
@@ -96,43 +96,109 @@ fn packed_traversal_reaches_the_leaves_of_root_to_leaf_descent() {
     }
 }
 
-#[test]
-fn discriminative_training_never_raises_a_nodes_error() {
-    let xy = points(6000, 2);
-    let noisy =
-        |p: &[f32; 2], k: usize| u8::from((p[0] - 0.5).powi(2) + (p[1] - 0.5).powi(2) < 0.1) ^ u8::from(k % 7 == 0);
-    let labels: Vec<u8> = xy.iter().enumerate().map(|(k, p)| noisy(p, k)).collect();
-    let space = Xy(&xy);
-    let objective = ClassObjective {
-        labels: &labels,
-        classes: 2,
-    };
-    let params = TrainParams {
-        trees: 1,
-        max_depth: 10,
-        tests: 10,
+/// A split node on coordinate `f` at `threshold` whose children are at `left`, `left + 1`.
+fn split(f: u8, threshold: f32, left: u32) -> Node<u8> {
+    Node {
+        feature: f,
+        threshold,
+        left,
+        leaf: NOT_LEAF,
+    }
+}
+
+fn leaf(index: u32) -> Node<u8> {
+    Node {
+        feature: 0,
+        threshold: 0.0,
+        left: 0,
+        leaf: index,
+    }
+}
+
+/// Points labelled 1 where x > 0.5 (the left side of a split on x at 0.5).
+fn labelled_by_x(n: usize, seed: u64) -> (Vec<[f32; 2]>, Vec<u8>) {
+    let xy = points(n, seed);
+    let labels = xy.iter().map(|p| u8::from(p[0] > 0.5)).collect();
+    (xy, labels)
+}
+
+fn accuracy(tree: &Tree<u8, Vec<f32>>, space: &Xy<'_>, labels: &[u8]) -> f64 {
+    let right = (0..labels.len() as u32)
+        .filter(|&i| argmax(tree.leaf(|f| space.value(i, f))) == usize::from(labels[i as usize]))
+        .count();
+    right as f64 / labels.len() as f64
+}
+
+fn disc(tests: usize, start_level: u32) -> DiscriminativeParams {
+    DiscriminativeParams {
+        tests,
         min_leaf: 20,
-        seed: 5,
+        start_level,
+        max_depth: 4,
+        ..DiscriminativeParams::default()
+    }
+}
+
+#[test]
+fn a_split_node_reached_by_few_samples_shrinks_to_a_leaf() {
+    let (xy, labels) = labelled_by_x(400, 11);
+    let (space, objective) = (Xy(&xy), ClassObjective { labels: &labels, classes: 2 });
+    // Root on x at 0.98 (left: x > 0.98, reached by a few samples), whose left child splits
+    // on y.
+    let mut tree = Tree {
+        nodes: vec![split(0, 0.98, 1), split(1, 0.5, 3), leaf(0), leaf(1), leaf(2)],
+        leaves: vec![vec![1.0, 0.0], vec![0.0, 1.0], vec![0.0, 1.0]],
     };
-    let mut train: Vec<u32> = (0..3000).collect();
-    let mut tree = train_tree(&space, &objective, &mut train, &params, 0, 0);
-    for scoring in [Scoring::SubtreeError, Scoring::Gain] {
-        let disc = DiscriminativeParams {
-            tests: 10,
-            min_leaf: 20,
-            scoring,
-            max_depth: 10,
-            ..DiscriminativeParams::default()
-        };
-        let mut second: Vec<u32> = (3000..6000).collect();
-        let stats = refine_tree(&space, &objective, &mut tree, &mut second, &disc, 0, 0);
-        assert!(stats.error_after <= stats.error_before, "{stats:?}");
-        if scoring == Scoring::SubtreeError {
-            assert!(stats.nodes_visited > 0);
-        }
-        // The tree is still whole after shrinking and growing.
-        for i in 0..6000u32 {
-            let _ = tree.leaf(|f| space.value(i, f));
+    let few: Vec<u32> = (0..400u32).filter(|&i| xy[i as usize][0] > 0.98).collect();
+    assert!(few.len() >= 2 && few.len() <= 20, "{}", few.len());
+    let mut samples: Vec<u32> = (0..400).collect();
+    let stats = refine_tree(&space, &objective, &mut tree, &mut samples, &disc(0, 0), 0, 0);
+    assert_eq!(stats.shrunk, 1, "{stats:?}");
+    // The few now share one leaf, and the root still tests x at 0.98.
+    let reached = |i: u32| tree.leaf_index(|f| space.value(i, f));
+    assert!(few.iter().all(|&i| reached(i) == reached(few[0])));
+    assert_eq!((tree.nodes[0].feature, tree.nodes[0].threshold), (0, 0.98));
+    assert!(tree.nodes[usize::try_from(tree.nodes[0].left).unwrap()].is_leaf());
+}
+
+#[test]
+fn a_leaf_reached_by_many_samples_grows_a_subtree_that_separates_them() {
+    let (xy, labels) = labelled_by_x(2000, 12);
+    let (space, objective) = (Xy(&xy), ClassObjective { labels: &labels, classes: 2 });
+    let mut tree = Tree {
+        nodes: vec![leaf(0)],
+        leaves: vec![vec![0.5, 0.5]],
+    };
+    let mut samples: Vec<u32> = (0..2000).collect();
+    let stats = refine_tree(&space, &objective, &mut tree, &mut samples, &disc(20, 0), 0, 0);
+    assert_eq!(stats.grown, 1, "{stats:?}");
+    assert!(tree.depth() >= 1 && tree.depth() <= 4, "{}", tree.depth());
+    assert!(accuracy(&tree, &space, &labels) > 0.95);
+}
+
+#[test]
+fn a_better_test_replaces_a_bad_one_below_start_level_only() {
+    let (xy, labels) = labelled_by_x(2000, 13);
+    let (space, objective) = (Xy(&xy), ClassObjective { labels: &labels, classes: 2 });
+    // The root tests y, which says nothing about the labels; its leaves say class 1 on the
+    // left (value > threshold) and 0 on the right, right for a test of x.
+    let bad = Tree {
+        nodes: vec![split(1, 0.5, 1), leaf(0), leaf(1)],
+        leaves: vec![vec![0.0, 1.0], vec![1.0, 0.0]],
+    };
+    let before = accuracy(&bad, &space, &labels);
+    for (start_level, changes) in [(0, true), (1, false)] {
+        let mut tree = bad.clone();
+        let mut samples: Vec<u32> = (0..2000).collect();
+        let params = disc(50, start_level);
+        let stats = refine_tree(&space, &objective, &mut tree, &mut samples, &params, 0, 0);
+        assert_eq!(tree.nodes[0] != bad.nodes[0], changes, "start level {start_level}: {stats:?}");
+        if changes {
+            assert_eq!(tree.nodes[0].feature, 0, "the root now tests x");
+            assert!(stats.error_after < stats.error_before, "{stats:?}");
+            assert!(accuracy(&tree, &space, &labels) > before + 0.3);
+        } else {
+            assert_eq!(stats.tests_changed, 0, "{stats:?}");
         }
     }
 }
