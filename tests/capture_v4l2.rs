@@ -2,20 +2,7 @@
 //! made from the V4L2 specification, since the test machines have no camera) and the MoSeq
 //! recording reader (small recordings written to a temporary directory).
 
-/// The error and its whole chain of causes, as `{:#}` prints it with anyhow.
-fn chain(error: &(dyn std::error::Error + 'static)) -> String {
-    let mut text = error.to_string();
-    let mut source = error.source();
-    while let Some(cause) = source {
-        text.push_str(": ");
-        text.push_str(&cause.to_string());
-        source = cause.source();
-    }
-    text
-}
-
 mod moseq {
-    use super::chain;
     use mousepose::core::frame::DepthFrame;
     use mousepose::io::session::meta::Backend;
     use mousepose::runtime::capture::moseq::{MoseqConfig, MoseqDepth, MoseqError, MoseqKind};
@@ -194,7 +181,7 @@ mod moseq {
         let len = (W * H * 2) as u64 * 3 + 100;
         file.set_len(len).unwrap();
         let err = MoseqDepth::open(MoseqConfig::new(dir.path())).unwrap_err();
-        let text = chain(&err);
+        let text = mousepose::core::error_chain(&err);
         assert!(matches!(moseq_error(&err), MoseqError::Truncated { .. }), "{text}");
         assert!(text.contains("depth.dat"), "{text}");
         assert!(
@@ -210,7 +197,7 @@ mod moseq {
         write_metadata(dir.path());
         std::fs::write(dir.path().join("depth_ts.txt"), "100 5000\n133 5033\n120 5066\n").unwrap();
         let err = MoseqDepth::open(MoseqConfig::new(dir.path())).unwrap_err();
-        let text = chain(&err);
+        let text = mousepose::core::error_chain(&err);
         assert!(
             matches!(moseq_error(&err), MoseqError::OutOfOrder { line: 3, .. }),
             "{text}"
@@ -225,7 +212,7 @@ mod moseq {
         write_dat(dir.path(), &frames());
         write_metadata(dir.path());
         let err = MoseqDepth::open(MoseqConfig::new(dir.path())).unwrap_err();
-        let text = chain(&err);
+        let text = mousepose::core::error_chain(&err);
         assert!(matches!(moseq_error(&err), MoseqError::NoTimestamps { .. }), "{text}");
         assert!(
             text.contains("no timestamp file") && text.contains("depth_ts.txt"),
@@ -240,7 +227,7 @@ mod moseq {
         write_metadata(dir.path());
         write_ts(dir.path(), FRAMES + 1);
         let err = MoseqDepth::open(MoseqConfig::new(dir.path())).unwrap_err();
-        let text = chain(&err);
+        let text = mousepose::core::error_chain(&err);
         assert!(
             matches!(
                 moseq_error(&err),
@@ -265,7 +252,7 @@ mod moseq {
         assert!(
             matches!(moseq_error(&err), MoseqError::NoDepthFile { .. }),
             "{}",
-            chain(&err)
+            mousepose::core::error_chain(&err)
         );
         write_dat(dir.path(), &frames());
         write_ts(dir.path(), FRAMES);
@@ -274,13 +261,12 @@ mod moseq {
         assert!(
             matches!(moseq_error(&err), MoseqError::Resolution { .. }),
             "{}",
-            chain(&err)
+            mousepose::core::error_chain(&err)
         );
     }
 }
 
 mod v4l2 {
-    use super::chain;
     use mousepose::core::frame::PixelFormat;
     use mousepose::runtime::capture::v4l2::{
         BUF_FLAG_ERROR, BufferDecoder, BufferMeta, BufferProblem, Chosen, Conversion, LOSS_ERROR_FLAG,
@@ -598,7 +584,7 @@ mod v4l2 {
             ..config(640, 480, 30.0, None)
         })
         .unwrap_err();
-        let text = chain(&err);
+        let text = mousepose::core::error_chain(&err);
         assert!(text.contains("not a V4L2 device (VIDIOC_QUERYCAP failed)"), "{text}");
     }
 

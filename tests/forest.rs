@@ -142,7 +142,13 @@ fn disc(tests: usize, start_level: u32) -> DiscriminativeParams {
 #[test]
 fn a_split_node_reached_by_few_samples_shrinks_to_a_leaf() {
     let (xy, labels) = labelled_by_x(400, 11);
-    let (space, objective) = (Xy(&xy), ClassObjective { labels: &labels, classes: 2 });
+    let (space, objective) = (
+        Xy(&xy),
+        ClassObjective {
+            labels: &labels,
+            classes: 2,
+        },
+    );
     // Root on x at 0.98 (left: x > 0.98, reached by a few samples), whose left child splits
     // on y.
     let mut tree = Tree {
@@ -164,7 +170,13 @@ fn a_split_node_reached_by_few_samples_shrinks_to_a_leaf() {
 #[test]
 fn a_leaf_reached_by_many_samples_grows_a_subtree_that_separates_them() {
     let (xy, labels) = labelled_by_x(2000, 12);
-    let (space, objective) = (Xy(&xy), ClassObjective { labels: &labels, classes: 2 });
+    let (space, objective) = (
+        Xy(&xy),
+        ClassObjective {
+            labels: &labels,
+            classes: 2,
+        },
+    );
     let mut tree = Tree {
         nodes: vec![leaf(0)],
         leaves: vec![vec![0.5, 0.5]],
@@ -179,7 +191,13 @@ fn a_leaf_reached_by_many_samples_grows_a_subtree_that_separates_them() {
 #[test]
 fn a_better_test_replaces_a_bad_one_below_start_level_only() {
     let (xy, labels) = labelled_by_x(2000, 13);
-    let (space, objective) = (Xy(&xy), ClassObjective { labels: &labels, classes: 2 });
+    let (space, objective) = (
+        Xy(&xy),
+        ClassObjective {
+            labels: &labels,
+            classes: 2,
+        },
+    );
     // The root tests y, which says nothing about the labels; its leaves say class 1 on the
     // left (value > threshold) and 0 on the right, right for a test of x.
     let bad = Tree {
@@ -192,7 +210,11 @@ fn a_better_test_replaces_a_bad_one_below_start_level_only() {
         let mut samples: Vec<u32> = (0..2000).collect();
         let params = disc(50, start_level);
         let stats = refine_tree(&space, &objective, &mut tree, &mut samples, &params, 0, 0);
-        assert_eq!(tree.nodes[0] != bad.nodes[0], changes, "start level {start_level}: {stats:?}");
+        assert_eq!(
+            tree.nodes[0] != bad.nodes[0],
+            changes,
+            "start level {start_level}: {stats:?}"
+        );
         if changes {
             assert_eq!(tree.nodes[0].feature, 0, "the root now tests x");
             assert!(stats.error_after < stats.error_before, "{stats:?}");

@@ -183,18 +183,6 @@ fn depth_path(dir: &Path) -> PathBuf {
     dir.join("depth").join("frames.mpstore")
 }
 
-/// An error and its causes, as a log line would show them.
-fn chain(e: &dyn std::error::Error) -> String {
-    let mut s = e.to_string();
-    let mut cause = e.source();
-    while let Some(c) = cause {
-        s.push_str(": ");
-        s.push_str(&c.to_string());
-        cause = c.source();
-    }
-    s
-}
-
 fn read_depth(r: &SessionReader) -> Vec<DepthFrame> {
     r.depth_frames().collect::<Result<Vec<_>, _>>().expect("depth frames")
 }
@@ -374,7 +362,11 @@ fn a_damaged_payload_byte_skips_that_frame_only() {
     assert_eq!(damage.skipped[0].reason, SkipReason::PayloadCrc);
     let err = r.depth_frame(7).unwrap_err();
     assert!(matches!(err, SessionError::Store(StoreError::Corrupt { offset, .. }) if offset == offsets[7]));
-    assert!(chain(&err).contains("payload checksum mismatch"), "{}", chain(&err));
+    assert!(
+        mousepose::core::error_chain(&err).contains("payload checksum mismatch"),
+        "{}",
+        mousepose::core::error_chain(&err)
+    );
     assert_eq!(r.depth_frame(8).unwrap(), depth_frame(8));
     assert_eq!(r.verify().unwrap().depth.skipped_records(), 1);
 
@@ -452,7 +444,7 @@ fn an_intact_record_that_is_not_a_valid_frame_is_named() {
     assert_eq!(items[0].as_ref().unwrap(), &depth_frame(0));
     assert_eq!(items[2].as_ref().unwrap(), &depth_frame(2));
     let err = items[1].as_ref().unwrap_err();
-    let message = chain(err);
+    let message = mousepose::core::error_chain(err);
     assert!(
         message.starts_with(&format!("{}: frame seq 1 at offset ", path.display())),
         "{message}"
@@ -472,9 +464,9 @@ fn what_is_not_a_session_is_rejected_clearly() {
     let err = SessionReader::open(dir.path()).unwrap_err();
     let toml_path = dir.path().join("session.toml");
     assert!(
-        chain(&err).starts_with(&format!("cannot read {}: ", toml_path.display())),
+        mousepose::core::error_chain(&err).starts_with(&format!("cannot read {}: ", toml_path.display())),
         "{}",
-        chain(&err)
+        mousepose::core::error_chain(&err)
     );
 
     write_full(dir.path(), true).unwrap();
@@ -497,11 +489,19 @@ fn what_is_not_a_session_is_rejected_clearly() {
     fs::write(&toml_path, original.replace("notes = ", "frame_rate = 3\nnotes = ")).unwrap();
     let err = SessionReader::open(dir.path()).unwrap_err();
     assert!(matches!(err, SessionError::Meta { .. }));
-    assert!(chain(&err).contains("unknown field `frame_rate`"), "{}", chain(&err));
+    assert!(
+        mousepose::core::error_chain(&err).contains("unknown field `frame_rate`"),
+        "{}",
+        mousepose::core::error_chain(&err)
+    );
     // ...also inside a camera.
     fs::write(&toml_path, original.replacen("fps = ", "gain = 2.0\nfps = ", 1)).unwrap();
     let err = SessionReader::open(dir.path()).unwrap_err();
-    assert!(chain(&err).contains("unknown field `gain`"), "{}", chain(&err));
+    assert!(
+        mousepose::core::error_chain(&err).contains("unknown field `gain`"),
+        "{}",
+        mousepose::core::error_chain(&err)
+    );
 
     // A colour camera claiming depth pixels.
     fs::write(
@@ -569,7 +569,11 @@ fn writing_needs_an_empty_directory_and_a_declared_camera() {
     let mut bad = depth_frame(0);
     bad.data.pop();
     let err = w.write_depth(&bad).unwrap_err();
-    assert!(chain(&err).contains("cannot encode frame seq 0"), "{}", chain(&err));
+    assert!(
+        mousepose::core::error_chain(&err).contains("cannot encode frame seq 0"),
+        "{}",
+        mousepose::core::error_chain(&err)
+    );
     w.write_depth(&depth_frame(0)).unwrap();
     w.finish().unwrap();
     let r = SessionReader::open(dir.path()).unwrap();
