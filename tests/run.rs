@@ -539,3 +539,24 @@ fn a_write_error_pauses_recording_and_keeps_what_was_written() {
         session.depth_count()
     );
 }
+
+#[test]
+fn a_camera_that_cannot_be_stopped_at_the_end_does_not_fail_the_run() {
+    let _port = take_port();
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = rig_with(tmp.path(), &session_depth(), true, "");
+    let camera = fake_camera();
+    let daemon = daemon(&rig, None);
+    std::thread::sleep(Duration::from_secs(5));
+    // Frozen just before the stop: stopping its acquisition times out.
+    signal(&camera, "STOP");
+    let (status, out, err) = terminate(daemon, Duration::from_secs(30));
+    signal(&camera, "CONT");
+    drop(camera);
+    assert!(status.success(), "{status}: {err}");
+    let report = report(&out);
+    assert!(
+        report["cameras"]["color"]["captured"].as_u64().unwrap() > 30,
+        "{report:#}"
+    );
+}

@@ -421,7 +421,11 @@ fn run_source<S: FrameSource>(
         };
         bump(&acct.camera(role).lost, reason, n);
     }
-    source.stop()?;
+    // Every frame is in by now: a camera that cannot be stopped cleanly (gone at the same
+    // moment, as when a rig powers down) is worth a warning, not the run.
+    if let Err(e) = source.stop() {
+        tracing::warn!(camera = %own_role, "the camera did not stop cleanly: {}", crate::core::error_chain(&e));
+    }
     Ok(())
 }
 
