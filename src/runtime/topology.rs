@@ -366,6 +366,16 @@ fn spawn_source<S: FrameSource>(
     })
 }
 
+/// The camera and reason of a source's loss: `depth_corrupt` is the depth camera's
+/// `corrupt` (a recording reports both cameras'), anything else the source's own camera's.
+fn loss_of(reason: &'static str, own_role: CameraRole) -> (CameraRole, &'static str) {
+    match reason.split_once('_') {
+        Some(("depth", r)) => (CameraRole::Depth, r),
+        Some(("color", r)) => (CameraRole::Color, r),
+        _ => (own_role, reason),
+    }
+}
+
 fn role_of(c: &Captured) -> CameraRole {
     match c {
         Captured::Depth(_) => CameraRole::Depth,
@@ -387,6 +397,8 @@ fn run_source<S: FrameSource>(
     let own_role = source.meta().role;
     source.start(clock)?;
     let mut gaps = [SeqGaps::default(); 2];
+    // Per camera, the source's own losses already set against gaps in its frame numbers.
+    let mut accounted = [0u64; 2];
     'frames: while !shutdown.requested() && !source.finished() {
         let Some(frame) = source.next_frame(Duration::from_millis(100))? else {
             continue;
@@ -396,7 +408,19 @@ fn run_source<S: FrameSource>(
         let counters = acct.camera(role);
         counters.captured.fetch_add(1, Ordering::Relaxed);
         let slot = usize::from(role == CameraRole::Color);
-        bump(&counters.lost, "camera_gap", gaps[slot].observe(frame.stamp().seq));
+        let missing = gaps[slot].observe(frame.stamp().seq);
+        if missing > 0 {
+            // A frame the source counted as lost (a damaged buffer or record) had its frame
+            // number too: counted once, by the source's reason, not again as a gap.
+            let lost: u64 = source
+                .losses()
+                .into_iter()
+                .filter_map(|(reason, n)| (loss_of(reason, own_role).0 == role).then_some(n))
+                .sum();
+            let explained = lost.saturating_sub(accounted[slot]);
+            accounted[slot] = lost;
+            bump(&counters.lost, "camera_gap", missing.saturating_sub(explained));
+        }
         let mut frame = Some(frame);
         for (k, (tx, recorder)) in outputs.iter().enumerate() {
             let item = if k + 1 == outputs.len() {
@@ -414,11 +438,7 @@ fn run_source<S: FrameSource>(
         }
     }
     for (reason, n) in source.losses() {
-        let (role, reason) = match reason.split_once('_') {
-            Some(("depth", r)) => (CameraRole::Depth, r),
-            Some(("color", r)) => (CameraRole::Color, r),
-            _ => (own_role, reason),
-        };
+        let (role, reason) = loss_of(reason, own_role);
         bump(&acct.camera(role).lost, reason, n);
     }
     // Every frame is in by now: a camera that cannot be stopped cleanly (gone at the same
@@ -492,4 +512,87 @@ fn run_sync(
     sync.flush(&mut out);
     emit(&mut out);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::frame::Stamp;
+    use crate::io::session::CameraMeta;
+    use crate::runtime::capture::CaptureError;
+
+    /// A depth camera delivering frames numbered `seqs`, of which it reports the ones between
+    /// as lost (damaged) from the third frame on: `damaged` of them.
+    #[derive(Debug)]
+    struct Numbered {
+        seqs: Vec<u64>,
+        delivered: usize,
+        damaged: u64,
+    }
+
+    impl FrameSource for Numbered {
+        type Frame = DepthFrame;
+        fn meta(&self) -> CameraMeta {
+            CameraMeta {
+                role: CameraRole::Depth,
+                backend: crate::io::session::Backend::Synthetic,
+                model: String::new(),
+                serial: String::new(),
+                firmware: String::new(),
+                width: 1,
+                height: 1,
+                pixel_format: crate::io::session::codec::FrameFormat::Depth16,
+                fps: 30.0,
+            }
+        }
+        fn start(&mut self, _clock: &Clock) -> Result<(), CaptureError> {
+            Ok(())
+        }
+        fn next_frame(&mut self, _timeout: Duration) -> Result<Option<DepthFrame>, CaptureError> {
+            let Some(&seq) = self.seqs.get(self.delivered) else {
+                return Ok(None);
+            };
+            self.delivered += 1;
+            let stamp = Stamp {
+                seq,
+                device_ns: seq * 33_000_000,
+                host_ns: seq * 33_000_000,
+            };
+            Ok(Some(DepthFrame::empty(stamp, 1, 1)))
+        }
+        fn finished(&self) -> bool {
+            self.delivered == self.seqs.len()
+        }
+        fn losses(&self) -> Vec<(&'static str, u64)> {
+            vec![("incomplete", if self.delivered >= 3 { self.damaged } else { 0 })]
+        }
+        fn stop(&mut self) -> Result<(), CaptureError> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_frame_the_source_counts_as_lost_is_not_counted_again_as_a_gap() {
+        // 2 is damaged (counted by the source), 4 and 5 never came.
+        let depth = Numbered {
+            seqs: vec![0, 1, 3, 6],
+            delivered: 0,
+            damaged: 1,
+        };
+        let topology = Topology {
+            sources: Sources::Cameras {
+                depth: Box::new(depth),
+                color: None,
+                epochs: Epochs::default(),
+            },
+            sync: SyncConfig::default(),
+            edges: Edges::replay(),
+            processing: None,
+            recorder: None,
+        };
+        let finished = topology.start().unwrap().join();
+        let lost = &finished.cameras["depth"].lost_before_capture;
+        assert_eq!(lost.get("incomplete"), Some(&1), "{lost:?}");
+        assert_eq!(lost.get("camera_gap"), Some(&2), "{lost:?}");
+    }
 }
