@@ -26,6 +26,31 @@ pub enum ConfigError {
     Value { path: PathBuf, key: String, reason: String },
 }
 
+/// A rig config is a few kilobytes; more is not a config.
+const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
+/// The text of a regular file of at most `max` bytes: a device (`/dev/zero`), a FIFO or a
+/// directory is refused before anything is read, and a larger file after `max` bytes.
+pub fn read_bounded(path: &Path, max: u64) -> std::io::Result<String> {
+    use std::io::Read as _;
+    // Asked before opening: opening a FIFO waits for a writer.
+    if !std::fs::metadata(path)?.is_file() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "it is not a regular file",
+        ));
+    }
+    let mut text = String::new();
+    std::fs::File::open(path)?.take(max + 1).read_to_string(&mut text)?;
+    if text.len() as u64 > max {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("it is larger than {max} bytes"),
+        ));
+    }
+    Ok(text)
+}
+
 // ---- the raw form, as written -------------------------------------------------------------
 
 #[derive(Debug, Deserialize)]
@@ -305,7 +330,7 @@ impl Config {
     /// The file cannot be read, does not parse (unknown keys included), or holds a value
     /// that cannot work.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        let text = read_bounded(path, MAX_CONFIG_BYTES).map_err(|source| ConfigError::Read {
             path: path.to_owned(),
             source,
         })?;
@@ -357,6 +382,15 @@ impl Checker<'_> {
         }
     }
 
+    /// A camera frame rate: whole frames per second, at least 1 (a camera mode has one).
+    fn frame_rate(&self, key: &str, v: f64) -> Result<f64, ConfigError> {
+        if v.is_finite() && (1.0..=1000.0).contains(&v) {
+            Ok(v)
+        } else {
+            Err(self.bad(key, format!("must be from 1 to 1000 frames per second, not {v}")))
+        }
+    }
+
     fn capacity(&self, key: &str, v: usize) -> Result<usize, ConfigError> {
         if (1..=4096).contains(&v) {
             Ok(v)
@@ -383,7 +417,7 @@ impl Checker<'_> {
                     serial: d.serial,
                     width: d.width,
                     height: d.height,
-                    fps: self.positive("depth.fps", d.fps, 1000.0)?,
+                    fps: self.frame_rate("depth.fps", d.fps)?,
                 }
             }
             "session" => {
@@ -655,5 +689,33 @@ mod tests {
         assert!(e.contains("color.address"), "{e}");
         let e = parse("[depth]\nbackend = \"openni2\"\n").unwrap_err().to_string();
         assert!(e.contains("uri"), "{e}");
+        // Below one frame a second is no camera mode (it used to mean "any mode").
+        let e = parse("[depth]\nbackend = \"openni2\"\nuri = \"x\"\nfps = 0.4\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("depth.fps") && e.contains("0.4"), "{e}");
+    }
+
+    #[test]
+    fn a_config_path_that_is_not_a_small_regular_file_is_refused_without_reading_it() {
+        for path in ["/dev/zero", "/"] {
+            let e = Config::load(Path::new(path)).unwrap_err();
+            assert!(crate::core::error_chain(&e).contains("not a regular file"), "{e}");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("fifo");
+        assert!(
+            std::process::Command::new("mkfifo")
+                .arg(&fifo)
+                .status()
+                .unwrap()
+                .success()
+        );
+        let e = Config::load(&fifo).unwrap_err();
+        assert!(crate::core::error_chain(&e).contains("not a regular file"), "{e}");
+        let big = dir.path().join("big.toml");
+        std::fs::write(&big, vec![b'#'; 2 << 20]).unwrap();
+        let e = Config::load(&big).unwrap_err();
+        assert!(crate::core::error_chain(&e).contains("larger than"), "{e}");
     }
 }
