@@ -409,6 +409,13 @@ fn model_files_round_trip_and_damage_is_refused() {
         message.contains("body.forest") && message.contains("damaged"),
         "{message}"
     );
+    // A forest without trees would vote for nothing and call every frame "ok".
+    let mut empty = model.clone();
+    if let Model::Body(_, f) = &mut empty {
+        f.trees.clear();
+    }
+    let e = check(&model::encode(&empty).expect("encodes")).expect_err("no trees");
+    assert!(e.to_string().contains("no trees"), "{e}");
 }
 
 #[test]

@@ -290,6 +290,9 @@ fn decode_trees<L>(
 ) -> Result<Forest<DepthFeature, L>, String> {
     let mut r = Reader { bytes, at: 0 };
     let count = r.count("tree count", 8)?;
+    if count == 0 {
+        return Err("it has no trees".to_owned());
+    }
     let mut trees = Vec::with_capacity(count);
     for t in 0..count {
         let n_nodes = r.count("node count", 20)?;

@@ -34,16 +34,55 @@ pub fn load(path: &Path) -> Result<Cascade, PawError> {
     parse(&text, path)
 }
 
+/// Whether number text is a finite number's: Rust parses `nan` and `inf`, OpenCV writes
+/// neither.
+fn finite(t: &str) -> bool {
+    !t.trim_start_matches(['+', '-'])
+        .starts_with(|c: char| c.is_ascii_alphabetic())
+}
+
+/// Deeper than any cascade (OpenCV's nest about six levels): refused before parsing, whose
+/// recursion a hostile file could otherwise drive off the stack.
+const MAX_NESTING: usize = 64;
+
+/// How deep the elements of `text` nest, counted from its tags alone (comments, processing
+/// instructions and declarations skipped; the parser checks the rest).
+fn nesting(text: &str) -> usize {
+    let (mut depth, mut deepest) = (0usize, 0usize);
+    let mut rest = text;
+    while let Some(at) = rest.find('<') {
+        rest = &rest[at + 1..];
+        if let Some(after) = rest.strip_prefix("!--") {
+            rest = after.find("-->").map_or("", |end| &after[end + 3..]);
+        } else if rest.starts_with('/') {
+            depth = depth.saturating_sub(1);
+        } else if !rest.starts_with('?') && !rest.starts_with('!') {
+            let end = rest.find('>').unwrap_or(rest.len());
+            if !rest[..end].ends_with('/') {
+                depth += 1;
+                deepest = deepest.max(depth);
+            }
+        }
+    }
+    deepest
+}
+
 /// Parses cascade XML held in memory; `path` only names it in errors.
 ///
 /// # Errors
 /// As [`load`].
 pub fn parse(text: &str, path: &Path) -> Result<Cascade, PawError> {
+    let p = Parser { path };
+    let depth = nesting(text);
+    if depth > MAX_NESTING {
+        return Err(p.bad(format!(
+            "its elements nest {depth} deep; a cascade nests fewer than {MAX_NESTING}"
+        )));
+    }
     let doc = Document::parse(text).map_err(|source| PawError::Xml {
         path: path.to_owned(),
         source,
     })?;
-    let p = Parser { path };
     let root = doc.root_element();
     if root.tag_name().name() != "opencv_storage" {
         return Err(p.bad(format!(
@@ -101,8 +140,10 @@ impl Parser<'_> {
 
     fn num<T: std::str::FromStr>(&self, node: XmlNode<'_, '_>, what: &str) -> Result<T, PawError> {
         let t = text(node);
-        t.parse()
-            .map_err(|_| self.bad(format!("<{what}> holds {t:?}, not a number")))
+        finite(t)
+            .then(|| t.parse().ok())
+            .flatten()
+            .ok_or_else(|| self.bad(format!("<{what}> holds {t:?}, not a number")))
     }
 
     fn field<T: std::str::FromStr>(&self, node: XmlNode<'_, '_>, name: &str) -> Result<T, PawError> {
@@ -114,8 +155,10 @@ impl Parser<'_> {
         text(node)
             .split_whitespace()
             .map(|t| {
-                t.parse::<f64>()
-                    .map_err(|_| self.bad(format!("<{what}> holds {t:?}, not a number")))
+                finite(t)
+                    .then(|| t.parse::<f64>().ok())
+                    .flatten()
+                    .ok_or_else(|| self.bad(format!("<{what}> holds {t:?}, not a number")))
             })
             .collect()
     }
@@ -547,5 +590,25 @@ mod tests {
         assert!(e.to_string().contains("uses feature 7 of 2"), "{e}");
         let nan = xml.replacen("<stageThreshold>", "<stageThreshold>x", 1);
         assert!(matches!(parse(&nan, Path::new("n.xml")), Err(PawError::Format { .. })));
+        for bad in ["nan", "-inf", "Infinity"] {
+            let at = xml.find("<stageThreshold>").unwrap() + "<stageThreshold>".len();
+            let end = at + xml[at..].find('<').unwrap();
+            let text = format!("{}{bad}{}", &xml[..at], &xml[end..]);
+            let e = parse(&text, Path::new("n.xml")).unwrap_err().to_string();
+            assert!(e.contains("not a number"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn a_cascade_nested_thousands_deep_is_refused_not_a_stack_overflow() {
+        let d = 30_000;
+        let text = format!(
+            "<opencv_storage>{}{}</opencv_storage>",
+            "<a>".repeat(d),
+            "</a>".repeat(d)
+        );
+        let e = parse(&text, Path::new("deep.xml")).unwrap_err().to_string();
+        assert!(e.contains("nest 30001 deep"), "{e}");
+        assert_eq!(nesting("<?xml version=\"1.0\"?><!-- <x> --><a><b/><c>1</c></a>"), 2);
     }
 }
