@@ -306,6 +306,13 @@ fn damaged_and_truncated_frames_are_counted_not_fatal() {
     assert!((s.pairs as usize) < reader.depth_count());
     let lost: u64 = s.cameras["depth"].lost_before_capture.values().sum();
     assert!(lost >= 2, "{:?}", s.cameras["depth"]);
+    // The cut last record is reported as such.
+    assert_eq!(
+        s.cameras["depth"].lost_before_capture.get("truncated"),
+        Some(&1),
+        "{:?}",
+        s.cameras["depth"]
+    );
 }
 
 #[test]
@@ -398,4 +405,31 @@ fn a_moseq_layout_recording_replays_depth_only() {
     assert_eq!(s.cameras["depth"].unpaired, s.pairs);
     assert!(s.pairing.is_none() && s.mean_error_mm.is_none());
     assert_accounted(&s);
+}
+
+#[test]
+fn one_colour_frame_of_another_size_is_skipped_and_counted_not_the_end_of_the_replay() {
+    let tmp = tempfile::tempdir().unwrap();
+    let reader = SessionReader::open(fixture()).unwrap();
+    let session = tmp.path().join("session");
+    std::fs::create_dir(&session).unwrap();
+    let mut w = SessionWriter::create(&session, reader.meta()).unwrap();
+    for f in reader.depth_frames() {
+        w.write_depth(&f.unwrap()).unwrap();
+    }
+    for (k, f) in reader.color_frames().unwrap().enumerate() {
+        let mut f = f.unwrap();
+        if k == 5 {
+            // Half as wide: a camera that changed its region for one frame.
+            f.width /= 2;
+            f.data.truncate(f.data.len() / 2);
+        }
+        w.write_color(&f).unwrap();
+    }
+    w.finish().unwrap();
+    let s = replay(&options(&session, &tmp.path().join("o"), 2)).unwrap();
+    assert_accounted(&s);
+    let color = &s.cameras["color"];
+    let skipped: u64 = color.lost_before_capture.values().sum::<u64>() + color.dropped_total;
+    assert_eq!(skipped, 1, "{color:?}");
 }

@@ -62,6 +62,15 @@ impl SessionPlayer {
         )
     }
 
+    /// Whether each camera's frame file ended in a cut record (depth, colour): the last frame
+    /// of a session that was not closed (a crash, a full disk), lost.
+    pub fn truncated(&self) -> (bool, bool) {
+        (
+            self.depth.damage().truncated_tail_bytes > 0,
+            self.color.as_ref().is_some_and(|c| c.damage().truncated_tail_bytes > 0),
+        )
+    }
+
     /// Reads ahead so that each camera has its next frame at hand. A frame whose contents do
     /// not decode is counted and stepped over; a file that cannot be read ends the source.
     fn fill(&mut self) -> Result<(), CaptureError> {
@@ -118,6 +127,14 @@ impl FrameSource for SessionPlayer {
             (None, Some(_)) => false,
             (None, None) => {
                 self.done = true;
+                for (role, cut) in [("depth", self.truncated().0), ("colour", self.truncated().1)] {
+                    if cut {
+                        tracing::warn!(
+                            "the {role} frames of {:?} end in a cut record: the session was not closed (a crash or a full disk), its last {role} frame is lost",
+                            self.dir
+                        );
+                    }
+                }
                 return Ok(None);
             }
         };
@@ -155,9 +172,12 @@ impl FrameSource for SessionPlayer {
 
     fn losses(&self) -> Vec<(&'static str, u64)> {
         let (dd, dc) = self.damaged_records();
+        let (td, tc) = self.truncated();
         vec![
             ("depth_corrupt", self.corrupt[0] + dd),
             ("color_corrupt", self.corrupt[1] + dc),
+            ("depth_truncated", u64::from(td)),
+            ("color_truncated", u64::from(tc)),
         ]
     }
 
