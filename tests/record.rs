@@ -166,3 +166,33 @@ fn record_stores_the_configured_calibration_and_refuses_another_rigs() {
     );
     assert!(!out.join("session.toml").exists());
 }
+
+#[test]
+fn a_camera_that_records_no_frame_fails_the_recording_loudly() {
+    let _openni = crate::capture_openni::serial();
+    let _port = crate::capture_aravis::take_port();
+    // Nine packets in ten lost: no whole colour frame ever arrives.
+    let _camera = crate::capture_aravis::start_fake_program(&["-s", "MP-LOSSY", "-r", "900"]);
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = tmp.path().join("rig.toml");
+    std::fs::write(
+        &rig,
+        format!(
+            "{DUMMY_DEPTH}[color]\nbackend = \"aravis\"\naddress = \"127.0.0.1\"\npixel_format = \"mono8\"\nfps = 30.0\n"
+        ),
+    )
+    .unwrap();
+    let out = tmp.path().join("session");
+    let run = mousepose()
+        .args(["record", "--seconds", "2", "--config"])
+        .arg(&rig)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{err}");
+    assert!(err.contains("the color camera recorded no frame"), "{err}");
+    // The depth frames are still there, in a whole session.
+    assert!(SessionReader::open(&out).unwrap().complete());
+}

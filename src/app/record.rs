@@ -271,8 +271,31 @@ pub fn command(args: &RecordArgs) -> crate::app::Outcome {
         Failure::classed(usage, e).context(format!("recording to {:?}", args.out))
     })?;
     if args.json {
-        return Ok(print_json(&summary)?);
+        print_json(&summary)?;
+    } else {
+        print(&summary_text(&summary))?;
     }
+    // A configured camera that gave nothing is a failed recording, however complete the
+    // session is otherwise (e.g. a GigE camera losing half its packets: no whole frame).
+    let silent: Vec<String> = summary
+        .cameras
+        .iter()
+        .filter(|(_, c)| c.recorded == Some(0))
+        .map(|(name, c)| {
+            format!(
+                "the {name} camera recorded no frame (lost before capture: {:?})",
+                c.lost_before_capture
+            )
+        })
+        .collect();
+    if !silent.is_empty() {
+        return Err(Failure::classed(false, anyhow::anyhow!("{}", silent.join("; "))));
+    }
+    Ok(())
+}
+
+/// The summary for a terminal.
+fn summary_text(summary: &RecordSummary) -> String {
     let mut text = format!(
         "recorded {:.1} s to {:?}: {} depth frames ({:.1} MB), {} colour frames ({:.1} MB), {:.2} cores\n",
         summary.seconds,
@@ -294,5 +317,5 @@ pub fn command(args: &RecordArgs) -> crate::app::Outcome {
             c.lost_before_capture
         );
     }
-    Ok(print(&text)?)
+    text
 }
