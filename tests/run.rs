@@ -197,9 +197,11 @@ fn a_daemon_killed_with_sigkill_leaves_its_chunk_readable() {
     let mut daemon = daemon(&rig, None);
     let start = Instant::now();
     let first = || tmp.path().join("out");
+    // Twenty frames recorded (the recorder is its own thread: poses may run ahead of it).
+    let lines = |c: &Path, file: &str| std::fs::read_to_string(c.join(file)).map_or(0, |t| t.lines().count());
     while !first().is_dir() || chunks(&first()).is_empty() || {
         let c = &chunks(&first())[0];
-        std::fs::read_to_string(c.join("poses.csv")).map_or(0, |t| t.lines().count()) < 20
+        lines(c, "depth/timestamps.csv") < 21 || lines(c, "poses.csv") < 2
     } {
         assert!(start.elapsed() < Duration::from_secs(60), "the daemon wrote no poses");
         assert!(daemon.0.try_wait().unwrap().is_none(), "the daemon exited early");
@@ -210,7 +212,8 @@ fn a_daemon_killed_with_sigkill_leaves_its_chunk_readable() {
     let chunk = &chunks(&first())[0];
     let session = SessionReader::open(chunk).unwrap();
     assert!(!session.complete());
-    assert!(session.depth_count() >= 20);
+    // As `record`'s: the frames whose timestamps were written, give or take the last two.
+    assert!(session.depth_count() >= 18, "{} frames", session.depth_count());
     assert_eq!(
         session.depth_frames().filter(|f| f.is_ok()).count(),
         session.depth_count()

@@ -193,6 +193,8 @@ pub struct Synchronizer {
     color: VecDeque<Pending<Arc<ColorFrame>>>,
     last_depth: Option<Stamp>,
     last_color: Option<Stamp>,
+    /// Frames in a row refused for going backwards, per camera (depth, colour).
+    backwards: [u32; 2],
     /// Smallest interval between depth frames per step of their frame counter (device time).
     depth_interval_ns: Option<u64>,
     /// The newest capture time seen from each camera (host time line).
@@ -210,6 +212,7 @@ impl Synchronizer {
             color: VecDeque::new(),
             last_depth: None,
             last_color: None,
+            backwards: [0; 2],
             depth_interval_ns: None,
             newest_depth: None,
             newest_color: None,
@@ -231,12 +234,7 @@ impl Synchronizer {
     /// Takes a depth frame; whatever can be decided goes to `out`.
     pub fn push_depth(&mut self, frame: Arc<DepthFrame>, out: &mut Vec<SyncOutput>) {
         let stamp = frame.stamp;
-        if let Some(reason) = out_of_order(self.last_depth, stamp) {
-            out.push(SyncOutput::Rejected {
-                role: Role::Depth,
-                stamp,
-                reason,
-            });
+        if !self.admit(Role::Depth, stamp, out) {
             return;
         }
         if let Some(last) = self.last_depth {
@@ -256,12 +254,7 @@ impl Synchronizer {
     /// Takes a colour frame; whatever can be decided goes to `out`.
     pub fn push_color(&mut self, frame: Arc<ColorFrame>, out: &mut Vec<SyncOutput>) {
         let stamp = frame.stamp;
-        if let Some(reason) = out_of_order(self.last_color, stamp) {
-            out.push(SyncOutput::Rejected {
-                role: Role::Color,
-                stamp,
-                reason,
-            });
+        if !self.admit(Role::Color, stamp, out) {
             return;
         }
         self.last_color = Some(stamp);
@@ -270,6 +263,40 @@ impl Synchronizer {
         self.newest_color = Some(self.newest_color.map_or(t, |n| n.max(t)));
         self.color.push_back(Pending { frame, stamp });
         self.decide(out, false);
+    }
+
+    /// Whether a camera's frame goes on to pairing. A frame whose counter or device time goes
+    /// backwards is refused (`out`); [`RESET_AFTER`] of them in a row mean the camera started
+    /// counting again (reopened, or a 32-bit counter wrapped): its clock is learnt again and
+    /// the frame taken. A device clock that jumps ahead of the host clock by more than
+    /// [`CLOCK_STEP_NS`] is learnt again too. Both are logged.
+    fn admit(&mut self, role: Role, stamp: Stamp, out: &mut Vec<SyncOutput>) -> bool {
+        let (last, k) = match role {
+            Role::Depth => (self.last_depth, 0),
+            Role::Color => (self.last_color, 1),
+        };
+        if let Some(reason) = out_of_order(last, stamp) {
+            self.backwards[k] += 1;
+            if self.backwards[k] < RESET_AFTER {
+                out.push(SyncOutput::Rejected { role, stamp, reason });
+                return false;
+            }
+            tracing::warn!(camera = ?role, "the camera's frame counter or clock started again: its clock is learnt again");
+            self.restart(role);
+        } else if let Some(last) = last {
+            let device = stamp.device_ns.saturating_sub(last.device_ns);
+            let host = stamp.host_ns.saturating_sub(last.host_ns);
+            if device.saturating_sub(host) > CLOCK_STEP_NS {
+                tracing::warn!(
+                    camera = ?role,
+                    step_s = (device - host) as f64 * 1e-9,
+                    "the camera's clock jumped ahead: its clock is learnt again"
+                );
+                self.restart(role);
+            }
+        }
+        self.backwards[k] = 0;
+        true
     }
 
     /// Forgets what was learnt of a camera's clock, after it was reopened: its device clock
@@ -384,6 +411,12 @@ impl Synchronizer {
 
 /// Most colour frames held while waiting for depth frames.
 const MAX_PENDING: usize = 64;
+
+/// Frames in a row going backwards that mean a camera started counting again.
+const RESET_AFTER: u32 = 3;
+/// How far a device clock may run ahead of the host clock between two frames before it counts
+/// as a step (a late burst makes the host clock run ahead instead, which is no step).
+const CLOCK_STEP_NS: u64 = 1_000_000_000;
 
 fn out_of_order(last: Option<Stamp>, stamp: Stamp) -> Option<RejectReason> {
     let last = last?;
@@ -679,5 +712,55 @@ mod tests {
             .filter(|o| matches!(o, SyncOutput::Pair(p) if p.color.is_some()))
             .count();
         assert!(paired >= 25, "{paired} pairs after the restart");
+    }
+
+    /// Both cameras at 30 fps, colour 1 ms after depth; `color_stamp(k)` gives colour frame
+    /// k's counter and device time (ms). Returns the outputs of frames 30-89.
+    fn with_colour(color_stamp: impl Fn(u64) -> (u64, u64)) -> Vec<SyncOutput> {
+        let mut sync = Synchronizer::new(SyncConfig::default());
+        let mut out = Vec::new();
+        let stamp = |seq: u64, device_ms: u64, host_ms: u64| Stamp {
+            seq,
+            device_ns: device_ms * 1_000_000,
+            host_ns: host_ms * 1_000_000,
+        };
+        for k in 0..90u64 {
+            if k == 30 {
+                out.clear();
+            }
+            sync.push_depth(depth(stamp(k, 10_000 + 33 * k, 1_000 + 33 * k)), &mut out);
+            let (seq, device_ms) = color_stamp(k);
+            sync.push_color(color(stamp(seq, device_ms, 1_001 + 33 * k)), &mut out);
+        }
+        out
+    }
+
+    fn colour_pairs(out: &[SyncOutput]) -> usize {
+        out.iter()
+            .filter(|o| matches!(o, SyncOutput::Pair(p) if p.color.is_some()))
+            .count()
+    }
+
+    #[test]
+    fn a_frame_counter_that_starts_again_is_followed_after_a_few_frames() {
+        // From frame 40 on, the colour camera counts (and keeps time) from 0 again.
+        let out = with_colour(|k| {
+            if k < 40 {
+                (k, 50_000 + 33 * k)
+            } else {
+                (k - 40, 33 * (k - 40))
+            }
+        });
+        let rejected = out.iter().filter(|o| matches!(o, SyncOutput::Rejected { .. })).count();
+        assert_eq!(rejected, usize::try_from(RESET_AFTER).unwrap() - 1);
+        assert!(colour_pairs(&out) >= 50, "{} pairs of 60", colour_pairs(&out));
+    }
+
+    #[test]
+    fn a_device_clock_that_jumps_ahead_is_learnt_again() {
+        // From frame 40 on, the colour camera's clock is 10 s ahead.
+        let out = with_colour(|k| (k, 50_000 + 33 * k + if k < 40 { 0 } else { 10_000 }));
+        assert!(!out.iter().any(|o| matches!(o, SyncOutput::Rejected { .. })));
+        assert!(colour_pairs(&out) >= 50, "{} pairs of 60", colour_pairs(&out));
     }
 }
