@@ -13,6 +13,14 @@
 //! that line, within the tolerance (half a depth frame interval by default). A constant
 //! difference between the two cameras' minimal latencies shifts every colour frame alike; the
 //! config's `color_latency_ns` corrects it when known.
+//!
+//! Faults a rig meets: frames held up and delivered in a burst (a USB or network stall) are
+//! paired by the model but do not fit it (a frame 20 ms later than the model expects, and its
+//! block of the envelope, are left out; a Theil-Sen line shrugs off the rest), so they go out
+//! unpaired rather than wrongly paired; a latency that stays late for 5 s is learnt again. A
+//! frame counter or device clock that starts again (three backward frames in a row) or jumps
+//! ahead is logged and that camera's clock learnt again. Not covered: a counter or clock that
+//! starts again in the middle of a stall, when nothing in the stamps tells late from on time.
 
 use crate::core::frame::{ColorFrame, DepthFrame, FramePair, Stamp};
 use std::collections::VecDeque;
