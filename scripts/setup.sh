@@ -18,6 +18,8 @@ packages=(
   systemd udev
   # the Debian package (scripts/package: dpkg-shlibdeps, strip)
   dpkg-dev binutils
+  # the daemon's live page, rendered headless by the tests
+  chromium
 )
 
 missing=()

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-fn fake_camera() -> ChildGuard {
+pub(crate) fn fake_camera() -> ChildGuard {
     start_fake_program(&["-s", "MP-RUN"])
 }
 
@@ -22,7 +22,7 @@ fn rig(dir: &Path, color: bool) -> PathBuf {
 const DUMMY_DEPTH: &str = "backend = \"openni2\"\nuri = \"Dummy\"\nwidth = 320\nheight = 240\nfps = 30\n";
 
 /// The fixture session's depth frames (a mouse from the first frame), played at camera pace.
-fn session_depth() -> String {
+pub(crate) fn session_depth() -> String {
     format!(
         "backend = \"session\"\npath = {:?}\n",
         repo_root().join("fixtures/sessions/synthetic-small")
@@ -30,12 +30,17 @@ fn session_depth() -> String {
 }
 
 /// A rig config in `dir` with the depth table `depth`, the fake camera as colour camera if
-/// `color`, and `output` added to the `[output]` table.
+/// `color`, and `output` added to the `[output]` table; its HTTP server on any free port.
 fn rig_with(dir: &Path, depth: &str, color: bool, output: &str) -> PathBuf {
+    rig_full(dir, depth, color, output, "address = \"127.0.0.1:0\"\n")
+}
+
+/// As [`rig_with`], with `http` as the `[http]` table.
+pub(crate) fn rig_full(dir: &Path, depth: &str, color: bool, output: &str, http: &str) -> PathBuf {
     let mut text = format!(
         "[depth]\n{depth}\
          [output]\ndir = {:?}\nchunk_minutes = 0.05\nmin_free_gb = 0\n{output}\
-         [reconnect]\nstall_ms = 1000\nmax_wait_ms = 1000\n",
+         [reconnect]\nstall_ms = 1000\nmax_wait_ms = 1000\n[http]\n{http}",
         dir.join("out")
     );
     if color {
@@ -49,7 +54,7 @@ fn rig_with(dir: &Path, depth: &str, color: bool, output: &str) -> PathBuf {
     path
 }
 
-fn daemon(rig: &Path, notify: Option<&Path>) -> ChildGuard {
+pub(crate) fn daemon(rig: &Path, notify: Option<&Path>) -> ChildGuard {
     let mut cmd = mousepose();
     cmd.args(["run", "--json", "--config"])
         .arg(rig)
@@ -79,7 +84,7 @@ fn chunks(out: &Path) -> Vec<PathBuf> {
 }
 
 /// Sends SIGTERM and waits (at most `limit`) for the exit; returns its status and stdout.
-fn terminate(mut child: ChildGuard, limit: Duration) -> (std::process::ExitStatus, String, String) {
+pub(crate) fn terminate(mut child: ChildGuard, limit: Duration) -> (std::process::ExitStatus, String, String) {
     let pid = child.0.id().to_string();
     assert!(
         Command::new("kill")

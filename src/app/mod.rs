@@ -12,6 +12,7 @@ pub mod progress;
 pub mod record;
 pub mod replay;
 pub mod run;
+pub mod status;
 pub mod synth;
 pub mod train;
 
@@ -54,6 +55,8 @@ enum Command {
     /// The daemon: capture, process and record the rig's cameras, through camera faults,
     /// until SIGTERM.
     Run(run::RunArgs),
+    /// The running daemon's status (cameras, poses, latency, recording), from its HTTP server.
+    Status(status::StatusArgs),
     /// List the cameras each backend sees (GigE cameras only at configured addresses).
     Devices(devices::DevicesArgs),
     /// Calibrate the cameras: intrinsics of each, then the rig against a board on the glass.
@@ -178,27 +181,29 @@ pub(crate) fn parse_binning(s: &str) -> Result<u32, String> {
 /// Sets up logging to stderr: plain lines for journald under systemd, with colours on a
 /// terminal; `RUST_LOG` picks the level (default `info`).
 fn init_logging() {
+    use tracing_subscriber::layer::SubscriberExt as _;
+    use tracing_subscriber::util::SubscriberInitExt as _;
     let journald = std::env::var_os("JOURNAL_STREAM").is_some();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into());
+    // The last events also go to the daemon's live page.
+    let events = crate::runtime::watch::events::EventLayer(crate::runtime::watch::events::EventLog::global());
+    let registry = tracing_subscriber::registry().with(filter).with(events);
     if journald {
         // Under systemd: structured events straight to the journal (fields kept), falling
         // back to plain lines on stderr (which the journal takes too) without a journal socket.
         if let Ok(layer) = tracing_journald::layer() {
-            use tracing_subscriber::layer::SubscriberExt as _;
-            let subscriber = tracing_subscriber::registry().with(filter).with(layer);
-            drop(tracing::subscriber::set_global_default(subscriber));
+            drop(registry.with(layer).try_init());
             return;
         }
     }
-    let builder = tracing_subscriber::fmt()
-        .with_env_filter(filter)
+    let fmt = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
         .with_target(false);
     let result = if journald {
-        builder.with_ansi(false).without_time().try_init()
+        registry.with(fmt.with_ansi(false).without_time()).try_init()
     } else {
-        builder
-            .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        registry
+            .with(fmt.with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr())))
             .try_init()
     };
     // A subscriber installed already (in tests) is fine.
@@ -237,6 +242,7 @@ fn run(cli: Cli) -> Outcome {
         Command::Replay(args) => replay::command(&args),
         Command::Record(args) => record::command(&args),
         Command::Run(args) => run::command(&args),
+        Command::Status(args) => status::command(&args),
         Command::Devices(args) => devices::command(&args),
         Command::Calibrate(command) => calibrate::run(&command),
     }

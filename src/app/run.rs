@@ -8,24 +8,25 @@
 use crate::app::{Failure, print, print_json};
 use crate::core::geometry::Rig;
 use crate::io::session::CameraRole;
-use crate::runtime::accounting::CameraSummary;
 use crate::runtime::capture::rig::{ColorSource, open_color, open_depth};
-use crate::runtime::capture::supervise::{CameraState, Outage, SharedHealth, Supervised, lock};
+use crate::runtime::capture::supervise::{CameraState, SharedHealth, Supervised, lock};
 use crate::runtime::capture::{CaptureError, FrameSource};
 use crate::runtime::config::{Config, DepthCamera};
+use crate::runtime::http::HttpServer;
 use crate::runtime::models::Models;
-use crate::runtime::pipeline::{LatencySummary, Shutdown, StageReport};
+use crate::runtime::pipeline::Shutdown;
 use crate::runtime::recording::Recording;
-use crate::runtime::sink::chunks::{ChunkPlan, ChunkPoses, ChunkRecorder, Chunks, DiskWatch, Live, chunk_meta};
+use crate::runtime::sink::chunks::{
+    ChunkPlan, ChunkPoses, ChunkRecorder, Chunks, DiskWatch, Live, RecorderGauges, chunk_meta,
+};
 use crate::runtime::stages::PoseStatus;
 use crate::runtime::stages::segment::SegmentStage;
 use crate::runtime::topology::{Edges, Epochs, Processing, Sources, Topology};
+use crate::runtime::watch::{RunInfo, RunReport, Watch};
 use crate::vision::calibrate::RigCalibration;
 use crate::vision::segment::{Segmenter, SegmenterConfig};
 use anyhow::Context as _;
 use clap::Args;
-use serde::Serialize;
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
@@ -45,34 +46,6 @@ pub struct RunArgs {
     /// Print the final report as one JSON object.
     #[arg(long)]
     pub json: bool,
-}
-
-/// One camera in the report.
-#[derive(Debug, Serialize)]
-pub struct RunCamera {
-    #[serde(flatten)]
-    pub frames: CameraSummary,
-    pub state: Option<CameraState>,
-    pub outages: Vec<Outage>,
-}
-
-/// What a run did.
-#[derive(Debug, Serialize)]
-pub struct RunReport {
-    /// The run's directory, holding its chunks.
-    pub dir: PathBuf,
-    pub seconds: f64,
-    pub chunks: usize,
-    pub poses: u64,
-    /// Poses that could not be written to `poses.csv` (a full disk, a write error).
-    pub poses_not_written: u64,
-    pub statuses: BTreeMap<&'static str, u64>,
-    pub cameras: BTreeMap<&'static str, RunCamera>,
-    pub stages: Vec<StageReport>,
-    /// From a pair leaving the synchroniser to its row handed to the operating system.
-    pub end_to_end_latency: LatencySummary,
-    /// CPU time the process used per second (1.0 = one core busy).
-    pub cpu_cores: f64,
 }
 
 /// The rig: the configured calibration, the one a replayed session was made with, or the
@@ -200,6 +173,14 @@ pub fn run(
 ) -> anyhow::Result<RunReport> {
     let root = create_run_dir(&config.output_dir)?;
     tracing::info!(dir = ?root, record = config.record, "run started");
+    let info = RunInfo {
+        version: env!("CARGO_PKG_VERSION"),
+        started_utc: crate::runtime::capture::clock::utc_now(),
+        config: config.path.clone(),
+        models: models.dir.clone(),
+        paw_model: models.paws.is_some(),
+        calibration: config.calibration.clone(),
+    };
 
     let epochs = Epochs::default();
     let depth_config = config.depth.clone();
@@ -232,9 +213,15 @@ pub fn run(
         meta: chunk_meta(notes, config.calibration.as_ref().map(|_| rig), latency),
     });
     let live = Arc::new(Mutex::new(Live::default()));
-    let recorder = config.record.then(|| {
+    let gauges = config.record.then(|| Arc::new(RecorderGauges::default()));
+    let recorder = gauges.as_ref().map(|gauges| {
         let disk = DiskWatch::new(&root, config.min_free_bytes, config.min_free_share);
-        Box::new(ChunkRecorder::new(Arc::clone(&chunks), disk, shared.clone())) as Box<_>
+        Box::new(ChunkRecorder::new(
+            Arc::clone(&chunks),
+            disk,
+            shared.clone(),
+            Arc::clone(gauges),
+        )) as Box<_>
     });
     let topology = Topology {
         sources: Sources::Cameras {
@@ -258,10 +245,29 @@ pub fn run(
         }),
         recorder,
     };
-    let cpu0 = crate::runtime::capture::clock::process_cpu_s();
     let started = Instant::now();
     let running = topology.start()?;
     let shutdown = running.shutdown();
+    let watch = Arc::new(Watch::new(
+        root,
+        info,
+        running.watch(),
+        healths.clone(),
+        Arc::clone(&live),
+        Arc::clone(&chunks),
+        gauges,
+    ));
+    let server = match config.http.address {
+        Some(address) => match HttpServer::start(address, config.http.token.clone(), Arc::clone(&watch), rig) {
+            Ok(server) => Some(server),
+            Err(e) => {
+                shutdown.request();
+                drop(running.join());
+                return Err(e.into());
+            }
+        },
+        None => None,
+    };
 
     // Ready once every camera was tried (opened, or known to be away).
     while !stop.requested() && healths.iter().any(|(_, h)| lock(h).state == Some(CameraState::Opening)) {
@@ -292,7 +298,7 @@ pub fn run(
         if now.rows > last_rows || (captured == last_captured && capture_alive) {
             notify(&[sd_notify::NotifyState::Watchdog]);
         }
-        let fps = (now.rows - last_rows) as f64 / last_tick.elapsed().as_secs_f64();
+        let fps = watch.sample().poses_per_s;
         (last_rows, last_captured, last_tick) = (now.rows, captured, Instant::now());
         if last_status.elapsed() >= Duration::from_secs(5) {
             let line = status_line(&healths, &now, fps);
@@ -305,38 +311,16 @@ pub fn run(
     tracing::info!(last = %last_line, "stopping");
     shutdown.request();
     let finished = running.join();
-    let elapsed = started.elapsed().as_secs_f64();
-    let cpu = crate::runtime::capture::clock::process_cpu_s() - cpu0;
     if let Some(recorder) = finished.recorder {
         if let Err(e) = recorder.finish() {
             tracing::error!("cannot close the last chunk's session: {e}");
         }
     }
-    let stages = finished.outcome?;
-    let live = snapshot();
-    let mut cameras = BTreeMap::new();
-    for (name, frames) in finished.cameras {
-        let (state, outages) = match healths.iter().find(|(n, _)| *n == name) {
-            Some((_, h)) => {
-                let h = lock(h);
-                (h.state.clone(), h.outages.clone())
-            }
-            None => (None, Vec::new()),
-        };
-        cameras.insert(name, RunCamera { frames, state, outages });
+    if let Some(server) = server {
+        server.stop();
     }
-    let report = RunReport {
-        dir: root,
-        seconds: elapsed,
-        chunks: chunks.count(),
-        poses: live.rows,
-        poses_not_written: live.rows_lost,
-        statuses: live.statuses,
-        cameras,
-        stages,
-        end_to_end_latency: finished.end_to_end_latency,
-        cpu_cores: cpu / elapsed.max(1e-9),
-    };
+    finished.outcome?;
+    let report = watch.report();
     tracing::info!(poses = report.poses, chunks = report.chunks, "run ended");
     Ok(report)
 }
@@ -358,29 +342,5 @@ pub fn command(args: &RunArgs) -> crate::app::Outcome {
     if args.json {
         return Ok(print_json(&report)?);
     }
-    let mut text = format!(
-        "ran {:.1} s into {:?}: {} chunks, {} poses {:?}, {:.2} cores, latency p99 {:.2} ms\n",
-        report.seconds,
-        report.dir,
-        report.chunks,
-        report.poses,
-        report.statuses,
-        report.cpu_cores,
-        report.end_to_end_latency.p99_ms
-    );
-    for (name, c) in &report.cameras {
-        use std::fmt::Write as _;
-        let _ = writeln!(
-            text,
-            "{name:>6}: captured {}, paired {}, unpaired {}, dropped {:?}, recorded {}, not recorded {:?}, outages {}",
-            c.frames.captured,
-            c.frames.paired,
-            c.frames.unpaired,
-            c.frames.dropped,
-            c.frames.recorded.unwrap_or(0),
-            c.frames.not_recorded,
-            c.outages.len()
-        );
-    }
-    Ok(print(&text)?)
+    Ok(print(&format!("ran {}", report.text()))?)
 }

@@ -161,16 +161,31 @@ impl RgbImage {
             path: path.to_owned(),
             source,
         })?;
-        let encode = |source| ImageError::Encode {
-            path: path.to_owned(),
-            source,
-        };
-        let mut encoder = png::Encoder::new(BufWriter::new(file), self.width, self.height);
+        self.encode_png(BufWriter::new(file), png::Compression::Default)
+            .map_err(|source| ImageError::Encode {
+                path: path.to_owned(),
+                source,
+            })
+    }
+
+    /// The image as PNG bytes, compressed fast (for pictures served live).
+    ///
+    /// # Errors
+    /// Never in practice: encoding into memory fails only on an image of zero size.
+    pub fn to_png(&self) -> Result<Vec<u8>, png::EncodingError> {
+        let mut bytes = Vec::new();
+        self.encode_png(&mut bytes, png::Compression::Fast)?;
+        Ok(bytes)
+    }
+
+    fn encode_png(&self, out: impl std::io::Write, compression: png::Compression) -> Result<(), png::EncodingError> {
+        let mut encoder = png::Encoder::new(out, self.width, self.height);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
-        let mut writer = encoder.write_header().map_err(encode)?;
-        writer.write_image_data(&self.data).map_err(encode)?;
-        writer.finish().map_err(encode)
+        encoder.set_compression(compression);
+        let mut writer = encoder.write_header()?;
+        writer.write_image_data(&self.data)?;
+        writer.finish()
     }
 }
 

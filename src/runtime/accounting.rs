@@ -116,6 +116,8 @@ impl CameraSummary {
 #[derive(Clone, Debug, Serialize)]
 pub struct EdgeSummary {
     pub capacity: usize,
+    /// Items waiting after the last send.
+    pub depth: u64,
     pub max_depth: u64,
     pub dropped_full: u64,
 }
@@ -124,6 +126,7 @@ impl EdgeSummary {
     pub fn of(config: EdgeConfig, stats: &EdgeStats) -> Self {
         Self {
             capacity: config.capacity.get(),
+            depth: stats.depth.load(Ordering::Relaxed),
             max_depth: stats.max_depth.load(Ordering::Relaxed),
             dropped_full: stats.dropped_full.load(Ordering::Relaxed),
         }

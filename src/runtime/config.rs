@@ -74,6 +74,8 @@ struct RawConfig {
     output: RawOutput,
     #[serde(default)]
     reconnect: RawReconnect,
+    #[serde(default)]
+    http: RawHttp,
 }
 
 #[derive(Debug, Deserialize)]
@@ -171,6 +173,14 @@ struct RawOutput {
 enum RawRecord {
     Flag(bool),
     Mode(String),
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawHttp {
+    address: Option<String>,
+    allow_remote: Option<bool>,
+    token_file: Option<PathBuf>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -321,7 +331,25 @@ pub struct Config {
     pub min_free_share: f64,
     /// When a camera counts as gone, and the longest wait between tries to reopen it.
     pub reconnect: Reconnect,
+    /// The daemon's HTTP server (live page, metrics, status).
+    pub http: Http,
 }
+
+/// The `[http]` table: where the daemon serves its live page, metrics and status.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Http {
+    /// `None`: no server (`address = "off"`).
+    pub address: Option<std::net::SocketAddr>,
+    /// The bearer token every request must carry, read from `token_file` (required when the
+    /// address is not loopback, which needs `allow_remote = true`).
+    pub token: Option<String>,
+}
+
+/// The port the daemon serves on by default (loopback only).
+pub const DEFAULT_HTTP_PORT: u16 = 8470;
+
+/// A token file is one line; more is not a token.
+const MAX_TOKEN_BYTES: u64 = 4096;
 
 impl Config {
     /// Reads and checks a config file.
@@ -522,6 +550,7 @@ impl Checker<'_> {
             first_wait: secs(250.0_f64.min(max_wait_ms)),
             max_wait: secs(max_wait_ms),
         };
+        let http = self.http(raw.http)?;
         Ok(Config {
             path: self.path.to_owned(),
             depth,
@@ -540,7 +569,62 @@ impl Checker<'_> {
             min_free_bytes: (min_free_gb * 1e9) as u64,
             min_free_share: min_free_percent / 100.0,
             reconnect,
+            http,
         })
+    }
+
+    /// `[http]`: a loopback address unless `allow_remote`, and then a token.
+    fn http(&self, h: RawHttp) -> Result<Http, ConfigError> {
+        let text = h.address.unwrap_or_else(|| format!("127.0.0.1:{DEFAULT_HTTP_PORT}"));
+        if text == "off" {
+            return Ok(Http {
+                address: None,
+                token: None,
+            });
+        }
+        let address: std::net::SocketAddr = text.parse().map_err(|_| {
+            self.bad(
+                "http.address",
+                format!("must be IP:PORT (e.g. \"127.0.0.1:{DEFAULT_HTTP_PORT}\") or \"off\", not {text:?}"),
+            )
+        })?;
+        let remote = !address.ip().is_loopback();
+        if remote && h.allow_remote != Some(true) {
+            return Err(self.bad(
+                "http.address",
+                format!(
+                    "{address} is reachable from other machines: set `allow_remote = true` (and a \
+                     `token_file`) to serve the rig's status beyond this machine"
+                ),
+            ));
+        }
+        let token = match &h.token_file {
+            Some(path) => Some(self.token(path)?),
+            None if remote => {
+                return Err(self.bad(
+                    "http.token_file",
+                    "is needed with `allow_remote = true`: a file holding the bearer token clients must send",
+                ));
+            }
+            None => None,
+        };
+        Ok(Http {
+            address: Some(address),
+            token,
+        })
+    }
+
+    /// The bearer token in `path`: one line of at least 16 visible characters.
+    fn token(&self, path: &Path) -> Result<String, ConfigError> {
+        let bad = |reason: String| self.bad("http.token_file", reason);
+        let text = read_bounded(path, MAX_TOKEN_BYTES).map_err(|e| bad(format!("{path:?} cannot be read: {e}")))?;
+        let token = text.trim();
+        if token.len() < 16 || !token.chars().all(|c| c.is_ascii_graphic()) {
+            return Err(bad(format!(
+                "{path:?} must hold one token of at least 16 visible ASCII characters"
+            )));
+        }
+        Ok(token.to_owned())
     }
 
     fn color(&self, c: RawColor) -> Result<ColorCamera, ConfigError> {
@@ -651,6 +735,46 @@ mod tests {
         ] {
             let e = parse(&format!("{base}{text}")).unwrap_err().to_string();
             assert!(e.contains(key), "{e}");
+        }
+    }
+
+    #[test]
+    fn the_http_server_stays_on_loopback_unless_allowed_and_then_needs_a_token() {
+        let base = "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n";
+        let c = parse(base).unwrap();
+        assert_eq!(c.http.address, Some(([127, 0, 0, 1], DEFAULT_HTTP_PORT).into()));
+        assert_eq!(c.http.token, None);
+        assert_eq!(
+            parse(&format!("{base}[http]\naddress = \"off\"\n"))
+                .unwrap()
+                .http
+                .address,
+            None
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let token = dir.path().join("token");
+        std::fs::write(&token, "  0123456789abcdefXYZ\n").unwrap();
+        let short = dir.path().join("short");
+        std::fs::write(&short, "secret\n").unwrap();
+        let c = parse(&format!(
+            "{base}[http]\naddress = \"0.0.0.0:9000\"\nallow_remote = true\ntoken_file = {token:?}\n"
+        ))
+        .unwrap();
+        assert_eq!(c.http.token.as_deref(), Some("0123456789abcdefXYZ"));
+        for (http, key, why) in [
+            ("address = \"0.0.0.0:9000\"\n", "http.address", "allow_remote"),
+            ("address = \"[::]:9000\"\n", "http.address", "allow_remote"),
+            ("address = \"localhost\"\n", "http.address", "IP:PORT"),
+            (
+                "address = \"0.0.0.0:9000\"\nallow_remote = true\n",
+                "http.token_file",
+                "bearer token",
+            ),
+            (&format!("token_file = {short:?}\n"), "http.token_file", "at least 16"),
+            ("token_file = \"/dev/zero\"\n", "http.token_file", "regular file"),
+        ] {
+            let e = parse(&format!("{base}[http]\n{http}")).unwrap_err().to_string();
+            assert!(e.contains(key) && e.contains(why), "{http}: {e}");
         }
     }
 

@@ -23,7 +23,7 @@ use crate::runtime::capture::session::SessionPlayer;
 use crate::runtime::capture::{Captured, Clock, FrameSource, SeqGaps, Stamped};
 use crate::runtime::pipeline::{
     EdgeConfig, EdgeSender, EdgeStats, Histogram, LatencySummary, PipelineError, Runner, Sent, Shutdown, Sink,
-    StageError, StageReport, Tracked, edge,
+    StageError, StageReport, StageStats, Tracked, edge,
 };
 use crate::runtime::recording::{Recording, RecordingError};
 use crate::runtime::sink::recorder::{FrameRecorder, write_frames};
@@ -121,6 +121,14 @@ pub enum TopologyError {
 #[derive(Debug)]
 pub struct Running {
     runner: Runner,
+    watch: PipelineWatch,
+    recorder: Option<Receiver<Box<dyn FrameRecorder>>>,
+}
+
+/// A running pipeline's counters, to read while it runs (the daemon's status and metrics) and
+/// once it has ended: lock-free counters only, so reading never waits on a stage.
+#[derive(Clone, Debug)]
+pub struct PipelineWatch {
     acct: Arc<Accounting>,
     color: bool,
     /// Whether the run processes frames, and whether it records them.
@@ -128,7 +136,42 @@ pub struct Running {
     started: Instant,
     edges: Vec<(&'static str, EdgeConfig, Arc<EdgeStats>)>,
     end_to_end: Arc<Histogram>,
-    recorder: Option<Receiver<Box<dyn FrameRecorder>>>,
+    stages: Vec<(String, Arc<StageStats>)>,
+}
+
+impl PipelineWatch {
+    /// Per camera: captured = paired + unpaired + dropped (so far).
+    pub fn cameras(&self) -> BTreeMap<&'static str, CameraSummary> {
+        let (processing, recording) = self.branches;
+        let mut cameras = BTreeMap::new();
+        cameras.insert("depth", CameraSummary::of(&self.acct.depth, processing, recording));
+        if self.color {
+            cameras.insert("color", CameraSummary::of(&self.acct.color, processing, recording));
+        }
+        cameras
+    }
+
+    /// Each edge's capacity, queue depth and drops.
+    pub fn edges(&self) -> BTreeMap<&'static str, EdgeSummary> {
+        self.edges
+            .iter()
+            .map(|(name, config, stats)| (*name, EdgeSummary::of(*config, stats)))
+            .collect()
+    }
+
+    /// Each stage's and sink's live counters and time per item.
+    pub fn stages(&self) -> &[(String, Arc<StageStats>)] {
+        &self.stages
+    }
+
+    /// From a pair leaving the synchroniser to its row written.
+    pub fn end_to_end(&self) -> &Histogram {
+        &self.end_to_end
+    }
+
+    pub fn elapsed_s(&self) -> f64 {
+        self.started.elapsed().as_secs_f64()
+    }
 }
 
 /// What a finished pipeline did.
@@ -307,14 +350,18 @@ impl Topology<'_> {
                 .sink("poses", p.poses, pose_rx, Arc::clone(&end_to_end))
                 .map_err(threads)?;
         }
-        Ok(Running {
-            runner,
+        let watch = PipelineWatch {
             acct,
             color,
             branches,
             started,
             edges: edge_stats,
             end_to_end,
+            stages: runner.stage_stats(),
+        };
+        Ok(Running {
+            runner,
+            watch,
             recorder: recorder_done,
         })
     }
@@ -326,26 +373,21 @@ impl Running {
         self.runner.shutdown()
     }
 
+    /// The pipeline's counters, to read while it runs.
+    pub fn watch(&self) -> PipelineWatch {
+        self.watch.clone()
+    }
+
     /// Waits for every thread and reports what the run did.
     pub fn join(self) -> Finished {
         let outcome = self.runner.join();
-        let elapsed_s = self.started.elapsed().as_secs_f64();
-        let mut cameras = BTreeMap::new();
-        let (processing, recording) = self.branches;
-        cameras.insert("depth", CameraSummary::of(&self.acct.depth, processing, recording));
-        if self.color {
-            cameras.insert("color", CameraSummary::of(&self.acct.color, processing, recording));
-        }
+        let w = self.watch;
         Finished {
             outcome,
-            cameras,
-            end_to_end_latency: self.end_to_end.summary(),
-            edges: self
-                .edges
-                .iter()
-                .map(|(name, config, stats)| (*name, EdgeSummary::of(*config, stats)))
-                .collect(),
-            elapsed_s,
+            cameras: w.cameras(),
+            end_to_end_latency: w.end_to_end.summary(),
+            edges: w.edges(),
+            elapsed_s: w.elapsed_s(),
             recorder: self.recorder.and_then(|rx| rx.recv().ok()),
         }
     }

@@ -113,6 +113,8 @@ pub struct SessionWriter {
     truth: Option<TruthWriter>,
     /// The latest host time seen in frames and events: the end time `finish` logs.
     last_host_ns: u64,
+    /// Encoded frame bytes appended so far.
+    frame_bytes: u64,
 }
 
 impl SessionWriter {
@@ -191,11 +193,17 @@ impl SessionWriter {
             events,
             truth: None,
             last_host_ns: 0,
+            frame_bytes: 0,
         })
     }
 
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    /// Encoded frame bytes written so far (without record headers and indexes).
+    pub fn frame_bytes(&self) -> u64 {
+        self.frame_bytes
     }
 
     /// Whether the session has frames of `role` (its metadata declares the camera).
@@ -249,6 +257,7 @@ impl SessionWriter {
             source,
         })?;
         stream.append(stamp, &payload)?;
+        self.frame_bytes += payload.len() as u64;
         self.last_host_ns = self.last_host_ns.max(stamp.host_ns);
         Ok(())
     }

@@ -53,6 +53,8 @@ pub struct EdgeStats {
     pub dropped_full: AtomicU64,
     /// Largest number of items seen waiting in the channel.
     pub max_depth: AtomicU64,
+    /// Items waiting in the channel after the last send (a gauge for the live metrics).
+    pub depth: AtomicU64,
 }
 
 /// The sending end of an edge.
@@ -95,8 +97,10 @@ impl<T> EdgeSender<T> {
         };
         match result {
             Ok(()) => {
+                let depth = self.tx.len() as u64;
                 self.stats.sent.fetch_add(1, Ordering::Relaxed);
-                self.stats.max_depth.fetch_max(self.tx.len() as u64, Ordering::Relaxed);
+                self.stats.depth.store(depth, Ordering::Relaxed);
+                self.stats.max_depth.fetch_max(depth, Ordering::Relaxed);
                 Sent::Delivered
             }
             Err(Sent::DroppedFull) => {

@@ -66,6 +66,31 @@ impl Histogram {
         self.count.load(Ordering::Relaxed)
     }
 
+    /// The number of recordings and their sum in microseconds.
+    pub fn totals(&self) -> (u64, u64) {
+        (self.count(), self.sum_us.load(Ordering::Relaxed))
+    }
+
+    /// Recordings per bucket of a coarser histogram whose upper bounds (inclusive, ascending,
+    /// microseconds) are `bounds_us`, plus one last bucket for the rest: a fine bucket counts
+    /// under the first bound its whole range is at or below.
+    pub fn counts_under(&self, bounds_us: &[u64]) -> Vec<u64> {
+        let mut counts = vec![0; bounds_us.len() + 1];
+        for (i, b) in self.buckets.iter().enumerate() {
+            let n = b.load(Ordering::Relaxed);
+            if n == 0 {
+                continue;
+            }
+            let top = bucket_floor(i + 1).saturating_sub(1).max(bucket_floor(i));
+            let k = bounds_us
+                .iter()
+                .position(|&bound| top <= bound)
+                .unwrap_or(bounds_us.len());
+            counts[k] += n;
+        }
+        counts
+    }
+
     /// The value below which a fraction `q` of the recordings fall, in milliseconds (the
     /// upper edge of its bucket, capped at the largest value recorded); 0 when empty.
     pub fn quantile_ms(&self, q: f64) -> f64 {
@@ -115,6 +140,20 @@ pub struct LatencySummary {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn coarse_counts_add_up_and_fall_under_their_bounds() {
+        let h = Histogram::default();
+        for us in [3, 900, 1000, 1500, 4000, 250_000] {
+            h.record(Duration::from_micros(us));
+        }
+        let counts = h.counts_under(&[1000, 2000, 5000]);
+        assert_eq!(counts.iter().sum::<u64>(), 6);
+        // 3 and 900 are within 1 ms; 1000's bucket reaches past 1000 us, so it and 1500
+        // count under 2 ms; 4000 under 5 ms; 250 ms above every bound.
+        assert_eq!(counts, vec![2, 2, 1, 1]);
+        assert_eq!(h.totals(), (6, 3 + 900 + 1000 + 1500 + 4000 + 250_000));
+    }
 
     #[test]
     fn buckets_are_ordered_and_tight() {

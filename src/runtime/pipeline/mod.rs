@@ -7,4 +7,6 @@ pub mod runner;
 
 pub use edge::{EdgeConfig, EdgeSender, EdgeStats, Sent, WhenFull, edge};
 pub use metrics::{Histogram, LatencySummary};
-pub use runner::{PipelineError, Runner, Shutdown, Sink, Stage, StageError, StageReport, Tracked};
+pub use runner::{
+    PipelineError, Runner, Shutdown, Sink, Stage, StageError, StageReport, StageStats, Tracked, reports_of,
+};

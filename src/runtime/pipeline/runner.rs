@@ -296,6 +296,11 @@ impl Runner {
         Ok(stats)
     }
 
+    /// Per stage and sink, its live counters.
+    pub fn stage_stats(&self) -> Vec<(String, Arc<StageStats>)> {
+        self.stages.clone()
+    }
+
     /// Per stage and sink: items in and out, time per item.
     pub fn reports(&self) -> Vec<StageReport> {
         reports_of(&self.stages)
@@ -386,7 +391,8 @@ impl<T> Reorder<T> {
     }
 }
 
-fn reports_of(stages: &[(String, Arc<StageStats>)]) -> Vec<StageReport> {
+/// Per stage and sink: items in and out, time per item.
+pub fn reports_of(stages: &[(String, Arc<StageStats>)]) -> Vec<StageReport> {
     stages
         .iter()
         .map(|(name, s)| StageReport {

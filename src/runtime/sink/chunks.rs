@@ -20,6 +20,7 @@ use crate::runtime::stages::Fused;
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
@@ -139,6 +140,8 @@ pub struct DiskWatch {
     min_free_share: f64,
     low: bool,
     checked: Option<Instant>,
+    /// Free bytes at the last check.
+    free: Option<u64>,
 }
 
 /// Space above the threshold before recording resumes, as a share of the threshold.
@@ -152,7 +155,13 @@ impl DiskWatch {
             min_free_share,
             low: false,
             checked: None,
+            free: None,
         }
+    }
+
+    /// Free bytes on the output's file system at the last check.
+    pub fn free_bytes(&self) -> Option<u64> {
+        self.free
     }
 
     /// Whether free space is low now (logging each change).
@@ -165,6 +174,7 @@ impl DiskWatch {
             return self.low;
         };
         let free = st.f_bavail.saturating_mul(st.f_frsize);
+        self.free = Some(free);
         let total = st.f_blocks.saturating_mul(st.f_frsize);
         let threshold = self.min_free_bytes.max((total as f64 * self.min_free_share) as u64);
         let gb = |b: u64| b as f64 / 1e9;
@@ -186,28 +196,60 @@ impl DiskWatch {
 /// How long recording pauses after a write error before it tries a new chunk.
 const WRITE_RETRY: Duration = Duration::from_secs(10);
 
+/// What the recorder branch of a live run shows while it runs (the daemon's status and
+/// metrics read it; the recorder thread writes it).
+#[derive(Debug, Default)]
+pub struct RecorderGauges {
+    /// Encoded frame bytes written, all chunks.
+    pub frame_bytes: AtomicU64,
+    /// Free bytes on the output's file system at the last check (once a second).
+    pub disk_free_bytes: AtomicU64,
+    /// Raw recording paused (disk low, or after a write error).
+    pub paused: AtomicBool,
+}
+
 /// The recorder branch of a live run: frames into the current chunk's session.
 #[derive(Debug)]
 pub struct ChunkRecorder {
     chunks: Arc<Chunks>,
     index: usize,
     writer: Option<SessionWriter>,
+    /// Frame bytes of the current writer already added to the gauges.
+    counted: u64,
     disk: DiskWatch,
     /// Set after a write error: nothing is written before then.
     paused_until: Option<Instant>,
     cameras: Vec<SharedHealth>,
+    gauges: Arc<RecorderGauges>,
 }
 
 impl ChunkRecorder {
-    pub fn new(chunks: Arc<Chunks>, disk: DiskWatch, cameras: Vec<SharedHealth>) -> Self {
+    pub fn new(chunks: Arc<Chunks>, disk: DiskWatch, cameras: Vec<SharedHealth>, gauges: Arc<RecorderGauges>) -> Self {
         Self {
             chunks,
             index: usize::MAX,
             writer: None,
+            counted: 0,
             disk,
             paused_until: None,
             cameras,
+            gauges,
         }
+    }
+
+    /// Brings the gauges up to date after a frame was offered.
+    fn update_gauges(&mut self, paused: bool) {
+        if let Some(w) = &self.writer {
+            let bytes = w.frame_bytes();
+            self.gauges
+                .frame_bytes
+                .fetch_add(bytes.saturating_sub(self.counted), Ordering::Relaxed);
+            self.counted = bytes;
+        }
+        if let Some(free) = self.disk.free_bytes() {
+            self.gauges.disk_free_bytes.store(free, Ordering::Relaxed);
+        }
+        self.gauges.paused.store(paused, Ordering::Relaxed);
     }
 
     /// Closes the current chunk's session cleanly.
@@ -227,9 +269,11 @@ impl ChunkRecorder {
     }
 
     fn switch(&mut self, index: usize) {
+        self.update_gauges(false);
         self.close();
         self.index = index;
         self.writer = self.chunks.take_writer(index);
+        self.counted = 0;
     }
 
     /// The cameras' events (outages, reopenings) into the session.
@@ -244,10 +288,9 @@ impl ChunkRecorder {
         }
         Ok(())
     }
-}
 
-impl crate::runtime::sink::recorder::FrameRecorder for ChunkRecorder {
-    fn write(&mut self, frame: &Captured) -> Result<Option<&'static str>, SessionError> {
+    /// Writes `frame` into its chunk's session, or says why not.
+    fn write_frame(&mut self, frame: &Captured) -> Result<Option<&'static str>, SessionError> {
         let host_ns = frame.stamp().host_ns;
         let role = match frame {
             Captured::Depth(_) => CameraRole::Depth,
@@ -271,7 +314,7 @@ impl crate::runtime::sink::recorder::FrameRecorder for ChunkRecorder {
             return Ok(Some("disk_low"));
         }
         let result = self.log_camera_events().and_then(|()| match &mut self.writer {
-            Some(w) => w.write(frame).map(|_| true),
+            Some(w) => crate::runtime::sink::recorder::FrameRecorder::write(w, frame).map(|_| true),
             None => Ok(false),
         });
         match result {
@@ -290,6 +333,14 @@ impl crate::runtime::sink::recorder::FrameRecorder for ChunkRecorder {
                 Ok(Some("write_error"))
             }
         }
+    }
+}
+
+impl crate::runtime::sink::recorder::FrameRecorder for ChunkRecorder {
+    fn write(&mut self, frame: &Captured) -> Result<Option<&'static str>, SessionError> {
+        let outcome = self.write_frame(frame);
+        self.update_gauges(matches!(outcome, Ok(Some(_))));
+        outcome
     }
 
     fn log_event(&mut self, event: &SessionEvent) -> Result<(), SessionError> {
@@ -326,6 +377,8 @@ pub struct Live {
     pub rows: u64,
     pub rows_lost: u64,
     pub latest: Option<crate::runtime::stages::PoseRecord>,
+    /// The latest pose's frames (shared with the pipeline, not copied).
+    pub frames: Option<crate::core::frame::FramePair>,
     pub statuses: BTreeMap<&'static str, u64>,
     pub chunk: usize,
 }
@@ -411,6 +464,7 @@ impl Sink for ChunkPoses {
         self.first_ns.get_or_insert(host_ns);
         self.last_ns = Some(host_ns);
         let record = item.record.clone();
+        let frames = item.frames.clone();
         let written = match &mut self.writer {
             Some((w, _)) => w.write(item).and_then(|()| w.hand_over().map_err(Into::into)),
             None => Err("no poses.csv open".into()),
@@ -429,6 +483,7 @@ impl Sink for ChunkPoses {
         live.rows_lost += u64::from(lost);
         *live.statuses.entry(record.status.name()).or_default() += 1;
         live.latest = Some(record);
+        live.frames = Some(frames);
         live.chunk = self.index;
         Ok(())
     }

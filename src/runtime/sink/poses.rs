@@ -161,7 +161,7 @@ impl Sink for PoseWriter {
     type In = Fused;
 
     fn write(&mut self, item: Fused) -> Result<(), StageError> {
-        let Fused { record: r, overlay } = item;
+        let Fused { record: r, overlay, .. } = item;
         if let Some(picture) = overlay {
             let dir = self.dir.join(OVERLAYS_DIR);
             std::fs::create_dir_all(&dir)?;

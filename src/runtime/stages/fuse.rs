@@ -41,7 +41,11 @@ impl Stage for FuseStage {
             .overlay_every
             .filter(|n| record.depth.seq % n == 0)
             .map(|_| overlay::draw(&self.rig, &pair.depth, pair.color.as_deref(), &record));
-        out.push(Fused { record, overlay });
+        out.push(Fused {
+            record,
+            frames: pair,
+            overlay,
+        });
         Ok(())
     }
 }

@@ -62,9 +62,11 @@ pub struct Posed {
     pub record: PoseRecord,
 }
 
-/// The finished pose of a frame pair, and its picture when one was asked for.
+/// The finished pose of a frame pair, its frames (shared, for the live view) and its
+/// picture when one was asked for.
 #[derive(Debug)]
 pub struct Fused {
     pub record: PoseRecord,
+    pub frames: FramePair,
     pub overlay: Option<crate::core::image::RgbImage>,
 }

@@ -30,6 +30,35 @@ pub fn draw(rig: &Rig, depth: &DepthFrame, color: Option<&ColorFrame>, record: &
     RgbImage::hstack(&panels, 4, [255, 255, 255])
 }
 
+/// The whole depth frame with the skeleton, coloured from the floor up (the live view).
+pub fn depth_view(rig: &Rig, frame: &DepthFrame, record: &PoseRecord) -> RgbImage {
+    let (near, far) = floor_range(frame);
+    // Small frames are magnified so that the skeleton stays legible.
+    let zoom = if frame.width < 400 { 2 } else { 1 };
+    let mut img = depth_to_rgb(&frame.data, frame.width, frame.height, near, far).upscale(zoom);
+    let joints = record
+        .pose
+        .joints
+        .map(|j| (j.source != JointSource::Missing).then_some(j.position_mm));
+    crate::core::image::draw_joints(&mut img, &rig.depth, &joints, (0.0, 0.0), f64::from(zoom));
+    img
+}
+
+/// The depth range to colour, mm: from 70 mm above the floor (a mouse on all fours is 30-45 mm
+/// high; a rearing one shows red) to just below it, the floor's distance being the median
+/// reading of the frame (a cage seen from above is mostly floor), so that a mouse shows
+/// whatever the camera's height.
+pub fn floor_range(frame: &DepthFrame) -> (f64, f64) {
+    // Every 7th pixel is plenty for a median.
+    let mut valid: Vec<u16> = frame.data.iter().step_by(7).copied().filter(|&z| z > 0).collect();
+    if valid.is_empty() {
+        return (400.0, 700.0);
+    }
+    let mid = valid.len() / 2;
+    let floor = f64::from(*valid.select_nth_unstable(mid).1);
+    (floor - 70.0, floor + 5.0)
+}
+
 /// The depth frame around the mouse, magnified 4 times, with the skeleton.
 fn top_panel(rig: &Rig, frame: &DepthFrame, joints: &[Option<Point3<f64>>; JOINT_COUNT]) -> RgbImage {
     let projected: Vec<_> = joints
@@ -96,7 +125,7 @@ fn rgb_at(frame: &ColorFrame, x: u32, y: u32) -> [u8; 3] {
 
 /// The bottom view around the mouse's footprint, scaled to the panel's height, with the paw
 /// detections (yellow) and the fused paws (blue discs).
-fn bottom_panel(rig: &Rig, frame: &ColorFrame, record: &PoseRecord) -> RgbImage {
+pub fn bottom_panel(rig: &Rig, frame: &ColorFrame, record: &PoseRecord) -> RgbImage {
     let (x0, y0, x1, y1) = footprint(&record.pose, &rig.color, FOOTPRINT_MARGIN_MM)
         .map_or((0, 0, frame.width, frame.height), |(roi, _)| roi);
     // Within the frame, even when the rig's colour camera is not this frame's (uncalibrated).

@@ -1,0 +1,315 @@
+//! `GET /metrics`: the daemon's counters in the OpenMetrics text format (which Prometheus
+//! scrapes), encoded by `prometheus-client` from what the [`Watch`] reads at scrape time. Every
+//! name starts with `mousepose_`; labels are few-valued (camera, reason, stage, edge, status),
+//! never a path, a message or a frame number. `docs/metrics.md` lists them.
+
+use crate::runtime::capture::clock::{monotonic_ns, process_cpu_s, process_resident_bytes};
+use crate::runtime::capture::supervise::{CameraState, lock};
+use crate::runtime::pipeline::Histogram;
+use crate::runtime::watch::Watch;
+use prometheus_client::collector::Collector;
+use prometheus_client::encoding::{DescriptorEncoder, EncodeCounterValue, EncodeMetric as _, NoLabelSet};
+use prometheus_client::metrics::MetricType;
+use prometheus_client::metrics::counter::ConstCounter;
+use prometheus_client::metrics::gauge::ConstGauge;
+use prometheus_client::registry::{Registry, Unit};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+/// Upper bounds of the latency histograms' buckets, microseconds (exported in seconds).
+const LATENCY_BOUNDS_US: [u64; 14] = [
+    250, 500, 1_000, 2_000, 3_000, 5_000, 7_500, 10_000, 20_000, 50_000, 100_000, 250_000, 500_000, 1_000_000,
+];
+
+type Labels = Vec<(&'static str, String)>;
+
+/// The text of `/metrics` now.
+pub fn encode(watch: &Arc<Watch>) -> Result<String, std::fmt::Error> {
+    let mut registry = Registry::default();
+    registry.register_collector(Box::new(WatchCollector(Arc::clone(watch))));
+    let mut text = String::new();
+    prometheus_client::encoding::text::encode(&mut text, &registry)?;
+    Ok(text)
+}
+
+#[derive(Debug)]
+struct WatchCollector(Arc<Watch>);
+
+/// Writes metric families one after the other.
+struct Families<'a>(DescriptorEncoder<'a>);
+
+impl Families<'_> {
+    fn counter<N: EncodeCounterValue + Copy>(
+        &mut self,
+        name: &str,
+        help: &str,
+        unit: Option<&Unit>,
+        samples: &[(Labels, N)],
+    ) -> std::fmt::Result {
+        let mut family = self.0.encode_descriptor(name, help, unit, MetricType::Counter)?;
+        for (labels, value) in samples {
+            ConstCounter::new(*value).encode(family.encode_family(labels)?)?;
+        }
+        Ok(())
+    }
+
+    fn gauge(&mut self, name: &str, help: &str, unit: Option<&Unit>, samples: &[(Labels, f64)]) -> std::fmt::Result {
+        let mut family = self.0.encode_descriptor(name, help, unit, MetricType::Gauge)?;
+        for (labels, value) in samples {
+            ConstGauge::new(*value).encode(family.encode_family(labels)?)?;
+        }
+        Ok(())
+    }
+
+    fn histogram(&mut self, name: &str, help: &str, samples: &[(Labels, &Histogram)]) -> std::fmt::Result {
+        let mut family = self
+            .0
+            .encode_descriptor(name, help, Some(&Unit::Seconds), MetricType::Histogram)?;
+        for (labels, h) in samples {
+            let (count, sum_us) = h.totals();
+            let counts = h.counts_under(&LATENCY_BOUNDS_US);
+            let buckets: Vec<(f64, u64)> = LATENCY_BOUNDS_US
+                .iter()
+                .map(|&us| us as f64 / 1e6)
+                .chain([f64::INFINITY])
+                .zip(counts)
+                .collect();
+            family
+                .encode_family(labels)?
+                .encode_histogram::<NoLabelSet>(sum_us as f64 / 1e6, count, &buckets, None)?;
+        }
+        Ok(())
+    }
+}
+
+fn label(key: &'static str, value: &str) -> Labels {
+    vec![(key, value.to_owned())]
+}
+
+fn labels2(k1: &'static str, v1: &str, k2: &'static str, v2: &str) -> Labels {
+    vec![(k1, v1.to_owned()), (k2, v2.to_owned())]
+}
+
+impl Collector for WatchCollector {
+    fn encode(&self, encoder: DescriptorEncoder) -> std::fmt::Result {
+        let w = &self.0;
+        let mut f = Families(encoder);
+        let cameras = w.pipeline.cameras();
+        let per_camera = |get: &dyn Fn(&crate::runtime::accounting::CameraSummary) -> u64| -> Vec<(Labels, u64)> {
+            cameras
+                .iter()
+                .map(|(name, c)| (label("camera", name), get(c)))
+                .collect()
+        };
+        let by_reason =
+            |get: &dyn Fn(&crate::runtime::accounting::CameraSummary) -> &std::collections::BTreeMap<String, u64>| {
+                cameras
+                    .iter()
+                    .flat_map(|(name, c)| {
+                        get(c)
+                            .iter()
+                            .map(|(reason, n)| (labels2("camera", name, "reason", reason), *n))
+                    })
+                    .collect::<Vec<_>>()
+            };
+        f.counter(
+            "mousepose_frames_captured",
+            "Frames the camera delivered.",
+            None,
+            &per_camera(&|c| c.captured),
+        )?;
+        f.counter(
+            "mousepose_frames_paired",
+            "Frames processed in a depth-colour pair.",
+            None,
+            &per_camera(&|c| c.paired),
+        )?;
+        f.counter(
+            "mousepose_frames_unpaired",
+            "Frames processed without a partner (depth-only pairs, colour frames no depth frame claimed).",
+            None,
+            &per_camera(&|c| c.unpaired),
+        )?;
+        f.counter(
+            "mousepose_frames_dropped",
+            "Frames delivered but not processed, by reason.",
+            None,
+            &by_reason(&|c| &c.dropped),
+        )?;
+        f.counter(
+            "mousepose_frames_lost_before_capture",
+            "Frames the camera never delivered (gaps in its frame counter, damaged buffers), by reason.",
+            None,
+            &by_reason(&|c| &c.lost_before_capture),
+        )?;
+        f.counter(
+            "mousepose_frames_recorded",
+            "Frames written to the raw recording.",
+            None,
+            &per_camera(&|c| c.recorded.unwrap_or(0)),
+        )?;
+        f.counter(
+            "mousepose_frames_not_recorded",
+            "Frames delivered but not recorded, by reason.",
+            None,
+            &by_reason(&|c| &c.not_recorded),
+        )?;
+
+        let now_ns = monotonic_ns();
+        let (mut up, mut away_s, mut outages, mut states) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for (name, health) in &w.cameras {
+            let h = lock(health);
+            let state = match &h.state {
+                Some(CameraState::Streaming) => "streaming",
+                Some(CameraState::Away(_)) => "away",
+                Some(CameraState::Opening) | None => "opening",
+            };
+            up.push((label("camera", name), f64::from(u8::from(state == "streaming"))));
+            for s in ["opening", "streaming", "away"] {
+                states.push((labels2("camera", name, "state", s), f64::from(u8::from(s == state))));
+            }
+            let current = h.outages.last().filter(|o| o.end_ns.is_none());
+            let seconds = current.map_or(0.0, |o| now_ns.saturating_sub(o.start_ns) as f64 / 1e9);
+            away_s.push((label("camera", name), seconds));
+            outages.push((label("camera", name), h.outages.len() as u64));
+        }
+        f.gauge(
+            "mousepose_camera_up",
+            "1 while the camera delivers frames, 0 while it is opening or away.",
+            None,
+            &up,
+        )?;
+        f.gauge(
+            "mousepose_camera_state",
+            "The camera's state (1 for the current one).",
+            None,
+            &states,
+        )?;
+        f.gauge(
+            "mousepose_camera_away",
+            "How long the camera has been away in its current outage (0 when it is not).",
+            Some(&Unit::Seconds),
+            &away_s,
+        )?;
+        f.counter(
+            "mousepose_camera_outages",
+            "Times the camera went away.",
+            None,
+            &outages,
+        )?;
+
+        let stages = w.pipeline.stages();
+        f.histogram(
+            "mousepose_stage_latency",
+            "Time a stage or sink spends on one item.",
+            &stages
+                .iter()
+                .map(|(name, s)| (label("stage", name), &s.latency))
+                .collect::<Vec<_>>(),
+        )?;
+        f.counter(
+            "mousepose_stage_items",
+            "Items a stage or sink finished.",
+            None,
+            &stages
+                .iter()
+                .map(|(name, s)| (label("stage", name), s.items_out.load(Ordering::Relaxed)))
+                .collect::<Vec<_>>(),
+        )?;
+        f.histogram(
+            "mousepose_end_to_end_latency",
+            "From a frame pair leaving the synchroniser to its pose row handed to the operating system.",
+            &[(Vec::new(), w.pipeline.end_to_end())],
+        )?;
+        let edges = w.pipeline.edges();
+        f.gauge(
+            "mousepose_queue_depth",
+            "Items waiting on an edge between threads (after its last send).",
+            None,
+            &edges
+                .iter()
+                .map(|(name, e)| (label("edge", name), e.depth as f64))
+                .collect::<Vec<_>>(),
+        )?;
+        f.gauge(
+            "mousepose_queue_capacity",
+            "Capacity of an edge between threads.",
+            None,
+            &edges
+                .iter()
+                .map(|(name, e)| (label("edge", name), e.capacity as f64))
+                .collect::<Vec<_>>(),
+        )?;
+
+        let live = w.live();
+        f.counter(
+            "mousepose_poses",
+            "Poses made, by status (ok, no_mouse, ...).",
+            None,
+            &live
+                .statuses
+                .iter()
+                .map(|(status, n)| (label("status", status), *n))
+                .collect::<Vec<_>>(),
+        )?;
+        f.counter(
+            "mousepose_poses_not_written",
+            "Poses that could not be written to poses.csv (full disk, write error).",
+            None,
+            &[(Vec::new(), live.rows_lost)],
+        )?;
+        f.gauge(
+            "mousepose_chunk",
+            "The chunk poses are written to now (0, 1, ...).",
+            None,
+            &[(Vec::new(), live.chunk as f64)],
+        )?;
+        if let Some(g) = &w.recorder {
+            f.counter(
+                "mousepose_recorded",
+                "Encoded frame bytes written to the raw recording.",
+                Some(&Unit::Bytes),
+                &[(Vec::new(), g.frame_bytes.load(Ordering::Relaxed))],
+            )?;
+            f.gauge(
+                "mousepose_disk_free",
+                "Free space on the output's file system.",
+                Some(&Unit::Bytes),
+                &[(Vec::new(), g.disk_free_bytes.load(Ordering::Relaxed) as f64)],
+            )?;
+            f.gauge(
+                "mousepose_recording_paused",
+                "1 while raw recording is paused (disk low or after a write error).",
+                None,
+                &[(Vec::new(), f64::from(u8::from(g.paused.load(Ordering::Relaxed))))],
+            )?;
+        }
+        if let Some(bytes) = process_resident_bytes() {
+            f.gauge(
+                "mousepose_process_resident_memory",
+                "Resident memory of the daemon.",
+                Some(&Unit::Bytes),
+                &[(Vec::new(), bytes as f64)],
+            )?;
+        }
+        f.counter(
+            "mousepose_process_cpu",
+            "CPU time the daemon used.",
+            Some(&Unit::Seconds),
+            &[(Vec::new(), process_cpu_s())],
+        )?;
+        f.gauge(
+            "mousepose_run_uptime",
+            "Time since the run started.",
+            Some(&Unit::Seconds),
+            &[(Vec::new(), w.pipeline.elapsed_s())],
+        )?;
+        f.gauge(
+            "mousepose_build_info",
+            "The running version (value 1).",
+            None,
+            &[(label("version", w.info.version), 1.0)],
+        )?;
+        Ok(())
+    }
+}

@@ -1,0 +1,435 @@
+//! The daemon's HTTP server: the live page, `/metrics`, `/status` and the pictures, while
+//! `mousepose run` works on the fixture session's depth and Aravis's fake camera on 127.0.0.1;
+//! the page rendered by headless Chromium; a remote address refused without `allow_remote`, and
+//! requests without the bearer token refused with it.
+
+use crate::capture_aravis::ChildGuard;
+use crate::run::{daemon, fake_camera, rig_full, session_depth, terminate};
+use crate::util::mousepose;
+use mousepose::runtime::http::client::{Answer, get};
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// A port free on loopback now.
+fn free_port() -> u16 {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("test set-up");
+    listener.local_addr().expect("test set-up").port()
+}
+
+fn fetch(address: SocketAddr, path: &str, token: Option<&str>) -> Answer {
+    get(address, path, token, Duration::from_secs(10)).unwrap_or_else(|e| panic!("GET {path}: {e}"))
+}
+
+/// Polls `/status` until `ready` holds for it (at most `limit`); returns it.
+fn wait_status(address: SocketAddr, limit: Duration, ready: impl Fn(&serde_json::Value) -> bool) -> serde_json::Value {
+    let deadline = Instant::now() + limit;
+    let mut last = serde_json::Value::Null;
+    while Instant::now() < deadline {
+        if let Ok(a) = get(address, "/status", None, Duration::from_secs(2)) {
+            if a.status == 200 {
+                last = serde_json::from_slice(&a.body).expect("/status is JSON");
+                if ready(&last) {
+                    return last;
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    panic!("the status did not get there within {limit:?}: {last:#}");
+}
+
+/// A series of an exposition: its name and labels.
+type SeriesKey = (String, Vec<(String, String)>);
+/// The samples of an exposition.
+type Series = BTreeMap<SeriesKey, f64>;
+
+/// Checks `text` strictly against the OpenMetrics text format as Prometheus reads it: every
+/// family declared (`# HELP`, `# TYPE`) before its samples, sample names the family's name with
+/// the suffixes its type allows, well-formed labels and values, histogram buckets cumulative up
+/// to `+Inf` equal to `_count`, no series twice, `# EOF` last. Returns the samples.
+fn parse_exposition(text: &str) -> Result<Series, String> {
+    let name_ok = |n: &str| {
+        !n.is_empty()
+            && n.chars()
+                .enumerate()
+                .all(|(i, c)| c.is_ascii_alphabetic() || c == '_' || c == ':' || (i > 0 && c.is_ascii_digit()))
+    };
+    let mut lines: Vec<&str> = text.split('\n').collect();
+    if lines.pop() != Some("") || lines.pop() != Some("# EOF") {
+        return Err("the exposition does not end with `# EOF` and a newline".into());
+    }
+    let mut types: BTreeMap<String, String> = BTreeMap::new();
+    let mut helped = std::collections::BTreeSet::new();
+    let mut series = Series::new();
+    let mut buckets: BTreeMap<SeriesKey, Vec<(f64, f64)>> = BTreeMap::new();
+    for (i, line) in lines.iter().enumerate() {
+        let at = |what: &str| format!("line {}: {what}: {line:?}", i + 1);
+        if let Some(rest) = line.strip_prefix("# ") {
+            let mut parts = rest.splitn(3, ' ');
+            let (kind, name) = (parts.next().unwrap_or(""), parts.next().unwrap_or(""));
+            if !name_ok(name) || !name.starts_with("mousepose_") {
+                return Err(at("a family name not of mousepose"));
+            }
+            match kind {
+                "HELP" => {
+                    helped.insert(name.to_owned());
+                }
+                "TYPE" => {
+                    let t = parts.next().unwrap_or("");
+                    if !["counter", "gauge", "histogram", "info", "stateset", "unknown"].contains(&t) {
+                        return Err(at("an unknown type"));
+                    }
+                    if types.insert(name.to_owned(), t.to_owned()).is_some() {
+                        return Err(at("a family declared twice"));
+                    }
+                }
+                "UNIT" => {
+                    if !name.ends_with(parts.next().unwrap_or("?")) {
+                        return Err(at("a unit that is not the name's suffix"));
+                    }
+                }
+                _ => return Err(at("an unknown comment")),
+            }
+            continue;
+        }
+        let (head, value) = line.rsplit_once(' ').ok_or_else(|| at("no value"))?;
+        let value: f64 = match value {
+            "+Inf" => f64::INFINITY,
+            "-Inf" => f64::NEG_INFINITY,
+            v => v.parse().map_err(|_| at("a value that is not a number"))?,
+        };
+        let (name, labels) = match head.split_once('{') {
+            Some((n, rest)) => (n, rest.strip_suffix('}').ok_or_else(|| at("labels not closed"))?),
+            None => (head, ""),
+        };
+        let mut parsed = Vec::new();
+        let mut rest = labels;
+        while !rest.is_empty() {
+            let (key, after) = rest.split_once("=\"").ok_or_else(|| at("a label without =\""))?;
+            if !name_ok(key) {
+                return Err(at("a bad label name"));
+            }
+            let mut end = None;
+            let mut escaped = false;
+            for (k, c) in after.char_indices() {
+                match (escaped, c) {
+                    (true, _) => escaped = false,
+                    (false, '\\') => escaped = true,
+                    (false, '"') => {
+                        end = Some(k);
+                        break;
+                    }
+                    _ => {}
+                }
+            }
+            let end = end.ok_or_else(|| at("a label value not closed"))?;
+            parsed.push((key.to_owned(), after[..end].to_owned()));
+            rest = after[end + 1..].strip_prefix(',').unwrap_or(&after[end + 1..]);
+        }
+        let family = types
+            .iter()
+            .filter(|(f, t)| {
+                let suffixes: &[&str] = match t.as_str() {
+                    "counter" => &["_total", "_created"],
+                    "histogram" => &["_bucket", "_sum", "_count", "_created"],
+                    "info" => &["_info"],
+                    _ => &[""],
+                };
+                suffixes.iter().any(|s| name.strip_suffix(s) == Some(f.as_str()))
+            })
+            .map(|(f, t)| (f.clone(), t.clone()))
+            .next()
+            .ok_or_else(|| at("a sample of no declared family"))?;
+        if !helped.contains(&family.0) {
+            return Err(at("a family without # HELP"));
+        }
+        if family.1 == "histogram" && name.ends_with("_bucket") {
+            let le = parsed
+                .iter()
+                .position(|(k, _)| k == "le")
+                .ok_or_else(|| at("a bucket without le"))?;
+            let (_, bound) = parsed.remove(le);
+            let bound: f64 = if bound == "+Inf" {
+                f64::INFINITY
+            } else {
+                bound.parse().map_err(|_| at("a bad le"))?
+            };
+            buckets
+                .entry((family.0.clone(), parsed.clone()))
+                .or_default()
+                .push((bound, value));
+            parsed.push(("le".into(), format!("{bound}")));
+        }
+        if series.insert((name.to_owned(), parsed), value).is_some() {
+            return Err(at("a series twice"));
+        }
+    }
+    for ((family, labels), b) in &buckets {
+        let count = series
+            .get(&(format!("{family}_count"), labels.clone()))
+            .ok_or_else(|| format!("{family}{labels:?} has buckets but no _count"))?;
+        if !b.windows(2).all(|w| w[0].0 < w[1].0 && w[0].1 <= w[1].1) {
+            return Err(format!(
+                "{family}{labels:?}: buckets not cumulative in ascending le: {b:?}"
+            ));
+        }
+        if b.last().map(|l| (l.0, l.1)) != Some((f64::INFINITY, *count)) {
+            return Err(format!("{family}{labels:?}: the +Inf bucket is not the count"));
+        }
+    }
+    Ok(series)
+}
+
+fn value(series: &Series, name: &str, labels: &[(&str, &str)]) -> f64 {
+    let key = (
+        name.to_owned(),
+        labels.iter().map(|(k, v)| ((*k).to_owned(), (*v).to_owned())).collect(),
+    );
+    *series
+        .get(&key)
+        .unwrap_or_else(|| panic!("no {name}{labels:?} in the metrics"))
+}
+
+#[test]
+fn the_exposition_check_refuses_what_prometheus_would() {
+    let good = "# HELP mousepose_x X.\n# TYPE mousepose_x counter\nmousepose_x_total{camera=\"depth\"} 3\n# EOF\n";
+    assert!(parse_exposition(good).is_ok());
+    for bad in [
+        // No EOF; a sample before its type; a counter without _total; a bad value; a
+        // histogram whose +Inf bucket is not its count.
+        "# HELP mousepose_x X.\n# TYPE mousepose_x counter\nmousepose_x_total 3\n",
+        "mousepose_x_total 3\n# HELP mousepose_x X.\n# TYPE mousepose_x counter\n# EOF\n",
+        "# HELP mousepose_x X.\n# TYPE mousepose_x counter\nmousepose_x 3\n# EOF\n",
+        "# HELP mousepose_x X.\n# TYPE mousepose_x gauge\nmousepose_x three\n# EOF\n",
+        "# HELP mousepose_h H.\n# TYPE mousepose_h histogram\nmousepose_h_sum 1\nmousepose_h_count 2\n\
+         mousepose_h_bucket{le=\"1\"} 1\nmousepose_h_bucket{le=\"+Inf\"} 1\n# EOF\n",
+    ] {
+        assert!(parse_exposition(bad).is_err(), "{bad}");
+    }
+}
+
+fn http_rig(dir: &Path, color: bool, http: &str) -> std::path::PathBuf {
+    rig_full(dir, &session_depth(), color, "min_free_percent = 0\n", http)
+}
+
+#[test]
+fn the_endpoints_answer_while_the_daemon_runs_and_the_page_renders_in_chromium() {
+    let tmp = tempfile::tempdir().unwrap();
+    let _camera = fake_camera();
+    let port = free_port();
+    let address: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    let rig = http_rig(tmp.path(), true, &format!("address = \"{address}\"\n"));
+    let child = daemon(&rig, None);
+    let first = wait_status(address, Duration::from_secs(60), |s| {
+        s["poses"].as_u64() > Some(5) && s["cameras"]["color"]["captured"].as_u64() > Some(5)
+    });
+    for key in [
+        "dir",
+        "info",
+        "cameras",
+        "stages",
+        "edges",
+        "end_to_end_latency",
+        "statuses",
+        "recording",
+    ] {
+        assert!(first.get(key).is_some(), "no {key} in {first:#}");
+    }
+
+    let metrics = fetch(address, "/metrics", None);
+    assert_eq!(metrics.status, 200);
+    assert!(
+        metrics
+            .content_type
+            .as_deref()
+            .is_some_and(|t| t.starts_with("application/openmetrics-text"))
+    );
+    let text = String::from_utf8(metrics.body).unwrap();
+    let before = parse_exposition(&text).unwrap_or_else(|e| panic!("{e}\n{text}"));
+    for family in [
+        "mousepose_frames_paired_total",
+        "mousepose_camera_up",
+        "mousepose_stage_latency_seconds_count",
+        "mousepose_end_to_end_latency_seconds_count",
+        "mousepose_queue_depth",
+        "mousepose_poses_total",
+        "mousepose_chunk",
+        "mousepose_recorded_bytes_total",
+        "mousepose_disk_free_bytes",
+        "mousepose_recording_paused",
+        "mousepose_process_resident_memory_bytes",
+    ] {
+        assert!(before.keys().any(|(n, _)| n == family), "no {family} in\n{text}");
+    }
+    assert_eq!(value(&before, "mousepose_camera_up", &[("camera", "color")]), 1.0);
+    std::thread::sleep(Duration::from_secs(2));
+    let after = parse_exposition(&String::from_utf8(fetch(address, "/metrics", None).body).unwrap()).unwrap();
+    for camera in ["depth", "color"] {
+        let captured = |s: &Series| value(s, "mousepose_frames_captured_total", &[("camera", camera)]);
+        assert!(captured(&after) > captured(&before), "{camera} frames did not move");
+    }
+    let e2e = |s: &Series| value(s, "mousepose_end_to_end_latency_seconds_count", &[]);
+    assert!(e2e(&after) > e2e(&before));
+
+    let depth = fetch(address, "/live/depth.png", None);
+    assert_eq!((depth.status, depth.content_type.as_deref()), (200, Some("image/png")));
+    assert!(depth.body.starts_with(b"\x89PNG"));
+    let events = fetch(address, "/events", None);
+    let events: serde_json::Value = serde_json::from_slice(&events.body).unwrap();
+    assert!(
+        events
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|e| e["text"].as_str().unwrap_or("").contains("serving the live page")),
+        "{events:#}"
+    );
+    let history: serde_json::Value = serde_json::from_slice(&fetch(address, "/history", None).body).unwrap();
+    assert!(!history.as_array().unwrap().is_empty());
+    let text = fetch(address, "/status?format=text", None);
+    assert!(String::from_utf8_lossy(&text.body).contains("color: streaming"));
+    // Only reading: anything but GET is refused.
+    assert_eq!(fetch(address, "/nothing", None).status, 404);
+
+    // `mousepose status` reads the same status.
+    let status = mousepose()
+        .args(["status", "--address", &address.to_string()])
+        .output()
+        .unwrap();
+    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    assert!(String::from_utf8_lossy(&status.stdout).contains("depth: streaming"));
+
+    screenshot_of_the_page(address, tmp.path());
+    let (exit, out, err) = terminate(child, Duration::from_secs(30));
+    assert!(exit.success(), "{err}");
+    let report: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(report["poses"].as_u64() >= first["poses"].as_u64(), "{report:#}");
+}
+
+/// Headless Chromium opens the page: the pictures load, the status fills in, and the screenshot
+/// is not blank.
+fn screenshot_of_the_page(address: SocketAddr, dir: &Path) {
+    let chromium = |extra: &[&str]| {
+        let profile = tempfile::tempdir_in(dir).expect("test set-up");
+        let out = std::process::Command::new("chromium")
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-quic",
+                "--no-first-run",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                "--hide-scrollbars",
+                "--window-size=900,1300",
+                "--virtual-time-budget=4000",
+            ])
+            .arg(format!("--user-data-dir={}", profile.path().display()))
+            .args(extra)
+            .arg(format!("http://{address}/"))
+            .output()
+            .expect("chromium (installed by scripts/setup.sh)");
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let dom = chromium(&["--dump-dom"]);
+    // Each picture's placeholder is hidden once its image has loaded.
+    for placeholder in ["depth-none", "bottom-none"] {
+        let tag = dom
+            .split('<')
+            .find(|t| t.contains(&format!("id=\"{placeholder}\"")))
+            .unwrap_or_else(|| panic!("no {placeholder} in\n{dom}"));
+        assert!(tag.contains("hidden"), "the image of {placeholder} did not load: {tag}");
+    }
+    assert!(dom.contains("streaming"), "the status did not fill in:\n{dom}");
+    let shot = dir.join("page.png");
+    chromium(&[&format!("--screenshot={}", shot.display())]);
+    let decoder = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(&shot).expect("a screenshot"),
+    ));
+    let mut reader = decoder.read_info().expect("a PNG screenshot");
+    let mut pixels = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut pixels).expect("a PNG screenshot");
+    let channels = info.color_type.samples();
+    let colours: std::collections::HashSet<&[u8]> = pixels[..info.buffer_size()].chunks(channels).collect();
+    assert!(
+        colours.len() > 200,
+        "the screenshot is nearly blank ({} colours)",
+        colours.len()
+    );
+    if let Ok(keep) = std::env::var("MOUSEPOSE_KEEP_SCREENSHOT") {
+        std::fs::copy(&shot, keep).expect("the screenshot kept");
+    }
+}
+
+#[test]
+fn a_remote_address_needs_allow_remote_and_then_a_token() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = http_rig(tmp.path(), false, "address = \"0.0.0.0:8470\"\n");
+    let run = mousepose()
+        .args(["run", "--seconds", "1", "--config"])
+        .arg(&rig)
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(err.contains("http.address") && err.contains("allow_remote"), "{err}");
+
+    let rig = http_rig(tmp.path(), false, "address = \"0.0.0.0:8470\"\nallow_remote = true\n");
+    let run = mousepose()
+        .args(["run", "--seconds", "1", "--config"])
+        .arg(&rig)
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&run.stderr).contains("http.token_file"));
+
+    // With a token (served on loopback here: no test listens beyond this machine).
+    let token = "f3a9c2d81b7e4a60b5c3";
+    let token_file = tmp.path().join("token");
+    std::fs::write(&token_file, format!("{token}\n")).unwrap();
+    let port = free_port();
+    let address: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    let rig = http_rig(
+        tmp.path(),
+        false,
+        &format!("address = \"{address}\"\nallow_remote = true\ntoken_file = {token_file:?}\n"),
+    );
+    let child: ChildGuard = daemon(&rig, None);
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while get(address, "/", None, Duration::from_secs(1)).is_err() {
+        assert!(Instant::now() < deadline, "the server did not start");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    for path in ["/", "/metrics", "/status", "/live/depth.png"] {
+        assert_eq!(fetch(address, path, None).status, 401, "{path}");
+        assert_eq!(fetch(address, path, Some("wrong-token-0000000")).status, 401, "{path}");
+    }
+    assert_eq!(fetch(address, "/status", Some(token)).status, 200);
+    assert_eq!(fetch(address, &format!("/metrics?token={token}"), None).status, 200);
+    let status = mousepose().args(["status", "--config"]).arg(&rig).output().unwrap();
+    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    let status = mousepose()
+        .args(["status", "--address", &address.to_string()])
+        .output()
+        .unwrap();
+    assert_eq!(status.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&status.stderr).contains("--token-file"));
+    let (exit, _, err) = terminate(child, Duration::from_secs(30));
+    assert!(exit.success(), "{err}");
+}
+
+#[test]
+fn status_without_a_daemon_says_so() {
+    let port = free_port();
+    let out = mousepose()
+        .args(["status", "--address", &format!("127.0.0.1:{port}")])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("cannot reach") && err.contains("mousepose run"), "{err}");
+}
