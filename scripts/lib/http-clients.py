@@ -4,7 +4,7 @@
 
 Each client, on a thread of its own, asks for /status every second, each picture about three
 times a second, /history and /events every two seconds; one more scrapes /metrics every second.
-All stop after SECONDS. Prints requests, failures and the slowest answer.
+They start once the daemon answers and stop SECONDS later. Prints requests, failures and the slowest answer.
 """
 import sys
 import threading
@@ -15,11 +15,12 @@ import urllib.request
 address, clients, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 lock = threading.Lock()
 done = {"requests": 0, "failures": 0, "no_picture": 0, "slowest": 0.0}
+why = {}
 
 
 def fetch(path):
     start = time.monotonic()
-    ok, no_picture = True, False
+    ok, no_picture, reason = True, False, ""
     try:
         with urllib.request.urlopen(f"http://{address}{path}", timeout=10) as answer:
             answer.read()
@@ -28,12 +29,16 @@ def fetch(path):
         # 404 for a picture: the latest pose has no colour frame; an answer all the same.
         no_picture = e.code == 404 and path.startswith("/live/")
         ok = no_picture
-    except Exception:  # a refused or failed request is counted, whatever it was
+        reason = f"{path} answered {e.code}"
+    except Exception as e:  # a refused or failed request is counted, whatever it was
         ok = False
+        reason = f"{path}: {type(e).__name__} {e}"
     with lock:
         done["requests"] += 1
         done["failures"] += 0 if ok else 1
         done["no_picture"] += 1 if no_picture else 0
+        if not ok:
+            why[reason] = why.get(reason, 0) + 1
         done["slowest"] = max(done["slowest"], time.monotonic() - start)
 
 
@@ -49,6 +54,17 @@ def client(schedule):
         time.sleep(0.02)
 
 
+# The daemon starts with the clients: wait (at most 30 s) until it serves.
+deadline = time.monotonic() + 30
+while True:
+    try:
+        urllib.request.urlopen(f"http://{address}/status", timeout=2).read()
+        break
+    except Exception:  # not listening yet
+        if time.monotonic() > deadline:
+            sys.exit(f"the daemon at {address} did not answer within 30 s")
+        time.sleep(0.1)
+
 page = [("/status", 1.0), ("/live/depth.png", 0.33), ("/live/bottom.png", 0.33), ("/history", 2.0), ("/events", 2.0)]
 threads = [threading.Thread(target=client, args=(page,)) for _ in range(clients)]
 threads.append(threading.Thread(target=client, args=([("/metrics", 1.0)],)))
@@ -60,3 +76,5 @@ print(
     f" clients: {done['requests']} requests, {done['failures']} failed, {done['no_picture']} pictures not there yet, "
     f"slowest {done['slowest'] * 1000:.0f} ms"
 )
+for reason, n in sorted(why.items(), key=lambda kv: -kv[1])[:5]:
+    print(f"   failed: {n} x {reason}")

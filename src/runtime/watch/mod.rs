@@ -118,11 +118,15 @@ impl RunReport {
             );
         }
         if let Some(r) = &self.recording {
+            let size = |b: u64| match b {
+                0..1_000_000_000 => format!("{:.0} MB", b as f64 / 1e6),
+                _ => format!("{:.1} GB", b as f64 / 1e9),
+            };
             let _ = writeln!(
                 text,
-                "recording: {:.1} GB written, {:.1} GB free{}",
-                r.frame_bytes as f64 / 1e9,
-                r.disk_free_bytes as f64 / 1e9,
+                "recording: {} written, {} free{}",
+                size(r.frame_bytes),
+                size(r.disk_free_bytes),
                 if r.paused { ", PAUSED" } else { "" }
             );
         }
