@@ -6,8 +6,9 @@
 //! It only reads: every handler reads the [`Watch`] (counters and the latest snapshot), never
 //! waits on a stage, and frames never cross it. Requests are bounded: at most
 //! [`MAX_IN_FLIGHT`] at once (more get 503), each done within [`REQUEST_TIMEOUT`], pictures
-//! drawn at most once per frame whatever the number of clients. A non-loopback address needs
-//! `allow_remote` in the config and then a bearer token on every request.
+//! drawn at most five times a second whatever the number of clients, and the server's threads
+//! run at a lower priority than the pipeline's. A non-loopback address needs `allow_remote` in
+//! the config and then a bearer token on every request.
 
 pub mod client;
 pub mod metrics;
@@ -120,13 +121,25 @@ impl Drop for HttpServer {
     }
 }
 
+/// Nice value of the server's threads: the pipeline's threads come first on a busy machine.
+const NICE: i32 = 10;
+
+/// Lowers the calling thread's priority (Linux sets nice per thread).
+fn lower_priority() {
+    if let Err(e) = rustix::process::setpriority_process(Some(rustix::thread::gettid()), NICE) {
+        tracing::debug!("cannot lower the HTTP server's priority: {e}");
+    }
+}
+
 /// The body of the server's thread.
 fn serve(listener: std::net::TcpListener, state: Arc<Served>, stop: tokio::sync::oneshot::Receiver<()>) {
+    lower_priority();
     let runtime = match tokio::runtime::Builder::new_current_thread()
         .enable_io()
         .enable_time()
         .max_blocking_threads(2)
         .thread_name("http-draw")
+        .on_thread_start(lower_priority)
         .build()
     {
         Ok(r) => r,
@@ -161,11 +174,15 @@ struct Served {
     pictures: tokio::sync::Mutex<Option<Pictures>>,
 }
 
+/// Pictures are drawn at most this often, however fast poses come.
+const PICTURE_INTERVAL: Duration = Duration::from_millis(200);
+
 /// The live pictures of one frame pair, as PNG.
 #[derive(Debug, Clone)]
 struct Pictures {
     /// Depth and colour frame numbers.
     key: (u64, Option<u64>),
+    drawn: std::time::Instant,
     depth: axum::body::Bytes,
     bottom: Option<axum::body::Bytes>,
 }
@@ -285,12 +302,15 @@ async fn bottom_png(State(s): State<Arc<Served>>) -> Response {
     }
 }
 
-/// The pictures of the latest pose, drawn once per frame pair (off the server's thread) and
-/// shared by every client.
+/// The pictures of the latest pose, drawn off the server's thread at most once per frame pair
+/// and once per [`PICTURE_INTERVAL`], and shared by every client.
 async fn pictures(s: &Arc<Served>) -> Option<Pictures> {
+    let mut cached = s.pictures.lock().await;
+    if let Some(p) = cached.as_ref().filter(|p| p.drawn.elapsed() < PICTURE_INTERVAL) {
+        return Some(p.clone());
+    }
     let (record, frames) = s.watch.latest()?;
     let key = (record.depth.seq, record.color.map(|c| c.seq));
-    let mut cached = s.pictures.lock().await;
     if let Some(p) = cached.as_ref().filter(|p| p.key == key) {
         return Some(p.clone());
     }
@@ -303,6 +323,7 @@ async fn pictures(s: &Arc<Served>) -> Option<Pictures> {
             .and_then(|c| overlay::bottom_panel(&rig, c, &record).to_png().ok());
         Some(Pictures {
             key,
+            drawn: std::time::Instant::now(),
             depth: depth.into(),
             bottom: bottom.map(Into::into),
         })
