@@ -6,6 +6,7 @@ mod capture_aravis;
 mod capture_openni;
 mod capture_v4l2;
 mod cli;
+mod export;
 mod forest;
 mod layers;
 mod packaging;

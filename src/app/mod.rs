@@ -2,12 +2,14 @@
 //! clap and exit codes: every command returns a [`Failure`] that says which code it means.
 //! `main.rs` only calls [`main`].
 
+pub mod batch;
 pub mod bench;
 pub mod calibrate;
 pub mod chart;
 pub mod devices;
 pub mod eval;
 pub mod experiment;
+pub mod export;
 pub mod progress;
 pub mod record;
 pub mod replay;
@@ -59,6 +61,11 @@ enum Command {
     /// Calibrate the cameras: intrinsics of each, then the rig against a board on the glass.
     #[command(subcommand)]
     Calibrate(calibrate::CalibrateCommand),
+    /// Replay many sessions, here or as a Slurm job array, with one table for all.
+    Batch(batch::BatchArgs),
+    /// Export a session or a run: MoSeq layout, or a video with the skeleton drawn.
+    #[command(subcommand)]
+    Export(export::ExportCommand),
 }
 
 /// Why a command failed, and the exit code that means: 1 when what the user asked for cannot
@@ -239,6 +246,8 @@ fn run(cli: Cli) -> Outcome {
         Command::Run(args) => run::command(&args),
         Command::Devices(args) => devices::command(&args),
         Command::Calibrate(command) => calibrate::run(&command),
+        Command::Export(command) => export::run(&command),
+        Command::Batch(args) => batch::command(&args),
     }
 }
 
