@@ -14,6 +14,8 @@ packages=(
   libopencv-dev opencv-data
   # video export and import
   ffmpeg
+  # batches on a Slurm cluster: scripts/slurm-test starts a one-node cluster on localhost
+  slurm-wlm munge
   # unit and rules checks (scripts/check-units)
   systemd udev
   # the Debian package (scripts/package: dpkg-shlibdeps, strip)
