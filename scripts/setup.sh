@@ -16,6 +16,8 @@ packages=(
   ffmpeg
   # batches on a Slurm cluster: scripts/slurm-test starts a one-node cluster on localhost
   slurm-wlm munge
+  # the report test opens the report page in a headless browser
+  chromium
   # unit and rules checks (scripts/check-units)
   systemd udev
   # the Debian package (scripts/package: dpkg-shlibdeps, strip)

@@ -14,6 +14,7 @@ mod packaging;
 mod paws;
 mod record;
 mod replay;
+mod report;
 mod run;
 mod segment;
 mod session;

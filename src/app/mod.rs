@@ -13,6 +13,7 @@ pub mod export;
 pub mod progress;
 pub mod record;
 pub mod replay;
+pub mod report;
 pub mod run;
 pub mod synth;
 pub mod train;
@@ -61,6 +62,8 @@ enum Command {
     /// Calibrate the cameras: intrinsics of each, then the rig against a board on the glass.
     #[command(subcommand)]
     Calibrate(calibrate::CalibrateCommand),
+    /// A run's behaviour and gait as an HTML page with PNG charts and CSV tables.
+    Report(report::ReportArgs),
     /// Replay many sessions, here or as a Slurm job array, with one table for all.
     Batch(batch::BatchArgs),
     /// Export a session or a run: MoSeq layout, or a video with the skeleton drawn.
@@ -248,6 +251,7 @@ fn run(cli: Cli) -> Outcome {
         Command::Calibrate(command) => calibrate::run(&command),
         Command::Export(command) => export::run(&command),
         Command::Batch(args) => batch::command(&args),
+        Command::Report(args) => report::command(&args),
     }
 }
 
