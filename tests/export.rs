@@ -238,3 +238,106 @@ fn video_export_has_a_frame_per_pose_row_and_the_window_asked_for() {
     assert!(String::from_utf8_lossy(&late.stderr).contains("no frame of the run"));
     assert!(!tmp.path().join("late.mp4").exists());
 }
+
+#[test]
+fn nwb_export_reads_back_with_24_series_and_passes_nwbinspector() {
+    let python = Path::new(mousepose::app::export::nwb::DEFAULT_PYTHON);
+    assert!(python.is_file(), "{python:?} is missing: run scripts/setup.sh");
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    replay_to(&fixture(), &run, None);
+    let rows = std::fs::read_to_string(run.join("poses.csv")).unwrap().lines().count() - 1;
+    let nwb = tmp.path().join("run.nwb");
+    let out = mousepose()
+        .args(["export", "nwb"])
+        .arg(&run)
+        .arg("--out")
+        .arg(&nwb)
+        .args([
+            "--subject-id",
+            "m1",
+            "--age",
+            "P84D",
+            "--experimenter",
+            "Doe, Jane",
+            "--institution",
+            "Lab",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // Read back by pynwb; checked by nwbinspector.
+    let check = r#"
+import json, sys
+import numpy as np
+from pynwb import NWBHDF5IO
+import ndx_pose
+from nwbinspector import inspect_nwbfile, Importance
+with NWBHDF5IO(sys.argv[1], "r") as io:
+    f = io.read()
+    pe = f.processing["behavior"]["PoseEstimation"]
+    series = pe.pose_estimation_series
+    first = next(iter(series.values()))
+    out = {
+        "series": len(series),
+        "names": list(series.keys()),
+        "shapes": sorted({tuple(s.data.shape) for s in series.values()}),
+        "timestamps": len(first.timestamps),
+        "increasing": bool(np.all(np.diff(first.timestamps[:]) > 0)),
+        "conversion": first.conversion,
+        "confidence": len(first.confidence),
+        "edges": len(pe.skeleton.edges),
+        "nodes": len(pe.skeleton.nodes),
+        "software": pe.source_software,
+        "devices": sorted(f.devices.keys()),
+        "subject": f.subject.subject_id,
+        "snout_x0": float(series["snout"].data[0][0]),
+    }
+critical = [m for m in inspect_nwbfile(nwbfile_path=sys.argv[1]) if m.importance == Importance.CRITICAL]
+out["critical"] = [m.message for m in critical]
+print(json.dumps(out))
+"#;
+    let read = Command::new(python).args(["-c", check]).arg(&nwb).output().unwrap();
+    assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&read.stdout).unwrap();
+    assert_eq!(v["series"], 24);
+    let names: Vec<&str> = v["names"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_str().unwrap())
+        .collect();
+    let mut expected: Vec<&str> = mousepose::core::skeleton::Joint::ALL.iter().map(|j| j.name()).collect();
+    let mut got = names.clone();
+    got.sort_unstable();
+    expected.sort_unstable();
+    assert_eq!(got, expected);
+    assert_eq!(v["shapes"], serde_json::json!([[rows, 3]]));
+    assert_eq!(v["timestamps"], rows);
+    assert_eq!(v["increasing"], true);
+    assert_eq!(v["conversion"], 0.001);
+    assert_eq!(v["confidence"], rows);
+    assert_eq!(v["edges"], 23);
+    assert_eq!(v["nodes"], 24);
+    assert_eq!(v["software"], "mousepose");
+    assert_eq!(v["devices"], serde_json::json!(["color_camera", "depth_camera"]));
+    assert_eq!(v["subject"], "m1");
+    assert_eq!(v["critical"], serde_json::json!([]), "{v}");
+    // The first row's snout, as poses.csv has it.
+    let csv = std::fs::read_to_string(run.join("poses.csv")).unwrap();
+    let snout_x: f64 = csv.lines().nth(1).unwrap().split(',').nth(8).unwrap().parse().unwrap();
+    assert!((v["snout_x0"].as_f64().unwrap() - snout_x).abs() < 1e-9);
+
+    // Without the Python environment: one sentence, exit code 1, no file.
+    let missing = mousepose()
+        .args(["export", "nwb"])
+        .arg(&run)
+        .arg("--out")
+        .arg(tmp.path().join("b.nwb"))
+        .args(["--python", "/nonexistent/python3"])
+        .output()
+        .unwrap();
+    assert_eq!(missing.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("cannot run"));
+    assert!(!tmp.path().join("b.nwb").exists());
+}

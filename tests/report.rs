@@ -133,7 +133,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 #[test]
 fn gait_of_a_rendered_walk_matches_the_animators_stride() {
-    let seconds = 8.0;
+    let seconds = 10.0;
     let (seed, walking_s) = walking_seed(seconds);
     assert!(walking_s > 3.0, "seed {seed}: {walking_s} s of walking");
     let tmp = tempfile::tempdir().unwrap();
@@ -185,7 +185,7 @@ fn gait_of_a_rendered_walk_matches_the_animators_stride() {
     assert!(truth_gait.strides.len() >= 12, "{} strides", truth_gait.strides.len());
     let (tl, td) = (median(lengths(&truth_gait)), median(duties(&truth_gait)));
     println!(
-        "truth: {} strides, length {tl:.1} mm, duty {td:.2}",
+        "seed {seed} ({walking_s:.1} s walking); truth: {} strides, length {tl:.1} mm, duty {td:.2}",
         truth_gait.strides.len()
     );
     assert!((tl - 30.0).abs() < 3.0, "true stride {tl} mm");
@@ -201,7 +201,7 @@ fn gait_of_a_rendered_walk_matches_the_animators_stride() {
         "measured: {} strides, length {ml:.1} mm, duty {md:.2}, cadence {cadence:.2} Hz",
         measured.strides.len()
     );
-    assert!(measured.strides.len() >= 8, "{} strides", measured.strides.len());
+    assert!(measured.strides.len() >= 6, "{} strides", measured.strides.len());
     assert!((ml - 30.0).abs() < 4.5, "measured stride {ml} mm");
     assert!((md - 0.6).abs() < 0.15, "measured duty factor {md}");
     // Cadence times stride length is the walking speed.

@@ -397,16 +397,10 @@ fn shell_quote(text: &str) -> String {
     format!("'{}'", text.replace('\'', "'\\''"))
 }
 
-/// The job script of a Slurm array over `items` (task `i` replays line `i + 1` of
+/// The job script of a Slurm array of `tasks` tasks (task `i` replays line `i + 1` of
 /// `tasks.tsv`).
-pub fn job_script(
-    program: &Path,
-    slurm_dir: &Path,
-    items: &[BatchItem],
-    options: &BatchOptions,
-    slurm: &SlurmArgs,
-) -> String {
-    let last = items.len().saturating_sub(1);
+pub fn job_script(program: &Path, slurm_dir: &Path, tasks: usize, options: &BatchOptions, slurm: &SlurmArgs) -> String {
+    let last = tasks.saturating_sub(1);
     let throttle = slurm.max_parallel.map(|n| format!("%{n}")).unwrap_or_default();
     let mut s = String::from("#!/bin/bash\n");
     let _ = writeln!(s, "#SBATCH --job-name={}", slurm.job_name);
@@ -517,8 +511,7 @@ fn run_slurm(
         }
         crate::app::write_report_file(&slurm_dir, "tasks.tsv", tasks.as_bytes())?;
         let program = std::env::current_exe().context("finding the mousepose program")?;
-        let owned: Vec<BatchItem> = todo.iter().map(|i| (*i).clone()).collect();
-        let script = job_script(&program, &slurm_dir, &owned, options, slurm);
+        let script = job_script(&program, &slurm_dir, todo.len(), options, slurm);
         let script_path = slurm_dir.join("job.sh");
         crate::app::write_report_file(&slurm_dir, "job.sh", script.as_bytes())?;
         let submitted = slurm_command("sbatch", &["--parsable", &script_path.to_string_lossy()])?;

@@ -1,9 +1,11 @@
-//! `mousepose export`: what researchers take away from a session or a run. `moseq` writes a
+//! `mousepose export`: what researchers take away from a session or a run. `nwb` writes the
+//! poses as NWB with ndx-pose (through pynwb); `moseq` writes a
 //! session in MoSeq's acquisition layout (lossless FFV1 depth, timestamps, metadata) and the
 //! colour camera as its own lossless video; `video` draws a run's poses over its frames into
 //! an H.264 MP4.
 
 pub mod moseq;
+pub mod nwb;
 pub mod video;
 
 use crate::app::replay::SUMMARY_FILE;
@@ -13,6 +15,9 @@ use std::path::{Path, PathBuf};
 
 #[derive(Debug, Subcommand)]
 pub enum ExportCommand {
+    /// A run's poses as NWB 2.x with ndx-pose (24 PoseEstimationSeries, the skeleton, the
+    /// cameras), written by pynwb.
+    Nwb(nwb::NwbArgs),
     /// A session in MoSeq's layout: depth.avi (FFV1 16-bit), depth_ts.txt, metadata.json,
     /// and the colour camera as color.avi (FFV1) with color_ts.txt.
     Moseq(moseq::MoseqArgs),
@@ -24,6 +29,7 @@ pub enum ExportCommand {
 /// `mousepose export`.
 pub fn run(command: &ExportCommand) -> crate::app::Outcome {
     match command {
+        ExportCommand::Nwb(args) => nwb::command(args),
         ExportCommand::Moseq(args) => moseq::command(args),
         ExportCommand::Video(args) => video::command(args),
     }
