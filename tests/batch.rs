@@ -1,5 +1,6 @@
 //! Batches: `replay` over several sessions or a glob (resumable, one table for all), and
 //! `batch --slurm` on a real one-node Slurm cluster started for the test.
+#![allow(clippy::unwrap_used)] // the helpers below are test code too
 
 use crate::util::{mousepose, repo_root};
 use std::path::Path;

@@ -1,5 +1,6 @@
 //! `mousepose export`: the MoSeq layout read back frame for frame and replayed to the same
 //! poses, and the video's frame count and size as ffprobe sees them.
+#![allow(clippy::unwrap_used)] // the helpers below are test code too
 
 use crate::util::{mousepose, repo_root};
 use mousepose::app::export::moseq::{COLOR_AVI, RIG_FILE, export_moseq};

@@ -1,6 +1,7 @@
 //! `mousepose report`: the page opens in headless Chromium with every image, the tables hold
 //! every frame, and the gait measured on a rendered walking mouse matches what its animator
 //! knows (a stride of 30 mm when walking, stance 60 % of it).
+#![allow(clippy::unwrap_used)] // the helpers below are test code too
 
 use crate::util::{mousepose, repo_root};
 use mousepose::app::replay::{ReplayOptions, replay};
