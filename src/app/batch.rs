@@ -350,6 +350,22 @@ pub fn replay_many(sessions: &[PathBuf], out: &Path, options: &BatchOptions, jso
     report(&out, &rows, json)
 }
 
+/// `mousepose replay` with several sessions or a pattern.
+pub fn replay_command(args: &crate::app::replay::ReplayArgs) -> crate::app::Outcome {
+    if args.realtime || args.overlays.is_some() {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "--realtime and --overlays are for one session, not a batch"
+        )));
+    }
+    let options = BatchOptions {
+        models: args.models.clone(),
+        workers: args.workers as usize,
+        calibration: args.calibration.clone(),
+        force: args.force,
+    };
+    replay_many(&args.sessions, &args.out, &options, args.json)
+}
+
 /// Resources and placement of the Slurm job.
 #[derive(Clone, Debug, Args)]
 pub struct SlurmArgs {

@@ -244,6 +244,7 @@ fn run(cli: Cli) -> Outcome {
         Command::Eval(args) => eval::run(&args),
         Command::Experiment(experiment::ExperimentCommand::Gauss2d(args)) => experiment::gauss2d(&args),
         Command::Bench(args) => bench::command(&args),
+        Command::Replay(args) if batch::is_batch(&args.sessions) => batch::replay_command(&args),
         Command::Replay(args) => replay::command(&args),
         Command::Record(args) => record::command(&args),
         Command::Run(args) => run::command(&args),

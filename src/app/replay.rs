@@ -338,22 +338,8 @@ pub struct ReplayArgs {
     pub force: bool,
 }
 
-/// `mousepose replay`.
+/// `mousepose replay` of one session (several make a batch, run by the batch command's module).
 pub fn command(args: &ReplayArgs) -> crate::app::Outcome {
-    if crate::app::batch::is_batch(&args.sessions) {
-        if args.realtime || args.overlays.is_some() {
-            return Err(Failure::usage(anyhow::anyhow!(
-                "--realtime and --overlays are for one session, not a batch"
-            )));
-        }
-        let options = crate::app::batch::BatchOptions {
-            models: args.models.clone(),
-            workers: args.workers as usize,
-            calibration: args.calibration.clone(),
-            force: args.force,
-        };
-        return crate::app::batch::replay_many(&args.sessions, &args.out, &options, args.json);
-    }
     let session = args.sessions.first().cloned().unwrap_or_default();
     let options = ReplayOptions {
         session: session.clone(),
