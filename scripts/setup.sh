@@ -14,12 +14,16 @@ packages=(
   libopencv-dev opencv-data
   # video export and import
   ffmpeg
+  # batches on a Slurm cluster: scripts/slurm-test starts a one-node cluster on localhost
+  slurm-wlm munge
+  # the tests render the report and the daemon's live page in a headless browser
+  chromium
+  # the Python environment of `export nwb` (below)
+  python3-venv
   # unit and rules checks (scripts/check-units)
   systemd udev
   # the Debian package (scripts/package: dpkg-shlibdeps, strip)
   dpkg-dev binutils
-  # the daemon's live page, rendered headless by the tests
-  chromium
 )
 
 missing=()
@@ -38,6 +42,20 @@ if ((${#missing[@]})); then
   export DEBIAN_FRONTEND=noninteractive
   apt-get update -qq
   apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+# `mousepose export nwb` writes NWB with the ecosystem's own libraries, pynwb and ndx-pose,
+# in a Python environment of mousepose's own (nwbinspector checks the files in the tests).
+nwb_venv=/opt/mousepose/venv
+if ! "$nwb_venv/bin/python3" -c 'import pynwb, ndx_pose, nwbinspector' >/dev/null 2>&1; then
+  if [[ $(id -u) -ne 0 ]]; then
+    echo "setup: the Python environment $nwb_venv (pynwb, ndx-pose) is missing and making it needs root" >&2
+    exit 1
+  fi
+  echo "setup: making the Python environment $nwb_venv (pynwb, ndx-pose, nwbinspector)" >&2
+  mkdir -p "$(dirname "$nwb_venv")"
+  /usr/bin/python3 -m venv "$nwb_venv"
+  "$nwb_venv/bin/pip" install -q --disable-pip-version-check 'pynwb>=3' 'ndx-pose>=0.2' nwbinspector
 fi
 
 if ! command -v cargo >/dev/null 2>&1; then

@@ -1,11 +1,13 @@
 //! The one integration test binary: each module tests one area through the public API or the
 //! built `mousepose` binary.
 
+mod batch;
 mod calibrate;
 mod capture_aravis;
 mod capture_openni;
 mod capture_v4l2;
 mod cli;
+mod export;
 mod forest;
 mod http;
 mod layers;
@@ -13,6 +15,7 @@ mod packaging;
 mod paws;
 mod record;
 mod replay;
+mod report;
 mod run;
 mod segment;
 mod session;

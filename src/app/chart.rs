@@ -294,3 +294,170 @@ pub fn confusion_chart(title: &str, labels: &[String], counts: &[Vec<u64>]) -> R
     }
     img
 }
+
+/// Lines over a long shared x axis (a time series): six evenly spaced x ticks instead of one
+/// per value, and a dashed horizontal line at each of `marks` (a threshold).
+pub fn series_chart(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    x: &[f64],
+    series: &[Series<'_>],
+    marks: &[f64],
+) -> RgbImage {
+    let all = || {
+        series
+            .iter()
+            .flat_map(|s| s.2.iter().copied())
+            .chain(marks.iter().copied())
+            .filter(|v| v.is_finite())
+    };
+    let lo = all().fold(f64::INFINITY, f64::min).min(0.0);
+    let hi = nice_max(all().fold(f64::NEG_INFINITY, f64::max));
+    let (lo, hi) = if lo.is_finite() && hi > lo {
+        (lo, hi)
+    } else {
+        (0.0, 1.0)
+    };
+    let mut img = frame(title, y_label, lo, hi);
+    let plot_w = f64::from(W) - LEFT - RIGHT;
+    let plot_h = f64::from(H) - TOP - BOTTOM;
+    let finite = || x.iter().copied().filter(|v| v.is_finite());
+    let (x_lo, x_hi) = (
+        finite().fold(f64::INFINITY, f64::min),
+        finite().fold(f64::NEG_INFINITY, f64::max),
+    );
+    let (x_lo, span) = if x_hi > x_lo { (x_lo, x_hi - x_lo) } else { (0.0, 1.0) };
+    let px = |v: f64| LEFT + plot_w * (v - x_lo) / span;
+    let py = |v: f64| TOP + plot_h * (1.0 - (v - lo) / (hi - lo));
+    for k in 0..=5 {
+        let v = x_lo + span * f64::from(k) / 5.0;
+        let label = format_number(v);
+        draw_text(
+            &mut img,
+            px(v) as i64 - i64::from(text_width(&label, 1)) / 2,
+            (TOP + plot_h) as i64 + 8,
+            &label,
+            INK,
+            1,
+        );
+    }
+    draw_text(
+        &mut img,
+        (LEFT + plot_w / 2.0) as i64,
+        (TOP + plot_h) as i64 + 28,
+        x_label,
+        INK,
+        1,
+    );
+    for &m in marks {
+        let y = py(m);
+        let mut x0 = LEFT;
+        while x0 < LEFT + plot_w {
+            img.line((x0, y), ((x0 + 6.0).min(LEFT + plot_w), y), [200, 60, 60], 1.0);
+            x0 += 12.0;
+        }
+    }
+    for (_, colour, values) in series {
+        // Gaps (non-finite values) break the line.
+        let mut last: Option<(f64, f64)> = None;
+        for (&a, &b) in x.iter().zip(values.iter()) {
+            if !(a.is_finite() && b.is_finite()) {
+                last = None;
+                continue;
+            }
+            let p = (px(a), py(b));
+            if let Some(q) = last {
+                img.line(q, p, *colour, 1.5);
+            }
+            last = Some(p);
+        }
+    }
+    legend(&mut img, series);
+    img
+}
+
+/// A path in a rectangle (the cage seen from above, `extent` its half sizes in mm, centred on
+/// the origin), coloured from blue (start) to red (end), with the centre zone outlined.
+pub fn path_chart(title: &str, points: &[Option<(f64, f64)>], extent: (f64, f64)) -> RgbImage {
+    let (hx, hy) = extent;
+    let scale = ((f64::from(W) - LEFT - RIGHT) / (2.0 * hx)).min((f64::from(H) - TOP - 30.0) / (2.0 * hy));
+    let (w, h) = (2.0 * hx * scale, 2.0 * hy * scale);
+    let mut img = RgbImage::new(W, H, [255, 255, 255]);
+    draw_text(&mut img, LEFT as i64, 15, title, INK, 2);
+    let (x0, y0) = ((f64::from(W) - w) / 2.0, TOP);
+    // y up in the cage, down in the picture.
+    let to_px = |(x, y): (f64, f64)| (x0 + (x + hx) * scale, y0 + (hy - y) * scale);
+    img.rect((x0, y0), (x0 + w, y0 + h), INK, 2.0);
+    img.rect(to_px((-hx / 2.0, hy / 2.0)), to_px((hx / 2.0, -hy / 2.0)), GRID, 1.0);
+    let n = points.len().max(2) as f64;
+    let mut last: Option<(f64, f64)> = None;
+    for (i, p) in points.iter().enumerate() {
+        let Some(p) = p else {
+            last = None;
+            continue;
+        };
+        let f = i as f64 / (n - 1.0);
+        let colour = [(255.0 * f) as u8, 60, (255.0 * (1.0 - f)) as u8];
+        let q = to_px(*p);
+        if let Some(l) = last {
+            img.line(l, q, colour, 1.5);
+        }
+        last = Some(q);
+    }
+    let label = format!("{:.0} x {:.0} mm", 2.0 * hx, 2.0 * hy);
+    draw_text(&mut img, x0 as i64, (y0 + h) as i64 + 10, &label, INK, 1);
+    img
+}
+
+/// Horizontal bars over time, one row per name: where each row's flags are set (a gait
+/// diagram: stance of each paw over time).
+pub fn raster_chart(title: &str, x_label: &str, x: &[f64], rows: &[(&str, Vec<bool>)]) -> RgbImage {
+    let mut img = RgbImage::new(W, H, [255, 255, 255]);
+    draw_text(&mut img, LEFT as i64, 15, title, INK, 2);
+    let left = 130.0;
+    let plot_w = f64::from(W) - left - RIGHT;
+    let plot_h = f64::from(H) - TOP - BOTTOM;
+    let row_h = plot_h / rows.len().max(1) as f64;
+    let (x_lo, x_hi) = (
+        x.iter().copied().fold(f64::INFINITY, f64::min),
+        x.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+    );
+    let (x_lo, span) = if x_hi > x_lo { (x_lo, x_hi - x_lo) } else { (0.0, 1.0) };
+    let step = if x.len() > 1 { span / (x.len() - 1) as f64 } else { 1.0 };
+    let px = |v: f64| left + plot_w * (v - x_lo) / (span + step);
+    for (r, (name, flags)) in rows.iter().enumerate() {
+        let y = TOP + row_h * r as f64;
+        draw_text(&mut img, 8, (y + row_h / 2.0) as i64 - 3, name, INK, 1);
+        for (&v, &on) in x.iter().zip(flags) {
+            if on {
+                for yy in (y + 2.0) as i64..(y + row_h - 2.0) as i64 {
+                    for xx in px(v) as i64..px(v + step).ceil() as i64 {
+                        img.put(xx, yy, [40, 90, 200]);
+                    }
+                }
+            }
+        }
+    }
+    for k in 0..=5 {
+        let v = x_lo + span * f64::from(k) / 5.0;
+        let label = format_number(v);
+        draw_text(
+            &mut img,
+            px(v) as i64 - i64::from(text_width(&label, 1)) / 2,
+            (TOP + plot_h) as i64 + 8,
+            &label,
+            INK,
+            1,
+        );
+    }
+    draw_text(
+        &mut img,
+        (left + plot_w / 2.0) as i64,
+        (TOP + plot_h) as i64 + 28,
+        x_label,
+        INK,
+        1,
+    );
+    img
+}

@@ -2,15 +2,18 @@
 //! clap and exit codes: every command returns a [`Failure`] that says which code it means.
 //! `main.rs` only calls [`main`].
 
+pub mod batch;
 pub mod bench;
 pub mod calibrate;
 pub mod chart;
 pub mod devices;
 pub mod eval;
 pub mod experiment;
+pub mod export;
 pub mod progress;
 pub mod record;
 pub mod replay;
+pub mod report;
 pub mod run;
 pub mod status;
 pub mod synth;
@@ -62,6 +65,13 @@ enum Command {
     /// Calibrate the cameras: intrinsics of each, then the rig against a board on the glass.
     #[command(subcommand)]
     Calibrate(calibrate::CalibrateCommand),
+    /// A run's behaviour and gait as an HTML page with PNG charts and CSV tables.
+    Report(report::ReportArgs),
+    /// Replay many sessions, here or as a Slurm job array, with one table for all.
+    Batch(batch::BatchArgs),
+    /// Export a session or a run: MoSeq layout, or a video with the skeleton drawn.
+    #[command(subcommand)]
+    Export(export::ExportCommand),
 }
 
 /// Why a command failed, and the exit code that means: 1 when what the user asked for cannot
@@ -239,12 +249,16 @@ fn run(cli: Cli) -> Outcome {
         Command::Eval(args) => eval::run(&args),
         Command::Experiment(experiment::ExperimentCommand::Gauss2d(args)) => experiment::gauss2d(&args),
         Command::Bench(args) => bench::command(&args),
+        Command::Replay(args) if batch::is_batch(&args.sessions) => batch::replay_command(&args),
         Command::Replay(args) => replay::command(&args),
         Command::Record(args) => record::command(&args),
         Command::Run(args) => run::command(&args),
         Command::Status(args) => status::command(&args),
         Command::Devices(args) => devices::command(&args),
         Command::Calibrate(command) => calibrate::run(&command),
+        Command::Export(command) => export::run(&command),
+        Command::Batch(args) => batch::command(&args),
+        Command::Report(args) => report::command(&args),
     }
 }
 

@@ -85,7 +85,11 @@ pub struct PairingCheck {
 /// `summary.json`.
 #[derive(Clone, Debug, Serialize)]
 pub struct ReplaySummary {
+    /// The session replayed (absolute, so that `export video` finds it from anywhere).
     pub session: PathBuf,
+    /// The calibration used instead of the session's own (`--calibration`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<PathBuf>,
     pub software_version: &'static str,
     pub body_model: PathBuf,
     /// The paw cascade, when the models directory has one.
@@ -212,7 +216,11 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         }
     });
     let summary = ReplaySummary {
-        session: options.session.clone(),
+        session: std::fs::canonicalize(&options.session).unwrap_or_else(|_| options.session.clone()),
+        calibration: options
+            .calibration
+            .as_ref()
+            .map(|c| std::fs::canonicalize(c).unwrap_or_else(|_| c.clone())),
         software_version: env!("CARGO_PKG_VERSION"),
         body_model,
         paw_model,
@@ -298,10 +306,12 @@ pub fn summary_text(summary: &ReplaySummary, out: &Path) -> String {
 
 #[derive(Debug, Args)]
 pub struct ReplayArgs {
-    /// The session directory (written by `record`, `run` or `synth session`).
-    #[arg(value_name = "SESSION")]
-    pub session: PathBuf,
-    /// The directory to write poses.csv and summary.json into.
+    /// The session directory (written by `record`, `run` or `synth session`, or a MoSeq
+    /// recording). Several sessions, or a glob pattern (quoted), make a batch: each session
+    /// goes to DIR/<session name>/, finished ones are skipped, and DIR/batch.csv sums up.
+    #[arg(value_name = "SESSION", required = true)]
+    pub sessions: Vec<PathBuf>,
+    /// The directory to write poses.csv and summary.json into (a batch: the sessions' parent).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// The models directory (body.forest); the bundled models by default.
@@ -328,10 +338,11 @@ pub struct ReplayArgs {
     pub force: bool,
 }
 
-/// `mousepose replay`.
+/// `mousepose replay` of one session (several make a batch, run by the batch command's module).
 pub fn command(args: &ReplayArgs) -> crate::app::Outcome {
+    let session = args.sessions.first().cloned().unwrap_or_default();
     let options = ReplayOptions {
-        session: args.session.clone(),
+        session: session.clone(),
         out: args.out.clone(),
         models: args.models.clone(),
         realtime: args.realtime,
@@ -346,7 +357,7 @@ pub fn command(args: &ReplayArgs) -> crate::app::Outcome {
             ReplayError::Recording(RecordingError::Calibration(c)) => c.is_input_problem(),
             _ => false,
         };
-        Failure::classed(usage, e).context(format!("replaying {:?}", args.session))
+        Failure::classed(usage, e).context(format!("replaying {session:?}"))
     })?;
     if args.json {
         return Ok(print_json(&summary)?);

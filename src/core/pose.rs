@@ -32,6 +32,19 @@ impl JointSource {
             JointSource::Missing => "missing",
         }
     }
+
+    /// The source a name of [`JointSource::name`] stands for.
+    pub fn from_name(name: &str) -> Option<Self> {
+        [
+            JointSource::Depth,
+            JointSource::Paw,
+            JointSource::Ik,
+            JointSource::Default,
+            JointSource::Missing,
+        ]
+        .into_iter()
+        .find(|s| s.name() == name)
+    }
 }
 
 impl fmt::Display for JointSource {

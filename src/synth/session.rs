@@ -58,6 +58,14 @@ impl Default for SessionSpec {
     }
 }
 
+/// The animated mouse of the session of a seed, at its start: what [`write_session`] renders
+/// (tests read its behaviour, e.g. its walking, without rendering).
+pub fn session_animator(seed: u64) -> Animator {
+    let mut mouse_rng = item_rng(seed, STREAM_MOUSE, 0);
+    let build = random_placement(&mut mouse_rng);
+    Animator::new(mouse_rng, build)
+}
+
 // RNG streams of a session.
 const STREAM_MOUSE: u64 = 10;
 const STREAM_CLOCKS: u64 = 11;
@@ -167,9 +175,7 @@ fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
         .collect();
     times.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
 
-    let mut mouse_rng = item_rng(spec.seed, STREAM_MOUSE, 0);
-    let build = random_placement(&mut mouse_rng);
-    let mut animator = Animator::new(mouse_rng, build);
+    let mut animator = session_animator(spec.seed);
     let mut now = 0.0;
     let mut shots = Vec::with_capacity(times.len());
     let mut events = Vec::new();

@@ -1,8 +1,9 @@
 //! The algorithms of the paper, as pure code: segmentation of the mouse in the depth image,
 //! the forests and their discriminative training, the paw cascade, fusion into 24 joints and
-//! the calibration maths. They know nothing of threads or the command line, and open only the
+//! the calibration maths; and the behaviour and gait measures read from a run's poses. They know nothing of threads or the command line, and open only the
 //! files they are asked to (models, calibrations).
 
+pub mod behaviour;
 pub mod calibrate;
 pub mod forest;
 pub mod fusion;

@@ -220,3 +220,118 @@ impl Sink for PoseWriter {
         Ok(())
     }
 }
+
+/// What is wrong with a `poses.csv` being read back.
+#[derive(Debug, thiserror::Error)]
+pub enum PosesReadError {
+    #[error("cannot read {path:?}")]
+    Io {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path:?} does not start with the header of poses.csv")]
+    Header { path: std::path::PathBuf },
+    #[error("{path:?} line {line}: {what}")]
+    Row {
+        path: std::path::PathBuf,
+        line: usize,
+        what: String,
+    },
+}
+
+/// Reads a `poses.csv` back into pose records, in row order (the colour stamp's host time,
+/// which the file does not hold, reads as 0; `paws` is empty).
+///
+/// # Errors
+/// The file cannot be read, its header is not this version's, or a row does not parse.
+pub fn read_poses(path: &Path) -> Result<Vec<PoseRecord>, PosesReadError> {
+    let text = std::fs::read_to_string(path).map_err(|source| PosesReadError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    let mut lines = text.lines();
+    if lines.next() != Some(header().as_str()) {
+        return Err(PosesReadError::Header { path: path.to_owned() });
+    }
+    lines
+        .enumerate()
+        .filter(|(_, l)| !l.is_empty())
+        .map(|(i, line)| {
+            parse_row(line).map_err(|what| PosesReadError::Row {
+                path: path.to_owned(),
+                line: i + 2,
+                what,
+            })
+        })
+        .collect()
+}
+
+fn parse_row(line: &str) -> Result<PoseRecord, String> {
+    use crate::core::frame::Stamp;
+    use crate::core::pose::{JointEstimate, Pose};
+    let fields: Vec<&str> = line.split(',').collect();
+    let expected = 8 + 5 * JOINT_COUNT;
+    if fields.len() != expected {
+        return Err(format!("{} columns, expected {expected}", fields.len()));
+    }
+    let field = |i: usize| fields.get(i).copied().unwrap_or_default();
+    let int = |i: usize| -> Result<Option<i64>, String> {
+        let f = field(i);
+        if f.is_empty() {
+            return Ok(None);
+        }
+        f.parse().map(Some).map_err(|_| format!("{f:?} is not a whole number"))
+    };
+    let unsigned = |i: usize| -> Result<Option<u64>, String> {
+        int(i)?
+            .map(|v| u64::try_from(v).map_err(|_| format!("{v} is negative")))
+            .transpose()
+    };
+    let need = |v: Option<u64>, what: &str| v.ok_or_else(|| format!("no {what}"));
+    let depth = Stamp {
+        seq: need(unsigned(1)?, "depth_seq")?,
+        host_ns: need(unsigned(3)?, "host_ns")?,
+        device_ns: need(unsigned(4)?, "depth_device_ns")?,
+    };
+    let color = match (unsigned(2)?, unsigned(5)?) {
+        (Some(seq), Some(device_ns)) => Some(Stamp {
+            seq,
+            device_ns,
+            host_ns: 0,
+        }),
+        (None, None) => None,
+        _ => return Err("color_seq and color_device_ns must both be there or both be empty".to_owned()),
+    };
+    let status = PoseStatus::from_name(field(7)).ok_or_else(|| format!("unknown status {:?}", field(7)))?;
+    let mut pose = Pose::default();
+    for (k, joint) in pose.joints.iter_mut().enumerate() {
+        let base = 8 + 5 * k;
+        let source_text = field(base + 4);
+        let source =
+            JointSource::from_name(source_text).ok_or_else(|| format!("unknown joint source {source_text:?}"))?;
+        if source == JointSource::Missing {
+            continue;
+        }
+        let num = |i: usize| -> Result<f64, String> {
+            let f = field(i);
+            f.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("{f:?} is not a number"))
+        };
+        *joint = JointEstimate {
+            position_mm: nalgebra::Point3::new(num(base)?, num(base + 1)?, num(base + 2)?),
+            score: num(base + 3)?,
+            source,
+        };
+    }
+    Ok(PoseRecord {
+        depth,
+        color,
+        skew_ns: int(6)?.unwrap_or(0),
+        status,
+        pose,
+        paws: Vec::new(),
+    })
+}

@@ -40,6 +40,13 @@ impl PoseStatus {
             PoseStatus::NoBackground => "no_background",
         }
     }
+
+    /// The status a value of the `status` column stands for.
+    pub fn from_name(name: &str) -> Option<Self> {
+        [PoseStatus::Ok, PoseStatus::NoMouse, PoseStatus::NoBackground]
+            .into_iter()
+            .find(|s| s.name() == name)
+    }
 }
 
 /// The pose of one frame pair, with the frames' metadata (the frames themselves are dropped

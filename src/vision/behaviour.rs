@@ -1,0 +1,549 @@
+//! Behaviour and gait measures from a sequence of poses: the path and speed of the body's
+//! centre, time by the walls and in the centre of the cage, rearing bouts (head height), and
+//! gait over walking bouts from the paws on the glass (stance and swing per paw, stride
+//! length, cadence, duty factor, base of support, inter-limb phase), the measures CatWalk
+//! and LocoMouse users read.
+//!
+//! Pure code: it takes per-frame times, positions and stance flags and returns numbers; the
+//! report command reads `poses.csv`, and the tests feed it a synthetic session's truth.
+
+use nalgebra::{Point2, Vector2};
+use serde::Serialize;
+
+/// Thresholds of the analysis.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct BehaviourConfig {
+    /// Positions are averaged over this long before speeds are taken (the estimate's frame to
+    /// frame jitter would otherwise read as motion), seconds.
+    pub smooth_s: f64,
+    /// Walking: smoothed speed between these (slower is standing or turning on the spot,
+    /// faster is running or bounding), mm/s.
+    pub walk_min_mm_s: f64,
+    pub walk_max_mm_s: f64,
+    /// Shortest walking bout, seconds.
+    pub min_walk_s: f64,
+    /// Rearing: head this high above the glass, mm.
+    pub rear_head_mm: f64,
+    /// Shortest rearing bout, seconds.
+    pub min_rear_s: f64,
+    /// By the walls: the body's centre within this of a wall, mm.
+    pub wall_band_mm: f64,
+    /// A paw found on the glass is in stance while it moves slower than this share of the
+    /// body's speed plus the margin (planted, it stays put; in swing it overtakes the body).
+    pub stance_speed_factor: f64,
+    pub stance_margin_mm_s: f64,
+    /// Strides with a period outside this range are not strides (a lost paw, a pause), s.
+    pub min_stride_s: f64,
+    pub max_stride_s: f64,
+}
+
+impl Default for BehaviourConfig {
+    fn default() -> Self {
+        Self {
+            smooth_s: 0.2,
+            walk_min_mm_s: 50.0,
+            walk_max_mm_s: 200.0,
+            min_walk_s: 0.4,
+            rear_head_mm: 40.0,
+            min_rear_s: 0.2,
+            wall_band_mm: 60.0,
+            stance_speed_factor: 1.2,
+            stance_margin_mm_s: 20.0,
+            min_stride_s: 0.08,
+            max_stride_s: 1.0,
+        }
+    }
+}
+
+/// One frame's input.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameInput {
+    pub t_s: f64,
+    /// The body's centre on the floor plane (mm), when the mouse was found.
+    pub centre: Option<Point2<f64>>,
+    /// Where the body points (tail base to neck), for the base of support.
+    pub axis: Option<Vector2<f64>>,
+    /// Height of the head above the glass, mm.
+    pub head_z_mm: Option<f64>,
+    /// Per paw (left fore, right fore, left hind, right hind): its place on the glass when
+    /// the bottom camera found it there, `None` when not seen. The bottom view also finds a
+    /// paw lifted a few millimetres in swing: stance is told from swing by the paw's speed.
+    pub paws: [Option<Point2<f64>>; 4],
+}
+
+/// Where the body's centre was.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Zone {
+    /// The central rectangle, half the cage's length and width.
+    Centre,
+    /// Within the wall band of a wall.
+    Wall,
+    /// Neither.
+    Between,
+    /// The mouse was not found.
+    Unknown,
+}
+
+impl Zone {
+    pub fn name(self) -> &'static str {
+        match self {
+            Zone::Centre => "centre",
+            Zone::Wall => "wall",
+            Zone::Between => "between",
+            Zone::Unknown => "unknown",
+        }
+    }
+}
+
+/// Per frame results.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FrameResult {
+    pub t_s: f64,
+    pub speed_mm_s: Option<f64>,
+    pub distance_mm: f64,
+    pub zone: Zone,
+    pub rearing: bool,
+    pub walking: bool,
+    /// Stance of each paw after one-frame gaps and blips are removed.
+    pub stance: [bool; 4],
+}
+
+/// A bout of one behaviour.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Bout {
+    pub start_s: f64,
+    pub end_s: f64,
+}
+
+impl Bout {
+    pub fn duration_s(&self) -> f64 {
+        self.end_s - self.start_s
+    }
+}
+
+/// One stride of one paw: from a touchdown to its next, within one walking bout.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Stride {
+    /// 0 left fore, 1 right fore, 2 left hind, 3 right hind.
+    pub paw: usize,
+    pub start_s: f64,
+    pub period_s: f64,
+    /// Between the centres of the two stance phases' footprints, mm.
+    pub length_mm: f64,
+    /// Stance time over the period.
+    pub duty_factor: f64,
+}
+
+/// The paws' names in the analysis's order.
+pub const PAW_NAMES: [&str; 4] = ["left_fore", "right_fore", "left_hind", "right_hind"];
+
+/// Per paw gait summary (medians over its strides).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct PawGait {
+    pub strides: usize,
+    pub stride_length_mm: Option<f64>,
+    /// Strides per second.
+    pub cadence_hz: Option<f64>,
+    pub duty_factor: Option<f64>,
+}
+
+/// The whole analysis.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Behaviour {
+    pub duration_s: f64,
+    pub distance_mm: f64,
+    pub mean_speed_mm_s: Option<f64>,
+    /// Seconds per zone, in [`Zone`] order: centre, wall, between, unknown.
+    pub zone_s: [f64; 4],
+    pub rearing: Vec<Bout>,
+    pub walking: Vec<Bout>,
+    pub strides: Vec<Stride>,
+    pub paws: [PawGait; 4],
+    /// Median distance across the body between the left and right paws both in stance, fore
+    /// and hind, mm.
+    pub base_of_support_fore_mm: Option<f64>,
+    pub base_of_support_hind_mm: Option<f64>,
+    /// Circular mean of the touchdown of each paw in the left hind paw's stride (0..1), paws
+    /// in [`PAW_NAMES`] order (the left hind's own is 0).
+    pub phase_to_left_hind: [Option<f64>; 4],
+    pub frames: Vec<FrameResult>,
+}
+
+fn median(values: &mut [f64]) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    Some(if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        (values[n / 2 - 1] + values[n / 2]) / 2.0
+    })
+}
+
+/// Runs of `true` as `(first, last)` index pairs.
+fn runs(flags: &[bool]) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut start = None;
+    for (i, &f) in flags.iter().enumerate() {
+        match (f, start) {
+            (true, None) => start = Some(i),
+            (false, Some(s)) => {
+                out.push((s, i - 1));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        out.push((s, flags.len() - 1));
+    }
+    out
+}
+
+/// Fills one-frame gaps in stance and removes one-frame stances (a missed or a spurious
+/// detection), so that a stride is not cut in two.
+fn clean_stance(flags: &[bool]) -> Vec<bool> {
+    let mut out = flags.to_vec();
+    for i in 1..flags.len().saturating_sub(1) {
+        if !flags[i] && flags[i - 1] && flags[i + 1] {
+            out[i] = true;
+        }
+    }
+    let filled = out.clone();
+    for i in 0..filled.len() {
+        let before = i > 0 && filled[i - 1];
+        let after = i + 1 < filled.len() && filled[i + 1];
+        if filled[i] && !before && !after {
+            out[i] = false;
+        }
+    }
+    out
+}
+
+/// Centred moving average of the centres over `half` frames each side (frames without a
+/// centre are left out of the average; a frame without one stays without).
+fn smooth(centres: &[Option<Point2<f64>>], half: usize) -> Vec<Option<Point2<f64>>> {
+    (0..centres.len())
+        .map(|i| {
+            centres[i]?;
+            let lo = i.saturating_sub(half);
+            let hi = (i + half).min(centres.len() - 1);
+            let (sum, n) = centres[lo..=hi]
+                .iter()
+                .flatten()
+                .fold((Vector2::zeros(), 0.0), |(s, n), p| (s + p.coords, n + 1.0));
+            Some(Point2::from(sum / n))
+        })
+        .collect()
+}
+
+/// The bouts of `flags` lasting at least `min_s`, and the flags with shorter ones cleared.
+fn bouts(t: &[f64], flags: &[bool], min_s: f64, dt: f64) -> (Vec<Bout>, Vec<bool>) {
+    let mut kept = vec![false; flags.len()];
+    let mut out = Vec::new();
+    for (a, b) in runs(flags) {
+        let bout = Bout {
+            start_s: t[a],
+            end_s: t[b] + dt,
+        };
+        if bout.duration_s() >= min_s {
+            kept[a..=b].iter_mut().for_each(|k| *k = true);
+            out.push(bout);
+        }
+    }
+    (out, kept)
+}
+
+/// The cage's zone of a centre (the cage centred on the origin, `cage_mm` its inside size).
+pub fn zone(p: Option<Point2<f64>>, cage_mm: (f64, f64), wall_band_mm: f64) -> Zone {
+    let Some(p) = p else { return Zone::Unknown };
+    let (hx, hy) = (cage_mm.0 / 2.0, cage_mm.1 / 2.0);
+    if p.x.abs() <= hx / 2.0 && p.y.abs() <= hy / 2.0 {
+        Zone::Centre
+    } else if hx - p.x.abs() <= wall_band_mm || hy - p.y.abs() <= wall_band_mm {
+        Zone::Wall
+    } else {
+        Zone::Between
+    }
+}
+
+/// Analyses `frames` (in time order) in a cage of `cage_mm` inside size centred on the
+/// origin.
+pub fn analyse(frames: &[FrameInput], cage_mm: (f64, f64), config: &BehaviourConfig) -> Behaviour {
+    let n = frames.len();
+    let t: Vec<f64> = frames.iter().map(|f| f.t_s).collect();
+    let dt = if n > 1 {
+        let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+        median(&mut steps).unwrap_or(1.0 / 30.0)
+    } else {
+        1.0 / 30.0
+    };
+    let half = ((config.smooth_s / dt / 2.0).round() as usize).max(1);
+    let centres: Vec<Option<Point2<f64>>> = frames.iter().map(|f| f.centre).collect();
+    let smoothed = smooth(&centres, half);
+
+    // Speed: central differences of the smoothed centre; distance: its steps.
+    let speed: Vec<Option<f64>> = (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(n.saturating_sub(1)));
+            match (smoothed.get(a).copied().flatten(), smoothed.get(b).copied().flatten()) {
+                (Some(p), Some(q)) if t[b] > t[a] => Some((q - p).norm() / (t[b] - t[a])),
+                _ => None,
+            }
+        })
+        .collect();
+    let mut distance = 0.0;
+    let mut cumulative = Vec::with_capacity(n);
+    for i in 0..n {
+        if i > 0
+            && let (Some(p), Some(q)) = (smoothed[i - 1], smoothed[i])
+        {
+            distance += (q - p).norm();
+        }
+        cumulative.push(distance);
+    }
+
+    let rear_flags: Vec<bool> = frames
+        .iter()
+        .map(|f| f.head_z_mm.is_some_and(|z| z >= config.rear_head_mm))
+        .collect();
+    let (rearing, rear_flags) = bouts(&t, &rear_flags, config.min_rear_s, dt);
+    let walk_flags: Vec<bool> = (0..n)
+        .map(|i| !rear_flags[i] && speed[i].is_some_and(|v| (config.walk_min_mm_s..=config.walk_max_mm_s).contains(&v)))
+        .collect();
+    let (walking, walk_flags) = bouts(&t, &walk_flags, config.min_walk_s, dt);
+    let walk_id: Vec<Option<usize>> = {
+        let mut id = None;
+        let mut count = 0;
+        (0..n)
+            .map(|i| {
+                if walk_flags[i] {
+                    if i == 0 || !walk_flags[i - 1] {
+                        count += 1;
+                    }
+                    id = Some(count);
+                    id
+                } else {
+                    None
+                }
+            })
+            .collect()
+    };
+
+    let stance: [Vec<bool>; 4] = std::array::from_fn(|k| {
+        let planted: Vec<bool> = (0..n)
+            .map(|i| {
+                let Some(p) = frames[i].paws[k] else { return false };
+                // The step to the next frame (to the one before at the end): a paw stands
+                // at a frame when it stays put until the next.
+                let step = |j: usize| {
+                    let f = frames.get(j)?;
+                    let q = f.paws[k]?;
+                    let dt = (f.t_s - t[i]).abs();
+                    (dt > 0.0).then(|| (q - p).norm() / dt)
+                };
+                let Some(paw_speed) = step(i + 1).or_else(|| i.checked_sub(1).and_then(step)) else {
+                    return false;
+                };
+                let body = speed[i].unwrap_or(0.0);
+                paw_speed < config.stance_speed_factor * body + config.stance_margin_mm_s
+            })
+            .collect();
+        clean_stance(&planted)
+    });
+    let mut strides = Vec::new();
+    let mut touchdowns: [Vec<(f64, Option<usize>)>; 4] = Default::default();
+    for (k, flags) in stance.iter().enumerate() {
+        let phases: Vec<(usize, usize, Option<Point2<f64>>)> = runs(flags)
+            .into_iter()
+            .map(|(a, b)| {
+                let (sum, m) = frames[a..=b]
+                    .iter()
+                    .filter_map(|f| f.paws[k])
+                    .fold((Vector2::zeros(), 0.0), |(s, m), p| (s + p.coords, m + 1.0));
+                (a, b, (m > 0.0).then(|| Point2::from(sum / m)))
+            })
+            .collect();
+        touchdowns[k] = phases.iter().map(|&(a, _, _)| (t[a], walk_id[a])).collect();
+        for w in phases.windows(2) {
+            let ((a, b, pa), (c, _, pc)) = (w[0], w[1]);
+            // Both touchdowns in the same walking bout, and a stance that began after the
+            // paw was seen in swing (not at the start of the sequence).
+            if walk_id[a].is_none() || walk_id[a] != walk_id[c] || a == 0 {
+                continue;
+            }
+            let period = t[c] - t[a];
+            if !(config.min_stride_s..=config.max_stride_s).contains(&period) {
+                continue;
+            }
+            let (Some(pa), Some(pc)) = (pa, pc) else { continue };
+            strides.push(Stride {
+                paw: k,
+                start_s: t[a],
+                period_s: period,
+                length_mm: (pc - pa).norm(),
+                duty_factor: ((t[b] + dt - t[a]) / period).min(1.0),
+            });
+        }
+    }
+    let paws: [PawGait; 4] = std::array::from_fn(|k| {
+        let mine: Vec<&Stride> = strides.iter().filter(|s| s.paw == k).collect();
+        let med = |f: fn(&Stride) -> f64| median(&mut mine.iter().map(|s| f(s)).collect::<Vec<_>>());
+        PawGait {
+            strides: mine.len(),
+            stride_length_mm: med(|s| s.length_mm),
+            cadence_hz: med(|s| 1.0 / s.period_s),
+            duty_factor: med(|s| s.duty_factor),
+        }
+    });
+
+    // Base of support: across the body axis, both paws of a girdle in stance, walking.
+    let support = |l: usize, r: usize| {
+        let mut widths: Vec<f64> = (0..n)
+            .filter(|&i| walk_flags[i] && stance[l][i] && stance[r][i])
+            .filter_map(|i| {
+                let f = &frames[i];
+                let (a, b, axis) = (f.paws[l]?, f.paws[r]?, f.axis?);
+                let across = Vector2::new(-axis.y, axis.x).try_normalize(1e-9)?;
+                Some((a - b).dot(&across).abs())
+            })
+            .collect();
+        median(&mut widths)
+    };
+
+    // Inter-limb phase: each paw's touchdown within the left hind paw's strides.
+    let reference = 2;
+    let phase_to_left_hind: [Option<f64>; 4] = std::array::from_fn(|k| {
+        let mut angles = Vec::new();
+        for s in strides.iter().filter(|s| s.paw == reference) {
+            let end = s.start_s + s.period_s;
+            if let Some(&(tk, _)) = touchdowns[k].iter().find(|(tk, _)| *tk >= s.start_s && *tk < end) {
+                angles.push(std::f64::consts::TAU * (tk - s.start_s) / s.period_s);
+            }
+        }
+        if angles.is_empty() {
+            return None;
+        }
+        let (sx, sy) = angles.iter().fold((0.0, 0.0), |(x, y), a| (x + a.cos(), y + a.sin()));
+        Some((sy.atan2(sx) / std::f64::consts::TAU).rem_euclid(1.0))
+    });
+
+    let mut zone_s = [0.0; 4];
+    let frames_out: Vec<FrameResult> = (0..n)
+        .map(|i| {
+            let z = zone(centres[i], cage_mm, config.wall_band_mm);
+            let slot = match z {
+                Zone::Centre => 0,
+                Zone::Wall => 1,
+                Zone::Between => 2,
+                Zone::Unknown => 3,
+            };
+            zone_s[slot] += dt;
+            FrameResult {
+                t_s: t[i],
+                speed_mm_s: speed[i],
+                distance_mm: cumulative[i],
+                zone: z,
+                rearing: rear_flags[i],
+                walking: walk_flags[i],
+                stance: std::array::from_fn(|k| stance[k][i]),
+            }
+        })
+        .collect();
+    let mut speeds: Vec<f64> = speed.iter().flatten().copied().collect();
+    let mean_speed = (!speeds.is_empty()).then(|| speeds.iter().sum::<f64>() / speeds.len() as f64);
+    speeds.clear();
+    Behaviour {
+        duration_s: n as f64 * dt,
+        distance_mm: distance,
+        mean_speed_mm_s: mean_speed,
+        zone_s,
+        rearing,
+        walking,
+        base_of_support_fore_mm: support(0, 1),
+        base_of_support_hind_mm: support(2, 3),
+        phase_to_left_hind,
+        strides,
+        paws,
+        frames: frames_out,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A mouse walking along x at `v` mm/s with a stride of `stride` mm, duty factor `duty`,
+    /// paws in the diagonal pairs of a walk, every paw seen in stance and in swing.
+    fn walker(v: f64, stride: f64, duty: f64, seconds: f64) -> Vec<FrameInput> {
+        let fps = 30.0;
+        let phases = [0.0, 0.5, 0.5, 0.0];
+        let side = [10.0, -10.0, 12.0, -12.0];
+        let ahead = [25.0, 25.0, -25.0, -25.0];
+        (0..(seconds * fps) as usize)
+            .map(|i| {
+                let t = i as f64 / fps;
+                let x = -200.0 + v * t;
+                // A quarter frame off the cycle's start, so no frame falls on a lift-off.
+                let cycle = v * t / stride + 0.025;
+                let paws = std::array::from_fn(|k| {
+                    let p = (cycle + phases[k]).rem_euclid(1.0);
+                    // Planted at the footprint of its current cycle while in stance.
+                    let footprint = (cycle + phases[k]).floor() * stride - phases[k] * stride - 200.0 + ahead[k];
+                    // In swing the bottom camera still sees the paw, moving to its next footprint.
+                    let swing = if p < duty {
+                        0.0
+                    } else {
+                        stride * (p - duty) / (1.0 - duty)
+                    };
+                    Some(Point2::new(footprint + swing, side[k]))
+                });
+                FrameInput {
+                    t_s: t,
+                    centre: Some(Point2::new(x, 0.0)),
+                    axis: Some(Vector2::x()),
+                    head_z_mm: Some(if (2.0..2.5).contains(&t) { 60.0 } else { 18.0 }),
+                    paws,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_regular_walk_gives_its_stride_cadence_duty_and_phases() {
+        let frames = walker(90.0, 30.0, 0.6, 4.0);
+        let b = analyse(&frames, (500.0, 450.0), &BehaviourConfig::default());
+        assert!((b.distance_mm - 90.0 * 4.0).abs() < 15.0, "{}", b.distance_mm);
+        assert_eq!(b.rearing.len(), 1);
+        assert!((b.rearing[0].duration_s() - 0.5).abs() < 0.05);
+        for (k, p) in b.paws.iter().enumerate() {
+            assert!(p.strides >= 5, "paw {k}: {p:?}");
+            assert!((p.stride_length_mm.unwrap() - 30.0).abs() < 1.5, "paw {k}: {p:?}");
+            assert!((p.cadence_hz.unwrap() - 3.0).abs() < 0.3, "paw {k}: {p:?}");
+            assert!((p.duty_factor.unwrap() - 0.6).abs() < 0.08, "paw {k}: {p:?}");
+        }
+        let phase = b.phase_to_left_hind;
+        let near = |a: Option<f64>, want: f64| {
+            let d = (a.unwrap() - want).rem_euclid(1.0);
+            d.min(1.0 - d) < 0.08
+        };
+        assert!(
+            near(phase[2], 0.0) && near(phase[3], 0.5) && near(phase[1], 0.0) && near(phase[0], 0.5),
+            "{phase:?}"
+        );
+        assert!((b.base_of_support_hind_mm.unwrap() - 24.0).abs() < 1e-6);
+        assert!((b.base_of_support_fore_mm.unwrap() - 20.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn zones_split_the_cage() {
+        let cage = (500.0, 450.0);
+        assert_eq!(zone(Some(Point2::new(0.0, 0.0)), cage, 60.0), Zone::Centre);
+        assert_eq!(zone(Some(Point2::new(240.0, 0.0)), cage, 60.0), Zone::Wall);
+        assert_eq!(zone(Some(Point2::new(150.0, 0.0)), cage, 60.0), Zone::Between);
+        assert_eq!(zone(None, cage, 60.0), Zone::Unknown);
+    }
+}
