@@ -10,6 +10,7 @@ mod forest;
 mod layers;
 mod packaging;
 mod paws;
+mod realrig;
 mod record;
 mod replay;
 mod run;

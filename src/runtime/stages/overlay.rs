@@ -5,12 +5,13 @@
 use crate::core::frame::{ColorFrame, DepthFrame, PixelFormat};
 use crate::core::geometry::Rig;
 use crate::core::image::draw_bones;
-use crate::core::image::{RgbImage, depth_to_rgb};
+use crate::core::image::{Region, RgbImage};
 use crate::core::pose::JointSource;
 use crate::core::skeleton::{JOINT_COUNT, Joint};
 use crate::runtime::stages::PoseRecord;
 use crate::runtime::stages::paws::{FOOTPRINT_MARGIN_MM, footprint};
 use crate::vision::fusion::BodyAxes;
+use crate::vision::segment::{FloorPlane, caption, frame_picture, height_picture};
 use nalgebra::{Point3, Vector3};
 
 /// Height of every panel, pixels.
@@ -30,7 +31,20 @@ pub fn draw(rig: &Rig, depth: &DepthFrame, color: Option<&ColorFrame>, record: &
     RgbImage::hstack(&panels, 4, [255, 255, 255])
 }
 
-/// The depth frame around the mouse, magnified 4 times, with the skeleton.
+/// A whole depth frame coloured by height above the floor, magnified to about the panels'
+/// height, with `note` written across its top: the picture of a recording in which no frame
+/// had a mouse.
+pub fn draw_note(rig: &Rig, depth: &DepthFrame, note: &str) -> RgbImage {
+    let floor = FloorPlane::of_camera(&rig.depth);
+    let zoom = (PANEL / depth.height.max(1)).max(1);
+    let mut img = frame_picture(depth, &rig.depth.intrinsics, &floor).upscale(zoom);
+    caption(&mut img, note);
+    img
+}
+
+/// The depth frame around the mouse, magnified 4 times, coloured by height above the floor
+/// (the world's `z = 0`: the rig's, or the one fitted to a recording without a calibration),
+/// with the skeleton.
 fn top_panel(rig: &Rig, frame: &DepthFrame, joints: &[Option<Point3<f64>>; JOINT_COUNT]) -> RgbImage {
     let projected: Vec<_> = joints
         .iter()
@@ -50,7 +64,6 @@ fn top_panel(rig: &Rig, frame: &DepthFrame, joints: &[Option<Point3<f64>>; JOINT
     let (w, h) = (160u32.min(frame.width), (PANEL / zoom).min(frame.height));
     let x0 = (cx - f64::from(w) / 2.0).clamp(0.0, f64::from(frame.width - w)) as u32;
     let y0 = (cy - f64::from(h) / 2.0).clamp(0.0, f64::from(frame.height - h)) as u32;
-    let near = rig.depth.world_from_camera.translation.vector.z - 120.0;
     let crop: Vec<u16> = (y0..y0 + h)
         .flat_map(|y| {
             let row = (y * frame.width + x0) as usize;
@@ -58,7 +71,14 @@ fn top_panel(rig: &Rig, frame: &DepthFrame, joints: &[Option<Point3<f64>>; JOINT
         })
         .copied()
         .collect();
-    let mut img = depth_to_rgb(&crop, w, h, near, near + 140.0).upscale(zoom);
+    let region = Region {
+        x0,
+        y0,
+        width: w,
+        height: h,
+    };
+    let floor = FloorPlane::of_camera(&rig.depth);
+    let mut img = height_picture(&crop, region, &rig.depth.intrinsics, &floor).upscale(zoom);
     crate::core::image::draw_joints(
         &mut img,
         &rig.depth,
