@@ -5,6 +5,7 @@
 pub mod bench;
 pub mod calibrate;
 pub mod chart;
+pub mod detect;
 pub mod devices;
 pub mod eval;
 pub mod experiment;
@@ -59,6 +60,9 @@ enum Command {
     /// Calibrate the cameras: intrinsics of each, then the rig against a board on the glass.
     #[command(subcommand)]
     Calibrate(calibrate::CalibrateCommand),
+    /// Run a detector on single images: the paw cascade on bottom views.
+    #[command(subcommand)]
+    Detect(detect::DetectCommand),
 }
 
 /// Why a command failed, and the exit code that means: 1 when what the user asked for cannot
@@ -239,6 +243,7 @@ fn run(cli: Cli) -> Outcome {
         Command::Run(args) => run::command(&args),
         Command::Devices(args) => devices::command(&args),
         Command::Calibrate(command) => calibrate::run(&command),
+        Command::Detect(detect::DetectCommand::Paws(args)) => detect::paws(&args),
     }
 }
 
