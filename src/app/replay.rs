@@ -68,12 +68,6 @@ pub enum ReplayError {
     Background(#[source] SegmentError),
     #[error(transparent)]
     Mask(#[from] MaskError),
-    #[error("the arena mask {path:?} holds no floor")]
-    MaskFloor {
-        path: PathBuf,
-        #[source]
-        source: SegmentError,
-    },
     #[error(transparent)]
     Output(#[from] OutputError),
     #[error("cannot write {path:?}")]
@@ -178,6 +172,12 @@ const BACKGROUND_FRAMES: usize = 31;
 /// readings of each pixel over frames spread across the whole recording (see
 /// [`Background::from_frames`]: a mouse that sits still for the first minutes drops out).
 pub(crate) fn background(recording: &Recording, rig: &Rig) -> Result<Background, ReplayError> {
+    background_in(recording, rig, None)
+}
+
+/// [`background`] with the arena given (a mask over the depth image, non-zero = inside): the
+/// floor is fitted inside it.
+fn background_in(recording: &Recording, rig: &Rig, arena: Option<&[u8]>) -> Result<Background, ReplayError> {
     if recording.depth_count() == 0 {
         return Err(ReplayError::Empty(recording.dir()));
     }
@@ -187,7 +187,7 @@ pub(crate) fn background(recording: &Recording, rig: &Rig) -> Result<Background,
             // the mouse goes in.
             let full = crate::core::image::Region::full(&rig.depth.intrinsics);
             let cage = crate::synth::render::Cage::new(&rig.depth).depth(full);
-            return Background::from_depth(&cage, full, &rig.depth.intrinsics, &SegmenterConfig::default())
+            return Background::from_depth_in(&cage, full, &rig.depth.intrinsics, &SegmenterConfig::default(), arena)
                 .map_err(ReplayError::Background);
         }
     }
@@ -197,7 +197,8 @@ pub(crate) fn background(recording: &Recording, rig: &Rig) -> Result<Background,
         intrinsics.width = f.width;
         intrinsics.height = f.height;
     }
-    Background::from_frames(&frames, &intrinsics, &SegmenterConfig::default()).map_err(ReplayError::Background)
+    Background::from_frames_in(&frames, &intrinsics, &SegmenterConfig::default(), arena)
+        .map_err(ReplayError::Background)
 }
 
 /// Runs the replay and writes `poses.csv` and `summary.json` into `options.out`.
@@ -216,15 +217,14 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         },
         None => recording.rig(options.intrinsics.as_deref())?,
     };
-    let mut background = background(&recording, &chosen.rig)?;
-    if let Some(path) = &options.roi {
-        let (w, h) = recording.depth_size();
-        let mask = read_mask_png(path, w, h)?;
-        background = background.with_arena(&mask).map_err(|source| ReplayError::MaskFloor {
-            path: path.clone(),
-            source,
-        })?;
-    }
+    let roi = match &options.roi {
+        Some(path) => {
+            let (w, h) = recording.depth_size();
+            Some(read_mask_png(path, w, h)?)
+        }
+        None => None,
+    };
+    let background = background_in(&recording, &chosen.rig, roi.as_deref())?;
     let floor = background.floor_plane();
     if !chosen.calibrated {
         // No calibration: the world is the floor's, z the height above it.
@@ -460,7 +460,7 @@ pub fn command(args: &ReplayArgs) -> crate::app::Outcome {
         let usage = match &e {
             ReplayError::Output(OutputError::NotEmpty(_) | OutputError::NotADirectory(_)) => true,
             ReplayError::Recording(r) => r.is_input_problem(),
-            ReplayError::Mask(_) | ReplayError::MaskFloor { .. } => true,
+            ReplayError::Mask(_) => true,
             _ => false,
         };
         Failure::classed(usage, e).context(format!("replaying {:?}", args.session))

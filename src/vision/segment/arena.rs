@@ -8,12 +8,13 @@
 //! connected regions (8-connected) of the readings within the floor tolerance of it. The floor
 //! region is the largest solid one (its centroid on itself: a ring of floor around a round
 //! arena's wall is not the arena), else the largest; it must hold at least one reading in 20.
-//! The floor is fitted again to that region alone. The arena is the region with its holes
+//! When the plane holds fewer than a fifth of the view's readings, the floor is fitted again
+//! to that region alone (otherwise its fit is already the floor's, to the same readings). The arena is the region with its holes
 //! filled (whatever stands on the floor), widened by [`ARENA_MARGIN_MM`] so that a mouse
 //! rearing at the wall stays inside.
 
 use super::SegmentError;
-use super::floor::{FloorPlane, best_plane, fit_floor};
+use super::floor::{FLOOR_MIN_INLIERS, FloorPlane, best_plane, fit_floor};
 
 /// The floor region holds at least this share of the readings.
 const MIN_FLOOR_SHARE: f64 = 0.05;
@@ -39,7 +40,7 @@ pub(super) fn find_arena(
     focal_px: f64,
     tolerance: f64,
 ) -> Result<FloorFit, SegmentError> {
-    let (plane, _, _) = best_plane(depth, rays, tolerance, None)?;
+    let (plane, held, sampled) = best_plane(depth, rays, tolerance, None)?;
     let height_of = |i: usize| {
         let (z, r) = (f64::from(depth[i]), rays[i]);
         plane
@@ -61,7 +62,13 @@ pub(super) fn find_arena(
             ),
         });
     }
-    let floor = fit_floor(depth, rays, tolerance, Some(&region))?;
+    // A floor that holds a fifth of the whole view is fitted well there already (and to the
+    // same readings); a smaller one is fitted again inside its region alone.
+    let floor = if (held as f64) >= FLOOR_MIN_INLIERS * sampled as f64 {
+        plane
+    } else {
+        fit_floor(depth, rays, tolerance, Some(&region))?
+    };
     let mut floor_depths: Vec<f32> = depth
         .iter()
         .zip(&region)

@@ -4,7 +4,7 @@
 //! with the rays of its pixels, the arena and the floor plane fitted inside it (`arena`), and
 //! refreshed from frames without a mouse.
 
-use super::arena::find_arena;
+use super::arena::{FloorFit, find_arena};
 use super::floor::fit_floor;
 use super::{FloorPlane, SegmentError, SegmenterConfig, check_buffer, check_frame};
 use crate::core::frame::DepthFrame;
@@ -62,6 +62,19 @@ impl Background {
         intrinsics: &Intrinsics,
         config: &SegmenterConfig,
     ) -> Result<Self, SegmentError> {
+        Self::from_frames_in(frames, intrinsics, config, None)
+    }
+
+    /// [`Background::from_frames`] with the arena given (see [`Background::from_depth_in`]).
+    ///
+    /// # Errors
+    /// As [`Background::from_frames`] and [`Background::from_depth_in`].
+    pub fn from_frames_in(
+        frames: &[DepthFrame],
+        intrinsics: &Intrinsics,
+        config: &SegmenterConfig,
+        arena: Option<&[u8]>,
+    ) -> Result<Self, SegmentError> {
         if frames.is_empty() {
             return Err(SegmentError::NoFrames);
         }
@@ -84,7 +97,7 @@ impl Background {
                 f32::from(kept[kept.len() / 2])
             })
             .collect();
-        Self::from_depth(&model, region, intrinsics, config)
+        Self::from_depth_in(&model, region, intrinsics, config, arena)
     }
 
     /// A background from one depth image of the empty cage over `region` of the camera's image
@@ -102,6 +115,22 @@ impl Background {
         intrinsics: &Intrinsics,
         config: &SegmenterConfig,
     ) -> Result<Self, SegmentError> {
+        Self::from_depth_in(depth, region, intrinsics, config, None)
+    }
+
+    /// [`Background::from_depth`], with the arena given when `arena` is (row-major over
+    /// `region`, non-zero = inside, such as a region of interest drawn by hand): the floor is
+    /// then fitted inside it and must hold a fifth of its readings.
+    ///
+    /// # Errors
+    /// As [`Background::from_depth`], or a mask of another size than the region.
+    pub fn from_depth_in(
+        depth: &[f32],
+        region: Region,
+        intrinsics: &Intrinsics,
+        config: &SegmenterConfig,
+        arena: Option<&[u8]>,
+    ) -> Result<Self, SegmentError> {
         config.validate()?;
         check_intrinsics(intrinsics)?;
         check_buffer(depth.len(), region, Region::full(intrinsics))?;
@@ -116,14 +145,25 @@ impl Background {
                 rays.push([r.x as f32, r.y as f32]);
             }
         }
-        let fit = find_arena(
-            &depth,
-            &rays,
-            region.width as usize,
-            region.height as usize,
-            intrinsics.fx,
-            f64::from(config.floor_tolerance_mm),
-        )?;
+        let tolerance = f64::from(config.floor_tolerance_mm);
+        let fit = match arena {
+            Some(mask) => {
+                check_buffer(mask.len(), region, region)?;
+                let inside: Vec<u8> = mask.iter().map(|&m| u8::from(m != 0)).collect();
+                FloorFit {
+                    floor: fit_floor(&depth, &rays, tolerance, Some(&inside))?,
+                    arena: inside,
+                }
+            }
+            None => find_arena(
+                &depth,
+                &rays,
+                region.width as usize,
+                region.height as usize,
+                intrinsics.fx,
+                tolerance,
+            )?,
+        };
         Ok(Self {
             region,
             intrinsics: *intrinsics,
@@ -156,25 +196,6 @@ impl Background {
     /// The arena: 1 where the mouse can be, row-major over [`Background::region`].
     pub fn arena(&self) -> &[u8] {
         &self.arena
-    }
-
-    /// The same background with the arena given (1 or any non-zero value = inside, such as a
-    /// region of interest drawn by hand), the floor fitted again inside it.
-    ///
-    /// # Errors
-    /// A mask of another size than the region, or no floor plane holding a fifth of the
-    /// readings inside it.
-    pub fn with_arena(mut self, mask: &[u8]) -> Result<Self, SegmentError> {
-        check_buffer(mask.len(), self.region, self.region)?;
-        let inside: Vec<u8> = mask.iter().map(|&m| u8::from(m != 0)).collect();
-        self.floor = fit_floor(
-            &self.depth,
-            &self.rays,
-            f64::from(self.floor_tolerance_mm),
-            Some(&inside),
-        )?;
-        self.arena = inside;
-        Ok(self)
     }
 
     /// The model's depth (mm, 0 = no reading), row-major over [`Background::region`].

@@ -21,7 +21,7 @@ const FLOOR_MAX_TILT_DEG: f64 = 60.0;
 /// The floor lies at least this far (mm) from the camera.
 const MIN_FLOOR_DISTANCE_MM: f64 = 100.0;
 /// The floor must hold at least this fraction of the background's readings.
-const FLOOR_MIN_INLIERS: f64 = 0.2;
+pub(super) const FLOOR_MIN_INLIERS: f64 = 0.2;
 
 /// The floor: `height_mm(p) = normal . p + offset_mm` for a point `p` in the camera frame, with
 /// `normal` a unit vector pointing up (towards the camera), so the camera is `offset_mm` above
