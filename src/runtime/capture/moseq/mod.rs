@@ -190,6 +190,8 @@ pub struct MoseqDepth {
     duplicates: usize,
     metadata: MoseqMetadata,
     fps: f64,
+    /// The video's own frame rate (`depth.avi`), which its frames are seeked by.
+    video_rate: Option<f64>,
     next_index: usize,
     reader: Option<Reader>,
 }
@@ -240,6 +242,7 @@ impl MoseqDepth {
             );
         }
         let metadata = read_metadata(&config.dir.join(METADATA)).map_err(recording)?;
+        let mut video_rate = None;
         let (width, height, frames) = match kind {
             MoseqKind::Raw => {
                 let (width, height) = metadata
@@ -265,7 +268,11 @@ impl MoseqDepth {
                 }
                 (width, height, Some(len / frame_bytes))
             }
-            MoseqKind::Video => probe(&config.ffprobe, &depth_path).map_err(recording)?,
+            MoseqKind::Video => {
+                let p = probe(&config.ffprobe, &depth_path).map_err(recording)?;
+                video_rate = p.rate;
+                (p.width, p.height, p.frames)
+            }
         };
         if let Some(frames) = frames
             && frames != timestamps.len() as u64
@@ -301,6 +308,7 @@ impl MoseqDepth {
             duplicates,
             metadata,
             fps,
+            video_rate,
             next_index: 0,
             reader: None,
         })
@@ -329,8 +337,10 @@ impl MoseqDepth {
         let data = match self.kind {
             MoseqKind::Raw => read_raw_frame(&self.depth_path, samples, index as u64),
             MoseqKind::Video => {
-                let fps = if self.fps > 0.0 { self.fps } else { 30.0 };
-                read_video_frame(&self.config.ffmpeg, &self.depth_path, samples, index as f64 / fps)
+                let fps = self.video_rate.unwrap_or(if self.fps > 0.0 { self.fps } else { 30.0 });
+                // Half a frame early: ffmpeg gives the first frame at or after the time.
+                let seconds = (index as f64 - 0.5).max(0.0) / fps;
+                read_video_frame(&self.config.ffmpeg, &self.depth_path, samples, seconds)
             }
         }
         .map_err(|e| self.error(e))?;

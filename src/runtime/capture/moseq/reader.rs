@@ -321,10 +321,15 @@ impl Drop for VideoDecoder {
 }
 
 /// Width, height and (when the container knows it) frame count of the first video stream.
-pub(super) fn probe(ffprobe: &Path, path: &Path) -> Result<(u32, u32, Option<u64>), MoseqError> {
+pub(super) fn probe(ffprobe: &Path, path: &Path) -> Result<Probed, MoseqError> {
     let output = Command::new(ffprobe)
         .args(["-v", "error", "-select_streams", "v:0"])
-        .args(["-show_entries", "stream=width,height,nb_frames", "-of", "json"])
+        .args([
+            "-show_entries",
+            "stream=width,height,nb_frames,r_frame_rate",
+            "-of",
+            "json",
+        ])
         .arg(path)
         .stdin(Stdio::null())
         .output()
@@ -364,5 +369,26 @@ pub(super) fn probe(ffprobe: &Path, path: &Path) -> Result<(u32, u32, Option<u64
         .get("nb_frames")
         .and_then(serde_json::Value::as_str)
         .and_then(|s| s.parse().ok());
-    Ok((width, height, frames))
+    // "30/1", "30000/1001".
+    let rate = stream
+        .get("r_frame_rate")
+        .and_then(serde_json::Value::as_str)
+        .and_then(|s| s.split_once('/'))
+        .and_then(|(n, d)| Some(n.parse::<f64>().ok()? / d.parse::<f64>().ok()?))
+        .filter(|r| r.is_finite() && *r > 0.0);
+    Ok(Probed {
+        width,
+        height,
+        frames,
+        rate,
+    })
+}
+
+/// What ffprobe says of a video: its frame size, frame count when the container records it,
+/// and frame rate.
+pub(super) struct Probed {
+    pub width: u32,
+    pub height: u32,
+    pub frames: Option<u64>,
+    pub rate: Option<f64>,
 }
