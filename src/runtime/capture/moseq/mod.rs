@@ -338,9 +338,9 @@ impl MoseqDepth {
             MoseqKind::Raw => read_raw_frame(&self.depth_path, samples, index as u64),
             MoseqKind::Video => {
                 let fps = self.video_rate.unwrap_or(if self.fps > 0.0 { self.fps } else { 30.0 });
-                // Half a frame early: ffmpeg gives the first frame at or after the time.
-                let seconds = (index as f64 - 0.5).max(0.0) / fps;
-                read_video_frame(&self.config.ffmpeg, &self.depth_path, samples, seconds)
+                // At the frame's own time: ffmpeg seeking an AVI half a frame early or late
+                // can give the frame before or after.
+                read_video_frame(&self.config.ffmpeg, &self.depth_path, samples, index as f64 / fps)
             }
         }
         .map_err(|e| self.error(e))?;
