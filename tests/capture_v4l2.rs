@@ -104,6 +104,10 @@ mod moseq {
         check_frames(&read_all(&mut source));
         // A second start reads the recording again from the beginning.
         check_frames(&read_all(&mut source));
+        // Single frames by seeking.
+        assert_eq!(source.frame_at(2).unwrap().data, frames()[2]);
+        assert!(source.frame_at(FRAMES).is_err());
+        assert_eq!(source.duplicate_timestamps(), 0);
     }
 
     #[test]
@@ -143,6 +147,13 @@ mod moseq {
         assert_eq!(source.kind(), MoseqKind::Video);
         assert_eq!(source.size(), (W, H));
         check_frames(&read_all(&mut source));
+        // Single frames by seeking, in any order.
+        for k in [3, 0, FRAMES - 1, 1] {
+            let frame = source.frame_at(k).unwrap();
+            assert_eq!(frame.data, frames()[k], "frame {k}");
+            assert_eq!(frame.stamp.seq, k as u64);
+        }
+        assert!(source.frame_at(FRAMES).is_err());
     }
 
     #[test]

@@ -13,6 +13,7 @@ mod http;
 mod layers;
 mod packaging;
 mod paws;
+mod realrig;
 mod record;
 mod replay;
 mod report;

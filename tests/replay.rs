@@ -22,6 +22,8 @@ fn options(session: &Path, out: &Path, workers: usize) -> ReplayOptions {
         workers,
         overlays: None,
         calibration: None,
+        intrinsics: None,
+        roi: None,
         force: false,
     }
 }

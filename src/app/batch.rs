@@ -224,6 +224,10 @@ pub fn run_local(items: &[BatchItem], options: &BatchOptions, mut progress: impl
                 workers: options.workers,
                 overlays: None,
                 calibration: options.calibration.clone(),
+                // A batch's sessions each carry their rig, or are placed on their own floor
+                // with the camera table's intrinsics; one mask or lens for all is not offered.
+                intrinsics: None,
+                roi: None,
                 force: true,
             });
             match result {

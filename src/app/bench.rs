@@ -517,6 +517,8 @@ fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Erro
         workers: 0,
         overlays: None,
         calibration: None,
+        intrinsics: None,
+        roi: None,
         force: true,
     };
     // The median of three fast replays: one replay lasts about a second, and a shared

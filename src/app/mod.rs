@@ -6,6 +6,7 @@ pub mod batch;
 pub mod bench;
 pub mod calibrate;
 pub mod chart;
+pub mod detect;
 pub mod devices;
 pub mod eval;
 pub mod experiment;
@@ -72,6 +73,9 @@ enum Command {
     /// Export a session or a run: MoSeq layout, or a video with the skeleton drawn.
     #[command(subcommand)]
     Export(export::ExportCommand),
+    /// Run a detector on single images: the paw cascade on bottom views.
+    #[command(subcommand)]
+    Detect(detect::DetectCommand),
 }
 
 /// Why a command failed, and the exit code that means: 1 when what the user asked for cannot
@@ -259,6 +263,7 @@ fn run(cli: Cli) -> Outcome {
         Command::Export(command) => export::run(&command),
         Command::Batch(args) => batch::command(&args),
         Command::Report(args) => report::command(&args),
+        Command::Detect(detect::DetectCommand::Paws(args)) => detect::paws(&args),
     }
 }
 

@@ -9,12 +9,13 @@
 use crate::app::{Failure, print, print_json};
 use crate::core::geometry::Rig;
 use crate::core::image::RgbImage;
+use crate::io::mask::{MaskError, read_mask_png};
 use crate::io::output::{OutputError, Staging};
 use crate::io::session::SessionSource;
 use crate::runtime::accounting::{CameraSummary, EdgeSummary};
 use crate::runtime::models::{Models, ModelsError};
 use crate::runtime::pipeline::{LatencySummary, PipelineError, StageReport};
-use crate::runtime::recording::{Recording, RecordingError};
+use crate::runtime::recording::{Recording, RecordingError, RecordingRig};
 use crate::runtime::sink::poses::{POSES_FILE, PoseTally, PoseWriter};
 use crate::runtime::stages::PoseRecord;
 use crate::runtime::stages::segment::SegmentStage;
@@ -46,6 +47,11 @@ pub struct ReplayOptions {
     pub overlays: Option<u64>,
     /// A rig calibration to use instead of the one the session carries.
     pub calibration: Option<PathBuf>,
+    /// The depth camera's intrinsics (as `calibrate intrinsics` writes) for a recording
+    /// without a rig calibration, instead of the camera table's.
+    pub intrinsics: Option<PathBuf>,
+    /// A PNG mask of the arena (non-black = inside), instead of the arena found automatically.
+    pub roi: Option<PathBuf>,
     pub force: bool,
 }
 
@@ -60,6 +66,8 @@ pub enum ReplayError {
     Models(#[from] ModelsError),
     #[error("cannot model the empty cage from the session's depth frames")]
     Background(#[source] SegmentError),
+    #[error(transparent)]
+    Mask(#[from] MaskError),
     #[error(transparent)]
     Output(#[from] OutputError),
     #[error("cannot write {path:?}")]
@@ -82,6 +90,27 @@ pub struct PairingCheck {
     pub mismatched: u64,
 }
 
+/// The world frame a replay used and the depth camera in it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct WorldSummary {
+    /// `calibration` (the rig calibration's world frame) or `floor` (z up from the floor
+    /// fitted to the recording, origin under the image centre).
+    pub frame: &'static str,
+    /// The depth camera's height above the fitted floor (mm) and its tilt from looking
+    /// straight down (degrees).
+    pub camera_height_mm: f64,
+    pub camera_tilt_deg: f64,
+    /// Where the depth intrinsics come from, and their focal length and centre (px).
+    pub intrinsics_from: String,
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    /// The arena's share of the depth image, and whether it was given (`--roi`) or found.
+    pub arena_share: f64,
+    pub arena_from: &'static str,
+}
+
 /// `summary.json`.
 #[derive(Clone, Debug, Serialize)]
 pub struct ReplaySummary {
@@ -95,6 +124,11 @@ pub struct ReplaySummary {
     /// The paw cascade, when the models directory has one.
     pub paw_model: Option<PathBuf>,
     pub realtime: bool,
+    pub world: WorldSummary,
+    /// Lines of a MoSeq `depth_ts.txt` repeating the timestamp before them: their frames are
+    /// dropped (`time_out_of_order`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub duplicate_timestamps: Option<usize>,
     pub pairs: u64,
     pub statuses: BTreeMap<&'static str, u64>,
     pub elapsed_s: f64,
@@ -124,13 +158,30 @@ fn picture(recording: &Recording, rig: &Rig, pose: &PoseRecord) -> Option<RgbIma
     Some(crate::runtime::stages::overlay::draw(rig, &depth, color.as_ref(), pose))
 }
 
+/// The picture of a recording where no frame had a mouse: its middle depth frame, saying so.
+fn picture_without_mouse(recording: &Recording, rig: &Rig) -> Option<RgbImage> {
+    let frames = recording.sample_depth(1).ok()?;
+    let depth = frames.first()?;
+    Some(crate::runtime::stages::overlay::draw_note(
+        rig,
+        depth,
+        "no mouse found in any frame",
+    ))
+}
+
 /// Frames the background model is built from, spread over the session.
 const BACKGROUND_FRAMES: usize = 31;
 
-/// The empty cage: for a synthetic session the rendered empty cage; otherwise the per-pixel
-/// median of frames spread over the session (a mouse that moves drops out of the median, as
-/// in MoSeq's extraction).
+/// The empty cage: for a synthetic session the rendered empty cage; otherwise the far
+/// readings of each pixel over frames spread across the whole recording (see
+/// [`Background::from_frames`]: a mouse that sits still for the first minutes drops out).
 pub(crate) fn background(recording: &Recording, rig: &Rig) -> Result<Background, ReplayError> {
+    background_in(recording, rig, None)
+}
+
+/// [`background`] with the arena given (a mask over the depth image, non-zero = inside): the
+/// floor is fitted inside it.
+fn background_in(recording: &Recording, rig: &Rig, arena: Option<&[u8]>) -> Result<Background, ReplayError> {
     if recording.depth_count() == 0 {
         return Err(ReplayError::Empty(recording.dir()));
     }
@@ -140,7 +191,7 @@ pub(crate) fn background(recording: &Recording, rig: &Rig) -> Result<Background,
             // the mouse goes in.
             let full = crate::core::image::Region::full(&rig.depth.intrinsics);
             let cage = crate::synth::render::Cage::new(&rig.depth).depth(full);
-            return Background::from_depth(&cage, full, &rig.depth.intrinsics, &SegmenterConfig::default())
+            return Background::from_depth_in(&cage, full, &rig.depth.intrinsics, &SegmenterConfig::default(), arena)
                 .map_err(ReplayError::Background);
         }
     }
@@ -150,7 +201,8 @@ pub(crate) fn background(recording: &Recording, rig: &Rig) -> Result<Background,
         intrinsics.width = f.width;
         intrinsics.height = f.height;
     }
-    Background::from_frames(&frames, &intrinsics, &SegmenterConfig::default()).map_err(ReplayError::Background)
+    Background::from_frames_in(&frames, &intrinsics, &SegmenterConfig::default(), arena)
+        .map_err(ReplayError::Background)
 }
 
 /// Runs the replay and writes `poses.csv` and `summary.json` into `options.out`.
@@ -161,11 +213,41 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
     let recording = Recording::open(&options.session)?;
     let models = Models::load(options.models.as_deref())?;
     let (body_model, paw_model) = (models.body_path(), models.paws_path());
-    let rig = match &options.calibration {
-        Some(path) => recording.calibrated_rig(path)?,
-        None => recording.rig(),
+    let mut chosen = match &options.calibration {
+        Some(path) => RecordingRig {
+            rig: recording.calibrated_rig(path)?,
+            calibrated: true,
+            intrinsics_from: "rig calibration".to_owned(),
+        },
+        None => recording.rig(options.intrinsics.as_deref())?,
     };
-    let background = background(&recording, &rig)?;
+    let roi = match &options.roi {
+        Some(path) => {
+            let (w, h) = recording.depth_size();
+            Some(read_mask_png(path, w, h)?)
+        }
+        None => None,
+    };
+    let background = background_in(&recording, &chosen.rig, roi.as_deref())?;
+    let floor = background.floor_plane();
+    if !chosen.calibrated {
+        // No calibration: the world is the floor's, z the height above it.
+        chosen.rig.depth.world_from_camera = floor.world_from_camera();
+    }
+    let rig = chosen.rig;
+    let arena = background.arena();
+    let world = WorldSummary {
+        frame: if chosen.calibrated { "calibration" } else { "floor" },
+        camera_height_mm: floor.camera_height_mm(),
+        camera_tilt_deg: floor.camera_tilt_deg(),
+        intrinsics_from: chosen.intrinsics_from,
+        fx: rig.depth.intrinsics.fx,
+        fy: rig.depth.intrinsics.fy,
+        cx: rig.depth.intrinsics.cx,
+        cy: rig.depth.intrinsics.cy,
+        arena_share: arena.iter().filter(|&&m| m != 0).count() as f64 / arena.len().max(1) as f64,
+        arena_from: if options.roi.is_some() { "roi" } else { "found" },
+    };
     let segmenter = SegmenterConfig::default()
         .build(background)
         .map_err(ReplayError::Background)?
@@ -225,6 +307,8 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         body_model,
         paw_model,
         realtime: options.realtime,
+        world,
+        duplicate_timestamps: recording.duplicate_timestamps(),
         pairs: tally.rows,
         statuses: tally.statuses.clone(),
         elapsed_s: finished.elapsed_s,
@@ -238,10 +322,13 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         mean_error_mm: tally.mean_error_mm(),
         group_error_mm: tally.group_error_mm(),
     };
-    if let Some(pose) = &tally.snapshot {
+    {
         let path = staging.path().join(PICTURE_FILE);
-        picture(&recording, &rig, pose)
-            .and_then(|img| img.write_png(&path).ok())
+        let img = match &tally.snapshot {
+            Some(pose) => picture(&recording, &rig, pose),
+            None => picture_without_mouse(&recording, &rig),
+        };
+        img.and_then(|img| img.write_png(&path).ok())
             .ok_or_else(|| ReplayError::Write {
                 path: path.clone(),
                 source: std::io::Error::other("cannot draw or write the picture"),
@@ -285,6 +372,24 @@ pub fn summary_text(summary: &ReplaySummary, out: &Path) -> String {
         "end to end: p50 {:.2} ms, p99 {:.2} ms",
         summary.end_to_end_latency.p50_ms, summary.end_to_end_latency.p99_ms
     );
+    let w = &summary.world;
+    let _ = writeln!(
+        text,
+        "depth camera {:.0} mm above the floor, tilted {:.1} deg; world frame from the {}; intrinsics: {} (f {:.1} px); arena {:.0} % of the image ({})",
+        w.camera_height_mm,
+        w.camera_tilt_deg,
+        w.frame,
+        w.intrinsics_from,
+        w.fx,
+        w.arena_share * 100.0,
+        w.arena_from
+    );
+    if let Some(n) = summary.duplicate_timestamps.filter(|&n| n > 0) {
+        let _ = writeln!(
+            text,
+            "depth_ts.txt: {n} timestamps repeat the one before them; their frames are dropped (time_out_of_order)"
+        );
+    }
     if let Some(p) = &summary.pairing {
         let _ = writeln!(text, "pairing vs truth: {} of {} pairs match", p.matched, p.truth_pairs);
     }
@@ -328,8 +433,17 @@ pub struct ReplayArgs {
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub overlays: Option<u64>,
     /// A rig calibration (from `calibrate extrinsics`) to use instead of the session's own.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", conflicts_with = "intrinsics")]
     pub calibration: Option<PathBuf>,
+    /// The depth camera's intrinsics (from `calibrate intrinsics`) for a recording without a
+    /// rig calibration; by default the camera its metadata names, or the one of its frame
+    /// size (nominal values).
+    #[arg(long, value_name = "FILE")]
+    pub intrinsics: Option<PathBuf>,
+    /// A PNG mask of the arena, one pixel per depth pixel (non-black = inside), instead of
+    /// the arena found automatically; the floor is fitted inside it.
+    #[arg(long, value_name = "FILE")]
+    pub roi: Option<PathBuf>,
     /// Print the summary as one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -349,12 +463,15 @@ pub fn command(args: &ReplayArgs) -> crate::app::Outcome {
         workers: args.workers as usize,
         overlays: args.overlays,
         calibration: args.calibration.clone(),
+        intrinsics: args.intrinsics.clone(),
+        roi: args.roi.clone(),
         force: args.force,
     };
     let summary = replay(&options).map_err(|e| {
         let usage = match &e {
             ReplayError::Output(OutputError::NotEmpty(_) | OutputError::NotADirectory(_)) => true,
-            ReplayError::Recording(RecordingError::Calibration(c)) => c.is_input_problem(),
+            ReplayError::Recording(r) => r.is_input_problem(),
+            ReplayError::Mask(_) => true,
             _ => false,
         };
         Failure::classed(usage, e).context(format!("replaying {session:?}"))

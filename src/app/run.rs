@@ -20,7 +20,7 @@ use crate::runtime::sink::chunks::{
     ChunkPlan, ChunkPoses, ChunkRecorder, Chunks, DiskWatch, Live, RecorderGauges, chunk_meta,
 };
 use crate::runtime::stages::PoseStatus;
-use crate::runtime::stages::segment::SegmentStage;
+use crate::runtime::stages::segment::{FloorSlot, SegmentStage};
 use crate::runtime::topology::{Edges, Epochs, Processing, Sources, Topology};
 use crate::runtime::watch::{RunInfo, RunReport, Watch};
 use crate::vision::calibrate::RigCalibration;
@@ -213,6 +213,7 @@ pub fn run(
         meta: chunk_meta(notes, config.calibration.as_ref().map(|_| rig), latency),
     });
     let live = Arc::new(Mutex::new(Live::default()));
+    let floor = FloorSlot::default();
     let gauges = config.record.then(|| Arc::new(RecorderGauges::default()));
     let recorder = gauges.as_ref().map(|gauges| {
         let disk = DiskWatch::new(&root, config.min_free_bytes, config.min_free_share);
@@ -235,7 +236,7 @@ pub fn run(
             stage: config.stage_edge,
         },
         processing: Some(Processing {
-            segment,
+            segment: segment.with_floor_slot(Arc::clone(&floor)),
             body: models.body,
             paws: models.paws,
             rig,
@@ -256,6 +257,7 @@ pub fn run(
         Arc::clone(&live),
         Arc::clone(&chunks),
         gauges,
+        floor,
     ));
     let server = match config.http.address {
         Some(address) => match HttpServer::start(address, config.http.token.clone(), Arc::clone(&watch), rig) {

@@ -2,6 +2,7 @@
 //! the rig, the limbs' kinematics, RGB pictures, errors on one line. Nothing here reads a file,
 //! a clock or a thread.
 
+pub mod cameras;
 pub mod frame;
 pub mod geometry;
 pub mod image;

@@ -1,16 +1,22 @@
 //! A recording read back as the rig's cameras: a session directory (what `record`, `run` and
 //! `synth session` write) or a depth-only recording in MoSeq's layout. It knows its rig, its
 //! frame count, how its clocks pair, and can fetch single frames again (for pictures).
+//!
+//! A recording without a rig calibration gets its depth camera's intrinsics from
+//! [`crate::core::cameras`] (the camera its metadata names, else the one of its frame size;
+//! an unknown size is refused) or from an intrinsics file, and is marked uncalibrated: the
+//! replay then poses the camera on the floor it fits
+//! ([`crate::vision::segment::FloorPlane::world_from_camera`]).
 
+use crate::core::cameras::{CameraModelError, depth_camera};
 use crate::core::frame::{ColorFrame, DepthFrame};
-use crate::core::geometry::Rig;
+use crate::core::geometry::{Intrinsics, Rig};
 use crate::io::session::{CameraRole, SessionError, SessionReader, Truth};
+use crate::runtime::capture::CaptureError;
 use crate::runtime::capture::moseq::{MoseqConfig, MoseqDepth};
-use crate::runtime::capture::{CaptureError, Clock, FrameSource};
 use crate::runtime::sync::SyncConfig;
 use crate::vision::calibrate::{CalibrationError, RigCalibration};
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 /// Why a recording cannot be read.
 #[derive(Debug, thiserror::Error)]
@@ -21,6 +27,42 @@ pub enum RecordingError {
     Moseq(#[source] CaptureError),
     #[error(transparent)]
     Calibration(#[from] CalibrationError),
+    #[error(transparent)]
+    CameraModel(#[from] CameraModelError),
+    #[error(
+        "the intrinsics {path:?} are for {width}x{height} images but the recording's depth frames are {frame_width}x{frame_height}"
+    )]
+    IntrinsicsSize {
+        path: PathBuf,
+        width: u32,
+        height: u32,
+        frame_width: u32,
+        frame_height: u32,
+    },
+}
+
+impl RecordingError {
+    /// Whether the user's input is at fault (a wrong file given, a camera to name), rather
+    /// than the recording failing to read.
+    pub fn is_input_problem(&self) -> bool {
+        match self {
+            Self::Calibration(c) => c.is_input_problem(),
+            Self::CameraModel(_) | Self::IntrinsicsSize { .. } => true,
+            Self::Session(_) | Self::Moseq(_) => false,
+        }
+    }
+}
+
+/// A recording's rig, and what it rests on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RecordingRig {
+    pub rig: Rig,
+    /// The rig comes from a calibration, its world frame with it. Otherwise the depth camera's
+    /// pose is to be fitted to the floor.
+    pub calibrated: bool,
+    /// Where the depth camera's intrinsics come from: "rig calibration", an intrinsics file,
+    /// or a camera model of the table ("Kinect v2, nominal").
+    pub intrinsics_from: String,
 }
 
 /// What a replay reads.
@@ -32,11 +74,16 @@ pub enum Recording {
         config: MoseqConfig,
         size: (u32, u32),
         count: usize,
+        /// The camera `metadata.json` names.
+        camera: Option<String>,
+        /// Lines of `depth_ts.txt` repeating the timestamp before them.
+        duplicate_timestamps: usize,
     },
 }
 
 impl Recording {
-    /// Opens the session or MoSeq recording in `dir`.
+    /// Opens the session or MoSeq recording in `dir`. A MoSeq `depth.dat` must look like depth
+    /// frames at its size ([`MoseqDepth::check_frame_size`]).
     ///
     /// # Errors
     /// Neither a readable session nor a readable MoSeq recording.
@@ -44,8 +91,14 @@ impl Recording {
         if is_moseq(dir) {
             let config = MoseqConfig::new(dir);
             let recording = Self::moseq(&config)?;
-            let (size, count) = (recording.size(), recording.frame_count());
-            return Ok(Recording::Moseq { config, size, count });
+            recording.check_frame_size().map_err(RecordingError::Moseq)?;
+            return Ok(Recording::Moseq {
+                size: recording.size(),
+                count: recording.frame_count(),
+                camera: recording.metadata().camera.clone(),
+                duplicate_timestamps: recording.duplicate_timestamps(),
+                config,
+            });
         }
         Ok(Recording::Session(Box::new(SessionReader::open(dir)?)))
     }
@@ -66,23 +119,77 @@ impl Recording {
         MoseqDepth::open(config.clone()).map_err(RecordingError::Moseq)
     }
 
-    /// The rig: the session's calibration, or the default rig (for MoSeq recordings with the
-    /// intrinsics of their frame size: Kinect v2's for 512x424, the default's scaled otherwise).
-    pub fn rig(&self) -> Rig {
-        let mut rig = Rig::default_rig();
-        match self {
-            Recording::Session(r) => r.meta().rig.unwrap_or(rig),
-            &Recording::Moseq { size: (w, h), .. } => {
-                let i = &mut rig.depth.intrinsics;
-                let f = if (w, h) == (512, 424) {
-                    365.0
-                } else {
-                    i.fx * f64::from(w) / f64::from(i.width)
-                };
-                (i.width, i.height, i.fx, i.fy) = (w, h, f, f);
-                (i.cx, i.cy) = (f64::from(w) / 2.0, f64::from(h) / 2.0);
-                rig
+    /// The rig: the session's calibration; otherwise the default rig with the depth camera's
+    /// intrinsics from `intrinsics` (an intrinsics file, as `calibrate intrinsics` writes)
+    /// or from the camera table, marked uncalibrated.
+    ///
+    /// # Errors
+    /// The intrinsics file cannot be read or is for another frame size; no camera of the
+    /// table fits the recording.
+    pub fn rig(&self, intrinsics: Option<&Path>) -> Result<RecordingRig, RecordingError> {
+        let session_rig = match self {
+            Recording::Session(r) => r.meta().rig,
+            Recording::Moseq { .. } => None,
+        };
+        if let (Some(rig), None) = (session_rig, intrinsics) {
+            return Ok(RecordingRig {
+                rig,
+                calibrated: true,
+                intrinsics_from: "rig calibration".to_owned(),
+            });
+        }
+        let (width, height) = self.depth_size();
+        let (found, intrinsics_from): (Intrinsics, String) = match intrinsics {
+            Some(path) => {
+                let i = crate::vision::calibrate::load_intrinsics(path)?;
+                if (i.width, i.height) != (width, height) {
+                    return Err(RecordingError::IntrinsicsSize {
+                        path: path.to_owned(),
+                        width: i.width,
+                        height: i.height,
+                        frame_width: width,
+                        frame_height: height,
+                    });
+                }
+                (i, path.display().to_string())
             }
+            None => {
+                let named = match self {
+                    Recording::Moseq { camera, .. } => camera.as_deref(),
+                    Recording::Session(_) => None,
+                };
+                let model = depth_camera(named, width, height)?;
+                (model.intrinsics(), format!("{}, nominal", model.label()))
+            }
+        };
+        let mut rig = session_rig.unwrap_or_else(Rig::default_rig);
+        rig.depth.intrinsics = found;
+        Ok(RecordingRig {
+            rig,
+            calibrated: false,
+            intrinsics_from,
+        })
+    }
+
+    /// The depth frames' size.
+    pub fn depth_size(&self) -> (u32, u32) {
+        match self {
+            Recording::Session(r) => r
+                .meta()
+                .camera(CameraRole::Depth)
+                .map_or((0, 0), |c| (c.width, c.height)),
+            Recording::Moseq { size, .. } => *size,
+        }
+    }
+
+    /// Lines of a MoSeq `depth_ts.txt` that repeat the timestamp before them (`None` for
+    /// sessions, whose frames carry their own stamps).
+    pub fn duplicate_timestamps(&self) -> Option<usize> {
+        match self {
+            Recording::Session(_) => None,
+            Recording::Moseq {
+                duplicate_timestamps, ..
+            } => Some(*duplicate_timestamps),
         }
     }
 
@@ -135,7 +242,7 @@ impl Recording {
         }
     }
 
-    /// Up to `n` depth frames spread over the session (MoSeq: over its first frames).
+    /// Up to `n` depth frames spread evenly over the whole recording.
     ///
     /// # Errors
     /// The MoSeq recording cannot be read.
@@ -147,25 +254,11 @@ impl Recording {
                 .filter_map(|k| r.depth_frame(k * count / picks).ok())
                 .collect()),
             Recording::Moseq { config: c, .. } => {
-                // One frame in ten of the first ones: a pass over the whole file would cost a
-                // full decode of a long video.
-                let mut source = Self::moseq(c)?;
-                source.start(&Clock::replay(0)).map_err(RecordingError::Moseq)?;
-                let mut frames = Vec::new();
-                let mut k = 0usize;
-                while frames.len() < picks && k < count && !source.finished() {
-                    if let Some(f) = source
-                        .next_frame(Duration::from_secs(5))
-                        .map_err(RecordingError::Moseq)?
-                    {
-                        if k % 10 == 0 {
-                            frames.push(f);
-                        }
-                        k += 1;
-                    }
-                }
-                source.stop().map_err(RecordingError::Moseq)?;
-                Ok(frames)
+                // Seeking: `depth.dat` directly, `depth.avi` by an ffmpeg per frame.
+                let source = Self::moseq(c)?;
+                (0..picks)
+                    .map(|k| source.frame_at(k * count / picks).map_err(RecordingError::Moseq))
+                    .collect()
             }
         }
     }
@@ -188,18 +281,9 @@ impl Recording {
                 let index = r.seqs(CameraRole::Depth).iter().position(|&s| s == seq)?;
                 r.depth_frame(index).ok()
             }
-            Recording::Moseq { config: c, .. } => {
-                let mut source = Self::moseq(c).ok()?;
-                source.start(&Clock::replay(0)).ok()?;
-                while !source.finished() {
-                    if let Some(f) = source.next_frame(Duration::from_secs(5)).ok()? {
-                        if f.stamp.seq >= seq {
-                            let _ = source.stop();
-                            return (f.stamp.seq == seq).then_some(f);
-                        }
-                    }
-                }
-                None
+            Recording::Moseq { config: c, count, .. } => {
+                let index = usize::try_from(seq).ok().filter(|&i| i < *count)?;
+                Self::moseq(c).ok()?.frame_at(index).ok()
             }
         }
     }

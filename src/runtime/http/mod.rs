@@ -17,6 +17,7 @@ use crate::core::geometry::Rig;
 use crate::runtime::stages::overlay;
 use crate::runtime::watch::Watch;
 use crate::runtime::watch::events::EventLog;
+use crate::vision::segment::FloorPlane;
 use axum::Router;
 use axum::body::Body;
 use axum::extract::{RawQuery, Request, State};
@@ -315,8 +316,12 @@ async fn pictures(s: &Arc<Served>) -> Option<Pictures> {
         return Some(p.clone());
     }
     let rig = s.rig;
+    // The floor the segmenter fitted; the rig's own until there is one.
+    let floor = s.watch.floor().unwrap_or_else(|| FloorPlane::of_camera(&rig.depth));
     let drawn = tokio::task::spawn_blocking(move || {
-        let depth = overlay::depth_view(&rig, &frames.depth, &record).to_png().ok()?;
+        let depth = overlay::depth_view(&rig, &frames.depth, &record, &floor)
+            .to_png()
+            .ok()?;
         let bottom = frames
             .color
             .as_deref()

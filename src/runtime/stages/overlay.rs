@@ -5,12 +5,13 @@
 use crate::core::frame::{ColorFrame, DepthFrame, PixelFormat};
 use crate::core::geometry::Rig;
 use crate::core::image::draw_bones;
-use crate::core::image::{RgbImage, depth_to_rgb};
+use crate::core::image::{Region, RgbImage};
 use crate::core::pose::JointSource;
 use crate::core::skeleton::{JOINT_COUNT, Joint};
 use crate::runtime::stages::PoseRecord;
 use crate::runtime::stages::paws::{FOOTPRINT_MARGIN_MM, footprint};
 use crate::vision::fusion::BodyAxes;
+use crate::vision::segment::{FloorPlane, caption, frame_picture, height_picture};
 use nalgebra::{Point3, Vector3};
 
 /// Height of every panel, pixels.
@@ -30,12 +31,12 @@ pub fn draw(rig: &Rig, depth: &DepthFrame, color: Option<&ColorFrame>, record: &
     RgbImage::hstack(&panels, 4, [255, 255, 255])
 }
 
-/// The whole depth frame with the skeleton, coloured from the floor up (the live view).
-pub fn depth_view(rig: &Rig, frame: &DepthFrame, record: &PoseRecord) -> RgbImage {
-    let (near, far) = floor_range(frame);
+/// The whole depth frame coloured by height above `floor` (the segmenter's, fitted to the
+/// camera's view), with the skeleton: the daemon's live view.
+pub fn depth_view(rig: &Rig, frame: &DepthFrame, record: &PoseRecord, floor: &FloorPlane) -> RgbImage {
     // Small frames are magnified so that the skeleton stays legible.
     let zoom = if frame.width < 400 { 2 } else { 1 };
-    let mut img = depth_to_rgb(&frame.data, frame.width, frame.height, near, far).upscale(zoom);
+    let mut img = frame_picture(frame, &rig.depth.intrinsics, floor).upscale(zoom);
     let joints = record
         .pose
         .joints
@@ -44,22 +45,20 @@ pub fn depth_view(rig: &Rig, frame: &DepthFrame, record: &PoseRecord) -> RgbImag
     img
 }
 
-/// The depth range to colour, mm: from 70 mm above the floor (a mouse on all fours is 30-45 mm
-/// high; a rearing one shows red) to just below it, the floor's distance being the median
-/// reading of the frame (a cage seen from above is mostly floor), so that a mouse shows
-/// whatever the camera's height.
-pub fn floor_range(frame: &DepthFrame) -> (f64, f64) {
-    // Every 7th pixel is plenty for a median.
-    let mut valid: Vec<u16> = frame.data.iter().step_by(7).copied().filter(|&z| z > 0).collect();
-    if valid.is_empty() {
-        return (400.0, 700.0);
-    }
-    let mid = valid.len() / 2;
-    let floor = f64::from(*valid.select_nth_unstable(mid).1);
-    (floor - 70.0, floor + 5.0)
+/// A whole depth frame coloured by height above the floor, magnified to about the panels'
+/// height, with `note` written across its top: the picture of a recording in which no frame
+/// had a mouse.
+pub fn draw_note(rig: &Rig, depth: &DepthFrame, note: &str) -> RgbImage {
+    let floor = FloorPlane::of_camera(&rig.depth);
+    let zoom = (PANEL / depth.height.max(1)).max(1);
+    let mut img = frame_picture(depth, &rig.depth.intrinsics, &floor).upscale(zoom);
+    caption(&mut img, note);
+    img
 }
 
-/// The depth frame around the mouse, magnified 4 times, with the skeleton.
+/// The depth frame around the mouse, magnified 4 times, coloured by height above the floor
+/// (the world's `z = 0`: the rig's, or the one fitted to a recording without a calibration),
+/// with the skeleton.
 fn top_panel(rig: &Rig, frame: &DepthFrame, joints: &[Option<Point3<f64>>; JOINT_COUNT]) -> RgbImage {
     let projected: Vec<_> = joints
         .iter()
@@ -79,7 +78,6 @@ fn top_panel(rig: &Rig, frame: &DepthFrame, joints: &[Option<Point3<f64>>; JOINT
     let (w, h) = (160u32.min(frame.width), (PANEL / zoom).min(frame.height));
     let x0 = (cx - f64::from(w) / 2.0).clamp(0.0, f64::from(frame.width - w)) as u32;
     let y0 = (cy - f64::from(h) / 2.0).clamp(0.0, f64::from(frame.height - h)) as u32;
-    let near = rig.depth.world_from_camera.translation.vector.z - 120.0;
     let crop: Vec<u16> = (y0..y0 + h)
         .flat_map(|y| {
             let row = (y * frame.width + x0) as usize;
@@ -87,7 +85,14 @@ fn top_panel(rig: &Rig, frame: &DepthFrame, joints: &[Option<Point3<f64>>; JOINT
         })
         .copied()
         .collect();
-    let mut img = depth_to_rgb(&crop, w, h, near, near + 140.0).upscale(zoom);
+    let region = Region {
+        x0,
+        y0,
+        width: w,
+        height: h,
+    };
+    let floor = FloorPlane::of_camera(&rig.depth);
+    let mut img = height_picture(&crop, region, &rig.depth.intrinsics, &floor).upscale(zoom);
     crate::core::image::draw_joints(
         &mut img,
         &rig.depth,

@@ -15,14 +15,20 @@ use crate::core::frame::{DepthFrame, FramePair};
 use crate::core::geometry::Intrinsics;
 use crate::core::image::Region;
 use crate::runtime::pipeline::{Stage, StageError};
-use crate::vision::segment::{Background, SegmentError, Segmenter, SegmenterConfig};
+use crate::vision::segment::{Background, FloorPlane, SegmentError, Segmenter, SegmenterConfig};
 use nalgebra::Isometry3;
+use std::sync::{Arc, Mutex, PoisonError};
+
+/// The floor the segmenter fitted last (in the depth camera's frame), for whoever draws the
+/// live view; `None` before any.
+pub type FloorSlot = Arc<Mutex<Option<FloorPlane>>>;
 
 /// Runs a [`Segmenter`] on each pair's depth frame.
 #[derive(Debug)]
 pub struct SegmentStage {
     segmenter: Option<Segmenter>,
     learner: Option<Learner>,
+    floor: Option<FloorSlot>,
 }
 
 /// The background learnt online; see the module documentation.
@@ -52,6 +58,21 @@ impl SegmentStage {
         Self {
             segmenter: Some(segmenter),
             learner: None,
+            floor: None,
+        }
+    }
+
+    /// The same stage, telling `slot` each floor it fits.
+    #[must_use]
+    pub fn with_floor_slot(mut self, slot: FloorSlot) -> Self {
+        self.floor = Some(slot);
+        self.publish_floor();
+        self
+    }
+
+    fn publish_floor(&self) {
+        if let (Some(slot), Some(segmenter)) = (&self.floor, &self.segmenter) {
+            *slot.lock().unwrap_or_else(PoisonError::into_inner) = Some(segmenter.background().floor_plane());
         }
     }
 
@@ -68,6 +89,7 @@ impl SegmentStage {
                 moved: 0,
                 frames: 0,
             }),
+            floor: None,
         }
     }
 
@@ -133,6 +155,7 @@ impl Stage for SegmentStage {
                             );
                         }
                         self.segmenter = Some(s);
+                        self.publish_floor();
                     }
                     Err(e) if self.segmenter.is_none() && learner.frames == 1 => {
                         tracing::warn!("no background yet, learning it from the frames (status no_background): {e}");

@@ -14,6 +14,7 @@ use crate::runtime::capture::clock::{process_cpu_s, process_resident_bytes};
 use crate::runtime::capture::supervise::{CameraState, Outage, SharedHealth, lock};
 use crate::runtime::pipeline::{LatencySummary, StageReport, reports_of};
 use crate::runtime::sink::chunks::{Live, RecorderGauges};
+use crate::runtime::stages::segment::FloorSlot;
 use crate::runtime::stages::{PoseRecord, PoseStatus};
 use crate::runtime::topology::PipelineWatch;
 use serde::{Deserialize, Serialize};
@@ -166,6 +167,8 @@ pub struct Watch {
     pub live: Arc<Mutex<Live>>,
     pub chunks: Arc<crate::runtime::sink::chunks::Chunks>,
     pub recorder: Option<Arc<RecorderGauges>>,
+    /// The floor the segmenter fitted, for the live view.
+    pub floor: FloorSlot,
     cpu0: f64,
     history: Mutex<History>,
 }
@@ -179,6 +182,7 @@ impl Watch {
         live: Arc<Mutex<Live>>,
         chunks: Arc<crate::runtime::sink::chunks::Chunks>,
         recorder: Option<Arc<RecorderGauges>>,
+        floor: FloorSlot,
     ) -> Self {
         Self {
             dir,
@@ -188,6 +192,7 @@ impl Watch {
             live,
             chunks,
             recorder,
+            floor,
             cpu0: process_cpu_s(),
             history: Mutex::default(),
         }
@@ -196,6 +201,11 @@ impl Watch {
     /// A copy of the live pose counts (the frames stay shared).
     pub fn live(&self) -> Live {
         self.live.lock().unwrap_or_else(PoisonError::into_inner).clone()
+    }
+
+    /// The floor fitted last, if any.
+    pub fn floor(&self) -> Option<crate::vision::segment::FloorPlane> {
+        *self.floor.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
     /// The latest pose and its frames.

@@ -1,8 +1,10 @@
-//! The empty cage as the depth camera sees it ([`Background`]): a per-pixel median depth,
-//! made from frames of the empty cage or from one depth image of it (a rendered cage), with
-//! the rays of its pixels and the floor plane fitted to it, and refreshed from frames without
-//! a mouse.
+//! The empty cage as the depth camera sees it ([`Background`]): a per-pixel depth made from
+//! frames spread over a recording (the far readings of each pixel: see
+//! [`Background::from_frames`]) or from one depth image of the empty cage (a rendered cage),
+//! with the rays of its pixels, the arena and the floor plane fitted inside it (`arena`), and
+//! refreshed from frames without a mouse.
 
+use super::arena::{FloorFit, find_arena};
 use super::floor::fit_floor;
 use super::{FloorPlane, SegmentError, SegmenterConfig, check_buffer, check_frame};
 use crate::core::frame::DepthFrame;
@@ -22,11 +24,16 @@ pub struct Background {
     /// Each pixel's ray `(x, y, 1)` in the camera frame.
     pub(super) rays: Vec<[f32; 2]>,
     pub(super) floor: FloorPlane,
+    /// 1 where the mouse can be (the arena), row-major over the region.
+    pub(super) arena: Vec<u8>,
     updates: usize,
     pub(super) refit_every: usize,
     pub(super) step_mm: f32,
     pub(super) floor_tolerance_mm: f32,
 }
+
+/// Of a pixel's readings, those within this (mm) of its far readings make its model.
+const FAR_BAND_MM: u16 = 15;
 
 impl fmt::Debug for Background {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -39,18 +46,34 @@ impl fmt::Debug for Background {
 }
 
 impl Background {
-    /// A background from the per-pixel median of `frames` (full images from the camera with
-    /// `intrinsics`) of the empty cage. A pixel with a reading in fewer than half the frames
-    /// has none in the model. A mouse that moves while the frames are taken does not matter; a
-    /// still one sits in the model (and its place never counts as foreground).
+    /// A background from `frames` (full images from the camera with `intrinsics`, best spread
+    /// over the whole recording). Per pixel: the readings within 15 mm of its far readings
+    /// (the 80th percentile of depth), and their median. The floor and the walls are always
+    /// behind the mouse, so a mouse that sits still in a fifth of the frames or more (the first
+    /// minutes of a recording) does not enter the model, where a median would keep it once it
+    /// is in half of them. A pixel with a reading in fewer than half the frames has none in the
+    /// model.
     ///
     /// # Errors
     /// No frames, a frame of another size than `intrinsics`, bad settings, or no floor plane
-    /// in the median (see [`Background::from_depth`]).
+    /// (see [`Background::from_depth`]).
     pub fn from_frames(
         frames: &[DepthFrame],
         intrinsics: &Intrinsics,
         config: &SegmenterConfig,
+    ) -> Result<Self, SegmentError> {
+        Self::from_frames_in(frames, intrinsics, config, None)
+    }
+
+    /// [`Background::from_frames`] with the arena given (see [`Background::from_depth_in`]).
+    ///
+    /// # Errors
+    /// As [`Background::from_frames`] and [`Background::from_depth_in`].
+    pub fn from_frames_in(
+        frames: &[DepthFrame],
+        intrinsics: &Intrinsics,
+        config: &SegmenterConfig,
+        arena: Option<&[u8]>,
     ) -> Result<Self, SegmentError> {
         if frames.is_empty() {
             return Err(SegmentError::NoFrames);
@@ -60,31 +83,53 @@ impl Background {
             check_frame(f, region)?;
         }
         let mut values = Vec::with_capacity(frames.len());
-        let median: Vec<f32> = (0..region.len())
+        let model: Vec<f32> = (0..region.len())
             .map(|i| {
                 values.clear();
                 values.extend(frames.iter().filter_map(|f| f.data.get(i).copied().filter(|&v| v > 0)));
                 if values.len() * 2 < frames.len() {
                     return 0.0;
                 }
-                let mid = values.len() / 2;
-                values.select_nth_unstable(mid).1.to_owned().into()
+                values.sort_unstable();
+                let far = values[(values.len() - 1) * 4 / 5];
+                let near_far = values.partition_point(|&v| v < far.saturating_sub(FAR_BAND_MM));
+                let kept = &values[near_far..];
+                f32::from(kept[kept.len() / 2])
             })
             .collect();
-        Self::from_depth(&median, region, intrinsics, config)
+        Self::from_depth_in(&model, region, intrinsics, config, arena)
     }
 
     /// A background from one depth image of the empty cage over `region` of the camera's image
     /// (mm, 0 = no reading), such as a rendered cage: `Cage::new(&rig.depth).depth(region)`.
     ///
+    /// The arena and the floor are found in it (see the `arena` module): the floor is fitted
+    /// inside the arena only.
+    ///
     /// # Errors
     /// A region outside the image, a buffer of the wrong length, bad intrinsics or settings,
-    /// or no floor plane: fewer than a fifth of the readings on one plane facing the camera.
+    /// or no floor plane: no plane facing the camera with a flat region of one reading in 20.
     pub fn from_depth(
         depth: &[f32],
         region: Region,
         intrinsics: &Intrinsics,
         config: &SegmenterConfig,
+    ) -> Result<Self, SegmentError> {
+        Self::from_depth_in(depth, region, intrinsics, config, None)
+    }
+
+    /// [`Background::from_depth`], with the arena given when `arena` is (row-major over
+    /// `region`, non-zero = inside, such as a region of interest drawn by hand): the floor is
+    /// then fitted inside it and must hold a fifth of its readings.
+    ///
+    /// # Errors
+    /// As [`Background::from_depth`], or a mask of another size than the region.
+    pub fn from_depth_in(
+        depth: &[f32],
+        region: Region,
+        intrinsics: &Intrinsics,
+        config: &SegmenterConfig,
+        arena: Option<&[u8]>,
     ) -> Result<Self, SegmentError> {
         config.validate()?;
         check_intrinsics(intrinsics)?;
@@ -100,13 +145,32 @@ impl Background {
                 rays.push([r.x as f32, r.y as f32]);
             }
         }
-        let floor = fit_floor(&depth, &rays, f64::from(config.floor_tolerance_mm))?;
+        let tolerance = f64::from(config.floor_tolerance_mm);
+        let fit = match arena {
+            Some(mask) => {
+                check_buffer(mask.len(), region, region)?;
+                let inside: Vec<u8> = mask.iter().map(|&m| u8::from(m != 0)).collect();
+                FloorFit {
+                    floor: fit_floor(&depth, &rays, tolerance, Some(&inside))?,
+                    arena: inside,
+                }
+            }
+            None => find_arena(
+                &depth,
+                &rays,
+                region.width as usize,
+                region.height as usize,
+                intrinsics.fx,
+                tolerance,
+            )?,
+        };
         Ok(Self {
             region,
             intrinsics: *intrinsics,
             depth,
             rays,
-            floor,
+            floor: fit.floor,
+            arena: fit.arena,
             updates: 0,
             refit_every: config.background_frames,
             step_mm: config.background_step_mm,
@@ -127,6 +191,11 @@ impl Background {
     /// The fitted floor plane, in the camera frame.
     pub fn floor_plane(&self) -> FloorPlane {
         self.floor
+    }
+
+    /// The arena: 1 where the mouse can be, row-major over [`Background::region`].
+    pub fn arena(&self) -> &[u8] {
+        &self.arena
     }
 
     /// The model's depth (mm, 0 = no reading), row-major over [`Background::region`].
@@ -162,7 +231,12 @@ impl Background {
         self.updates += 1;
         if self.updates >= self.refit_every {
             self.updates = 0;
-            self.floor = fit_floor(&self.depth, &self.rays, f64::from(self.floor_tolerance_mm))?;
+            self.floor = fit_floor(
+                &self.depth,
+                &self.rays,
+                f64::from(self.floor_tolerance_mm),
+                Some(&self.arena),
+            )?;
         }
         Ok(true)
     }

@@ -3,7 +3,8 @@
 //! squares over the inliers. The fit is deterministic (a fixed seed).
 
 use super::SegmentError;
-use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
+use crate::core::geometry::Camera;
+use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -20,7 +21,7 @@ const FLOOR_MAX_TILT_DEG: f64 = 60.0;
 /// The floor lies at least this far (mm) from the camera.
 const MIN_FLOOR_DISTANCE_MM: f64 = 100.0;
 /// The floor must hold at least this fraction of the background's readings.
-const FLOOR_MIN_INLIERS: f64 = 0.2;
+pub(super) const FLOOR_MIN_INLIERS: f64 = 0.2;
 
 /// The floor: `height_mm(p) = normal . p + offset_mm` for a point `p` in the camera frame, with
 /// `normal` a unit vector pointing up (towards the camera), so the camera is `offset_mm` above
@@ -35,6 +36,60 @@ impl FloorPlane {
     /// The height (mm) of a camera-frame point above the floor.
     pub fn height_mm(&self, p: &Point3<f64>) -> f64 {
         self.normal.dot(&p.coords) + self.offset_mm
+    }
+
+    /// The floor of a posed camera: the world's `z = 0` plane in the camera's frame.
+    pub fn of_camera(camera: &Camera) -> Self {
+        let camera_from_world = camera.camera_from_world();
+        let normal = camera_from_world.rotation * Vector3::z();
+        let origin = camera_from_world * Point3::origin();
+        Self {
+            normal,
+            offset_mm: -normal.dot(&origin.coords),
+        }
+    }
+
+    /// How high the camera's centre is above the floor (mm).
+    pub fn camera_height_mm(&self) -> f64 {
+        self.offset_mm
+    }
+
+    /// The angle between the camera's optical axis and the floor's downward normal (degrees):
+    /// 0 for a camera looking straight down.
+    pub fn camera_tilt_deg(&self) -> f64 {
+        (-self.normal.z).clamp(-1.0, 1.0).acos().to_degrees()
+    }
+
+    /// The depth (mm along the optical axis) at which the floor is seen along a pixel's ray
+    /// `(x, y, 1)`, or `None` when the ray never meets it.
+    pub fn depth_along(&self, ray: &Vector3<f64>) -> Option<f64> {
+        let a = self.normal.dot(ray);
+        (a < -1e-9).then(|| -self.offset_mm / a)
+    }
+
+    /// The camera's pose in a world frame made from this floor alone: z up from the floor
+    /// (so a point's z is its height above it), the origin where the optical axis meets the
+    /// floor, x along the image's x axis laid on the floor. This is the world frame of a
+    /// recording without a rig calibration.
+    pub fn world_from_camera(&self) -> Isometry3<f64> {
+        let z = self.normal;
+        let along = Vector3::x() - z * z.x;
+        let x = if along.norm() > 1e-9 {
+            along.normalize()
+        } else {
+            (Vector3::y() - z * z.y).normalize()
+        };
+        let y = z.cross(&x);
+        // The columns are the world's axes in the camera frame.
+        let camera_from_world_rotation = Rotation3::from_basis_unchecked(&[x, y, z]);
+        let origin = self
+            .depth_along(&Vector3::z())
+            .map_or_else(|| -z * self.offset_mm, |t| Vector3::z() * t);
+        let camera_from_world = Isometry3::from_parts(
+            Translation3::from(origin),
+            UnitQuaternion::from_rotation_matrix(&camera_from_world_rotation),
+        );
+        camera_from_world.inverse()
     }
 }
 
@@ -75,10 +130,38 @@ fn oriented(normal: Vector3<f64>, point: Vector3<f64>) -> Option<FloorPlane> {
     })
 }
 
-/// Fits the floor to a background: RANSAC over a subsample of its readings, then least
-/// squares over the inliers. Deterministic (a fixed seed).
-pub(super) fn fit_floor(depth: &[f32], rays: &[[f32; 2]], tolerance: f64) -> Result<FloorPlane, SegmentError> {
-    let valid = depth.iter().filter(|&&z| z > 0.0).count();
+/// Fits the floor to a background: RANSAC over a subsample of its readings (those inside
+/// `mask` when one is given, 1 = inside), then least squares over the inliers.
+/// Deterministic (a fixed seed).
+///
+/// # Errors
+/// Fewer than three readings, no plane facing the camera, or a plane holding fewer than a
+/// fifth of the readings.
+pub(super) fn fit_floor(
+    depth: &[f32],
+    rays: &[[f32; 2]],
+    tolerance: f64,
+    mask: Option<&[u8]>,
+) -> Result<FloorPlane, SegmentError> {
+    let (plane, count, total) = best_plane(depth, rays, tolerance, mask)?;
+    if (count as f64) < FLOOR_MIN_INLIERS * total as f64 {
+        return Err(SegmentError::Floor {
+            reason: format!("the best plane holds {count} of {total} sampled readings, fewer than a fifth"),
+        });
+    }
+    Ok(plane)
+}
+
+/// The plane holding the most readings (inside `mask`), facing the camera, with how many of
+/// the sampled readings it holds and how many were sampled.
+pub(super) fn best_plane(
+    depth: &[f32],
+    rays: &[[f32; 2]],
+    tolerance: f64,
+    mask: Option<&[u8]>,
+) -> Result<(FloorPlane, usize, usize), SegmentError> {
+    let inside = |i: usize| mask.is_none_or(|m| m.get(i).is_some_and(|&v| v != 0));
+    let valid = depth.iter().enumerate().filter(|&(i, &z)| z > 0.0 && inside(i)).count();
     if valid < 3 {
         return Err(SegmentError::Floor {
             reason: format!("only {valid} pixels have a reading"),
@@ -88,9 +171,10 @@ pub(super) fn fit_floor(depth: &[f32], rays: &[[f32; 2]], tolerance: f64) -> Res
     let points: Vec<Vector3<f64>> = depth
         .iter()
         .zip(rays)
-        .filter(|(z, _)| **z > 0.0)
+        .enumerate()
+        .filter(|&(i, (z, _))| *z > 0.0 && inside(i))
         .step_by(stride)
-        .map(|(&z, r)| Vector3::new(f64::from(r[0]), f64::from(r[1]), 1.0) * f64::from(z))
+        .map(|(_, (&z, r))| Vector3::new(f64::from(r[0]), f64::from(r[1]), 1.0) * f64::from(z))
         .collect();
     let score_stride = points.len().div_ceil(FLOOR_SCORE_SAMPLES).max(1);
     let scoring: Vec<Vector3<f64>> = points.iter().step_by(score_stride).copied().collect();
@@ -139,13 +223,36 @@ pub(super) fn fit_floor(depth: &[f32], rays: &[[f32; 2]], tolerance: f64) -> Res
         }
     }
     let count = inliers(&plane, &points);
-    if (count as f64) < FLOOR_MIN_INLIERS * points.len() as f64 {
-        return Err(SegmentError::Floor {
-            reason: format!(
-                "the best plane holds {count} of {} sampled readings, fewer than a fifth",
-                points.len()
-            ),
-        });
+    Ok((plane, count, points.len()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::geometry::{Rig, look_at};
+
+    #[test]
+    fn a_floor_gives_back_the_camera_height_and_tilt_and_heights_as_world_z() {
+        for (height, tilt_deg) in [(550.0, 0.0), (670.0, 8.0), (800.0, 15.0)] {
+            let t = f64::to_radians(tilt_deg);
+            let mut camera = Rig::default_rig().depth;
+            camera.world_from_camera = look_at(
+                Point3::new(30.0, -20.0, height),
+                Point3::new(30.0 + height * t.tan(), -20.0, 0.0),
+                -Vector3::y(),
+            );
+            let floor = FloorPlane::of_camera(&camera);
+            assert!((floor.camera_height_mm() - height).abs() < 1e-9);
+            assert!((floor.camera_tilt_deg() - tilt_deg).abs() < 1e-9);
+            let world = floor.world_from_camera();
+            // Any camera-frame point: its world z is its height above the floor.
+            for p in [Point3::new(10.0, 20.0, 500.0), Point3::new(-80.0, 40.0, height)] {
+                let z_world = (world * p).z;
+                let truth = (camera.world_from_camera * p).z;
+                assert!((z_world - truth).abs() < 1e-9, "{z_world} vs {truth}");
+                assert!((z_world - floor.height_mm(&p)).abs() < 1e-9);
+            }
+            assert!(((world * Point3::origin()).z - height).abs() < 1e-9);
+        }
     }
-    Ok(plane)
 }

@@ -1,5 +1,5 @@
 //! Segmentation of the mouse in the top depth image (DESIGN.md sec. 4): a background model of
-//! the empty cage, the floor plane fitted to it, foreground between a minimum and a maximum
+//! the empty cage, its arena and the floor plane fitted inside it, foreground inside the arena between a minimum and a maximum
 //! height above that floor (and nearer than the background by a margin, so walls and fixed
 //! objects never count), the largest connected component grown along its thin low parts (the
 //! tail), small holes filled, and the scalars MoSeq users know.
@@ -38,21 +38,27 @@
 //!
 //! This file holds the front, [`Segmenter`], with its errors, the buffers it reuses and the
 //! checks of what it is given. The rest is one job a file: `config` (the settings, and a
-//! segmenter built from them), `background` (the empty-cage model), `floor` (the floor plane
-//! fitted to it), `mask` (steps 1 to 4: the strong mask, the densest tiles, depth jumps, the
+//! segmenter built from them), `background` (the empty-cage model), `arena` (where the mouse
+//! can be: the largest flat region of the floor plane, or a given mask), `floor` (the floor
+//! plane fitted inside it), `mask` (steps 1 to 4: the strong mask, the densest tiles, depth jumps, the
 //! floor's noise, the largest component and its growth) and `mouse` (steps 5 and 6: the mask
-//! tidied inside its box, and the [`Mouse`] with its figures).
+//! tidied inside its box, and the [`Mouse`] with its figures); `picture` colours a depth
+//! image by height above the fitted floor for every picture the program draws.
 
+mod arena;
 mod background;
 mod config;
 mod floor;
 mod mask;
 mod mouse;
+mod picture;
 
+pub use arena::ARENA_MARGIN_MM;
 pub use background::Background;
 pub use config::SegmenterConfig;
 pub use floor::FloorPlane;
 pub use mouse::{Mouse, PoseFrame};
+pub use picture::{PICTURE_HEIGHT_MM, caption, frame_picture, height_picture};
 
 use crate::core::frame::DepthFrame;
 use crate::core::image::Region;
@@ -175,11 +181,13 @@ impl Segmenter {
             .rays
             .iter()
             .zip(&self.background.depth)
+            .zip(&self.background.arena)
             .zip(self.lo.iter_mut().zip(self.hi_strong.iter_mut()));
-        for ((r, &bg), (lo, hs)) in iter {
+        for (((r, &bg), &inside), (lo, hs)) in iter {
             let a = normal.dot(&Vector3::new(f64::from(r[0]), f64::from(r[1]), 1.0));
-            if !a.is_finite() || a >= -1e-6 {
-                // The ray never meets the floor: nothing seen along it is above the floor.
+            if !a.is_finite() || a >= -1e-6 || inside == 0 {
+                // Outside the arena, or the ray never meets the floor: nothing seen along it
+                // is the mouse.
                 (*lo, *hs) = (u16::MAX, 0);
                 continue;
             }

@@ -17,7 +17,9 @@
 //!   device timestamp and, when present, the second as the host (system) timestamp. Decimals are
 //!   kept exactly down to the nanosecond. Blank lines are ignored. A line whose timestamp is
 //!   smaller than the one before (in either column) is an error naming the line: skipping it
-//!   would shift every later frame against its time.
+//!   would shift every later frame against its time. A line that repeats the timestamp before
+//!   it is kept and counted ([`MoseqDepth::duplicate_timestamps`]): the synchroniser drops its
+//!   frame (`time_out_of_order`), and `replay` reports how many there were.
 //!
 //! Each frame gets `Stamp { seq: frame index, device_ns: column 1 in ns, host_ns: column 2 in ns
 //! or column 1 when there is no second column }`. The host clock handed to `start` is not
@@ -25,19 +27,23 @@
 //!
 //! Every check that can be made before reading a frame (sizes, the timestamp file, the frame
 //! count against the timestamp count) is made by [`MoseqDepth::open`], so a bad directory fails
-//! at once with an error naming the file.
+//! at once with an error naming the file. [`MoseqDepth::check_frame_size`] then reads a few
+//! frames and refuses a `depth.dat` whose frames do not look like depth images at the size
+//! used (a wrong `DepthResolution` of the same pixel count divides the file just as well).
 //!
 //! This file holds the source, [`MoseqDepth`], with its config and errors; `timestamps` reads
 //! `depth_ts.txt`, and `reader` reads the depth file (its frame size, and its frames from
 //! `depth.dat` or from an `ffmpeg` child decoding `depth.avi`).
 
 mod reader;
+mod size_check;
 mod timestamps;
 
-pub use reader::metadata_resolution;
+pub use reader::{MoseqMetadata, metadata_resolution, read_metadata};
+pub use size_check::{SizeTried, smooth_share};
 pub use timestamps::{MoseqTimestamp, ns_from_ms, parse_timestamps};
 
-use reader::{Reader, probe, read_full};
+use reader::{Reader, probe, read_full, read_raw_frame, read_video_frame};
 
 use super::{CaptureError, Clock, FrameSource};
 use crate::core::frame::{DepthFrame, Stamp};
@@ -148,6 +154,19 @@ pub enum MoseqError {
     },
     #[error("{path:?}: unexpected ffprobe output {output:?}")]
     Probe { path: PathBuf, output: String },
+    #[error(
+        "{path:?} does not look like {width}x{height} depth frames ({given}): only {share_pct:.0} % of vertically neighbouring readings agree, as in noise, where a smooth floor gives most; sizes tried: {tried}; {advice}"
+    )]
+    FrameSize {
+        path: PathBuf,
+        width: u32,
+        height: u32,
+        /// Where the size came from.
+        given: &'static str,
+        share_pct: f64,
+        tried: String,
+        advice: String,
+    },
 }
 
 /// Which depth file a recording has.
@@ -168,7 +187,11 @@ pub struct MoseqDepth {
     width: u32,
     height: u32,
     timestamps: Vec<MoseqTimestamp>,
+    duplicates: usize,
+    metadata: MoseqMetadata,
     fps: f64,
+    /// The video's own frame rate (`depth.avi`), which its frames are seeked by.
+    video_rate: Option<f64>,
     next_index: usize,
     reader: Option<Reader>,
 }
@@ -207,10 +230,23 @@ impl MoseqDepth {
         };
         let timestamps = parse_timestamps(&text, &ts_path).map_err(recording)?;
 
+        let duplicates = timestamps
+            .windows(2)
+            .filter(|w| w.first().map(|a| a.device_ns) == w.get(1).map(|b| b.device_ns))
+            .count();
+        if duplicates > 0 {
+            tracing::warn!(
+                message = "Timestamps repeat: the frames after them are dropped as out of order.",
+                path = %ts_path.display(),
+                duplicates,
+            );
+        }
+        let metadata = read_metadata(&config.dir.join(METADATA)).map_err(recording)?;
+        let mut video_rate = None;
         let (width, height, frames) = match kind {
             MoseqKind::Raw => {
-                let (width, height) = metadata_resolution(&config.dir.join(METADATA))
-                    .map_err(recording)?
+                let (width, height) = metadata
+                    .resolution
                     .unwrap_or((config.default_width, config.default_height));
                 let len = std::fs::metadata(&depth_path)
                     .map_err(|source| {
@@ -232,7 +268,11 @@ impl MoseqDepth {
                 }
                 (width, height, Some(len / frame_bytes))
             }
-            MoseqKind::Video => probe(&config.ffprobe, &depth_path).map_err(recording)?,
+            MoseqKind::Video => {
+                let p = probe(&config.ffprobe, &depth_path).map_err(recording)?;
+                video_rate = p.rate;
+                (p.width, p.height, p.frames)
+            }
         };
         if let Some(frames) = frames
             && frames != timestamps.len() as u64
@@ -265,9 +305,54 @@ impl MoseqDepth {
             width,
             height,
             timestamps,
+            duplicates,
+            metadata,
             fps,
+            video_rate,
             next_index: 0,
             reader: None,
+        })
+    }
+
+    /// How many lines of `depth_ts.txt` repeat the timestamp of the line before.
+    pub fn duplicate_timestamps(&self) -> usize {
+        self.duplicates
+    }
+
+    /// What `metadata.json` says (its camera, its frame size).
+    pub fn metadata(&self) -> &MoseqMetadata {
+        &self.metadata
+    }
+
+    /// Frame `index` (0-based), read on its own: `depth.dat` is seeked, `depth.avi` decoded by
+    /// an ffmpeg seeking to the frame's time. Independent of the frames `next_frame` reads.
+    ///
+    /// # Errors
+    /// An index past the end, or the file cannot be read there.
+    pub fn frame_at(&self, index: usize) -> Result<DepthFrame, CaptureError> {
+        let Some(ts) = self.timestamps.get(index) else {
+            return Err(self.error(self.count_mismatch(index as u64)));
+        };
+        let samples = self.frame_samples();
+        let data = match self.kind {
+            MoseqKind::Raw => read_raw_frame(&self.depth_path, samples, index as u64),
+            MoseqKind::Video => {
+                let fps = self.video_rate.unwrap_or(if self.fps > 0.0 { self.fps } else { 30.0 });
+                // At the frame's own time: ffmpeg seeking an AVI half a frame early or late
+                // can give the frame before or after.
+                read_video_frame(&self.config.ffmpeg, &self.depth_path, samples, index as f64 / fps)
+            }
+        }
+        .map_err(|e| self.error(e))?;
+        Ok(DepthFrame {
+            stamp: Stamp {
+                seq: index as u64,
+                device_ns: ts.device_ns,
+                host_ns: ts.system_ns.unwrap_or(ts.device_ns),
+            },
+            width: self.width,
+            height: self.height,
+            data,
         })
     }
 

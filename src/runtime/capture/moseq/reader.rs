@@ -9,16 +9,39 @@ use std::path::Path;
 use std::process::{Child, ChildStderr, Command, Stdio};
 use std::sync::mpsc;
 
-/// The frame size `metadata.json` gives (`DepthResolution`), `None` when the file or the key
-/// is absent.
+/// What `metadata.json` says about the depth camera.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct MoseqMetadata {
+    /// `DepthResolution`: `[width, height]`.
+    pub resolution: Option<(u32, u32)>,
+    /// The camera, when a key names it (`CameraType`, `Camera`, `CameraName`, `DeviceName`,
+    /// `DepthCamera`, `Device`, in any letter case): free text such as "Azure Kinect".
+    pub camera: Option<String>,
+}
+
+/// Keys of `metadata.json` (compared without letter case) whose text names the depth camera.
+const CAMERA_KEYS: &[&str] = &[
+    "cameratype",
+    "camera_type",
+    "camera",
+    "cameraname",
+    "camera_name",
+    "devicename",
+    "device_name",
+    "depthcamera",
+    "depth_camera",
+    "device",
+];
+
+/// Reads `metadata.json`; everything `None` when the file is absent.
 ///
 /// # Errors
 /// The file exists but cannot be read, is not JSON, or its `DepthResolution` is not two
 /// positive integers.
-pub fn metadata_resolution(path: &Path) -> Result<Option<(u32, u32)>, MoseqError> {
+pub fn read_metadata(path: &Path) -> Result<MoseqMetadata, MoseqError> {
     let text = match std::fs::read_to_string(path) {
         Ok(text) => text,
-        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(None),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(MoseqMetadata::default()),
         Err(source) => {
             return Err(MoseqError::Io {
                 path: path.to_owned(),
@@ -30,8 +53,17 @@ pub fn metadata_resolution(path: &Path) -> Result<Option<(u32, u32)>, MoseqError
         path: path.to_owned(),
         source,
     })?;
+    let camera = value.as_object().and_then(|o| {
+        o.iter()
+            .find(|(k, v)| CAMERA_KEYS.contains(&k.to_lowercase().as_str()) && v.is_string())
+            .and_then(|(_, v)| v.as_str())
+            .map(str::to_owned)
+    });
     let Some(resolution) = value.get("DepthResolution") else {
-        return Ok(None);
+        return Ok(MoseqMetadata {
+            resolution: None,
+            camera,
+        });
     };
     let size = |i: usize| {
         resolution
@@ -41,12 +73,93 @@ pub fn metadata_resolution(path: &Path) -> Result<Option<(u32, u32)>, MoseqError
             .filter(|&v| v > 0)
     };
     match (resolution.as_array().map(Vec::len), size(0), size(1)) {
-        (Some(2), Some(w), Some(h)) => Ok(Some((w, h))),
+        (Some(2), Some(w), Some(h)) => Ok(MoseqMetadata {
+            resolution: Some((w, h)),
+            camera,
+        }),
         _ => Err(MoseqError::Resolution {
             path: path.to_owned(),
             value: resolution.to_string(),
         }),
     }
+}
+
+/// The frame size `metadata.json` gives (`DepthResolution`), `None` when the file or the key
+/// is absent.
+///
+/// # Errors
+/// As [`read_metadata`].
+pub fn metadata_resolution(path: &Path) -> Result<Option<(u32, u32)>, MoseqError> {
+    Ok(read_metadata(path)?.resolution)
+}
+
+/// Reads frame `index` of a raw depth file of `samples`-pixel frames, by seeking to it.
+///
+/// # Errors
+/// The file cannot be read there (it is shorter).
+pub(super) fn read_raw_frame(path: &Path, samples: usize, index: u64) -> Result<Vec<u16>, MoseqError> {
+    use std::io::{Seek, SeekFrom};
+    let io_error = |source| MoseqError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let mut file = File::open(path).map_err(io_error)?;
+    file.seek(SeekFrom::Start(index * samples as u64 * 2))
+        .map_err(io_error)?;
+    let mut bytes = vec![0u8; samples * 2];
+    file.read_exact(&mut bytes).map_err(io_error)?;
+    Ok(bytes
+        .chunks_exact(2)
+        .map(|b| u16::from_le_bytes([b[0], b[1]]))
+        .collect())
+}
+
+/// Decodes one frame of `depth.avi` at `seconds` from its start (ffmpeg seeks to it).
+///
+/// # Errors
+/// ffmpeg cannot be run, fails, or gives no whole frame.
+pub(super) fn read_video_frame(
+    ffmpeg: &Path,
+    path: &Path,
+    samples: usize,
+    seconds: f64,
+) -> Result<Vec<u16>, MoseqError> {
+    let output = Command::new(ffmpeg)
+        .args(["-nostdin", "-v", "error", "-ss", &format!("{seconds:.6}"), "-i"])
+        .arg(path)
+        .args([
+            "-map",
+            "0:v:0",
+            "-frames:v",
+            "1",
+            "-f",
+            "rawvideo",
+            "-pix_fmt",
+            "gray16le",
+            "-",
+        ])
+        .stdin(Stdio::null())
+        .output()
+        .map_err(|source| MoseqError::Spawn {
+            program: ffmpeg.to_owned(),
+            source,
+        })?;
+    if !output.status.success() || output.stdout.len() != samples * 2 {
+        return Err(MoseqError::Tool {
+            program: ffmpeg.to_owned(),
+            path: path.to_owned(),
+            stderr: format!(
+                "no whole frame at {seconds:.3} s ({} bytes): {}",
+                output.stdout.len(),
+                String::from_utf8_lossy(&output.stderr).trim()
+            ),
+        });
+    }
+    Ok(output
+        .stdout
+        .chunks_exact(2)
+        .map(|b| u16::from_le_bytes([b[0], b[1]]))
+        .collect())
 }
 
 /// What frames are read from while the source runs.
@@ -208,10 +321,15 @@ impl Drop for VideoDecoder {
 }
 
 /// Width, height and (when the container knows it) frame count of the first video stream.
-pub(super) fn probe(ffprobe: &Path, path: &Path) -> Result<(u32, u32, Option<u64>), MoseqError> {
+pub(super) fn probe(ffprobe: &Path, path: &Path) -> Result<Probed, MoseqError> {
     let output = Command::new(ffprobe)
         .args(["-v", "error", "-select_streams", "v:0"])
-        .args(["-show_entries", "stream=width,height,nb_frames", "-of", "json"])
+        .args([
+            "-show_entries",
+            "stream=width,height,nb_frames,r_frame_rate",
+            "-of",
+            "json",
+        ])
         .arg(path)
         .stdin(Stdio::null())
         .output()
@@ -251,5 +369,26 @@ pub(super) fn probe(ffprobe: &Path, path: &Path) -> Result<(u32, u32, Option<u64
         .get("nb_frames")
         .and_then(serde_json::Value::as_str)
         .and_then(|s| s.parse().ok());
-    Ok((width, height, frames))
+    // "30/1", "30000/1001".
+    let rate = stream
+        .get("r_frame_rate")
+        .and_then(serde_json::Value::as_str)
+        .and_then(|s| s.split_once('/'))
+        .and_then(|(n, d)| Some(n.parse::<f64>().ok()? / d.parse::<f64>().ok()?))
+        .filter(|r| r.is_finite() && *r > 0.0);
+    Ok(Probed {
+        width,
+        height,
+        frames,
+        rate,
+    })
+}
+
+/// What ffprobe says of a video: its frame size, frame count when the container records it,
+/// and frame rate.
+pub(super) struct Probed {
+    pub width: u32,
+    pub height: u32,
+    pub frames: Option<u64>,
+    pub rate: Option<f64>,
 }

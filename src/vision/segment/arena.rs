@@ -1,0 +1,257 @@
+//! The arena: the part of the view where the mouse can be, found MoSeq's way (the readings
+//! near the floor's depth, and of them the largest flat region) or given as a mask. The floor
+//! is fitted inside the arena only, so an arena that fills a small part of the view (a round
+//! arena in a larger box, the lab around it) still gives its floor; and the mouse is looked for
+//! inside the arena only.
+//!
+//! Found automatically ([`find_arena`]): the plane holding the most readings, then the
+//! connected regions (8-connected) of the readings within the floor tolerance of it. The floor
+//! region is the largest solid one (its centroid on itself: a ring of floor around a round
+//! arena's wall is not the arena), else the largest; it must hold at least one reading in 20.
+//! When the plane holds fewer than a fifth of the view's readings, the floor is fitted again
+//! to that region alone (otherwise its fit is already the floor's, to the same readings). The arena is the region with its holes
+//! filled (whatever stands on the floor), widened by [`ARENA_MARGIN_MM`] so that a mouse
+//! rearing at the wall stays inside.
+
+use super::SegmentError;
+use super::floor::{FLOOR_MIN_INLIERS, FloorPlane, best_plane, fit_floor};
+
+/// The floor region holds at least this share of the readings.
+const MIN_FLOOR_SHARE: f64 = 0.05;
+/// The arena reaches this far (mm on the floor) past its floor region.
+pub const ARENA_MARGIN_MM: f64 = 40.0;
+
+/// The floor and the arena (1 = inside, row-major over the background's region).
+pub(super) struct FloorFit {
+    pub floor: FloorPlane,
+    pub arena: Vec<u8>,
+}
+
+/// Finds the floor and the arena of a background of `width` x `height` readings (mm, 0 = none)
+/// whose rays are `rays`, with a camera of focal length `focal_px`.
+///
+/// # Errors
+/// No plane facing the camera, or no flat region of it holding one reading in 20.
+pub(super) fn find_arena(
+    depth: &[f32],
+    rays: &[[f32; 2]],
+    width: usize,
+    height: usize,
+    focal_px: f64,
+    tolerance: f64,
+) -> Result<FloorFit, SegmentError> {
+    let (plane, held, sampled) = best_plane(depth, rays, tolerance, None)?;
+    let height_of = |i: usize| {
+        let (z, r) = (f64::from(depth[i]), rays[i]);
+        plane
+            .normal
+            .dot(&nalgebra::Vector3::new(f64::from(r[0]), f64::from(r[1]), 1.0))
+            * z
+            + plane.offset_mm
+    };
+    let near_floor: Vec<u8> = (0..depth.len())
+        .map(|i| u8::from(depth[i] > 0.0 && height_of(i).abs() <= tolerance))
+        .collect();
+    let valid = depth.iter().filter(|&&z| z > 0.0).count();
+    let region = floor_region(&near_floor, width, height);
+    let count = region.iter().filter(|&&v| v != 0).count();
+    if (count as f64) < MIN_FLOOR_SHARE * valid as f64 {
+        return Err(SegmentError::Floor {
+            reason: format!(
+                "the largest flat region of the best plane holds {count} of {valid} readings, fewer than one in 20"
+            ),
+        });
+    }
+    // A floor that holds a fifth of the whole view is fitted well there already (and to the
+    // same readings); a smaller one is fitted again inside its region alone.
+    let floor = if (held as f64) >= FLOOR_MIN_INLIERS * sampled as f64 {
+        plane
+    } else {
+        fit_floor(depth, rays, tolerance, Some(&region))?
+    };
+    let mut floor_depths: Vec<f32> = depth
+        .iter()
+        .zip(&region)
+        .filter(|&(_, &m)| m != 0)
+        .map(|(&z, _)| z)
+        .collect();
+    let mid = floor_depths.len() / 2;
+    let floor_depth = f64::from(*floor_depths.select_nth_unstable_by(mid, f32::total_cmp).1);
+    let margin_px = (ARENA_MARGIN_MM * focal_px / floor_depth.max(1.0)).ceil() as usize;
+    let mut arena = fill_holes(&region, width, height);
+    widen(&mut arena, width, height, margin_px);
+    Ok(FloorFit { floor, arena })
+}
+
+/// The floor region among the connected regions of `mask`: the largest solid one, else the
+/// largest (see the module documentation); all zero when `mask` is.
+fn floor_region(mask: &[u8], width: usize, height: usize) -> Vec<u8> {
+    let mut labels = vec![0u32; mask.len()];
+    // Per region: pixel count, and sums of x and y.
+    let mut stats: Vec<(usize, usize, usize)> = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..mask.len() {
+        if mask[start] == 0 || labels[start] != 0 {
+            continue;
+        }
+        stats.push((0, 0, 0));
+        let label = stats.len() as u32;
+        labels[start] = label;
+        stack.push(start);
+        let mut s = (0, 0, 0);
+        while let Some(i) = stack.pop() {
+            let (x, y) = (i % width, i / width);
+            s = (s.0 + 1, s.1 + x, s.2 + y);
+            for (dx, dy) in [(-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)] {
+                let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                if nx < 0 || ny < 0 || nx >= width as i64 || ny >= height as i64 {
+                    continue;
+                }
+                let j = ny as usize * width + nx as usize;
+                if mask[j] != 0 && labels[j] == 0 {
+                    labels[j] = label;
+                    stack.push(j);
+                }
+            }
+        }
+        if let Some(last) = stats.last_mut() {
+            *last = s;
+        }
+    }
+    let solid = |k: usize, &(n, sx, sy): &(usize, usize, usize)| {
+        let (cx, cy) = (sx / n.max(1), sy / n.max(1));
+        labels.get(cy * width + cx) == Some(&(k as u32 + 1))
+    };
+    let largest = |only_solid: bool| {
+        stats
+            .iter()
+            .enumerate()
+            .filter(|(k, s)| !only_solid || solid(*k, s))
+            .max_by_key(|(_, s)| s.0)
+            .map(|(k, s)| (k, s.0))
+    };
+    let biggest = largest(false);
+    // A solid region that is not tiny beside the largest: the arena's floor inside a ring.
+    let chosen = match (largest(true), biggest) {
+        (Some((k, n)), Some((_, m))) if n * 10 >= m => Some(k),
+        (_, b) => b.map(|(k, _)| k),
+    };
+    let Some(k) = chosen else {
+        return vec![0; mask.len()];
+    };
+    let label = k as u32 + 1;
+    labels.iter().map(|&l| u8::from(l == label)).collect()
+}
+
+/// `region` with its holes filled: every pixel not reachable from the image's border without
+/// crossing the region.
+fn fill_holes(region: &[u8], width: usize, height: usize) -> Vec<u8> {
+    let mut outside = vec![false; region.len()];
+    let mut stack: Vec<usize> = (0..width)
+        .flat_map(|x| [x, (height - 1) * width + x])
+        .chain((0..height).flat_map(|y| [y * width, y * width + width - 1]))
+        .filter(|&i| region.get(i) == Some(&0))
+        .collect();
+    for &i in &stack {
+        outside[i] = true;
+    }
+    while let Some(i) = stack.pop() {
+        let (x, y) = (i % width, i / width);
+        let mut visit = |j: usize| {
+            if region[j] == 0 && !outside[j] {
+                outside[j] = true;
+                stack.push(j);
+            }
+        };
+        if x > 0 {
+            visit(i - 1);
+        }
+        if x + 1 < width {
+            visit(i + 1);
+        }
+        if y > 0 {
+            visit(i - width);
+        }
+        if y + 1 < height {
+            visit(i + width);
+        }
+    }
+    outside.iter().map(|&o| u8::from(!o)).collect()
+}
+
+/// Widens the 1s of `mask` by `r` pixels (a square of side `2r + 1` around each).
+fn widen(mask: &mut [u8], width: usize, height: usize, r: usize) {
+    if r == 0 {
+        return;
+    }
+    // Distance (in pixels, the larger of the two axes) to the nearest 1, in two passes.
+    let far = u32::MAX / 2;
+    let mut d: Vec<u32> = mask.iter().map(|&m| if m != 0 { 0 } else { far }).collect();
+    for y in 0..height {
+        for x in 0..width {
+            let i = y * width + x;
+            let mut v = d[i];
+            if x > 0 {
+                v = v.min(d[i - 1] + 1);
+            }
+            if y > 0 {
+                v = v.min(d[i - width] + 1);
+                if x > 0 {
+                    v = v.min(d[i - width - 1] + 1);
+                }
+                if x + 1 < width {
+                    v = v.min(d[i - width + 1] + 1);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    for y in (0..height).rev() {
+        for x in (0..width).rev() {
+            let i = y * width + x;
+            let mut v = d[i];
+            if x + 1 < width {
+                v = v.min(d[i + 1] + 1);
+            }
+            if y + 1 < height {
+                v = v.min(d[i + width] + 1);
+                if x + 1 < width {
+                    v = v.min(d[i + width + 1] + 1);
+                }
+                if x > 0 {
+                    v = v.min(d[i + width - 1] + 1);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    for (m, &v) in mask.iter_mut().zip(&d) {
+        *m = u8::from(v as usize <= r);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_ring_around_a_disc_leaves_the_disc_as_the_floor() {
+        let (w, h) = (60usize, 60usize);
+        let mask: Vec<u8> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f64 - 30.0, (i / w) as f64 - 30.0);
+                let r = (x * x + y * y).sqrt();
+                u8::from(r < 12.0 || (r > 16.0 && r < 29.0))
+            })
+            .collect();
+        let region = floor_region(&mask, w, h);
+        assert_eq!(region[30 * w + 30], 1);
+        assert_eq!(region[30 * w + 50], 0);
+        let mut filled = fill_holes(&[1, 1, 1, 1, 0, 1, 1, 1, 1], 3, 3);
+        assert_eq!(filled, vec![1; 9]);
+        filled = vec![0; 25];
+        filled[12] = 1;
+        widen(&mut filled, 5, 5, 1);
+        assert_eq!(filled.iter().filter(|&&v| v == 1).count(), 9);
+    }
+}
