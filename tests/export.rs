@@ -20,14 +20,8 @@ fn fixture() -> PathBuf {
 
 fn replay_to(session: &Path, out: &Path, calibration: Option<PathBuf>) {
     replay(&ReplayOptions {
-        session: session.to_owned(),
-        out: out.to_owned(),
-        models: Some(repo_root().join("fixtures/models")),
-        realtime: false,
-        workers: 1,
-        overlays: None,
         calibration,
-        force: false,
+        ..crate::util::replay_options(session, out, 1)
     })
     .unwrap();
 }

@@ -5,7 +5,7 @@
 //! joints are known.
 #![allow(clippy::unwrap_used)] // the helpers below are test code too
 
-use crate::util::{mousepose, repo_root};
+use crate::util::mousepose;
 use mousepose::app::replay::{ReplayOptions, ReplaySummary, replay};
 use mousepose::core::cameras::depth_camera;
 use mousepose::core::geometry::{Camera, Intrinsics, look_at};
@@ -88,18 +88,7 @@ fn resolution(i: &Intrinsics) -> String {
 }
 
 fn options(session: &Path, out: &Path) -> ReplayOptions {
-    ReplayOptions {
-        session: session.to_owned(),
-        out: out.to_owned(),
-        models: Some(repo_root().join("fixtures/models")),
-        realtime: false,
-        workers: 2,
-        overlays: None,
-        calibration: None,
-        intrinsics: None,
-        roi: None,
-        force: false,
-    }
+    crate::util::replay_options(session, out, 2)
 }
 
 /// Per row of `poses.csv`: its status and the mean z of joints 1-12 when it has them.

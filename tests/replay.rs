@@ -14,18 +14,7 @@ fn fixture() -> PathBuf {
 }
 
 fn options(session: &Path, out: &Path, workers: usize) -> ReplayOptions {
-    ReplayOptions {
-        session: session.to_owned(),
-        out: out.to_owned(),
-        models: Some(repo_root().join("fixtures/models")),
-        realtime: false,
-        workers,
-        overlays: None,
-        calibration: None,
-        intrinsics: None,
-        roi: None,
-        force: false,
-    }
+    crate::util::replay_options(session, out, workers)
 }
 
 /// Every captured frame is paired, unpaired or dropped, per camera.

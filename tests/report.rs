@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used)] // the helpers below are test code too
 
 use crate::util::{mousepose, repo_root};
-use mousepose::app::replay::{ReplayOptions, replay};
+use mousepose::app::replay::replay;
 use mousepose::app::report::{frame_input, report};
 use mousepose::core::noise::{DepthNoise, NoiseModel};
 use mousepose::core::skeleton::Joint;
@@ -16,17 +16,7 @@ use nalgebra::{Point2, Vector2};
 use std::path::Path;
 
 fn replay_to(session: &Path, out: &Path) {
-    replay(&ReplayOptions {
-        session: session.to_owned(),
-        out: out.to_owned(),
-        models: Some(repo_root().join("fixtures/models")),
-        realtime: false,
-        workers: 1,
-        overlays: None,
-        calibration: None,
-        force: false,
-    })
-    .unwrap();
+    replay(&crate::util::replay_options(session, out, 1)).unwrap();
 }
 
 /// Loads `dir/index.html` in headless Chromium and returns what a script found of its

@@ -13,3 +13,24 @@ pub fn mousepose() -> Command {
 pub fn repo_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
+
+/// Options to replay `session` into `out` with the fixture models on `workers` threads, and
+/// everything else as `replay` does by default.
+pub fn replay_options(
+    session: &std::path::Path,
+    out: &std::path::Path,
+    workers: usize,
+) -> mousepose::app::replay::ReplayOptions {
+    mousepose::app::replay::ReplayOptions {
+        session: session.to_owned(),
+        out: out.to_owned(),
+        models: Some(repo_root().join("fixtures/models")),
+        realtime: false,
+        workers,
+        overlays: None,
+        calibration: None,
+        intrinsics: None,
+        roi: None,
+        force: false,
+    }
+}

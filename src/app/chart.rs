@@ -63,6 +63,31 @@ fn format_number(v: f64) -> String {
     }
 }
 
+/// Six labels along the x axis from `x_lo` over `span`, placed by `px`, and the axis's name
+/// under them; `(left, plot_w, plot_h)` is the plot area.
+fn x_axis(
+    img: &mut RgbImage,
+    (x_lo, span): (f64, f64),
+    px: impl Fn(f64) -> f64,
+    (left, plot_w, plot_h): (f64, f64, f64),
+    x_label: &str,
+) {
+    for k in 0..=5 {
+        let v = x_lo + span * f64::from(k) / 5.0;
+        let label = format_number(v);
+        let x = px(v) as i64 - i64::from(text_width(&label, 1)) / 2;
+        draw_text(img, x, (TOP + plot_h) as i64 + 8, &label, INK, 1);
+    }
+    draw_text(
+        img,
+        (left + plot_w / 2.0) as i64,
+        (TOP + plot_h) as i64 + 28,
+        x_label,
+        INK,
+        1,
+    );
+}
+
 fn legend(img: &mut RgbImage, series: &[Series<'_>]) {
     let mut x = LEFT as i64 + 10;
     let y = i64::from(H) - 22;
@@ -253,26 +278,7 @@ pub fn series_chart(
     let (x_lo, span) = if x_hi > x_lo { (x_lo, x_hi - x_lo) } else { (0.0, 1.0) };
     let px = |v: f64| LEFT + plot_w * (v - x_lo) / span;
     let py = |v: f64| TOP + plot_h * (1.0 - (v - lo) / (hi - lo));
-    for k in 0..=5 {
-        let v = x_lo + span * f64::from(k) / 5.0;
-        let label = format_number(v);
-        draw_text(
-            &mut img,
-            px(v) as i64 - i64::from(text_width(&label, 1)) / 2,
-            (TOP + plot_h) as i64 + 8,
-            &label,
-            INK,
-            1,
-        );
-    }
-    draw_text(
-        &mut img,
-        (LEFT + plot_w / 2.0) as i64,
-        (TOP + plot_h) as i64 + 28,
-        x_label,
-        INK,
-        1,
-    );
+    x_axis(&mut img, (x_lo, span), px, (LEFT, plot_w, plot_h), x_label);
     for &m in marks {
         let y = py(m);
         let mut x0 = LEFT;
@@ -362,25 +368,6 @@ pub fn raster_chart(title: &str, x_label: &str, x: &[f64], rows: &[(&str, Vec<bo
             }
         }
     }
-    for k in 0..=5 {
-        let v = x_lo + span * f64::from(k) / 5.0;
-        let label = format_number(v);
-        draw_text(
-            &mut img,
-            px(v) as i64 - i64::from(text_width(&label, 1)) / 2,
-            (TOP + plot_h) as i64 + 8,
-            &label,
-            INK,
-            1,
-        );
-    }
-    draw_text(
-        &mut img,
-        (left + plot_w / 2.0) as i64,
-        (TOP + plot_h) as i64 + 28,
-        x_label,
-        INK,
-        1,
-    );
+    x_axis(&mut img, (x_lo, span), px, (left, plot_w, plot_h), x_label);
     img
 }

@@ -22,7 +22,7 @@ use crate::runtime::sink::chunks::{
 use crate::runtime::stages::PoseStatus;
 use crate::runtime::stages::segment::{FloorSlot, SegmentStage};
 use crate::runtime::topology::{Edges, Epochs, Processing, Sources, Topology};
-use crate::runtime::watch::{RunInfo, RunReport, Watch};
+use crate::runtime::watch::{RunInfo, RunReport, Watch, Watched};
 use crate::vision::calibrate::RigCalibration;
 use crate::vision::segment::{Segmenter, SegmenterConfig};
 use anyhow::Context as _;
@@ -249,16 +249,16 @@ pub fn run(
     let started = Instant::now();
     let running = topology.start()?;
     let shutdown = running.shutdown();
-    let watch = Arc::new(Watch::new(
-        root,
+    let watch = Arc::new(Watch::new(Watched {
+        dir: root,
         info,
-        running.watch(),
-        healths.clone(),
-        Arc::clone(&live),
-        Arc::clone(&chunks),
-        gauges,
+        pipeline: running.watch(),
+        cameras: healths.clone(),
+        live: Arc::clone(&live),
+        chunks: Arc::clone(&chunks),
+        recorder: gauges,
         floor,
-    ));
+    }));
     let server = match config.http.address {
         Some(address) => match HttpServer::start(address, config.http.token.clone(), Arc::clone(&watch), rig) {
             Ok(server) => Some(server),

@@ -198,9 +198,9 @@ impl ClockModel {
                 }
             }
         }
-        let slope = median(&mut slopes).unwrap_or(0.0);
+        let slope = crate::core::median(&mut slopes).unwrap_or(0.0);
         let mut intercepts: Vec<f64> = pts.iter().map(|p| p.1 - slope * p.0).collect();
-        self.line = median(&mut intercepts).map(|a| (a, slope, t0));
+        self.line = crate::core::median(&mut intercepts).map(|a| (a, slope, t0));
     }
 
     /// `host - device` at device time `device_ns`: the clocks' offset plus the camera's
@@ -222,20 +222,6 @@ impl ClockModel {
     fn host_time(&self, stamp: Stamp) -> i64 {
         stamp.device_ns as i64 + self.offset_ns(stamp.device_ns).unwrap_or(0)
     }
-}
-
-/// The median (the mean of the middle two for an even count); `None` for no values.
-fn median(values: &mut [f64]) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    Some(if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        (values[n / 2 - 1] + values[n / 2]) / 2.0
-    })
 }
 
 /// A frame waiting for its partner.

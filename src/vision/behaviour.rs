@@ -170,19 +170,6 @@ pub struct Behaviour {
     pub frames: Vec<FrameResult>,
 }
 
-fn median(values: &mut [f64]) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    Some(if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        (values[n / 2 - 1] + values[n / 2]) / 2.0
-    })
-}
-
 /// Runs of `true` as `(first, last)` index pairs.
 fn runs(flags: &[bool]) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
@@ -277,7 +264,7 @@ pub fn analyse(frames: &[FrameInput], cage_mm: (f64, f64), config: &BehaviourCon
     let t: Vec<f64> = frames.iter().map(|f| f.t_s).collect();
     let dt = if n > 1 {
         let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
-        median(&mut steps).unwrap_or(1.0 / 30.0)
+        crate::core::median(&mut steps).unwrap_or(1.0 / 30.0)
     } else {
         1.0 / 30.0
     };
@@ -391,7 +378,7 @@ pub fn analyse(frames: &[FrameInput], cage_mm: (f64, f64), config: &BehaviourCon
     }
     let paws: [PawGait; 4] = std::array::from_fn(|k| {
         let mine: Vec<&Stride> = strides.iter().filter(|s| s.paw == k).collect();
-        let med = |f: fn(&Stride) -> f64| median(&mut mine.iter().map(|s| f(s)).collect::<Vec<_>>());
+        let med = |f: fn(&Stride) -> f64| crate::core::median(&mut mine.iter().map(|s| f(s)).collect::<Vec<_>>());
         PawGait {
             strides: mine.len(),
             stride_length_mm: med(|s| s.length_mm),
@@ -411,7 +398,7 @@ pub fn analyse(frames: &[FrameInput], cage_mm: (f64, f64), config: &BehaviourCon
                 Some((a - b).dot(&across).abs())
             })
             .collect();
-        median(&mut widths)
+        crate::core::median(&mut widths)
     };
 
     // Inter-limb phase: each paw's touchdown within the left hind paw's strides.

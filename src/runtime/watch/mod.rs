@@ -173,26 +173,30 @@ pub struct Watch {
     history: Mutex<History>,
 }
 
+/// What a [`Watch`] is made of.
+#[derive(Debug)]
+pub struct Watched {
+    pub dir: PathBuf,
+    pub info: RunInfo,
+    pub pipeline: PipelineWatch,
+    pub cameras: Vec<(&'static str, SharedHealth)>,
+    pub live: Arc<Mutex<Live>>,
+    pub chunks: Arc<crate::runtime::sink::chunks::Chunks>,
+    pub recorder: Option<Arc<RecorderGauges>>,
+    pub floor: FloorSlot,
+}
+
 impl Watch {
-    pub fn new(
-        dir: PathBuf,
-        info: RunInfo,
-        pipeline: PipelineWatch,
-        cameras: Vec<(&'static str, SharedHealth)>,
-        live: Arc<Mutex<Live>>,
-        chunks: Arc<crate::runtime::sink::chunks::Chunks>,
-        recorder: Option<Arc<RecorderGauges>>,
-        floor: FloorSlot,
-    ) -> Self {
+    pub fn new(w: Watched) -> Self {
         Self {
-            dir,
-            info,
-            pipeline,
-            cameras,
-            live,
-            chunks,
-            recorder,
-            floor,
+            dir: w.dir,
+            info: w.info,
+            pipeline: w.pipeline,
+            cameras: w.cameras,
+            live: w.live,
+            chunks: w.chunks,
+            recorder: w.recorder,
+            floor: w.floor,
             cpu0: process_cpu_s(),
             history: Mutex::default(),
         }
