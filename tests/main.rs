@@ -7,6 +7,7 @@ mod capture_openni;
 mod capture_v4l2;
 mod cli;
 mod forest;
+mod fuzz;
 mod layers;
 mod packaging;
 mod paws;

@@ -340,6 +340,24 @@ fn decode_trees<L>(
     Ok(Forest { trees })
 }
 
+/// The tree section, decompressed as a stream: memory grows with the trees actually there,
+/// never reserved up front for the largest section accepted (what `zstd::bulk` does, 1 GiB
+/// for every model), and stops past [`MAX_TREES_BYTES`].
+fn decompress_trees(compressed: &[u8]) -> Result<Vec<u8>, String> {
+    use std::io::Read as _;
+    let unreadable = |e: std::io::Error| format!("its trees do not decompress: {e}");
+    let mut trees = Vec::new();
+    zstd::stream::read::Decoder::with_buffer(compressed)
+        .map_err(unreadable)?
+        .take(MAX_TREES_BYTES as u64 + 1)
+        .read_to_end(&mut trees)
+        .map_err(unreadable)?;
+    if trees.len() > MAX_TREES_BYTES {
+        return Err(format!("its trees decompress to more than {MAX_TREES_BYTES} bytes"));
+    }
+    Ok(trees)
+}
+
 /// Reads a model file, checking it is whole, of this format, and of the expected kind.
 ///
 /// # Errors
@@ -408,8 +426,7 @@ pub fn decode(bytes: &[u8], path: &Path, expected: Option<ModelKind>) -> Result<
     l.copy_from_slice(len_bytes);
     let len = usize::try_from(u64::from_le_bytes(l)).unwrap_or(usize::MAX);
     let compressed = r.take(len, "trees").map_err(corrupt)?;
-    let trees = zstd::bulk::decompress(compressed, MAX_TREES_BYTES)
-        .map_err(|e| corrupt(format!("its trees do not decompress: {e}")))?;
+    let trees = decompress_trees(compressed).map_err(corrupt)?;
     match kind {
         ModelKind::Body => {
             let forest = decode_trees(&trees, 2, |r| {
