@@ -8,6 +8,7 @@ mod capture_v4l2;
 mod cli;
 mod forest;
 mod fuzz;
+mod hostile;
 mod layers;
 mod packaging;
 mod paws;

@@ -44,6 +44,8 @@ fn quantise_u16(v: f32, unit: f32, lo: u16) -> u16 {
 }
 /// The largest decompressed tree section accepted (far above any real model).
 const MAX_TREES_BYTES: usize = 1 << 30;
+/// The largest model file read (the bundled ones are about 9 MB).
+const MAX_MODEL_BYTES: u64 = 1 << 30;
 
 /// What a model file holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -363,7 +365,7 @@ fn decompress_trees(compressed: &[u8]) -> Result<Vec<u8>, String> {
 /// # Errors
 /// A [`ModelError`] naming the file and what is wrong with it.
 pub fn load(path: &Path, expected: Option<ModelKind>) -> Result<Model, ModelError> {
-    let bytes = std::fs::read(path).map_err(|source| ModelError::Io {
+    let bytes = crate::io::read_bounded_bytes(path, MAX_MODEL_BYTES).map_err(|source| ModelError::Io {
         path: path.to_owned(),
         action: "read",
         source,

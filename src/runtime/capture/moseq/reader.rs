@@ -9,6 +9,9 @@ use std::path::Path;
 use std::process::{Child, ChildStderr, Command, Stdio};
 use std::sync::mpsc;
 
+/// The longest side of a depth frame accepted (far beyond any depth camera's).
+pub const MAX_SIDE_PX: u32 = 65_535;
+
 /// The frame size `metadata.json` gives (`DepthResolution`), `None` when the file or the key
 /// is absent.
 ///
@@ -16,7 +19,7 @@ use std::sync::mpsc;
 /// The file exists but cannot be read, is not JSON, or its `DepthResolution` is not two
 /// positive integers.
 pub fn metadata_resolution(path: &Path) -> Result<Option<(u32, u32)>, MoseqError> {
-    let text = match std::fs::read_to_string(path) {
+    let text = match crate::io::read_bounded(path, 1 << 20) {
         Ok(text) => text,
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(None),
         Err(source) => {
@@ -38,7 +41,7 @@ pub fn metadata_resolution(path: &Path) -> Result<Option<(u32, u32)>, MoseqError
             .get(i)
             .and_then(serde_json::Value::as_u64)
             .and_then(|v| u32::try_from(v).ok())
-            .filter(|&v| v > 0)
+            .filter(|v| (1..=MAX_SIDE_PX).contains(v))
     };
     match (resolution.as_array().map(Vec::len), size(0), size(1)) {
         (Some(2), Some(w), Some(h)) => Ok(Some((w, h))),
