@@ -35,7 +35,7 @@ use std::time::{Duration, Instant};
 pub const HANG_SECS: u64 = 20;
 /// The memory a campaign may allocate beyond what it holds when it starts (MiB).
 const DEFAULT_MEMORY_MB: u64 = 1024;
-/// Inputs in the corpus at most (the seeds always stay).
+/// Inputs in the corpus at most, in memory (the seeds always stay) and on disk.
 const MAX_CORPUS: usize = 2000;
 
 /// One fuzz input: named parts, most of them files written under the work directory by that
@@ -129,17 +129,30 @@ pub struct Target {
     pub words: &'static [&'static str],
 }
 
-/// An error's whole chain, with the work directory and digits left out, as an outcome.
+/// An error's whole chain as an outcome: its words, with numbers and quoted text (paths, keys
+/// and values from the input) left out, so that outcomes tell apart the checks that failed
+/// rather than the inputs.
 pub fn outcome_of(e: &dyn std::error::Error, dir: &Path) -> String {
     let text = mousepose::core::error_chain(e).replace(&dir.display().to_string(), "DIR");
     let mut out = String::with_capacity(text.len());
+    let mut quote = None;
     for c in text.chars() {
-        if c.is_ascii_digit() {
-            if !out.ends_with('#') {
-                out.push('#');
+        match quote {
+            Some(q) if c == q => {
+                out.push(c);
+                quote = None;
             }
-        } else {
-            out.push(c);
+            Some(_) => {}
+            None if c == '"' || c == '`' => {
+                out.push(c);
+                quote = Some(c);
+            }
+            None if c.is_ascii_digit() => {
+                if !out.ends_with('#') {
+                    out.push('#');
+                }
+            }
+            None => out.push(c),
         }
     }
     format!("err: {out}")
@@ -176,7 +189,7 @@ fn limit_memory(budget_mb: u64) {
     assert!(result.is_ok(), "cannot lower the data limit: {result:?}");
 }
 
-/// Peak resident memory since the last reset, and the reset (Linux: `clear_refs` 5).
+/// Peak resident memory since [`reset_peak_rss`] (KiB).
 fn peak_rss_kb() -> u64 {
     let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
     status
@@ -186,6 +199,8 @@ fn peak_rss_kb() -> u64 {
         .unwrap_or(0)
 }
 
+/// Starts the peak resident memory figure again from what is resident now (Linux's
+/// `clear_refs` 5).
 fn reset_peak_rss() {
     // Best effort: without it the figure is the campaign's peak, still an upper bound.
     if std::fs::write("/proc/self/clear_refs", "5").is_err() {
@@ -355,6 +370,7 @@ fn run_campaign(s: &Settings) -> u64 {
         }
     }
     let kept = corpus.len() - seed_count;
+    let mut on_disk = kept;
     let stop_at = s.seconds.map(|secs| epoch + Duration::from_secs(secs));
     loop {
         if s.runs.is_some_and(|n| runs >= n) || stop_at.is_some_and(|at| Instant::now() >= at) {
@@ -370,11 +386,18 @@ fn run_campaign(s: &Settings) -> u64 {
                 let evict = rng.gen_range(seed_count..corpus.len());
                 corpus.swap_remove(evict);
             }
-            if let Err(e) = input.save(&corpus_dir.join(input.id())) {
-                eprintln!("fuzz: cannot keep an input in the corpus: {e}");
+            if on_disk < MAX_CORPUS {
+                on_disk += 1;
+                if let Err(e) = input.save(&corpus_dir.join(input.id())) {
+                    eprintln!("fuzz: cannot keep an input in the corpus: {e}");
+                }
             }
             corpus.push(input);
         }
+    }
+    // Only a campaign that died leaves its last input in the work directory.
+    if let Err(e) = std::fs::remove_dir_all(&work) {
+        eprintln!("fuzz: cannot remove {}: {e}", work.display());
     }
     let secs = epoch.elapsed().as_secs_f64();
     println!(
