@@ -893,6 +893,9 @@ mod tests {
 
     const PERIOD_S: f64 = 1.0 / 30.0;
 
+    /// A camera's frames: `(true capture time s, stamp)`.
+    type Stream = Vec<(f64, Stamp)>;
+
     fn fault_mix() -> impl Strategy<Value = FaultMix> {
         (
             200usize..600,
@@ -920,7 +923,7 @@ mod tests {
 
     impl FaultMix {
         /// The depth and colour streams of the case.
-        fn streams(&self) -> (Vec<(f64, Stamp)>, Vec<(f64, Stamp)>) {
+        fn streams(&self) -> (Stream, Stream) {
             let span = self.n as f64 * PERIOD_S;
             // A counter or clock that starts again in the middle of a stall is not covered: the
             // clock is then learnt again from late frames only, and nothing in the stamps says
@@ -1071,7 +1074,7 @@ mod tests {
         }
         let with_partner = total.right + total.wrong.len() + total.unpaired_with_partner;
         let share = |n: usize, of: usize| 100.0 * n as f64 / of.max(1) as f64;
-        println!(
+        eprintln!(
             "fault mix, {cases} cases: {} depth frames; {} paired with colour ({} right, {} wrong); {} unpaired ({:.2} %), \
              of which {} had a true partner: {:.2} % of the {with_partner} depth frames with one left unpaired; \
              {} colour frames rejected (counter restarts)",

@@ -346,7 +346,7 @@ fn run_campaign(s: &Settings) -> u64 {
     for seed in &seeds {
         let outcome = run_one(seed);
         let outcome = outcome.unwrap_or_else(|| panic!("a seed input of {} fails", t.name));
-        println!("fuzz {}: seed {outcome}", t.name);
+        eprintln!("fuzz {}: seed {outcome}", t.name);
         seen.insert(outcome);
         runs += 1;
         corpus.push(seed.clone());
@@ -400,7 +400,7 @@ fn run_campaign(s: &Settings) -> u64 {
         eprintln!("fuzz: cannot remove {}: {e}", work.display());
     }
     let secs = epoch.elapsed().as_secs_f64();
-    println!(
+    eprintln!(
         "fuzz {}: {runs} inputs in {secs:.1} s, {} outcomes, corpus {} ({} seeds, {kept} kept from earlier runs), \
          {failures} failing; slowest input {:.0} ms ({} bytes), largest memory peak {} KiB ({} bytes)",
         t.name,
@@ -449,7 +449,7 @@ fn short_campaign(target: &str, runs: u64) {
     let stdout = String::from_utf8_lossy(&output.stdout);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(
-        output.status.success() && stdout.contains(&format!("fuzz {target}: {runs} inputs")),
+        output.status.success() && stderr.contains(&format!("fuzz {target}: {runs} inputs")),
         "fuzz campaign of {target} failed ({}):\n{stdout}\n{stderr}",
         output.status
     );

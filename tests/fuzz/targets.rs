@@ -697,6 +697,27 @@ fn model_file(input: &Input) -> Vec<u8> {
     out
 }
 
+/// Whether samples with feature values from the far negative to the far positive all end in a
+/// leaf that exists.
+fn walkable<L>(t: &Tree<[f32; 2], L>) -> Result<(), String> {
+    let values = [-1e9f32, -3.0, 0.0, 0.5, 14.9, 15.0, 1e9];
+    for k in 0..values.len() {
+        let mut salt = k;
+        let leaf = t.leaf_index(|_| {
+            salt += 1;
+            values[salt % values.len()]
+        });
+        if leaf >= t.leaves.len() {
+            return Err(format!(
+                "a sample reached leaf {leaf} of {} ({} nodes)",
+                t.leaves.len(),
+                t.nodes.len()
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn forest_run(input: &Input, dir: &Path) -> Outcome {
     std::fs::create_dir_all(dir).expect("work directory");
     let path = dir.join("model.forest");
@@ -705,28 +726,9 @@ fn forest_run(input: &Input, dir: &Path) -> Outcome {
         Ok(m) => m,
         Err(e) => return Ok(outcome_of(&e, dir)),
     };
-    // A loaded forest can be walked: every sample ends in a leaf that exists.
-    let values = [-1e9f32, -3.0, 0.0, 0.5, 14.9, 15.0, 1e9];
-    let check = |nodes: usize, leaves: usize, leaf_of: &dyn Fn(&dyn Fn(usize) -> f32) -> usize| {
-        for k in 0..values.len() {
-            let leaf = leaf_of(&|salt| values[(k + salt) % values.len()]);
-            if leaf >= leaves {
-                return Err(format!("a sample reached leaf {leaf} of {leaves} ({nodes} nodes)"));
-            }
-        }
-        Ok(())
-    };
     match m {
         Model::Body(_, forest) => {
-            for t in &forest.trees {
-                check(t.nodes.len(), t.leaves.len(), &|v| {
-                    let mut salt = 0;
-                    t.leaf_index(|_| {
-                        salt += 1;
-                        v(salt)
-                    })
-                })?;
-            }
+            forest.trees.iter().try_for_each(walkable)?;
             let trees = forest.trees.len();
             // The run-time traversal and voting, on a small image.
             let mut estimator = BodyEstimator::new(forest, VoteSettings::default());
@@ -761,15 +763,7 @@ fn forest_run(input: &Input, dir: &Path) -> Outcome {
             ))
         }
         Model::Parts(_, forest) => {
-            for t in &forest.trees {
-                check(t.nodes.len(), t.leaves.len(), &|v| {
-                    let mut salt = 0;
-                    t.leaf_index(|_| {
-                        salt += 1;
-                        v(salt)
-                    })
-                })?;
-            }
+            forest.trees.iter().try_for_each(walkable)?;
             Ok(format!("ok: parts trees~{}", bucket(forest.trees.len() as u64)))
         }
     }
