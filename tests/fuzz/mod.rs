@@ -37,6 +37,10 @@ pub const HANG_SECS: u64 = 20;
 const DEFAULT_MEMORY_MB: u64 = 1024;
 /// Inputs in the corpus at most, in memory (the seeds always stay) and on disk.
 const MAX_CORPUS: usize = 2000;
+/// Bytes the corpus holds in memory at most, and the largest input it takes in: the
+/// campaign's own memory stays far below the data limit that catches the readers'.
+const MAX_CORPUS_BYTES: usize = 128 << 20;
+const MAX_CORPUS_INPUT_BYTES: usize = 1 << 20;
 
 /// One fuzz input: named parts, most of them files written under the work directory by that
 /// relative path; parts whose name starts with `@` are read by the target itself (a mode, a
@@ -170,13 +174,7 @@ fn env_u64(name: &str, default: u64) -> u64 {
 /// making the parser allocate more aborts the campaign instead of going unnoticed.
 fn limit_memory(budget_mb: u64) {
     use rustix::process::{Resource, Rlimit, getrlimit, setrlimit};
-    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
-    let data_kb: u64 = status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmData:"))
-        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
-        .unwrap_or(0);
-    let want = (data_kb << 10) + (budget_mb << 20);
+    let want = (data_kb() << 10) + (budget_mb << 20);
     let old = getrlimit(Resource::Data);
     let limit = old.maximum.map_or(want, |max| max.min(want));
     let result = setrlimit(
@@ -189,14 +187,24 @@ fn limit_memory(budget_mb: u64) {
     assert!(result.is_ok(), "cannot lower the data limit: {result:?}");
 }
 
-/// Peak resident memory since [`reset_peak_rss`] (KiB).
-fn peak_rss_kb() -> u64 {
+/// A figure of `/proc/self/status` in KiB (0 when it cannot be read).
+fn status_kb(key: &str) -> u64 {
     let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
     status
         .lines()
-        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .find_map(|l| l.strip_prefix(key))
         .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
         .unwrap_or(0)
+}
+
+/// The process's data (heap and private mappings), what the data limit counts (KiB).
+fn data_kb() -> u64 {
+    status_kb("VmData:")
+}
+
+/// Peak resident memory since [`reset_peak_rss`] (KiB).
+fn peak_rss_kb() -> u64 {
+    status_kb("VmHWM:")
 }
 
 /// Starts the peak resident memory figure again from what is resident now (Linux's
@@ -287,7 +295,8 @@ fn run_campaign(s: &Settings) -> u64 {
     let mut words = mutate::words_of(&seeds);
     words.extend(t.words.iter().map(|w| w.as_bytes().to_vec()));
 
-    limit_memory(env_u64("MEMORY_MB", DEFAULT_MEMORY_MB));
+    let budget_mb = env_u64("MEMORY_MB", DEFAULT_MEMORY_MB);
+    limit_memory(budget_mb);
     let epoch = Instant::now();
     let started_ms = Arc::new(AtomicU64::new(0));
     watchdog(started_ms.clone(), epoch, work.clone());
@@ -370,10 +379,24 @@ fn run_campaign(s: &Settings) -> u64 {
         }
     }
     let kept = corpus.len() - seed_count;
+    let mut corpus_bytes: usize = corpus.iter().map(Input::total_bytes).sum();
     let mut on_disk = kept;
     let stop_at = s.seconds.map(|secs| epoch + Duration::from_secs(secs));
+    let data_at_start = data_kb();
+    let mut leaked = false;
     loop {
         if s.runs.is_some_and(|n| runs >= n) || stop_at.is_some_and(|at| Instant::now() >= at) {
+            break;
+        }
+        // Memory that stays taken after its input (a leak in a reader or a library under it)
+        // would end the campaign at the data limit: stop first and say so.
+        if runs % 1000 == 0 && data_kb().saturating_sub(data_at_start) > (budget_mb << 10) / 2 {
+            eprintln!(
+                "fuzz {}: stopping early: the process's data grew by {} MiB over {runs} inputs (memory a reader keeps)",
+                t.name,
+                data_kb().saturating_sub(data_at_start) >> 10
+            );
+            leaked = true;
             break;
         }
         let mut input = corpus[rng.gen_range(0..corpus.len())].clone();
@@ -381,11 +404,14 @@ fn run_campaign(s: &Settings) -> u64 {
         let outcome = run_one(&input);
         runs += 1;
         failures += u64::from(outcome.is_none());
-        if outcome.is_some_and(|o| seen.insert(o)) {
-            if corpus.len() >= MAX_CORPUS {
+        if input.total_bytes() <= MAX_CORPUS_INPUT_BYTES && outcome.is_some_and(|o| seen.insert(o)) {
+            while corpus.len() > seed_count
+                && (corpus.len() >= MAX_CORPUS || corpus_bytes + input.total_bytes() > MAX_CORPUS_BYTES)
+            {
                 let evict = rng.gen_range(seed_count..corpus.len());
-                corpus.swap_remove(evict);
+                corpus_bytes -= corpus.swap_remove(evict).total_bytes();
             }
+            corpus_bytes += input.total_bytes();
             if on_disk < MAX_CORPUS {
                 on_disk += 1;
                 if let Err(e) = input.save(&corpus_dir.join(input.id())) {
@@ -413,8 +439,10 @@ fn run_campaign(s: &Settings) -> u64 {
         biggest.1,
     );
     let log = format!(
-        "{} seed={} inputs={runs} seconds={secs:.1} failing={failures}\n",
-        t.name, s.seed
+        "{} seed={} inputs={runs} seconds={secs:.1} failing={failures} leaking={}\n",
+        t.name,
+        s.seed,
+        u8::from(leaked)
     );
     let appended = std::fs::OpenOptions::new()
         .create(true)
