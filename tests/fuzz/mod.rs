@@ -361,12 +361,17 @@ fn run_campaign(s: &Settings) -> u64 {
         corpus.push(seed.clone());
     }
     let seed_count = corpus.len();
-    // The corpus kept by earlier campaigns.
+    // The corpus kept by earlier campaigns, within the corpus's bounds.
+    let mut corpus_bytes: usize = corpus.iter().map(Input::total_bytes).sum();
     if let Ok(entries) = std::fs::read_dir(&corpus_dir) {
         let mut dirs: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
         dirs.sort();
         for dir in dirs {
-            if let Ok(input) = Input::load(&dir) {
+            if let Ok(input) = Input::load(&dir)
+                && input.total_bytes() <= MAX_CORPUS_INPUT_BYTES
+                && corpus_bytes + input.total_bytes() <= MAX_CORPUS_BYTES
+            {
+                corpus_bytes += input.total_bytes();
                 match run_one(&input) {
                     Some(outcome) => {
                         seen.insert(outcome);
@@ -379,7 +384,6 @@ fn run_campaign(s: &Settings) -> u64 {
         }
     }
     let kept = corpus.len() - seed_count;
-    let mut corpus_bytes: usize = corpus.iter().map(Input::total_bytes).sum();
     let mut on_disk = kept;
     let stop_at = s.seconds.map(|secs| epoch + Duration::from_secs(secs));
     let data_at_start = data_kb();
@@ -388,11 +392,12 @@ fn run_campaign(s: &Settings) -> u64 {
         if s.runs.is_some_and(|n| runs >= n) || stop_at.is_some_and(|at| Instant::now() >= at) {
             break;
         }
-        // Memory that stays taken after its input (a leak in a reader or a library under it)
-        // would end the campaign at the data limit: stop first and say so.
+        // Memory that stays taken after its input (a leak in a reader or a library under it,
+        // or freed memory the allocator keeps) would end the campaign at the data limit: stop
+        // first and say so.
         if runs % 1000 == 0 && data_kb().saturating_sub(data_at_start) > (budget_mb << 10) / 2 {
             eprintln!(
-                "fuzz {}: stopping early: the process's data grew by {} MiB over {runs} inputs (memory a reader keeps)",
+                "fuzz {}: stopping early: the process's data grew by {} MiB over {runs} inputs (memory kept after its input)",
                 t.name,
                 data_kb().saturating_sub(data_at_start) >> 10
             );
