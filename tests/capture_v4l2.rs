@@ -275,6 +275,26 @@ mod moseq {
             mousepose::core::error_chain(&err)
         );
     }
+
+    #[test]
+    fn a_depth_resolution_beyond_any_camera_is_refused_not_an_overflow() {
+        // Width x height x 2 bytes overflowed 64 bits (a panic in checked builds, a wrong
+        // frame size otherwise).
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("depth.dat"), b"").unwrap();
+        std::fs::write(dir.path().join("depth_ts.txt"), "").unwrap();
+        for resolution in ["[4294967295, 4294967295]", "[65536, 2]"] {
+            std::fs::write(
+                dir.path().join("metadata.json"),
+                format!(r#"{{"DepthResolution": {resolution}}}"#),
+            )
+            .unwrap();
+            let err = MoseqDepth::open(MoseqConfig::new(dir.path())).unwrap_err();
+            let text = mousepose::core::error_chain(&err);
+            assert!(matches!(moseq_error(&err), MoseqError::Resolution { .. }), "{text}");
+            assert!(text.contains("up to 65535"), "{text}");
+        }
+    }
 }
 
 mod v4l2 {

@@ -9,6 +9,8 @@ mod capture_v4l2;
 mod cli;
 mod export;
 mod forest;
+mod fuzz;
+mod hostile;
 mod http;
 mod layers;
 mod packaging;

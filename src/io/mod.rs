@@ -7,3 +7,39 @@ pub mod output;
 pub mod session;
 pub mod store;
 pub mod video;
+
+use std::io::{self, Read as _};
+use std::path::Path;
+
+/// The bytes of a regular file of at most `max` bytes: a device (`/dev/zero`), a FIFO or a
+/// directory is refused before anything is read (opening a FIFO waits for a writer, a device
+/// never ends), and a larger file after `max` bytes. Every reader of a file a user names goes
+/// through it.
+///
+/// # Errors
+/// The file's own I/O errors (`NotFound` when it is missing), or `InvalidInput` naming why it
+/// is refused.
+pub fn read_bounded_bytes(path: &Path, max: u64) -> io::Result<Vec<u8>> {
+    // Asked before opening: opening a FIFO waits for a writer.
+    if !std::fs::metadata(path)?.is_file() {
+        return Err(io::Error::new(io::ErrorKind::InvalidInput, "it is not a regular file"));
+    }
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)?.take(max + 1).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > max {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("it is larger than {max} bytes"),
+        ));
+    }
+    Ok(bytes)
+}
+
+/// The text of a regular file of at most `max` bytes, as [`read_bounded_bytes`].
+///
+/// # Errors
+/// As [`read_bounded_bytes`], and `InvalidData` when the file is not UTF-8.
+pub fn read_bounded(path: &Path, max: u64) -> io::Result<String> {
+    String::from_utf8(read_bounded_bytes(path, max)?)
+        .map_err(|_| io::Error::new(io::ErrorKind::InvalidData, "it is not UTF-8 text"))
+}

@@ -5,6 +5,7 @@
 //! `docs/rig.example.toml` is a commented example of every key.
 
 use crate::core::frame::PixelFormat;
+use crate::io::read_bounded;
 use crate::runtime::pipeline::{EdgeConfig, WhenFull};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -28,28 +29,6 @@ pub enum ConfigError {
 
 /// A rig config is a few kilobytes; more is not a config.
 const MAX_CONFIG_BYTES: u64 = 1 << 20;
-
-/// The text of a regular file of at most `max` bytes: a device (`/dev/zero`), a FIFO or a
-/// directory is refused before anything is read, and a larger file after `max` bytes.
-pub fn read_bounded(path: &Path, max: u64) -> std::io::Result<String> {
-    use std::io::Read as _;
-    // Asked before opening: opening a FIFO waits for a writer.
-    if !std::fs::metadata(path)?.is_file() {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            "it is not a regular file",
-        ));
-    }
-    let mut text = String::new();
-    std::fs::File::open(path)?.take(max + 1).read_to_string(&mut text)?;
-    if text.len() as u64 > max {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            format!("it is larger than {max} bytes"),
-        ));
-    }
-    Ok(text)
-}
 
 // ---- the raw form, as written -------------------------------------------------------------
 

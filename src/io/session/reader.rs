@@ -286,10 +286,13 @@ impl SessionReader {
     }
 }
 
+/// `session.toml` is a few kilobytes; more is not session metadata.
+const MAX_META_BYTES: u64 = 1 << 20;
+
 /// Reads and checks `session.toml`: format name and version before the rest, so a newer
 /// version's file is reported as such rather than by its first unknown key.
 fn read_meta(path: &Path) -> Result<SessionMeta> {
-    let text = std::fs::read_to_string(path).map_err(io_error(path, "read"))?;
+    let text = crate::io::read_bounded(path, MAX_META_BYTES).map_err(io_error(path, "read"))?;
     let table: toml::Table = toml::from_str(&text).map_err(|source| SessionError::Meta {
         path: path.to_path_buf(),
         source,

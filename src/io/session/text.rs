@@ -60,10 +60,13 @@ impl LineWriter {
     }
 }
 
+/// The longest line file read (4 GiB: ten hours of ground truth at 30 fps take under 1 GiB).
+const MAX_LINE_FILE_BYTES: u64 = 4 << 30;
+
 /// The finished lines of a file with their one-based line numbers; a last line without its
 /// `\n` is left out.
 pub(crate) fn read_lines(path: &Path) -> Result<Vec<(u64, String)>> {
-    let bytes = std::fs::read(path).map_err(io_error(path, "read"))?;
+    let bytes = crate::io::read_bounded_bytes(path, MAX_LINE_FILE_BYTES).map_err(io_error(path, "read"))?;
     let text = std::str::from_utf8(&bytes).map_err(|source| {
         let valid = bytes.get(..source.valid_up_to()).unwrap_or_default();
         SessionError::NotText {

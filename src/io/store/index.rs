@@ -84,6 +84,10 @@ pub fn read_index(path: impl AsRef<Path>) -> Result<Index> {
         path: path.to_path_buf(),
         reason: reason.to_owned(),
     };
+    // Asked before opening: opening a FIFO waits for a writer, a device never ends.
+    if !std::fs::metadata(path).map_err(io_error(path, "open"))?.is_file() {
+        return Err(invalid("not a regular file"));
+    }
     let mut file = File::open(path).map_err(io_error(path, "open"))?;
     let file_len = file.metadata().map_err(io_error(path, "read"))?.len();
     let mut header = [0u8; INDEX_HEADER_LEN as usize];

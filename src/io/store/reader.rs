@@ -110,6 +110,12 @@ impl RecordReader {
     /// version 1 record file of the expected kind.
     pub fn open(path: impl AsRef<Path>, expected: Kind) -> Result<Self> {
         let path = path.as_ref();
+        // Asked before opening: opening a FIFO waits for a writer, a device never ends.
+        if !std::fs::metadata(path).map_err(io_error(path, "open"))?.is_file() {
+            return Err(StoreError::NotRecordFile {
+                path: path.to_path_buf(),
+            });
+        }
         let mut file = File::open(path).map_err(io_error(path, "open"))?;
         let len = file.metadata().map_err(io_error(path, "read"))?.len();
         let mut header = [0u8; 16];

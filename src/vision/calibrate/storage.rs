@@ -100,6 +100,9 @@ fn cv(path: &Path, action: &'static str, source: opencv::Error) -> CalibrationEr
     }
 }
 
+/// Calibration files are a few kilobytes; more is not a calibration.
+const MAX_YAML_BYTES: u64 = 1 << 20;
+
 /// A parsed YAML document.
 pub(crate) struct YamlReader {
     fs: FileStorage,
@@ -113,15 +116,36 @@ pub(crate) struct Node<'a> {
     path: &'a Path,
 }
 
+/// The first line (1-based) holding a directive (`%...`) other than the first line's, or a
+/// document marker (`---`, `...`) with more after it: OpenCV writes neither, and its YAML
+/// parser (4.6) loops forever on some such files (`%YAML:1.0`, `---%:1`, `-`, `-`; found by
+/// fuzzing), so they never reach it.
+fn directive_out_of_place(text: &str) -> Option<usize> {
+    text.lines().enumerate().skip(1).find_map(|(i, line)| {
+        let marker = ["---", "..."]
+            .iter()
+            .any(|m| line.strip_prefix(m).is_some_and(|rest| !rest.trim().is_empty()));
+        (line.starts_with('%') || marker).then_some(i + 1)
+    })
+}
+
 impl YamlReader {
     /// Reads and parses the file at `path`.
     pub(crate) fn open(path: &Path) -> Result<Self, CalibrationError> {
-        let text = std::fs::read_to_string(path).map_err(|source| CalibrationError::Io {
+        let text = crate::io::read_bounded(path, MAX_YAML_BYTES).map_err(|source| CalibrationError::Io {
             path: path.to_owned(),
             source,
         })?;
         if text.trim().is_empty() {
             return Err(CalibrationError::Empty(path.to_owned()));
+        }
+        if let Some(line) = directive_out_of_place(&text) {
+            return Err(CalibrationError::Invalid {
+                path: path.to_owned(),
+                what: format!(
+                    "line {line} holds a YAML directive or document marker where OpenCV writes none (OpenCV's parser can loop forever on one)"
+                ),
+            });
         }
         let flags = core::FileStorage_READ | core::FileStorage_MEMORY | core::FileStorage_FORMAT_YAML;
         let fs = FileStorage::new(&text, flags, "").map_err(|e| cv(path, "parse", e))?;

@@ -44,6 +44,8 @@ fn quantise_u16(v: f32, unit: f32, lo: u16) -> u16 {
 }
 /// The largest decompressed tree section accepted (far above any real model).
 const MAX_TREES_BYTES: usize = 1 << 30;
+/// The largest model file read (the bundled ones are about 9 MB).
+const MAX_MODEL_BYTES: u64 = 1 << 30;
 
 /// What a model file holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -340,12 +342,30 @@ fn decode_trees<L>(
     Ok(Forest { trees })
 }
 
+/// The tree section, decompressed as a stream: memory grows with the trees actually there,
+/// never reserved up front for the largest section accepted (what `zstd::bulk` does, 1 GiB
+/// for every model), and stops past [`MAX_TREES_BYTES`].
+fn decompress_trees(compressed: &[u8]) -> Result<Vec<u8>, String> {
+    use std::io::Read as _;
+    let unreadable = |e: std::io::Error| format!("its trees do not decompress: {e}");
+    let mut trees = Vec::new();
+    zstd::stream::read::Decoder::with_buffer(compressed)
+        .map_err(unreadable)?
+        .take(MAX_TREES_BYTES as u64 + 1)
+        .read_to_end(&mut trees)
+        .map_err(unreadable)?;
+    if trees.len() > MAX_TREES_BYTES {
+        return Err(format!("its trees decompress to more than {MAX_TREES_BYTES} bytes"));
+    }
+    Ok(trees)
+}
+
 /// Reads a model file, checking it is whole, of this format, and of the expected kind.
 ///
 /// # Errors
 /// A [`ModelError`] naming the file and what is wrong with it.
 pub fn load(path: &Path, expected: Option<ModelKind>) -> Result<Model, ModelError> {
-    let bytes = std::fs::read(path).map_err(|source| ModelError::Io {
+    let bytes = crate::io::read_bounded_bytes(path, MAX_MODEL_BYTES).map_err(|source| ModelError::Io {
         path: path.to_owned(),
         action: "read",
         source,
@@ -408,8 +428,7 @@ pub fn decode(bytes: &[u8], path: &Path, expected: Option<ModelKind>) -> Result<
     l.copy_from_slice(len_bytes);
     let len = usize::try_from(u64::from_le_bytes(l)).unwrap_or(usize::MAX);
     let compressed = r.take(len, "trees").map_err(corrupt)?;
-    let trees = zstd::bulk::decompress(compressed, MAX_TREES_BYTES)
-        .map_err(|e| corrupt(format!("its trees do not decompress: {e}")))?;
+    let trees = decompress_trees(compressed).map_err(corrupt)?;
     match kind {
         ModelKind::Body => {
             let forest = decode_trees(&trees, 2, |r| {

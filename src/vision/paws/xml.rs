@@ -16,13 +16,16 @@ use roxmltree::{Document, Node as XmlNode};
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// OpenCV's largest shipped cascades are about 2 MB.
+const MAX_XML_BYTES: u64 = 64 << 20;
+
 /// Reads a cascade file.
 ///
 /// # Errors
 /// When the file cannot be read, is not well-formed XML, is not a cascade, is damaged or
 /// uses something we do not support; the error names the file and what is wrong.
 pub fn load(path: &Path) -> Result<Cascade, PawError> {
-    let bytes = std::fs::read(path).map_err(|source| PawError::Io {
+    let bytes = crate::io::read_bounded_bytes(path, MAX_XML_BYTES).map_err(|source| PawError::Io {
         path: path.to_owned(),
         action: "read",
         source,

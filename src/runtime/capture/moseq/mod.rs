@@ -5,7 +5,7 @@
 //! A session directory holds:
 //! - `depth.dat`: raw frames one after the other, each `width * height` little-endian `u16`
 //!   depths in millimetres, row-major, no header. The size comes from `metadata.json`
-//!   (`"DepthResolution": [width, height]`) when that file has it, else from the configured
+//!   (`"DepthResolution": [width, height]`, each side up to 65535) when that file has it, else from the configured
 //!   default (512x424, the Kinect v2 depth size). The file length must be a whole number of
 //!   frames; or
 //! - `depth.avi`: the same frames compressed losslessly (FFV1, 16-bit grey). It is decoded by an
@@ -64,6 +64,9 @@ pub const DEPTH_TS: &str = "depth_ts.txt";
 /// The metadata file name.
 pub const METADATA: &str = "metadata.json";
 
+/// The longest `depth_ts.txt` read (a day at 30 fps takes about 60 MB).
+const MAX_TIMESTAMPS_BYTES: u64 = 1 << 30;
+
 /// Where a MoSeq recording is and how to read it.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct MoseqConfig {
@@ -112,7 +115,10 @@ pub enum MoseqError {
         #[source]
         source: serde_json::Error,
     },
-    #[error("{path:?}: DepthResolution {value} is not [width, height] of positive integers")]
+    #[error(
+        "{path:?}: DepthResolution {value} is not [width, height] of positive integers up to {}",
+        reader::MAX_SIDE_PX
+    )]
     Resolution { path: PathBuf, value: String },
     #[error("{path:?} is {len} bytes, not a multiple of the {frame_bytes}-byte frame of {width}x{height} u16 depths")]
     Truncated {
@@ -221,7 +227,7 @@ impl MoseqDepth {
         };
 
         let ts_path = config.dir.join(DEPTH_TS);
-        let text = match std::fs::read_to_string(&ts_path) {
+        let text = match crate::io::read_bounded(&ts_path, MAX_TIMESTAMPS_BYTES) {
             Ok(text) => text,
             Err(e) if e.kind() == io::ErrorKind::NotFound => {
                 return Err(recording(MoseqError::NoTimestamps { path: ts_path }));
@@ -256,7 +262,8 @@ impl MoseqDepth {
                         })
                     })?
                     .len();
-                let frame_bytes = u64::from(width) * u64::from(height) * 2;
+                // Saturating: a configured default size is not bounded like metadata's.
+                let frame_bytes = (u64::from(width) * u64::from(height)).saturating_mul(2);
                 if frame_bytes == 0 || len % frame_bytes != 0 {
                     return Err(recording(MoseqError::Truncated {
                         path: depth_path,

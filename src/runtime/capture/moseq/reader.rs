@@ -9,6 +9,9 @@ use std::path::Path;
 use std::process::{Child, ChildStderr, Command, Stdio};
 use std::sync::mpsc;
 
+/// The longest side of a depth frame accepted (far beyond any depth camera's).
+pub const MAX_SIDE_PX: u32 = 65_535;
+
 /// What `metadata.json` says about the depth camera.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct MoseqMetadata {
@@ -39,7 +42,7 @@ const CAMERA_KEYS: &[&str] = &[
 /// The file exists but cannot be read, is not JSON, or its `DepthResolution` is not two
 /// positive integers.
 pub fn read_metadata(path: &Path) -> Result<MoseqMetadata, MoseqError> {
-    let text = match std::fs::read_to_string(path) {
+    let text = match crate::io::read_bounded(path, 1 << 20) {
         Ok(text) => text,
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(MoseqMetadata::default()),
         Err(source) => {
@@ -70,7 +73,7 @@ pub fn read_metadata(path: &Path) -> Result<MoseqMetadata, MoseqError> {
             .get(i)
             .and_then(serde_json::Value::as_u64)
             .and_then(|v| u32::try_from(v).ok())
-            .filter(|&v| v > 0)
+            .filter(|v| (1..=MAX_SIDE_PX).contains(v))
     };
     match (resolution.as_array().map(Vec::len), size(0), size(1)) {
         (Some(2), Some(w), Some(h)) => Ok(MoseqMetadata {
