@@ -3,7 +3,7 @@
 #![allow(clippy::unwrap_used)] // the helpers below are test code too
 
 use crate::util::{mousepose, repo_root};
-use mousepose::app::export::moseq::{COLOR_AVI, RIG_FILE, export_moseq};
+use mousepose::app::export::moseq::{COLOR_AVI, PROVENANCE_FILE, RIG_FILE, export_moseq};
 use mousepose::app::replay::{ReplayOptions, replay};
 use mousepose::io::session::SessionReader;
 use mousepose::runtime::capture::moseq::{
@@ -89,6 +89,19 @@ fn moseq_export_is_lossless_and_replays_to_the_same_poses() {
     assert_eq!(meta["IsLittleEndian"], true);
     assert_eq!(meta["DepthDataType"], "UInt16[]");
     assert_eq!(meta["ColorResolution"], serde_json::json!([320, 256]));
+    // moseq2-extract stores each value as an HDF5 dataset: no objects, no nested lists.
+    for (key, value) in meta.as_object().unwrap() {
+        let flat = match value {
+            serde_json::Value::Object(_) => false,
+            serde_json::Value::Array(items) => items.iter().all(|v| !v.is_array() && !v.is_object()),
+            _ => true,
+        };
+        assert!(flat, "metadata.json's {key} is not a string, a number or a flat list");
+    }
+    let provenance: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join(PROVENANCE_FILE)).unwrap()).unwrap();
+    assert_eq!(provenance["software_version"], env!("CARGO_PKG_VERSION"));
+    assert_eq!(provenance["depth_frames"], reader.depth_count());
 
     // The same frames written raw (depth.dat, the layout's uncompressed form) straight from
     // the session, with the session's own times: replayed with the session's calibration,

@@ -6,6 +6,7 @@
 //!   depth.avi       depth frames, FFV1 16-bit grey (gray16le), millimetres, lossless
 //!   depth_ts.txt    per depth frame: device time (ms), host time (ms)
 //!   metadata.json   SubjectName, SessionName, StartTime, DepthResolution, ... (MoSeq's keys)
+//!   mousepose.json  where the export came from: software version, session, cameras, counts
 //!   color.avi       the colour camera's frames, FFV1, lossless (Bayer mosaics as recorded)
 //!   color_ts.txt    per colour frame: device time (ms), host time (ms)
 //!   rig.yaml        the session's calibration (for `replay DIR --calibration DIR/rig.yaml`)
@@ -31,6 +32,9 @@ pub const COLOR_AVI: &str = "color.avi";
 pub const COLOR_TS: &str = "color_ts.txt";
 /// The session's calibration.
 pub const RIG_FILE: &str = "rig.yaml";
+/// Where the export came from. Not in `metadata.json`: moseq2-extract stores each of that
+/// file's values as an HDF5 dataset and fails on a nested object.
+pub const PROVENANCE_FILE: &str = "mousepose.json";
 
 #[derive(Debug, Args)]
 pub struct MoseqArgs {
@@ -52,8 +56,8 @@ pub struct MoseqArgs {
 }
 
 /// `metadata.json`: the keys MoSeq's acquisition writes (moseq2-extract reads the resolution,
-/// byte order and data type, and names its results after the subject and session), then
-/// mousepose's own.
+/// byte order and data type, names its results after the subject and session, and copies
+/// every value into its results, so each must be a string, a number or a flat list).
 #[derive(Debug, Serialize)]
 #[serde(rename_all = "PascalCase")]
 struct Metadata {
@@ -69,8 +73,6 @@ struct Metadata {
     color_data_type: Option<&'static str>,
     nidaq_channels: u32,
     nidaq_sampling_rate: f64,
-    #[serde(rename = "mousepose")]
-    mousepose: Provenance,
 }
 
 /// Where the export came from.
@@ -251,17 +253,18 @@ pub fn export_moseq(
         color_data_type: (color_frames > 0).then_some("Byte[]"),
         nidaq_channels: 0,
         nidaq_sampling_rate: 0.0,
-        mousepose: Provenance {
-            software_version: env!("CARGO_PKG_VERSION"),
-            session: std::fs::canonicalize(session).unwrap_or_else(|_| session.to_owned()),
-            depth_camera: depth_meta,
-            color_camera: color_meta,
-            color_pixel_format,
-            depth_frames,
-            color_frames,
-        },
+    };
+    let provenance = Provenance {
+        software_version: env!("CARGO_PKG_VERSION"),
+        session: std::fs::canonicalize(session).unwrap_or_else(|_| session.to_owned()),
+        depth_camera: depth_meta,
+        color_camera: color_meta,
+        color_pixel_format,
+        depth_frames,
+        color_frames,
     };
     crate::app::write_report_file(&dir, METADATA, &serde_json::to_vec_pretty(&metadata)?)?;
+    crate::app::write_report_file(&dir, PROVENANCE_FILE, &serde_json::to_vec_pretty(&provenance)?)?;
     if let Some(rig) = &meta.rig {
         RigCalibration::from_rig(rig)
             .save(&dir.join(RIG_FILE))
