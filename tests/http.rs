@@ -433,3 +433,23 @@ fn status_without_a_daemon_says_so() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("cannot reach") && err.contains("mousepose run"), "{err}");
 }
+
+#[test]
+fn an_address_in_use_stops_the_daemon_before_it_starts_a_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let address = taken.local_addr().unwrap();
+    let rig = http_rig(tmp.path(), false, &format!("address = \"{address}\"\n"));
+    let run = mousepose()
+        .args(["run", "--seconds", "5", "--config"])
+        .arg(&rig)
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains("cannot listen on") && err.contains(&address.to_string()),
+        "{err}"
+    );
+    assert!(!tmp.path().join("out").exists(), "a run directory was made");
+}

@@ -171,6 +171,7 @@ pub fn run(
     seconds: Option<f64>,
     stop: &Shutdown,
 ) -> anyhow::Result<RunReport> {
+    let listener = config.http.address.map(HttpServer::bind).transpose()?;
     let root = create_run_dir(&config.output_dir)?;
     tracing::info!(dir = ?root, record = config.record, "run started");
     let info = RunInfo {
@@ -259,15 +260,13 @@ pub fn run(
         recorder: gauges,
         floor,
     }));
-    let server = match config.http.address {
-        Some(address) => match HttpServer::start(address, config.http.token.clone(), Arc::clone(&watch), rig) {
-            Ok(server) => Some(server),
-            Err(e) => {
-                shutdown.request();
-                drop(running.join());
-                return Err(e.into());
-            }
-        },
+    let server = match listener.map(|l| HttpServer::start(l, config.http.token.clone(), Arc::clone(&watch), rig)) {
+        Some(Err(e)) => {
+            shutdown.request();
+            drop(running.join());
+            return Err(e.into());
+        }
+        Some(Ok(server)) => Some(server),
         None => None,
     };
 

@@ -50,6 +50,13 @@ pub enum HttpError {
     Thread(#[source] std::io::Error),
 }
 
+/// An address taken for the server, not served yet.
+#[derive(Debug)]
+pub struct Listener {
+    listener: std::net::TcpListener,
+    bound: SocketAddr,
+}
+
 /// A running server; dropping it (or [`HttpServer::stop`]) stops it.
 #[derive(Debug)]
 pub struct HttpServer {
@@ -59,17 +66,27 @@ pub struct HttpServer {
 }
 
 impl HttpServer {
-    /// Listens on `address` (port 0: any free port) and serves `watch` from a thread of its
-    /// own. `token`: the bearer token every request must carry.
+    /// Takes `address` (port 0: any free port), before anything else of a run starts, so that
+    /// an address in use stops the daemon before it opens a camera.
     ///
     /// # Errors
-    /// The address cannot be bound, or the thread cannot start.
-    pub fn start(address: SocketAddr, token: Option<String>, watch: Arc<Watch>, rig: Rig) -> Result<Self, HttpError> {
+    /// The address cannot be bound.
+    pub fn bind(address: SocketAddr) -> Result<Listener, HttpError> {
         let listener = std::net::TcpListener::bind(address).map_err(|source| HttpError::Bind { address, source })?;
         let bound = listener
             .local_addr()
             .and_then(|a| listener.set_nonblocking(true).map(|()| a))
             .map_err(|source| HttpError::Bind { address, source })?;
+        Ok(Listener { listener, bound })
+    }
+
+    /// Serves `watch` on `listener` from a thread of its own. `token`: the bearer token every
+    /// request must carry.
+    ///
+    /// # Errors
+    /// The thread cannot start.
+    pub fn start(listener: Listener, token: Option<String>, watch: Arc<Watch>, rig: Rig) -> Result<Self, HttpError> {
+        let Listener { listener, bound } = listener;
         let state = Arc::new(Served {
             watch,
             rig,
