@@ -453,3 +453,27 @@ fn an_address_in_use_stops_the_daemon_before_it_starts_a_run() {
     );
     assert!(!tmp.path().join("out").exists(), "a run directory was made");
 }
+
+#[test]
+fn a_client_that_never_finishes_its_request_does_not_hold_up_sigterm() {
+    let tmp = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let address: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    let rig = http_rig(tmp.path(), false, &format!("address = \"{address}\"\n"));
+    let child = daemon(&rig, None);
+    wait_status(address, Duration::from_secs(30), |s| s["poses"].as_u64() > Some(0));
+    // Half a request, never finished, and a finished one kept alive.
+    let mut slow = std::net::TcpStream::connect(address).unwrap();
+    std::io::Write::write_all(&mut slow, b"GET /status HTTP/1.1\r\nHost: x\r\n").unwrap();
+    let mut idle = std::net::TcpStream::connect(address).unwrap();
+    std::io::Write::write_all(&mut idle, b"GET /status HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    let started = Instant::now();
+    let (exit, _, err) = terminate(child, Duration::from_secs(15));
+    assert!(exit.success(), "{err}");
+    assert!(
+        started.elapsed() < Duration::from_secs(10),
+        "{:?} to stop",
+        started.elapsed()
+    );
+    drop((slow, idle));
+}

@@ -34,6 +34,9 @@ pub const MAX_IN_FLIGHT: usize = 64;
 /// The longest a request may take.
 pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(5);
 
+/// How long stopping waits for open connections.
+const STOP_WAIT: Duration = Duration::from_secs(2);
+
 /// The live page, served from the binary.
 const PAGE: &str = include_str!("page.html");
 
@@ -126,7 +129,15 @@ impl HttpServer {
             tracing::debug!("the HTTP server had stopped already");
         }
         if let Some(thread) = self.thread.take() {
-            if thread.join().is_err() {
+            // Open connections get a moment to finish; a client that holds one longer does not
+            // hold up the daemon's exit.
+            let deadline = std::time::Instant::now() + STOP_WAIT;
+            while !thread.is_finished() && std::time::Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            if !thread.is_finished() {
+                tracing::warn!("the HTTP server still had clients after {STOP_WAIT:?}: left to end with the process");
+            } else if thread.join().is_err() {
                 tracing::error!("the HTTP server's thread panicked");
             }
         }
