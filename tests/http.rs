@@ -365,27 +365,28 @@ fn screenshot_of_the_page(address: SocketAddr, dir: &Path) {
     }
 }
 
+/// Runs the daemon with `rig`, which it must refuse as a usage error (exit 1); its stderr.
+fn refused_at_start(rig: &Path) -> String {
+    let run = mousepose()
+        .args(["run", "--seconds", "1", "--config"])
+        .arg(rig)
+        .output()
+        .expect("test set-up");
+    assert_eq!(run.status.code(), Some(1));
+    String::from_utf8_lossy(&run.stderr).into_owned()
+}
+
 #[test]
 fn a_remote_address_needs_allow_remote_and_then_a_token() {
     let tmp = tempfile::tempdir().unwrap();
-    let rig = http_rig(tmp.path(), false, "address = \"0.0.0.0:8470\"\n");
-    let run = mousepose()
-        .args(["run", "--seconds", "1", "--config"])
-        .arg(&rig)
-        .output()
-        .unwrap();
-    assert_eq!(run.status.code(), Some(1));
-    let err = String::from_utf8_lossy(&run.stderr);
+    let err = refused_at_start(&http_rig(tmp.path(), false, "address = \"0.0.0.0:8470\"\n"));
     assert!(err.contains("http.address") && err.contains("allow_remote"), "{err}");
-
-    let rig = http_rig(tmp.path(), false, "address = \"0.0.0.0:8470\"\nallow_remote = true\n");
-    let run = mousepose()
-        .args(["run", "--seconds", "1", "--config"])
-        .arg(&rig)
-        .output()
-        .unwrap();
-    assert_eq!(run.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&run.stderr).contains("http.token_file"));
+    let err = refused_at_start(&http_rig(
+        tmp.path(),
+        false,
+        "address = \"0.0.0.0:8470\"\nallow_remote = true\n",
+    ));
+    assert!(err.contains("http.token_file"), "{err}");
 
     // With a token (served on loopback here: no test listens beyond this machine).
     let token = "f3a9c2d81b7e4a60b5c3";

@@ -45,7 +45,7 @@ pub fn command(args: &StatusArgs) -> crate::app::Outcome {
     };
     let token = match &args.token_file {
         Some(path) => Some(
-            crate::io::read_bounded(path, 4096)
+            crate::io::read_bounded(path, crate::runtime::config::MAX_TOKEN_BYTES)
                 .with_context(|| format!("cannot read the token file {path:?}"))
                 .map_err(Failure::usage)?
                 .trim()

@@ -328,7 +328,7 @@ pub struct Http {
 pub const DEFAULT_HTTP_PORT: u16 = 8470;
 
 /// A token file is one line; more is not a token.
-const MAX_TOKEN_BYTES: u64 = 4096;
+pub const MAX_TOKEN_BYTES: u64 = 4096;
 
 impl Config {
     /// Reads and checks a config file.

@@ -94,7 +94,7 @@ impl Collector for WatchCollector {
     fn encode(&self, encoder: DescriptorEncoder) -> std::fmt::Result {
         let w = &self.0;
         let mut f = Families(encoder);
-        let cameras = w.pipeline.cameras();
+        let cameras = w.parts.pipeline.cameras();
         let per_camera = |get: &dyn Fn(&crate::runtime::accounting::CameraSummary) -> u64| -> Vec<(Labels, u64)> {
             cameras
                 .iter()
@@ -157,7 +157,7 @@ impl Collector for WatchCollector {
 
         let now_ns = monotonic_ns();
         let (mut up, mut away_s, mut outages, mut states) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        for (name, health) in &w.cameras {
+        for (name, health) in &w.parts.cameras {
             let h = lock(health);
             let state = match &h.state {
                 Some(CameraState::Streaming) => "streaming",
@@ -198,7 +198,7 @@ impl Collector for WatchCollector {
             &outages,
         )?;
 
-        let stages = w.pipeline.stages();
+        let stages = w.parts.pipeline.stages();
         f.histogram(
             "mousepose_stage_latency",
             "Time a stage or sink spends on one item.",
@@ -219,9 +219,9 @@ impl Collector for WatchCollector {
         f.histogram(
             "mousepose_end_to_end_latency",
             "From a frame pair leaving the synchroniser to its pose row handed to the operating system.",
-            &[(Vec::new(), w.pipeline.end_to_end())],
+            &[(Vec::new(), w.parts.pipeline.end_to_end())],
         )?;
-        let edges = w.pipeline.edges();
+        let edges = w.parts.pipeline.edges();
         f.gauge(
             "mousepose_queue_depth",
             "Items waiting on an edge between threads (after its last send).",
@@ -264,7 +264,7 @@ impl Collector for WatchCollector {
             None,
             &[(Vec::new(), live.chunk as f64)],
         )?;
-        if let Some(g) = &w.recorder {
+        if let Some(g) = &w.parts.recorder {
             f.counter(
                 "mousepose_recorded",
                 "Encoded frame bytes written to the raw recording.",
@@ -302,13 +302,13 @@ impl Collector for WatchCollector {
             "mousepose_run_uptime",
             "Time since the run started.",
             Some(&Unit::Seconds),
-            &[(Vec::new(), w.pipeline.elapsed_s())],
+            &[(Vec::new(), w.parts.pipeline.elapsed_s())],
         )?;
         f.gauge(
             "mousepose_build_info",
             "The running version (value 1).",
             None,
-            &[(label("version", w.info.version), 1.0)],
+            &[(label("version", w.parts.info.version), 1.0)],
         )?;
         Ok(())
     }

@@ -157,23 +157,7 @@ struct History {
     last: Option<(f64, u64, u64, u64, u64, u64)>,
 }
 
-/// A running daemon, as its readers see it.
-#[derive(Debug)]
-pub struct Watch {
-    pub dir: PathBuf,
-    pub info: RunInfo,
-    pub pipeline: PipelineWatch,
-    pub cameras: Vec<(&'static str, SharedHealth)>,
-    pub live: Arc<Mutex<Live>>,
-    pub chunks: Arc<crate::runtime::sink::chunks::Chunks>,
-    pub recorder: Option<Arc<RecorderGauges>>,
-    /// The floor the segmenter fitted, for the live view.
-    pub floor: FloorSlot,
-    cpu0: f64,
-    history: Mutex<History>,
-}
-
-/// What a [`Watch`] is made of.
+/// What a [`Watch`] reads.
 #[derive(Debug)]
 pub struct Watched {
     pub dir: PathBuf,
@@ -183,20 +167,22 @@ pub struct Watched {
     pub live: Arc<Mutex<Live>>,
     pub chunks: Arc<crate::runtime::sink::chunks::Chunks>,
     pub recorder: Option<Arc<RecorderGauges>>,
+    /// The floor the segmenter fitted, for the live view.
     pub floor: FloorSlot,
 }
 
+/// A running daemon, as its readers see it.
+#[derive(Debug)]
+pub struct Watch {
+    pub parts: Watched,
+    cpu0: f64,
+    history: Mutex<History>,
+}
+
 impl Watch {
-    pub fn new(w: Watched) -> Self {
+    pub fn new(parts: Watched) -> Self {
         Self {
-            dir: w.dir,
-            info: w.info,
-            pipeline: w.pipeline,
-            cameras: w.cameras,
-            live: w.live,
-            chunks: w.chunks,
-            recorder: w.recorder,
-            floor: w.floor,
+            parts,
             cpu0: process_cpu_s(),
             history: Mutex::default(),
         }
@@ -204,27 +190,27 @@ impl Watch {
 
     /// A copy of the live pose counts (the frames stay shared).
     pub fn live(&self) -> Live {
-        self.live.lock().unwrap_or_else(PoisonError::into_inner).clone()
+        self.parts.live.lock().unwrap_or_else(PoisonError::into_inner).clone()
     }
 
     /// The floor fitted last, if any.
     pub fn floor(&self) -> Option<crate::vision::segment::FloorPlane> {
-        *self.floor.lock().unwrap_or_else(PoisonError::into_inner)
+        *self.parts.floor.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
     /// The latest pose and its frames.
     pub fn latest(&self) -> Option<(PoseRecord, FramePair)> {
-        let live = self.live.lock().unwrap_or_else(PoisonError::into_inner);
+        let live = self.parts.live.lock().unwrap_or_else(PoisonError::into_inner);
         Some((live.latest.clone()?, live.frames.clone()?))
     }
 
     /// The run report so far.
     pub fn report(&self) -> RunReport {
         let live = self.live();
-        let seconds = self.pipeline.elapsed_s();
+        let seconds = self.parts.pipeline.elapsed_s();
         let mut cameras = BTreeMap::new();
-        for (name, frames) in self.pipeline.cameras() {
-            let (state, outages) = match self.cameras.iter().find(|(n, _)| *n == name) {
+        for (name, frames) in self.parts.pipeline.cameras() {
+            let (state, outages) = match self.parts.cameras.iter().find(|(n, _)| *n == name) {
                 Some((_, h)) => {
                     let h = lock(h);
                     (h.state.clone(), h.outages.clone())
@@ -235,10 +221,10 @@ impl Watch {
         }
         let latest_status = live.latest.as_ref().map(|p| p.status.name());
         RunReport {
-            dir: self.dir.clone(),
-            info: self.info.clone(),
+            dir: self.parts.dir.clone(),
+            info: self.parts.info.clone(),
             seconds,
-            chunks: self.chunks.count(),
+            chunks: self.parts.chunks.count(),
             chunk: live.chunk,
             poses: live.rows,
             poses_not_written: live.rows_lost,
@@ -249,12 +235,12 @@ impl Watch {
             statuses: live.statuses,
             latest_status,
             cameras,
-            stages: reports_of(self.pipeline.stages()),
-            edges: self.pipeline.edges(),
-            end_to_end_latency: self.pipeline.end_to_end().summary(),
+            stages: reports_of(self.parts.pipeline.stages()),
+            edges: self.parts.pipeline.edges(),
+            end_to_end_latency: self.parts.pipeline.end_to_end().summary(),
             cpu_cores: (process_cpu_s() - self.cpu0) / seconds.max(1e-9),
             resident_memory_bytes: process_resident_bytes(),
-            recording: self.recorder.as_ref().map(|g| RecordingReport {
+            recording: self.parts.recorder.as_ref().map(|g| RecordingReport {
                 frame_bytes: g.frame_bytes.load(Ordering::Relaxed),
                 disk_free_bytes: g.disk_free_bytes.load(Ordering::Relaxed),
                 paused: g.paused.load(Ordering::Relaxed),
@@ -265,10 +251,10 @@ impl Watch {
     /// Takes one sample of rates and latency since the previous call (the daemon calls this
     /// once a second) and returns it.
     pub fn sample(&self) -> Sample {
-        let t = self.pipeline.elapsed_s();
-        let rows = self.live.lock().unwrap_or_else(PoisonError::into_inner).rows;
-        let (count, sum_us) = self.pipeline.end_to_end().totals();
-        let cams = self.pipeline.cameras();
+        let t = self.parts.pipeline.elapsed_s();
+        let rows = self.parts.live.lock().unwrap_or_else(PoisonError::into_inner).rows;
+        let (count, sum_us) = self.parts.pipeline.end_to_end().totals();
+        let cams = self.parts.pipeline.cameras();
         let captured = |name: &str| cams.get(name).map_or(0, |c| c.captured);
         let now = (t, rows, count, sum_us, captured("depth"), captured("color"));
         let mut history = self.history.lock().unwrap_or_else(PoisonError::into_inner);
