@@ -148,6 +148,10 @@ pub struct ReplaySummary {
     /// paws the bottom camera found (`detected_paws`).
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub group_error_mm: BTreeMap<&'static str, f64>,
+    /// Frames whose head and tail were swapped, against the truth: after the orientation
+    /// tracker, by each frame's own evidence, and by the body forest alone.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orientation: Option<crate::runtime::sink::poses::OrientationCheck>,
 }
 
 /// The picture of the frame pair of `pose` (see [`crate::runtime::stages::overlay`]); `None`
@@ -321,6 +325,7 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         per_joint_error_mm: tally.per_joint_error_mm(),
         mean_error_mm: tally.mean_error_mm(),
         group_error_mm: tally.group_error_mm(),
+        orientation: (tally.orientation.frames > 0).then_some(tally.orientation),
     };
     {
         let path = staging.path().join(PICTURE_FILE);
@@ -405,6 +410,18 @@ pub fn summary_text(summary: &ReplaySummary, out: &Path) -> String {
         for (group, e) in &summary.group_error_mm {
             let _ = writeln!(text, "{group:>14}: {e:.2} mm");
         }
+    }
+    if let Some(o) = &summary.orientation {
+        let share = |n: u64| 100.0 * n as f64 / o.frames as f64;
+        let _ = writeln!(
+            text,
+            "head and tail swapped vs truth: {:.1} % of {} frames (each frame alone {:.1} %, the forest alone {:.1} %); heading error otherwise {:.1} deg",
+            share(o.flipped_tracked),
+            o.frames,
+            share(o.flipped_frame_alone),
+            share(o.flipped_forest),
+            o.heading_error_deg
+        );
     }
     text
 }

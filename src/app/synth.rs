@@ -78,6 +78,10 @@ pub struct SessionArgs {
     /// Depth camera only (the paper's single-depth-image mode).
     #[arg(long)]
     no_color: bool,
+    /// standard: mice like the ones the bundled forests were trained on; varied: sizes,
+    /// body shapes, backs and tails well outside that range (a stress test).
+    #[arg(long, value_name = "KIND", default_value = "standard")]
+    mice: crate::synth::Mice,
     /// Replace the output directory if it is not empty.
     #[arg(long)]
     force: bool,
@@ -126,6 +130,7 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         color_binning: args.color_binning,
         color_format: PixelFormat::BayerRg8,
         color: !args.no_color,
+        mice: args.mice,
     };
     let bar = progress::bar(0, "rendering");
     let summary = write_session(staging.path(), &spec, |done, total| {

@@ -42,6 +42,77 @@ pub fn random_placement(rng: &mut impl Rng) -> Placement {
     }
 }
 
+/// How varied the synthetic mice are: `Standard`, the range the bundled forests were trained
+/// on (what [`random_placement`] draws); `Varied`, mice well outside it, for testing how the
+/// pipeline copes with real animals unlike the renderer's: sizes from small to large,
+/// elongated and stout bodies, hunched and stretched backs, and tails lifted, curled or not
+/// visible.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Mice {
+    #[default]
+    Standard,
+    Varied,
+}
+
+impl std::str::FromStr for Mice {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "standard" => Ok(Mice::Standard),
+            "varied" => Ok(Mice::Varied),
+            _ => Err(format!("{s:?} is not a kind of mice: standard or varied")),
+        }
+    }
+}
+
+/// A mouse's way of holding itself, added to every pose it takes (all zero for the standard
+/// mice).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Carriage {
+    /// Added to the tail's lift above the floor (mm) and to its curl.
+    pub tail_lift: f64,
+    pub tail_curl: f64,
+    /// Added to the pitch of the back's two middle segments (positive: hunched).
+    pub hunch: f64,
+    /// The rump's height is multiplied by this (1 for the standard mice).
+    pub rump_height: f64,
+}
+
+impl Carriage {
+    /// `params` as this mouse holds them.
+    pub fn apply(&self, params: &mut PoseParams) {
+        params.tail_lift = (params.tail_lift + self.tail_lift).max(0.0);
+        params.tail_curl += self.tail_curl;
+        params.pitch[1] += self.hunch;
+        params.pitch[2] += self.hunch;
+        params.rump_height *= self.rump_height;
+    }
+}
+
+/// The build of a mouse well outside the standard range ([`Mice::Varied`]): scale 0.8-1.25
+/// (about 13 to 49 g), each bone +-20 %, girth 0.75-1.45, and a carriage: the back hunched
+/// or stretched, the rump carried low or high, and the tail as animated, lifted 10-30 mm,
+/// curled, or not visible (4 mm long), each a quarter of the mice.
+pub fn varied_build(rng: &mut impl Rng) -> (Placement, Carriage) {
+    let mut placement = random_placement(rng);
+    placement.scale = rng.gen_range(0.8..=1.25);
+    placement.bones = crate::core::skeleton::BoneLengths::default().map(|v| v * rng.gen_range(0.8..=1.2));
+    placement.girth = rng.gen_range(0.75..=1.45);
+    let mut carriage = Carriage {
+        hunch: rng.gen_range(-0.2..=0.3),
+        rump_height: rng.gen_range(0.8..=1.3),
+        ..Carriage::default()
+    };
+    match rng.gen_range(0..4) {
+        1 => carriage.tail_lift = rng.gen_range(10.0..=30.0),
+        2 => carriage.tail_curl = rng.gen_range(1.5..=3.0) * if rng.gen_bool(0.5) { 1.0 } else { -1.0 },
+        3 => placement.bones.tail = 4.0,
+        _ => {}
+    }
+    (placement, carriage)
+}
+
 /// Small random changes to a library pose (so no two images share exact joint angles).
 pub fn jitter_pose(p: &PoseParams, rng: &mut impl Rng) -> PoseParams {
     let mut q = *p;

@@ -8,7 +8,7 @@ use super::body::skin;
 use super::mouse::{MouseInstance, fit_in_cage, pose_mouse};
 use super::render::Cage;
 use super::views::{render_bottom_frame, render_top_frame};
-use super::{ENGINE_VERSION, item_rng, random_placement};
+use super::{Carriage, ENGINE_VERSION, Mice, item_rng, random_placement, varied_build};
 use crate::core::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
 use crate::core::geometry::Rig;
 use crate::core::image::Region;
@@ -39,6 +39,8 @@ pub struct SessionSpec {
     pub color_format: PixelFormat,
     /// Whether the session has a colour camera at all (depth-only rigs have none).
     pub color: bool,
+    /// The standard mice, or mice well outside the training range.
+    pub mice: Mice,
 }
 
 impl Default for SessionSpec {
@@ -54,6 +56,7 @@ impl Default for SessionSpec {
             color_binning: 1,
             color_format: PixelFormat::BayerRg8,
             color: true,
+            mice: Mice::Standard,
         }
     }
 }
@@ -61,9 +64,21 @@ impl Default for SessionSpec {
 /// The animated mouse of the session of a seed, at its start: what [`write_session`] renders
 /// (tests read its behaviour, e.g. its walking, without rendering).
 pub fn session_animator(seed: u64) -> Animator {
+    session_mouse(seed, Mice::Standard).0
+}
+
+/// The animated mouse of a seed and its carriage: the standard mice's build comes from the
+/// mouse's own random stream (as it always did), a varied mouse's from a stream of its own.
+fn session_mouse(seed: u64, mice: Mice) -> (Animator, Carriage) {
     let mut mouse_rng = item_rng(seed, STREAM_MOUSE, 0);
     let build = random_placement(&mut mouse_rng);
-    Animator::new(mouse_rng, build)
+    match mice {
+        Mice::Standard => (Animator::new(mouse_rng, build), Carriage::default()),
+        Mice::Varied => {
+            let (build, carriage) = varied_build(&mut item_rng(seed, STREAM_VARIETY, 0));
+            (Animator::new(mouse_rng, build), carriage)
+        }
+    }
 }
 
 // RNG streams of a session.
@@ -71,6 +86,7 @@ const STREAM_MOUSE: u64 = 10;
 const STREAM_CLOCKS: u64 = 11;
 const STREAM_DEPTH: u64 = 12;
 const STREAM_COLOR: u64 = 13;
+const STREAM_VARIETY: u64 = 14;
 
 /// The simulated cameras' minimal transport latencies (ms), recorded in the session's
 /// metadata as the colour camera's latency relative to the depth camera's.
@@ -175,7 +191,7 @@ fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
         .collect();
     times.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
 
-    let mut animator = session_animator(spec.seed);
+    let (mut animator, carriage) = session_mouse(spec.seed, spec.mice);
     let mut now = 0.0;
     let mut shots = Vec::with_capacity(times.len());
     let mut events = Vec::new();
@@ -183,7 +199,10 @@ fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
     for (t, role, seq) in times {
         animator.advance(t - now);
         now = t;
-        let (params, placement) = animator.state();
+        let (mut params, placement) = animator.state();
+        if spec.mice == Mice::Varied {
+            carriage.apply(&mut params);
+        }
         let mut mouse = pose_mouse(&params, &placement);
         fit_in_cage(&mut mouse, 3.0);
         let (clock, forced) = match role {

@@ -7,5 +7,6 @@ pub mod behaviour;
 pub mod calibrate;
 pub mod forest;
 pub mod fusion;
+pub mod orientation;
 pub mod paws;
 pub mod segment;

@@ -5,12 +5,16 @@
 //! status`, then per joint in joint order `{name}_x, {name}_y, {name}_z` (mm, world frame),
 //! `{name}_score` and `{name}_source` (Anipose's per-joint convention). A joint without an
 //! estimate has empty coordinates and score, and source `missing`; a depth-only pair has an
-//! empty `color_seq` and `color_device_ns`.
+//! empty `color_seq` and `color_device_ns`. The last column, `orientation_confidence`, is how
+//! sure the orientation tracker is of which end is the head (0.5 to 1; empty without a mouse).
+//! Files written before it was added (without that column) read back too.
 
 use crate::core::pose::{JointPositions, JointSource};
 use crate::core::skeleton::{JOINT_COUNT, Joint};
 use crate::runtime::pipeline::{Sink, StageError};
 use crate::runtime::stages::{Fused, PoseRecord, PoseStatus};
+use crate::vision::orientation::{self, BodyJoints, Orientation};
+use nalgebra::Vector2;
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::fs::File;
@@ -27,6 +31,14 @@ pub const OVERLAYS_DIR: &str = "overlays";
 
 /// The header line of `poses.csv`.
 pub fn header() -> String {
+    format!("{},{ORIENTATION_COLUMN}", header_without_orientation())
+}
+
+/// The last column's name.
+const ORIENTATION_COLUMN: &str = "orientation_confidence";
+
+/// The header of files written before the orientation column was added.
+fn header_without_orientation() -> String {
     let mut h = String::from("frame,depth_seq,color_seq,host_ns,depth_device_ns,color_device_ns,skew_ns,status");
     for joint in Joint::ALL {
         for col in ["x", "y", "z", "score", "source"] {
@@ -34,6 +46,39 @@ pub fn header() -> String {
         }
     }
     h
+}
+
+/// How often the head's end was wrong, against the truth: of the tracker's output, of each
+/// frame's own evidence, and of the body forest alone.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct OrientationCheck {
+    /// Frames with a mouse, the truth and a heading.
+    pub frames: u64,
+    /// Frames whose heading (tail base to neck, seen from above) points more than 90 degrees
+    /// away from the truth's.
+    pub flipped_tracked: u64,
+    pub flipped_frame_alone: u64,
+    pub flipped_forest: u64,
+    /// Mean angle (degrees) between the tracked heading and the truth's, over frames not flipped.
+    pub heading_error_deg: f64,
+}
+
+impl OrientationCheck {
+    /// Counts one frame: the true heading and the three estimated ones.
+    fn count(&mut self, truth: Vector2<f64>, tracked: Option<Vector2<f64>>, orientation: &Orientation) {
+        let Some(tracked) = tracked else { return };
+        let flipped = |v: Option<Vector2<f64>>| v.is_none_or(|v| v.dot(&truth) < 0.0);
+        let not_flipped = self.frames - self.flipped_tracked;
+        self.frames += 1;
+        if flipped(Some(tracked)) {
+            self.flipped_tracked += 1;
+        } else {
+            let angle = tracked.angle(&truth).to_degrees();
+            self.heading_error_deg += (angle - self.heading_error_deg) / (not_flipped + 1) as f64;
+        }
+        self.flipped_frame_alone += u64::from(flipped(orientation.frame_alone));
+        self.flipped_forest += u64::from(flipped(orientation.forest));
+    }
 }
 
 /// What the sink has written.
@@ -51,6 +96,8 @@ pub struct PoseTally {
     pub detected_paw_error: (f64, u64),
     /// The first pose with a mouse at or after the snapshot row (for a picture).
     pub snapshot: Option<PoseRecord>,
+    /// Flipped headings against the truth (frames without truth are not counted).
+    pub orientation: OrientationCheck,
 }
 
 impl PoseTally {
@@ -200,6 +247,20 @@ impl Sink for PoseWriter {
                 }
             }
         }
+        line.push(',');
+        if let Some(o) = &r.orientation {
+            let _ = write!(line, "{:.3}", o.confidence);
+            if let Some(t) = truth {
+                let heading = |joints: &JointPositions| {
+                    let (neck, base) = (joints.get(Joint::Neck.index())?, joints.get(Joint::TailBase.index())?);
+                    Some(Vector2::new(neck.x - base.x, neck.y - base.y))
+                };
+                let body: BodyJoints = std::array::from_fn(|k| r.pose.joints[k]);
+                if let Some(true_heading) = heading(t) {
+                    tally.orientation.count(true_heading, orientation::heading(&body), o);
+                }
+            }
+        }
         line.push('\n');
         self.out.write_all(line.as_bytes())?;
         tally.rows += 1;
@@ -251,14 +312,19 @@ pub fn read_poses(path: &Path) -> Result<Vec<PoseRecord>, PosesReadError> {
         source,
     })?;
     let mut lines = text.lines();
-    if lines.next() != Some(header().as_str()) {
+    let first = lines.next();
+    let orientation = if first == Some(header().as_str()) {
+        true
+    } else if first == Some(header_without_orientation().as_str()) {
+        false
+    } else {
         return Err(PosesReadError::Header { path: path.to_owned() });
-    }
+    };
     lines
         .enumerate()
         .filter(|(_, l)| !l.is_empty())
         .map(|(i, line)| {
-            parse_row(line).map_err(|what| PosesReadError::Row {
+            parse_row(line, orientation).map_err(|what| PosesReadError::Row {
                 path: path.to_owned(),
                 line: i + 2,
                 what,
@@ -267,11 +333,12 @@ pub fn read_poses(path: &Path) -> Result<Vec<PoseRecord>, PosesReadError> {
         .collect()
 }
 
-fn parse_row(line: &str) -> Result<PoseRecord, String> {
+/// One row of `poses.csv`; `orientation`: whether the file has the orientation column.
+fn parse_row(line: &str, orientation: bool) -> Result<PoseRecord, String> {
     use crate::core::frame::Stamp;
     use crate::core::pose::{JointEstimate, Pose};
     let fields: Vec<&str> = line.split(',').collect();
-    let expected = 8 + 5 * JOINT_COUNT;
+    let expected = 8 + 5 * JOINT_COUNT + usize::from(orientation);
     if fields.len() != expected {
         return Err(format!("{} columns, expected {expected}", fields.len()));
     }
@@ -326,6 +393,15 @@ fn parse_row(line: &str) -> Result<PoseRecord, String> {
             source,
         };
     }
+    let confidence = match field(8 + 5 * JOINT_COUNT) {
+        "" => None,
+        f => Some(
+            f.parse::<f64>()
+                .ok()
+                .filter(|v| (0.0..=1.0).contains(v))
+                .ok_or_else(|| format!("{f:?} is not an orientation confidence (0 to 1)"))?,
+        ),
+    };
     Ok(PoseRecord {
         depth,
         color,
@@ -333,5 +409,49 @@ fn parse_row(line: &str) -> Result<PoseRecord, String> {
         status,
         pose,
         paws: Vec::new(),
+        headings: None,
+        orientation: confidence.map(|confidence| Orientation {
+            confidence,
+            frame_alone: None,
+            forest: None,
+        }),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A row of a frame without a mouse: every joint missing.
+    fn empty_row(seq: u64) -> String {
+        let mut row = format!("{seq},{seq},,{},{},,0,no_mouse", 1000 + seq, 2000 + seq);
+        for _ in 0..JOINT_COUNT {
+            row.push_str(",,,,,missing");
+        }
+        row
+    }
+
+    #[test]
+    fn files_with_and_without_the_orientation_column_read_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let old = dir.path().join("old.csv");
+        std::fs::write(&old, format!("{}\n{}\n", header_without_orientation(), empty_row(3))).unwrap();
+        let rows = read_poses(&old).unwrap();
+        assert_eq!(rows.len(), 1);
+        assert_eq!(rows[0].depth.seq, 3);
+        assert_eq!(rows[0].orientation, None);
+
+        let new = dir.path().join("new.csv");
+        let text = format!("{}\n{},\n{},0.875\n", header(), empty_row(4), empty_row(5));
+        std::fs::write(&new, text).unwrap();
+        let rows = read_poses(&new).unwrap();
+        assert_eq!(rows[0].orientation, None);
+        assert_eq!(rows[1].orientation.map(|o| o.confidence), Some(0.875));
+
+        // A confidence out of its range, or an old row under the new header, is refused.
+        std::fs::write(&new, format!("{}\n{},1.5\n", header(), empty_row(6))).unwrap();
+        assert!(read_poses(&new).is_err());
+        std::fs::write(&new, format!("{}\n{}\n", header(), empty_row(6))).unwrap();
+        assert!(read_poses(&new).is_err());
+    }
 }

@@ -6,8 +6,9 @@ use crate::core::pose::{JointEstimate, JointSource, Pose};
 use crate::core::skeleton::Joint;
 use crate::runtime::pipeline::{Stage, StageError};
 use crate::vision::forest::depth::DepthImage;
-use crate::vision::forest::infer::{BodyEstimator, Pixel, sample_pixels};
-use nalgebra::Point3;
+use crate::vision::forest::infer::{BodyEstimator, JointGuess, Oriented, Pixel, sample_pixels};
+use crate::vision::orientation::{self, BodyJoints, Headings, TrackerConfig};
+use nalgebra::{Point2, Point3, Vector2, Vector3};
 
 /// Pixels of the mouse run through the forest per frame in the pipeline, at most. Fewer than
 /// the evaluation's vote budget (1,200, `VOTE_BUDGET` of the training module): on a 10 s synthetic session the
@@ -41,6 +42,33 @@ impl BodyStage {
     }
 }
 
+impl BodyStage {
+    /// The world-frame joints and evidence of a frame's [`Oriented`] estimate.
+    fn headings(&self, oriented: &Oriented) -> Headings {
+        let to_world = |guesses: &[Option<JointGuess>; 12]| -> BodyJoints {
+            guesses.map(|guess| {
+                guess.map_or_else(JointEstimate::default, |g| JointEstimate {
+                    position_mm: self.camera.world_from_camera * Point3::from(g.position_mm.cast::<f64>()),
+                    score: f64::from(g.score),
+                    source: JointSource::Depth,
+                })
+            })
+        };
+        let axis = self.camera.world_from_camera.rotation * oriented.axis.cast::<f64>();
+        let centre = self.camera.world_from_camera * Point3::from(oriented.centre.cast::<f64>());
+        Headings {
+            axis: Vector2::new(axis.x, axis.y)
+                .try_normalize(1e-9)
+                .unwrap_or_else(Vector2::x),
+            centre: Point2::new(centre.x, centre.y),
+            votes: f64::from(oriented.votes),
+            ends: f64::from(oriented.ends),
+            joints: oriented.ahead.each_ref().map(to_world),
+            forest_heading: orientation::heading(&to_world(&oriented.raw)),
+        }
+    }
+}
+
 impl Stage for BodyStage {
     type In = Segmented;
     type Out = Posed;
@@ -62,6 +90,8 @@ impl Stage for BodyStage {
             },
             pose: Pose::default(),
             paws: Vec::new(),
+            headings: None,
+            orientation: None,
         };
         if let Some(mouse) = mouse {
             let r = mouse.region;
@@ -77,17 +107,16 @@ impl Stage for BodyStage {
             if self.crop.len() == self.mask.len() {
                 let image = DepthImage::from_mask(r, &self.crop, &self.mask);
                 sample_pixels(&image, self.budget, &mut self.pixels);
-                let guesses = self.estimator.estimate(&image, &self.pixels, &self.camera.intrinsics);
-                for (joint, guess) in Joint::MAIN_BODY.iter().zip(guesses) {
-                    if let Some(g) = guess {
-                        let p = Point3::from(g.position_mm.cast::<f64>());
-                        *record.pose.joint_mut(*joint) = JointEstimate {
-                            position_mm: self.camera.world_from_camera * p,
-                            score: f64::from(g.score),
-                            source: JointSource::Depth,
-                        };
-                    }
+                let up = (self.camera.world_from_camera.rotation.inverse() * Vector3::z()).cast::<f32>();
+                let oriented = self
+                    .estimator
+                    .estimate_oriented(&image, &self.pixels, &self.camera.intrinsics, &up);
+                let headings = self.headings(&oriented);
+                let alone = TrackerConfig::default().frame_evidence(&headings) < 0.0;
+                for (joint, estimate) in Joint::MAIN_BODY.iter().zip(headings.joints[usize::from(alone)]) {
+                    *record.pose.joint_mut(*joint) = estimate;
                 }
+                record.headings = Some(Box::new(headings));
                 record.status = PoseStatus::Ok;
             }
         }

@@ -1,17 +1,21 @@
-//! The fusion stage: paws and limbs added to the body's joints (see [`crate::vision::fusion`]), and
-//! the picture of every n-th frame. It carries the legs' memory from frame to frame, so the
-//! runner gives it its frames in order.
+//! The fusion stage: the head's end chosen by the orientation tracker (see
+//! [`crate::vision::orientation`]), paws and limbs added to the body's joints (see
+//! [`crate::vision::fusion`]), and the picture of every n-th frame. It carries the tracker's
+//! and the legs' memory from frame to frame, so the runner gives it its frames in order.
 
 use super::{Fused, PoseStatus, Posed};
 use crate::core::geometry::Rig;
+use crate::core::skeleton::Joint;
 use crate::runtime::pipeline::{Stage, StageError};
 use crate::runtime::stages::overlay;
 use crate::vision::fusion::Fuser;
+use crate::vision::orientation::{self, Orientation, Tracker, TrackerConfig};
 
 /// Runs a [`Fuser`] on each pose.
 #[derive(Debug, Clone)]
 pub struct FuseStage {
     fuser: Fuser,
+    tracker: Tracker,
     rig: Rig,
     /// Draw a picture of the frames whose depth sequence number is a multiple of this.
     overlay_every: Option<u64>,
@@ -21,6 +25,7 @@ impl FuseStage {
     pub fn new(fuser: Fuser, rig: Rig, overlay_every: Option<u64>) -> Self {
         Self {
             fuser,
+            tracker: Tracker::new(TrackerConfig::default()),
             rig,
             overlay_every: overlay_every.filter(|&n| n > 0),
         }
@@ -33,6 +38,17 @@ impl Stage for FuseStage {
 
     fn process(&mut self, input: Posed, out: &mut Vec<Fused>) -> Result<(), StageError> {
         let Posed { pair, mut record } = input;
+        if let Some(headings) = record.headings.take() {
+            let decision = self.tracker.update(record.depth.device_ns, &headings);
+            for (joint, estimate) in Joint::MAIN_BODY.iter().zip(headings.joints[decision.chosen]) {
+                *record.pose.joint_mut(*joint) = estimate;
+            }
+            record.orientation = Some(Orientation {
+                confidence: decision.confidence,
+                frame_alone: orientation::heading(&headings.joints[decision.frame_alone]),
+                forest: headings.forest_heading,
+            });
+        }
         // Depth-only pairs keep joints 1-12 (the paper's single depth image mode).
         if record.status == PoseStatus::Ok && pair.color.is_some() {
             self.fuser.fuse(record.depth.seq, &mut record.pose, &record.paws);

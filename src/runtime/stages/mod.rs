@@ -60,6 +60,11 @@ pub struct PoseRecord {
     pub pose: Pose,
     /// The paws found in the bottom view (empty without a colour frame or a paw model).
     pub paws: Vec<crate::vision::paws::PawDetection>,
+    /// The main-body joints under both orientations, from the body stage until the fusion
+    /// stage's tracker has chosen (then `None`).
+    pub headings: Option<Box<crate::vision::orientation::Headings>>,
+    /// What the tracker chose, for a frame with a mouse.
+    pub orientation: Option<crate::vision::orientation::Orientation>,
 }
 
 /// A frame pair and its pose so far, on its way through the stages that add to the pose.

@@ -17,6 +17,7 @@ use super::simd::{self, Kernel, PixelLanes};
 use super::{Forest, PackedTree, Traversal, Tree};
 use crate::core::geometry::Intrinsics;
 use crate::core::skeleton::Joint;
+use crate::vision::orientation;
 use nalgebra::{Point2, Point3, Vector3};
 use std::collections::VecDeque;
 use wide::f32x8;
@@ -173,6 +174,20 @@ impl BodyEstimator {
         pixels: &[Pixel],
         intrinsics: &Intrinsics,
     ) -> [Option<JointGuess>; BODY_JOINTS] {
+        let mut guesses = self.estimate_votes(image, pixels, intrinsics);
+        if self.settings.follow_tail {
+            self.follow_tail(image, intrinsics, &mut guesses);
+        }
+        guesses
+    }
+
+    /// Gathers the votes of `pixels` and finds each joint at their densest mode.
+    fn estimate_votes(
+        &mut self,
+        image: &DepthImage,
+        pixels: &[Pixel],
+        intrinsics: &Intrinsics,
+    ) -> [Option<JointGuess>; BODY_JOINTS] {
         for cloud in self.confident.iter_mut().chain(&mut self.doubtful) {
             cloud.clear();
         }
@@ -201,45 +216,46 @@ impl BodyEstimator {
                 }
             }
         });
-        let mut guesses: [Option<JointGuess>; BODY_JOINTS] = std::array::from_fn(|j| self.aggregate(j));
-        if self.settings.follow_tail
-            && let (Some(base), Some(tip)) = (guesses[TAIL_BASE], &mut guesses[TAIL_TIP])
-            && let Some(end) = self.tail_end.find(image, intrinsics, base.position_mm, tip.position_mm)
-        {
-            tip.position_mm = end;
-        }
-        guesses
+        std::array::from_fn(|j| self.aggregate(j))
     }
 
-    fn aggregate(&self, joint: usize) -> Option<JointGuess> {
-        let votes = if self.confident[joint].is_empty() {
+    /// The votes a joint is found from: its confident ones, or the others when it has none.
+    fn cloud(&self, joint: usize) -> &VoteCloud {
+        if self.confident[joint].is_empty() {
             &self.doubtful[joint]
         } else {
             &self.confident[joint]
-        };
+        }
+    }
+
+    /// Mean-shift over `votes` from `start`: the mode it settles on and the density there.
+    fn shift(&self, votes: &VoteCloud, start: Vector3<f32>) -> Mode {
+        let h2 = self.settings.bandwidth_mm * self.settings.bandwidth_mm;
+        let mut at = start;
+        for _ in 0..self.settings.iterations {
+            let (acc, w) = votes.kernel_sums(&at, h2);
+            if w <= 1e-12 {
+                break;
+            }
+            let next = acc / w;
+            let moved = (next - at).norm_squared();
+            at = next;
+            if moved < 0.01 {
+                break;
+            }
+        }
+        (at, votes.kernel_sums(&at, h2).1)
+    }
+
+    /// The modes mean-shift finds from the mean of a joint's votes and from its three
+    /// heaviest votes, each with its density, and the votes' total weight; `None` without votes.
+    fn modes(&self, joint: usize) -> Option<([Mode; 4], f32)> {
+        let votes = self.cloud(joint);
         let [x, y, z, total] = votes.sum(|x, y, z, w| [w * x, w * y, w * z, w]);
         if votes.is_empty() || total <= 0.0 {
             return None;
         }
         let mean = Vector3::new(x, y, z) / total;
-        let h2 = self.settings.bandwidth_mm * self.settings.bandwidth_mm;
-        let shift = |start: Vector3<f32>| -> Vector3<f32> {
-            let mut at = start;
-            for _ in 0..self.settings.iterations {
-                let (acc, w) = votes.kernel_sums(&at, h2);
-                if w <= 1e-12 {
-                    break;
-                }
-                let next = acc / w;
-                let moved = (next - at).norm_squared();
-                at = next;
-                if moved < 0.01 {
-                    break;
-                }
-            }
-            at
-        };
-        // Seeds: the mean and the three heaviest votes.
         let mut seeds = [mean; 4];
         let mut heaviest: [(f32, usize); 3] = [(-1.0, 0); 3];
         for (i, &w) in votes.w.iter().enumerate() {
@@ -253,24 +269,189 @@ impl BodyEstimator {
                 seeds[k + 1] = votes.point(*i);
             }
         }
-        let mut best = (f32::NEG_INFINITY, mean);
-        for seed in seeds {
-            let mode = shift(seed);
-            let density = votes.kernel_sums(&mode, h2).1;
-            if density > best.0 {
-                best = (density, mode);
-            }
-        }
-        // Score: the share of the weight within a fixed radius of the mode.
-        let (m, r2) = (best.1, SCORE_RADIUS_MM * SCORE_RADIUS_MM);
-        let [near, ..] = votes.sum(|x, y, z, w| {
+        Some((seeds.map(|seed| self.shift(votes, seed)), total))
+    }
+
+    /// The joint's estimate at `position`: scored by the share of its vote weight within
+    /// [`SCORE_RADIUS_MM`].
+    fn guess_at(&self, joint: usize, position: Vector3<f32>, total: f32) -> JointGuess {
+        let (m, r2) = (position, SCORE_RADIUS_MM * SCORE_RADIUS_MM);
+        let [near, ..] = self.cloud(joint).sum(|x, y, z, w| {
             let d2 = (x - m.x) * (x - m.x) + (y - m.y) * (y - m.y) + (z - m.z) * (z - m.z);
             [if d2 <= r2 { w } else { 0.0 }, 0.0, 0.0, 0.0]
         });
-        Some(JointGuess {
-            position_mm: best.1,
+        JointGuess {
+            position_mm: position,
             score: (near / total).clamp(0.0, 1.0),
-        })
+        }
+    }
+
+    fn aggregate(&self, joint: usize) -> Option<JointGuess> {
+        let (modes, total) = self.modes(joint)?;
+        let best = modes.iter().fold((Vector3::zeros(), f32::NEG_INFINITY), |best, m| {
+            if m.1 > best.1 { *m } else { best }
+        });
+        Some(self.guess_at(joint, best.0, total))
+    }
+
+    /// Like [`Self::estimate`], and the joints again under either orientation of the body: the
+    /// long axis of the mouse seen along `up` (the world's up in the camera frame), and for
+    /// each end of it the joints with the head at that end. A front joint (see
+    /// [`orientation::end_of`]) takes the densest of its modes on the head's side of the
+    /// centre, a rear joint on the other; where the votes have no mode on that side (the
+    /// forest put all of them at the wrong end), the joint is the forest's estimate mirrored
+    /// across the centre, scored by the votes near it.
+    pub fn estimate_oriented(
+        &mut self,
+        image: &DepthImage,
+        pixels: &[Pixel],
+        intrinsics: &Intrinsics,
+        up: &Vector3<f32>,
+    ) -> Oriented {
+        let raw = self.estimate_votes(image, pixels, intrinsics);
+        let (centre, axis) = long_axis(&self.points, up);
+        let side = |p: &Vector3<f32>| (p - centre).dot(&axis);
+        let mut oriented = Oriented {
+            raw,
+            ahead: [raw; 2],
+            axis,
+            centre,
+            votes: 0.0,
+            ends: ends_evidence(&self.points, up, &centre, &axis),
+        };
+        let (mut agree, mut weight) = (0.0f32, 0.0f32);
+        for (j, joint) in Joint::MAIN_BODY.iter().enumerate() {
+            let end = orientation::end_of(*joint);
+            if end == 0.0 {
+                continue;
+            }
+            let [along, w, ..] = self.cloud(j).sum(|x, y, z, w| {
+                let s = side(&Vector3::new(x, y, z));
+                [w * end * s.signum(), w, 0.0, 0.0]
+            });
+            agree += along / w.max(1e-12);
+            weight += 1.0;
+            let (Some((modes, total)), Some(forest)) = (self.modes(j), raw[j]) else {
+                continue;
+            };
+            let mirrored = forest.position_mm - 2.0 * side(&forest.position_mm) * axis;
+            let from_mirror = self.shift(self.cloud(j), mirrored);
+            for (h, sign) in [1.0f32, -1.0].into_iter().enumerate() {
+                let fits = |p: &Vector3<f32>| side(p) * end * sign > 0.0;
+                let best = modes
+                    .iter()
+                    .chain(std::iter::once(&from_mirror))
+                    .filter(|m| fits(&m.0))
+                    .fold(None::<Mode>, |best, m| match best {
+                        Some(b) if b.1 >= m.1 => Some(b),
+                        _ => Some(*m),
+                    });
+                let position = match best {
+                    Some((p, _)) => p,
+                    None if fits(&forest.position_mm) => forest.position_mm,
+                    None => mirrored,
+                };
+                oriented.ahead[h][j] = Some(self.guess_at(j, position, total));
+            }
+        }
+        oriented.votes = if weight > 0.0 { agree / weight } else { 0.0 };
+        if self.settings.follow_tail {
+            for guesses in &mut oriented.ahead {
+                self.follow_tail(image, intrinsics, guesses);
+            }
+        }
+        oriented
+    }
+
+    /// Moves the tail tip to the far end of the segmented tail ([`TailEnd`]).
+    fn follow_tail(
+        &mut self,
+        image: &DepthImage,
+        intrinsics: &Intrinsics,
+        guesses: &mut [Option<JointGuess>; BODY_JOINTS],
+    ) {
+        if let (Some(base), Some(tip)) = (guesses[TAIL_BASE], &mut guesses[TAIL_TIP])
+            && let Some(end) = self.tail_end.find(image, intrinsics, base.position_mm, tip.position_mm)
+        {
+            tip.position_mm = end;
+        }
+    }
+}
+
+/// A mode of a joint's votes and the votes' density there.
+type Mode = (Vector3<f32>, f32);
+
+/// The joints of one frame under the forest alone and under either orientation (see
+/// [`BodyEstimator::estimate_oriented`]), in the camera frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Oriented {
+    /// The forest's own estimate, before the tail tip follows the tail.
+    pub raw: [Option<JointGuess>; BODY_JOINTS],
+    /// The joints with the head toward `+axis` (`[0]`) and toward `-axis` (`[1]`).
+    pub ahead: [[Option<JointGuess>; BODY_JOINTS]; 2],
+    /// The body's long axis across `up` (unit length, sign arbitrary) and its centre.
+    pub axis: Vector3<f32>,
+    pub centre: Vector3<f32>,
+    /// The front and rear joints' votes: share of weight on the side that puts the head toward
+    /// `+axis` less the share on the other (-1 to 1).
+    pub votes: f32,
+    /// How much higher the `+axis` end of the body is than the other: `tanh` of the
+    /// difference in 10 mm (-1 to 1).
+    pub ends: f32,
+}
+
+/// The centre of `points` and their long axis seen along `up`: the main direction of the
+/// points projected on the plane across `up` (any unit vector across `up` for fewer than two
+/// points).
+fn long_axis(points: &[Vector3<f32>], up: &Vector3<f32>) -> (Vector3<f32>, Vector3<f32>) {
+    let n = points.len().max(1) as f32;
+    let centre = points.iter().sum::<Vector3<f32>>() / n;
+    let flat = |p: &Vector3<f32>| {
+        let d = p - centre;
+        d - up * d.dot(up)
+    };
+    let mut cov = nalgebra::Matrix3::<f32>::zeros();
+    for p in points {
+        let d = flat(p);
+        cov += d * d.transpose();
+    }
+    let eigen = nalgebra::SymmetricEigen::new(cov);
+    let k = eigen.eigenvalues.imax();
+    let axis = flat(&(centre + eigen.eigenvectors.column(k).into_owned()));
+    let axis = if axis.norm() > 1e-6 {
+        axis.normalize()
+    } else {
+        up.cross(&Vector3::x()).try_normalize(1e-6).unwrap_or_else(Vector3::y)
+    };
+    (centre, axis)
+}
+
+/// The share of the body's length at each end whose height is compared in [`ends_evidence`].
+const END_SHARE: f32 = 0.2;
+
+/// How much higher the `+axis` end of `points` is than the `-axis` end (the mean height of
+/// the points in the outer [`END_SHARE`] of the length at each end), as `tanh` of the
+/// difference in 10 mm: the tail lies low, the head is carried.
+fn ends_evidence(points: &[Vector3<f32>], up: &Vector3<f32>, centre: &Vector3<f32>, axis: &Vector3<f32>) -> f32 {
+    let along = |p: &Vector3<f32>| (p - centre).dot(axis);
+    let (lo, hi) = points
+        .iter()
+        .map(along)
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), s| (lo.min(s), hi.max(s)));
+    if hi <= lo {
+        return 0.0;
+    }
+    let cut = END_SHARE * (hi - lo);
+    let mean_height = |near_end: &dyn Fn(f32) -> bool| {
+        let (sum, n) = points
+            .iter()
+            .filter(|p| near_end(along(p)))
+            .fold((0.0f32, 0u32), |(sum, n), p| (sum + p.dot(up), n + 1));
+        (n > 0).then(|| sum / n as f32)
+    };
+    match (mean_height(&|s| s >= hi - cut), mean_height(&|s| s <= lo + cut)) {
+        (Some(plus), Some(minus)) => ((plus - minus) / 10.0).tanh(),
+        _ => 0.0,
     }
 }
 

@@ -1,0 +1,253 @@
+//! Which end of the mouse is its head, decided over time.
+//!
+//! The body forest alone swaps head and tail on mice unlike the ones it was trained on: its
+//! votes for the front joints land on both ends and the skeleton folds. So the body stage
+//! estimates the joints twice, once with the head at each end of the body's long axis
+//! ([`Headings`]), and gathers the evidence of the frame for either end: where the forest's
+//! votes for the front and rear joints lie, and which end is higher (the head is carried, the
+//! tail lies low). The [`Tracker`] then chooses between the two hypotheses frame by frame
+//! with a Viterbi recursion over them: a flip from one to the other costs, evidence adds up
+//! over frames, and a mouse that moves fast mostly moves head first. It decides each frame
+//! when it comes (no look-ahead, so the daemon's latency does not grow), and its margin
+//! between the two hypotheses is the frame's orientation confidence.
+
+use crate::core::pose::JointEstimate;
+use crate::core::skeleton::Joint;
+use nalgebra::{Point2, Vector2};
+
+/// The main-body joints' estimates under one hypothesis, in [`Joint::MAIN_BODY`] order.
+pub type BodyJoints = [JointEstimate; 12];
+
+/// Which end of the body's long axis a main-body joint belongs to: `1` the head's, `-1` the
+/// tail's, `0` neither (the middle of the back).
+pub fn end_of(joint: Joint) -> f32 {
+    match joint {
+        Joint::Snout | Joint::Head | Joint::Neck | Joint::LeftEar | Joint::RightEar | Joint::Withers => 1.0,
+        Joint::Rump | Joint::TailBase | Joint::TailTip | Joint::LeftHip | Joint::RightHip => -1.0,
+        _ => 0.0,
+    }
+}
+
+/// What one frame says about the mouse's orientation, and its joints under both hypotheses.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Headings {
+    /// The body's long axis seen from above (world x, y; unit length; its sign is arbitrary).
+    pub axis: Vector2<f64>,
+    /// The mouse's centre seen from above (world x, y, mm).
+    pub centre: Point2<f64>,
+    /// The forest's votes for the front and rear joints: the share of their weight on the
+    /// side of the centre that puts the head toward `+axis`, less the share that puts it
+    /// toward `-axis` (-1 to 1).
+    pub votes: f64,
+    /// The heights of the body's two ends: `tanh` of how much higher (in 10 mm) the `+axis`
+    /// end is than the `-axis` end (-1 to 1).
+    pub ends: f64,
+    /// The main-body joints with the head toward `+axis` (`[0]`) and toward `-axis` (`[1]`).
+    pub joints: [BodyJoints; 2],
+    /// Tail base to neck of the forest's own estimate (world x, y), when it has both.
+    pub forest_heading: Option<Vector2<f64>>,
+}
+
+/// How much each cue counts (in units of log-odds) and what a flip costs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrackerConfig {
+    pub votes_weight: f64,
+    pub ends_weight: f64,
+    /// Log-odds added for the head toward the direction of motion, at full speed.
+    pub motion_weight: f64,
+    /// Speed (mm/s) below which motion says nothing, and at which it counts fully.
+    pub min_speed_mm_s: f64,
+    pub full_speed_mm_s: f64,
+    /// Cost of changing hypothesis from one frame to the next.
+    pub flip_cost: f64,
+    /// A gap without a mouse longer than this starts the tracking afresh.
+    pub reset_after_ns: u64,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        Self {
+            votes_weight: 4.0,
+            ends_weight: 2.0,
+            motion_weight: 2.0,
+            min_speed_mm_s: 40.0,
+            full_speed_mm_s: 150.0,
+            flip_cost: 6.0,
+            reset_after_ns: 1_000_000_000,
+        }
+    }
+}
+
+impl TrackerConfig {
+    /// The log-odds of the head toward `+axis` from the frame alone (votes and ends).
+    pub fn frame_evidence(&self, h: &Headings) -> f64 {
+        self.votes_weight * h.votes + self.ends_weight * h.ends
+    }
+}
+
+/// The tracker's choice for one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Decision {
+    /// Index into [`Headings::joints`]: `0` head toward `+axis`, `1` toward `-axis`.
+    pub chosen: usize,
+    /// The choice the frame's own evidence makes, without the tracker.
+    pub frame_alone: usize,
+    /// How sure the tracker is: `1 / (1 + e^-margin)` of the two hypotheses' costs (0.5 to 1).
+    pub confidence: f64,
+}
+
+/// The tracker's outcome for a frame: its confidence, and the headings (tail base to neck,
+/// world x, y) the frame's own evidence and the forest alone gave, to check them against the
+/// truth where there is one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Orientation {
+    pub confidence: f64,
+    pub frame_alone: Option<Vector2<f64>>,
+    pub forest: Option<Vector2<f64>>,
+}
+
+/// Viterbi over head toward `+axis` / toward `-axis`, decided frame by frame.
+#[derive(Clone, Debug, Default)]
+pub struct Tracker {
+    config: TrackerConfig,
+    /// Cost of each hypothesis so far, relative to the cheaper one.
+    cost: [f64; 2],
+    /// The previous frame: its time, axis and centre.
+    last: Option<(u64, Vector2<f64>, Point2<f64>)>,
+}
+
+impl Tracker {
+    pub fn new(config: TrackerConfig) -> Self {
+        Self {
+            config,
+            ..Self::default()
+        }
+    }
+
+    /// Takes the frame at `time_ns` into account and chooses its hypothesis.
+    pub fn update(&mut self, time_ns: u64, h: &Headings) -> Decision {
+        let c = self.config;
+        let mut evidence = c.frame_evidence(h);
+        match self.last {
+            Some((t, axis, centre)) if time_ns > t && time_ns - t <= c.reset_after_ns => {
+                // The axis's sign is arbitrary: keep each hypothesis on the same end of the
+                // mouse from frame to frame.
+                if axis.dot(&h.axis) < 0.0 {
+                    self.cost.swap(0, 1);
+                }
+                let dt = (time_ns - t) as f64 * 1e-9;
+                let velocity = (h.centre - centre) / dt;
+                let speed = velocity.norm();
+                if speed > c.min_speed_mm_s {
+                    let full = (speed / c.full_speed_mm_s).min(1.0);
+                    evidence += c.motion_weight * full * velocity.dot(&h.axis) / speed;
+                }
+            }
+            _ => self.cost = [0.0; 2],
+        }
+        self.last = Some((time_ns, h.axis, h.centre));
+        let [plus, minus] = self.cost;
+        let next = [
+            plus.min(minus + c.flip_cost) - evidence / 2.0,
+            minus.min(plus + c.flip_cost) + evidence / 2.0,
+        ];
+        let low = next[0].min(next[1]);
+        self.cost = [next[0] - low, next[1] - low];
+        let chosen = usize::from(self.cost[1] < self.cost[0]);
+        let margin = (self.cost[0] - self.cost[1]).abs();
+        Decision {
+            chosen,
+            frame_alone: usize::from(c.frame_evidence(h) < 0.0),
+            confidence: 1.0 / (1.0 + (-margin).exp()),
+        }
+    }
+}
+
+/// The heading (tail base to neck, world x, y) of the main-body joints, when both are there.
+pub fn heading(joints: &BodyJoints) -> Option<Vector2<f64>> {
+    let at = |joint: Joint| {
+        let j = &joints[joint.index()];
+        (j.source != crate::core::pose::JointSource::Missing).then_some(j.position_mm)
+    };
+    let (neck, base) = (at(Joint::Neck)?, at(Joint::TailBase)?);
+    let v = Vector2::new(neck.x - base.x, neck.y - base.y);
+    (v.norm() > 1e-6).then_some(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(axis: Vector2<f64>, centre: Point2<f64>, votes: f64) -> Headings {
+        Headings {
+            axis,
+            centre,
+            votes,
+            ends: 0.0,
+            joints: [[JointEstimate::default(); 12]; 2],
+            forest_heading: None,
+        }
+    }
+
+    #[test]
+    fn a_few_wrong_frames_do_not_flip_the_tracked_heading() {
+        let mut tracker = Tracker::new(TrackerConfig::default());
+        let axis = Vector2::new(1.0, 0.0);
+        let mut flips_alone = 0;
+        for k in 0..60u64 {
+            // Every fifth frame the votes say the opposite, firmly.
+            let votes = if k % 5 == 4 { -0.8 } else { 0.5 };
+            let d = tracker.update(k * 33_000_000, &frame(axis, Point2::origin(), votes));
+            flips_alone += d.frame_alone;
+            assert_eq!(d.chosen, 0, "frame {k}");
+            assert!(d.confidence >= 0.5);
+        }
+        assert_eq!(flips_alone, 12);
+    }
+
+    #[test]
+    fn the_axis_sign_changing_between_frames_keeps_the_same_end() {
+        let mut tracker = Tracker::new(TrackerConfig::default());
+        for k in 0..10u64 {
+            tracker.update(k * 33_000_000, &frame(Vector2::new(1.0, 0.0), Point2::origin(), 0.6));
+        }
+        // The same mouse, its axis reported the other way round, votes that say nothing: the
+        // head stays where it was, which is now toward -axis.
+        let d = tracker.update(10 * 33_000_000, &frame(Vector2::new(-1.0, 0.0), Point2::origin(), 0.0));
+        assert_eq!(d.chosen, 1);
+    }
+
+    #[test]
+    fn lasting_evidence_turns_it_and_a_long_gap_starts_afresh() {
+        let mut tracker = Tracker::new(TrackerConfig::default());
+        let axis = Vector2::new(0.0, 1.0);
+        for k in 0..10u64 {
+            tracker.update(k * 33_000_000, &frame(axis, Point2::origin(), 0.6));
+        }
+        let turned = (10..40u64)
+            .map(|k| tracker.update(k * 33_000_000, &frame(axis, Point2::origin(), -0.6)))
+            .position(|d| d.chosen == 1);
+        assert!(matches!(turned, Some(1..=5)), "{turned:?}");
+        // After two seconds without a mouse the old costs are forgotten.
+        let d = tracker.update(3_000_000_000, &frame(axis, Point2::origin(), 0.1));
+        assert_eq!(d.chosen, 0);
+    }
+
+    #[test]
+    fn a_fast_mouse_moves_head_first() {
+        let mut tracker = Tracker::new(TrackerConfig::default());
+        let axis = Vector2::new(1.0, 0.0);
+        let mut last = Decision {
+            chosen: 9,
+            frame_alone: 9,
+            confidence: 0.0,
+        };
+        // Votes say nothing; the mouse walks toward -x at 200 mm/s.
+        for k in 0..30u64 {
+            let centre = Point2::new(-(k as f64) * 200.0 / 30.0, 0.0);
+            last = tracker.update(k * 1_000_000_000 / 30, &frame(axis, centre, 0.0));
+        }
+        assert_eq!(last.chosen, 1);
+        assert!(last.confidence > 0.99);
+    }
+}
