@@ -480,6 +480,7 @@ fn eval_bundled_baseline(
             gaussian_mm: 0.0,
         },
         bottom_views: false,
+        mice: mousepose::synth::Mice::Standard,
     };
     let library = pose_library();
     let samples: Vec<_> = (0..count).map(|i| render_sample(rig, &spec, &library, i)).collect();

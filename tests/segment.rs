@@ -40,6 +40,7 @@ fn spec(noise: DepthNoise, seed: u64) -> DatasetSpec {
         seed,
         noise,
         bottom_views: false,
+        mice: mousepose::synth::Mice::Standard,
     }
 }
 

@@ -19,6 +19,7 @@ fn clean_spec(count: u64) -> DatasetSpec {
         seed: 42,
         noise: DepthNoise::default(),
         bottom_views: true,
+        mice: mousepose::synth::Mice::Standard,
     }
 }
 

@@ -192,6 +192,7 @@ pub fn run(quick: bool) -> BenchReport {
             gaussian_mm: 0.0,
         },
         bottom_views: false,
+        mice: crate::synth::Mice::Standard,
     };
     // Warm up caches and the thread pool.
     (0..32)
@@ -256,6 +257,7 @@ fn bench_training(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick:
             gaussian_mm: 0.0,
         },
         bottom_views: false,
+        mice: crate::synth::Mice::Standard,
     };
     let samples: Vec<_> = (0..images)
         .into_par_iter()
@@ -390,6 +392,7 @@ fn bench_forest(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: b
             gaussian_mm: 0.0,
         },
         bottom_views: false,
+        mice: crate::synth::Mice::Standard,
     };
     let frames: Vec<_> = (0..50)
         .map(|i| {

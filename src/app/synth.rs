@@ -48,6 +48,10 @@ pub struct DatasetArgs {
     /// Leave out the bottom colour views (smaller and faster, for body and part training).
     #[arg(long)]
     no_bottom: bool,
+    /// standard: mice in the range the bundled forests were trained on; varied: sizes, body
+    /// shapes, backs and tails well outside it (see `synth session --mice`).
+    #[arg(long, value_name = "KIND", default_value = "standard")]
+    mice: crate::synth::Mice,
     /// Replace the output directory if it is not empty.
     #[arg(long)]
     force: bool,
@@ -106,6 +110,7 @@ fn synth_dataset(args: &DatasetArgs) -> Outcome {
             gaussian_mm: args.noise.noise_mm,
         },
         bottom_views: !args.no_bottom,
+        mice: args.mice,
     };
     let bar = progress::bar(spec.count, "rendering");
     let rig = crate::core::geometry::Rig::default_rig();

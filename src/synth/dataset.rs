@@ -9,7 +9,7 @@ use super::body::skin;
 use super::mouse::{Behaviour, fit_in_cage, pose_library, pose_mouse};
 use super::render::Cage;
 use super::views::{BottomView, PawBox, TopView, render_bottom, render_top};
-use super::{ENGINE_VERSION, item_rng, jitter_pose, random_placement};
+use super::{ENGINE_VERSION, Mice, item_rng, jitter_pose, random_placement, varied_build};
 use crate::core::geometry::Rig;
 use crate::core::image::Region;
 use crate::core::noise::DepthNoise;
@@ -49,6 +49,9 @@ pub struct DatasetMeta {
     pub seed: u64,
     pub noise: DepthNoise,
     pub bottom_views: bool,
+    /// Which mice (datasets written before this key have the standard ones).
+    #[serde(default)]
+    pub mice: Mice,
     #[serde(with = "crate::io::session::meta::rig_repr")]
     pub rig: Option<Rig>,
 }
@@ -60,6 +63,7 @@ pub struct DatasetSpec {
     pub seed: u64,
     pub noise: DepthNoise,
     pub bottom_views: bool,
+    pub mice: Mice,
 }
 
 /// One rendered instant.
@@ -99,8 +103,15 @@ pub enum DatasetError {
 pub fn render_sample(rig: &Rig, spec: &DatasetSpec, library: &[super::mouse::PoseParams], index: u64) -> Sample {
     let mut rng = item_rng(spec.seed, STREAM, index);
     let pose_id = rng.gen_range(0..library.len());
-    let params = jitter_pose(&library[pose_id], &mut rng);
-    let placement = random_placement(&mut rng);
+    let mut params = jitter_pose(&library[pose_id], &mut rng);
+    let placement = match spec.mice {
+        Mice::Standard => random_placement(&mut rng),
+        Mice::Varied => {
+            let (placement, carriage) = varied_build(&mut rng);
+            carriage.apply(&mut params);
+            placement
+        }
+    };
     let mut m = pose_mouse(&params, &placement);
     fit_in_cage(&mut m, 3.0);
     let skin = skin(&m);
@@ -166,6 +177,7 @@ pub fn write_dataset(
         seed: spec.seed,
         noise: spec.noise,
         bottom_views: spec.bottom_views,
+        mice: spec.mice,
         rig: Some(*rig),
     };
     let path = dir.join(META_FILE);

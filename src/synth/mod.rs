@@ -47,7 +47,8 @@ pub fn random_placement(rng: &mut impl Rng) -> Placement {
 /// pipeline copes with real animals unlike the renderer's: sizes from small to large,
 /// elongated and stout bodies, hunched and stretched backs, and tails lifted, curled or not
 /// visible.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Mice {
     #[default]
     Standard,
