@@ -145,6 +145,7 @@ fn paw_cascade_agrees_with_opencv() {
         seed: 3,
         noise: mousepose::core::noise::DepthNoise::default(),
         bottom_views: true,
+        mice: mousepose::synth::Mice::Standard,
     };
     let rig = mousepose::core::geometry::Rig::default_rig();
     let library = mousepose::synth::mouse::pose_library();
