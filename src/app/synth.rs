@@ -49,7 +49,8 @@ pub struct DatasetArgs {
     #[arg(long)]
     no_bottom: bool,
     /// standard: mice in the range the bundled forests were trained on; varied: sizes, body
-    /// shapes, backs and tails well outside it (see `synth session --mice`).
+    /// shapes, backs and tails well outside it (see `synth session --mice`); mixed: every
+    /// other image varied.
     #[arg(long, value_name = "KIND", default_value = "standard")]
     mice: crate::synth::Mice,
     /// Replace the output directory if it is not empty.
@@ -83,7 +84,8 @@ pub struct SessionArgs {
     #[arg(long)]
     no_color: bool,
     /// standard: mice like the ones the bundled forests were trained on; varied: sizes,
-    /// body shapes, backs and tails well outside that range (a stress test).
+    /// body shapes, backs and tails well outside that range (a stress test); mixed: varied
+    /// for odd seeds.
     #[arg(long, value_name = "KIND", default_value = "standard")]
     mice: crate::synth::Mice,
     /// Replace the output directory if it is not empty.

@@ -104,8 +104,8 @@ pub fn render_sample(rig: &Rig, spec: &DatasetSpec, library: &[super::mouse::Pos
     let mut rng = item_rng(spec.seed, STREAM, index);
     let pose_id = rng.gen_range(0..library.len());
     let mut params = jitter_pose(&library[pose_id], &mut rng);
-    let placement = match spec.mice {
-        Mice::Standard => random_placement(&mut rng),
+    let placement = match spec.mice.of_item(index) {
+        Mice::Standard | Mice::Mixed => random_placement(&mut rng),
         Mice::Varied => {
             let (placement, carriage) = varied_build(&mut rng);
             carriage.apply(&mut params);

@@ -46,13 +46,15 @@ pub fn random_placement(rng: &mut impl Rng) -> Placement {
 /// on (what [`random_placement`] draws); `Varied`, mice well outside it, for testing how the
 /// pipeline copes with real animals unlike the renderer's: sizes from small to large,
 /// elongated and stout bodies, hunched and stretched backs, and tails lifted, curled or not
-/// visible.
+/// visible; `Mixed`, each item one or the other (by the parity of a dataset image's index or
+/// of a session's seed: odd is varied).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Mice {
     #[default]
     Standard,
     Varied,
+    Mixed,
 }
 
 impl std::str::FromStr for Mice {
@@ -62,16 +64,17 @@ impl std::str::FromStr for Mice {
         match s {
             "standard" => Ok(Mice::Standard),
             "varied" => Ok(Mice::Varied),
-            _ => Err(format!("{s:?} is not a kind of mice: standard or varied")),
+            "mixed" => Ok(Mice::Mixed),
+            _ => Err(format!("{s:?} is not a kind of mice: standard, varied or mixed")),
         }
     }
 }
 
-/// A mouse's way of holding itself, added to every pose it takes (all zero for the standard
-/// mice).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// A mouse's way of holding itself, added to every pose it takes (the default, the standard
+/// mice's, changes nothing).
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Carriage {
-    /// Added to the tail's lift above the floor (mm) and to its curl.
+    /// Added to the tail's lift above the floor (mm, not negative) and to its curl.
     pub tail_lift: f64,
     pub tail_curl: f64,
     /// Added to the pitch of the back's two middle segments (positive: hunched).
@@ -80,10 +83,21 @@ pub struct Carriage {
     pub rump_height: f64,
 }
 
+impl Default for Carriage {
+    fn default() -> Self {
+        Self {
+            tail_lift: 0.0,
+            tail_curl: 0.0,
+            hunch: 0.0,
+            rump_height: 1.0,
+        }
+    }
+}
+
 impl Carriage {
     /// `params` as this mouse holds them.
     pub fn apply(&self, params: &mut PoseParams) {
-        params.tail_lift = (params.tail_lift + self.tail_lift).max(0.0);
+        params.tail_lift += self.tail_lift;
         params.tail_curl += self.tail_curl;
         params.pitch[1] += self.hunch;
         params.pitch[2] += self.hunch;
@@ -112,6 +126,18 @@ pub fn varied_build(rng: &mut impl Rng) -> (Placement, Carriage) {
         _ => {}
     }
     (placement, carriage)
+}
+
+impl Mice {
+    /// The kind of item `index` (a dataset image's index, a session's seed): `Mixed` gives
+    /// `Varied` for odd ones and `Standard` for even ones.
+    pub fn of_item(self, index: u64) -> Mice {
+        match self {
+            Mice::Mixed if index % 2 == 1 => Mice::Varied,
+            Mice::Mixed => Mice::Standard,
+            kind => kind,
+        }
+    }
 }
 
 /// Small random changes to a library pose (so no two images share exact joint angles).

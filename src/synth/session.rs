@@ -72,8 +72,8 @@ pub fn session_animator(seed: u64) -> Animator {
 fn session_mouse(seed: u64, mice: Mice) -> (Animator, Carriage) {
     let mut mouse_rng = item_rng(seed, STREAM_MOUSE, 0);
     let build = random_placement(&mut mouse_rng);
-    match mice {
-        Mice::Standard => (Animator::new(mouse_rng, build), Carriage::default()),
+    match mice.of_item(seed) {
+        Mice::Standard | Mice::Mixed => (Animator::new(mouse_rng, build), Carriage::default()),
         Mice::Varied => {
             let (build, carriage) = varied_build(&mut item_rng(seed, STREAM_VARIETY, 0));
             (Animator::new(mouse_rng, build), carriage)
@@ -200,9 +200,7 @@ fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
         animator.advance(t - now);
         now = t;
         let (mut params, placement) = animator.state();
-        if spec.mice == Mice::Varied {
-            carriage.apply(&mut params);
-        }
+        carriage.apply(&mut params);
         let mut mouse = pose_mouse(&params, &placement);
         fit_in_cage(&mut mouse, 3.0);
         let (clock, forced) = match role {
