@@ -174,20 +174,21 @@ impl BodyEstimator {
         pixels: &[Pixel],
         intrinsics: &Intrinsics,
     ) -> [Option<JointGuess>; BODY_JOINTS] {
-        let mut guesses = self.estimate_votes(image, pixels, intrinsics);
+        let (mut guesses, _) = self.estimate_votes(image, pixels, intrinsics);
         if self.settings.follow_tail {
             self.follow_tail(image, intrinsics, &mut guesses);
         }
         guesses
     }
 
-    /// Gathers the votes of `pixels` and finds each joint at their densest mode.
+    /// Gathers the votes of `pixels` and finds each joint at their densest mode; also returns
+    /// each joint's modes ([`Self::modes`]).
     fn estimate_votes(
         &mut self,
         image: &DepthImage,
         pixels: &[Pixel],
         intrinsics: &Intrinsics,
-    ) -> [Option<JointGuess>; BODY_JOINTS] {
+    ) -> ([Option<JointGuess>; BODY_JOINTS], [Option<Modes>; BODY_JOINTS]) {
         for cloud in self.confident.iter_mut().chain(&mut self.doubtful) {
             cloud.clear();
         }
@@ -216,7 +217,15 @@ impl BodyEstimator {
                 }
             }
         });
-        std::array::from_fn(|j| self.aggregate(j))
+        let modes: [Option<Modes>; BODY_JOINTS] = std::array::from_fn(|j| self.modes(j));
+        let guesses = std::array::from_fn(|j| {
+            let (modes, total) = modes[j]?;
+            let best = modes.iter().fold((Vector3::zeros(), f32::NEG_INFINITY), |best, m| {
+                if m.1 > best.1 { *m } else { best }
+            });
+            Some(self.guess_at(j, best.0, total))
+        });
+        (guesses, modes)
     }
 
     /// The votes a joint is found from: its confident ones, or the others when it has none.
@@ -249,7 +258,7 @@ impl BodyEstimator {
 
     /// The modes mean-shift finds from the mean of a joint's votes and from its three
     /// heaviest votes, each with its density, and the votes' total weight; `None` without votes.
-    fn modes(&self, joint: usize) -> Option<([Mode; 4], f32)> {
+    fn modes(&self, joint: usize) -> Option<Modes> {
         let votes = self.cloud(joint);
         let [x, y, z, total] = votes.sum(|x, y, z, w| [w * x, w * y, w * z, w]);
         if votes.is_empty() || total <= 0.0 {
@@ -286,14 +295,6 @@ impl BodyEstimator {
         }
     }
 
-    fn aggregate(&self, joint: usize) -> Option<JointGuess> {
-        let (modes, total) = self.modes(joint)?;
-        let best = modes.iter().fold((Vector3::zeros(), f32::NEG_INFINITY), |best, m| {
-            if m.1 > best.1 { *m } else { best }
-        });
-        Some(self.guess_at(joint, best.0, total))
-    }
-
     /// Like [`Self::estimate`], and the joints again under either orientation of the body: the
     /// long axis of the mouse seen along `up` (the world's up in the camera frame), and for
     /// each end of it the joints with the head at that end. A front joint (see
@@ -308,7 +309,7 @@ impl BodyEstimator {
         intrinsics: &Intrinsics,
         up: &Vector3<f32>,
     ) -> Oriented {
-        let raw = self.estimate_votes(image, pixels, intrinsics);
+        let (raw, all_modes) = self.estimate_votes(image, pixels, intrinsics);
         let (centre, axis) = long_axis(&self.points, up);
         let side = |p: &Vector3<f32>| (p - centre).dot(&axis);
         let mut oriented = Oriented {
@@ -331,7 +332,7 @@ impl BodyEstimator {
             });
             agree += along / w.max(1e-12);
             weight += 1.0;
-            let (Some((modes, total)), Some(forest)) = (self.modes(j), raw[j]) else {
+            let (Some((modes, total)), Some(forest)) = (all_modes[j], raw[j]) else {
                 continue;
             };
             let mirrored = forest.position_mm - 2.0 * side(&forest.position_mm) * axis;
@@ -380,6 +381,9 @@ impl BodyEstimator {
 
 /// A mode of a joint's votes and the votes' density there.
 type Mode = (Vector3<f32>, f32);
+
+/// The modes mean-shift finds from a joint's four seeds, and the votes' total weight.
+type Modes = ([Mode; 4], f32);
 
 /// The joints of one frame under the forest alone and under either orientation (see
 /// [`BodyEstimator::estimate_oriented`]), in the camera frame.
