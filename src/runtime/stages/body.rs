@@ -5,7 +5,7 @@ use crate::core::geometry::Camera;
 use crate::core::pose::{JointEstimate, JointSource, Pose};
 use crate::core::skeleton::Joint;
 use crate::runtime::pipeline::{Stage, StageError};
-use crate::vision::forest::depth::DepthImage;
+use crate::vision::forest::depth::{BODY_JOINTS, DepthImage};
 use crate::vision::forest::infer::{BodyEstimator, JointGuess, Oriented, Pixel, sample_pixels};
 use crate::vision::orientation::{self, BodyJoints, Headings, TrackerConfig};
 use nalgebra::{Point2, Point3, Vector2, Vector3};
@@ -40,12 +40,10 @@ impl BodyStage {
             crop: Vec::new(),
         }
     }
-}
 
-impl BodyStage {
     /// The world-frame joints and evidence of a frame's [`Oriented`] estimate.
     fn headings(&self, oriented: &Oriented) -> Headings {
-        let to_world = |guesses: &[Option<JointGuess>; 12]| -> BodyJoints {
+        let to_world = |guesses: &[Option<JointGuess>; BODY_JOINTS]| -> BodyJoints {
             guesses.map(|guess| {
                 guess.map_or_else(JointEstimate::default, |g| JointEstimate {
                     position_mm: self.camera.world_from_camera * Point3::from(g.position_mm.cast::<f64>()),
