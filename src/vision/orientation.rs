@@ -16,7 +16,7 @@ use crate::core::skeleton::Joint;
 use nalgebra::{Point2, Vector2};
 
 /// The main-body joints' estimates under one hypothesis, in [`Joint::MAIN_BODY`] order.
-pub type BodyJoints = [JointEstimate; 12];
+pub type BodyJoints = [JointEstimate; Joint::MAIN_BODY.len()];
 
 /// Which end of the body's long axis a main-body joint belongs to: `1` the head's, `-1` the
 /// tail's, `0` neither (the middle of the back).
@@ -184,7 +184,7 @@ mod tests {
             centre,
             votes,
             ends: 0.0,
-            joints: [[JointEstimate::default(); 12]; 2],
+            joints: [[JointEstimate::default(); Joint::MAIN_BODY.len()]; 2],
             forest_heading: None,
         }
     }
