@@ -57,6 +57,18 @@ pub enum Mice {
     Mixed,
 }
 
+impl Mice {
+    /// The kind of item `index` (a dataset image's index, a session's seed): `Mixed` gives
+    /// `Varied` for odd ones and `Standard` for even ones.
+    pub fn of_item(self, index: u64) -> Mice {
+        match self {
+            Mice::Mixed if index % 2 == 1 => Mice::Varied,
+            Mice::Mixed => Mice::Standard,
+            kind => kind,
+        }
+    }
+}
+
 impl std::str::FromStr for Mice {
     type Err = String;
 
@@ -74,7 +86,7 @@ impl std::str::FromStr for Mice {
 /// mice's, changes nothing).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Carriage {
-    /// Added to the tail's lift above the floor (mm, not negative) and to its curl.
+    /// Added to the tail's lift above the floor (mm) and to its curl.
     pub tail_lift: f64,
     pub tail_curl: f64,
     /// Added to the pitch of the back's two middle segments (positive: hunched).
@@ -126,18 +138,6 @@ pub fn varied_build(rng: &mut impl Rng) -> (Placement, Carriage) {
         _ => {}
     }
     (placement, carriage)
-}
-
-impl Mice {
-    /// The kind of item `index` (a dataset image's index, a session's seed): `Mixed` gives
-    /// `Varied` for odd ones and `Standard` for even ones.
-    pub fn of_item(self, index: u64) -> Mice {
-        match self {
-            Mice::Mixed if index % 2 == 1 => Mice::Varied,
-            Mice::Mixed => Mice::Standard,
-            kind => kind,
-        }
-    }
 }
 
 /// Small random changes to a library pose (so no two images share exact joint angles).

@@ -39,7 +39,7 @@ pub struct SessionSpec {
     pub color_format: PixelFormat,
     /// Whether the session has a colour camera at all (depth-only rigs have none).
     pub color: bool,
-    /// The standard mice, or mice well outside the training range.
+    /// The standard mice, mice well outside the training range, or either by the seed.
     pub mice: Mice,
 }
 

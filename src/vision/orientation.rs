@@ -13,7 +13,7 @@
 
 use crate::core::pose::JointEstimate;
 use crate::core::skeleton::Joint;
-use nalgebra::{Point2, Vector2};
+use nalgebra::{Point2, Point3, Vector2};
 
 /// The main-body joints' estimates under one hypothesis, in [`Joint::MAIN_BODY`] order.
 pub type BodyJoints = [JointEstimate; Joint::MAIN_BODY.len()];
@@ -169,8 +169,13 @@ pub fn heading(joints: &BodyJoints) -> Option<Vector2<f64>> {
         let j = &joints[joint.index()];
         (j.source != crate::core::pose::JointSource::Missing).then_some(j.position_mm)
     };
-    let (neck, base) = (at(Joint::Neck)?, at(Joint::TailBase)?);
-    let v = Vector2::new(neck.x - base.x, neck.y - base.y);
+    heading_between(&at(Joint::Neck)?, &at(Joint::TailBase)?)
+}
+
+/// The heading from the tail base to the neck seen from above (world x, y), `None` when one
+/// stands right above the other.
+pub fn heading_between(neck: &Point3<f64>, tail_base: &Point3<f64>) -> Option<Vector2<f64>> {
+    let v = Vector2::new(neck.x - tail_base.x, neck.y - tail_base.y);
     (v.norm() > 1e-6).then_some(v)
 }
 

@@ -251,12 +251,10 @@ impl Sink for PoseWriter {
         if let Some(o) = &r.orientation {
             let _ = write!(line, "{:.3}", o.confidence);
             if let Some(t) = truth {
-                let heading = |joints: &JointPositions| {
-                    let (neck, base) = (joints.get(Joint::Neck.index())?, joints.get(Joint::TailBase.index())?);
-                    Some(Vector2::new(neck.x - base.x, neck.y - base.y))
-                };
                 let body: BodyJoints = std::array::from_fn(|k| r.pose.joints[k]);
-                if let Some(true_heading) = heading(t) {
+                if let Some(true_heading) =
+                    orientation::heading_between(&t[Joint::Neck.index()], &t[Joint::TailBase.index()])
+                {
                     tally.orientation.count(true_heading, orientation::heading(&body), o);
                 }
             }
