@@ -38,6 +38,44 @@ fn points(n: usize, seed: u64) -> Vec<[f32; 2]> {
 }
 
 #[test]
+fn scoring_on_a_bounded_sample_still_separates_and_routes_every_sample() {
+    let xy = points(20_000, 2);
+    let labels: Vec<u8> = xy.iter().map(|p| u8::from(p[0] > 0.3 && p[1] > 0.6)).collect();
+    let space = Xy(&xy);
+    let objective = ClassObjective {
+        labels: &labels,
+        classes: 2,
+    };
+    let params = TrainParams {
+        trees: 1,
+        max_depth: 12,
+        tests: 50,
+        min_leaf: 2,
+        seed: 4,
+        score_sample: 500,
+    };
+    let mut all: Vec<u32> = (0..xy.len() as u32).collect();
+    let tree = train_tree(&space, &objective, &mut all, &params, 0, 0);
+    // Every sample reached a leaf whose payload counts it: the root saw all 20,000.
+    let wrong = (0..xy.len())
+        .filter(|&i| argmax(tree.leaf(|f| space.value(i as u32, f))) != usize::from(labels[i]))
+        .count();
+    assert!(wrong < 200, "{wrong} of 20,000 misclassified");
+    let unbounded = train_tree(
+        &space,
+        &objective,
+        &mut (0..xy.len() as u32).collect::<Vec<_>>(),
+        &TrainParams {
+            score_sample: 0,
+            ..params
+        },
+        0,
+        0,
+    );
+    assert_ne!(tree, unbounded, "the bound changed which tests were scored");
+}
+
+#[test]
 fn a_tree_separates_separable_data() {
     let xy = points(4000, 1);
     // Two classes split by a diagonal staircase: separable by axis-aligned cuts.
@@ -56,6 +94,7 @@ fn a_tree_separates_separable_data() {
         tests: 50,
         min_leaf: 2,
         seed: 3,
+        score_sample: 0,
     };
     let mut all: Vec<u32> = (0..xy.len() as u32).collect();
     let tree = train_tree(&space, &objective, &mut all, &params, 0, 0);
@@ -80,6 +119,7 @@ fn packed_traversal_reaches_the_leaves_of_root_to_leaf_descent() {
         tests: 10,
         min_leaf: 4,
         seed: 9,
+        score_sample: 0,
     };
     let mut all: Vec<u32> = (0..2000).collect();
     let tree = train_tree(&space, &objective, &mut all, &params, 0, 0);
@@ -225,6 +265,90 @@ fn a_better_test_replaces_a_bad_one_below_start_level_only() {
     }
 }
 
+#[test]
+fn a_leaf_above_the_start_level_does_not_grow() {
+    let (xy, labels) = labelled_by_x(2000, 12);
+    let (space, objective) = (
+        Xy(&xy),
+        ClassObjective {
+            labels: &labels,
+            classes: 2,
+        },
+    );
+    // A root testing y whose two leaves are each reached by about 1,000 samples (> l_n) of
+    // both classes.
+    let start = Tree {
+        nodes: vec![split(1, 0.5, 1), leaf(0), leaf(1)],
+        leaves: vec![vec![0.0, 1.0], vec![1.0, 0.0]],
+    };
+    for (start_level, grows) in [(1, true), (2, false)] {
+        let mut tree = start.clone();
+        let mut samples: Vec<u32> = (0..2000).collect();
+        let stats = refine_tree(
+            &space,
+            &objective,
+            &mut tree,
+            &mut samples,
+            &disc(20, start_level),
+            0,
+            0,
+        );
+        assert_eq!(
+            stats.grown,
+            if grows { 2 } else { 0 },
+            "start level {start_level}: {stats:?}"
+        );
+        assert_eq!(tree.depth() > 1, grows, "start level {start_level}");
+    }
+}
+
+/// Candidate tests on y only: none of them can match a good test on x.
+struct OnlyY<'a>(Xy<'a>);
+
+impl SplitSpace for OnlyY<'_> {
+    type Feature = u8;
+    fn value(&self, s: u32, f: &u8) -> f32 {
+        self.0.value(s, f)
+    }
+    fn candidates(&self, depth: u32, s: &[u32], m: usize, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<(u8, Vec<f32>)> {
+        let mut c = self.0.candidates(depth, s, m, rng);
+        c.retain(|(f, _)| *f == 1);
+        c
+    }
+}
+
+#[test]
+fn the_current_test_survives_only_when_kept_among_the_candidates() {
+    let (xy, labels) = labelled_by_x(2000, 14);
+    let space = OnlyY(Xy(&xy));
+    let objective = ClassObjective {
+        labels: &labels,
+        classes: 2,
+    };
+    // A perfect root on x: every fresh test (on y) does worse.
+    let good = Tree {
+        nodes: vec![split(0, 0.5, 1), leaf(0), leaf(1)],
+        leaves: vec![vec![0.0, 1.0], vec![1.0, 0.0]],
+    };
+    for keep_current in [true, false] {
+        let mut tree = good.clone();
+        let mut samples: Vec<u32> = (0..2000).collect();
+        let params = DiscriminativeParams {
+            keep_current,
+            ..disc(50, 0)
+        };
+        let stats = refine_tree(&space, &objective, &mut tree, &mut samples, &params, 0, 0);
+        if keep_current {
+            assert_eq!(tree.nodes[0], good.nodes[0], "{stats:?}");
+            assert!((stats.error_after - stats.error_before).abs() < 1e-9, "{stats:?}");
+        } else {
+            // The paper's rule: the best of a fresh draw, even when it is worse.
+            assert_eq!(tree.nodes[0].feature, 1, "{stats:?}");
+            assert!(stats.error_after > stats.error_before + 100.0, "{stats:?}");
+        }
+    }
+}
+
 struct Quiet;
 impl TrainProgress for Quiet {
     fn stage(&self, _: &str, _: u64) {}
@@ -243,6 +367,7 @@ fn small_job(target: Target, discriminative: bool) -> TrainJob<'static> {
             tests: 20,
             min_leaf: 20,
             seed: 9,
+            score_sample: 0,
         },
         disc: DiscriminativeParams {
             tests: 20,
@@ -295,6 +420,7 @@ fn training_is_reproducible_whatever_the_thread_count() {
 fn a_regression_forest_recovers_a_constant_offset() {
     use mousepose::core::image::Region;
     use mousepose::vision::forest::depth::{DepthImage, DepthSpace, JointObjective, JointTargets, PixelSet};
+    use mousepose::vision::forest::discriminative::ErrorScope;
     // One flat image; every pixel is 5 mm from every joint, in the same direction.
     let region = Region {
         x0: 100,
@@ -325,13 +451,17 @@ fn a_regression_forest_recovers_a_constant_offset() {
         pixels: &set,
         thresholds: 4,
     };
-    let objective = JointObjective { targets: &targets };
+    let objective = JointObjective {
+        targets: &targets,
+        scope: ErrorScope::AllJoints,
+    };
     let params = TrainParams {
         trees: 2,
         max_depth: 6,
         tests: 10,
         min_leaf: 10,
         seed: 1,
+        score_sample: 0,
     };
     let all: Vec<u32> = (0..set.len() as u32).collect();
     let forest = train_forest(&space, &objective, vec![all; 2], &params, [0.0; 2], &|| {});
@@ -433,6 +563,7 @@ fn gauss2d_runs_end_to_end_at_small_scale() {
         tests: 50,
         min_leaf: 60,
         seed: 1,
+        score_sample: 0,
     };
     let base = baseline(&d_t, &params);
     let disc = DiscriminativeParams {
@@ -452,7 +583,18 @@ fn gauss2d_runs_end_to_end_at_small_scale() {
         a <= bayes + 0.01 && r <= bayes + 0.01,
         "no classifier beats Bayes: {a} {r} {bayes}"
     );
-    assert!(stats.error_after <= stats.error_before);
+    assert!(stats.nodes_visited > 0, "{stats:?}");
+    // The paper's setup: nine pairs, each of both classes, overlapping.
+    assert_eq!(b.len(), 18);
+    for pair in b.chunks(2) {
+        assert_ne!(pair[0].class, pair[1].class);
+        let gap = ((pair[0].mean[0] - pair[1].mean[0]).powi(2) + (pair[0].mean[1] - pair[1].mean[1]).powi(2)).sqrt();
+        assert!(gap <= 3.0 * (pair[0].sigma + pair[1].sigma) / 2.0 + 1e-9, "{pair:?}");
+    }
+    assert!(
+        bayes < 0.95,
+        "overlapping pairs leave some points on the wrong side: {bayes}"
+    );
 }
 
 /// `fixtures/models/body-baseline.forest` with `settings`, evaluated (segmentation included)

@@ -248,6 +248,7 @@ fn bench_training(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick:
     use crate::training::{PixelParams, draw_pixels, joint_targets};
     use crate::vision::forest::TrainParams;
     use crate::vision::forest::depth::{DepthSpace, JointObjective};
+    use crate::vision::forest::discriminative::ErrorScope;
     let images = if quick { 100 } else { 600 };
     let spec = DatasetSpec {
         count: images,
@@ -275,7 +276,10 @@ fn bench_training(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick:
         pixels: &set,
         thresholds: pixels.thresholds,
     };
-    let objective = JointObjective { targets: &targets };
+    let objective = JointObjective {
+        targets: &targets,
+        scope: ErrorScope::AllJoints,
+    };
     rate((set.len() * params.trees) as u64, || {
         drop(crate::vision::forest::train::train_forest(
             &space,

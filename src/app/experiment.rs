@@ -51,6 +51,8 @@ struct Gauss2dReport {
     union_baseline_accuracy: f64,
     discriminative_gain_accuracy: f64,
     discriminative_accuracy: f64,
+    /// Ours: the node's current test kept among the candidates, winning ties.
+    discriminative_keep_current_accuracy: f64,
     paper: PaperFigures,
     sweeps: std::collections::BTreeMap<String, Vec<SweepPoint>>,
 }
@@ -77,7 +79,7 @@ pub fn gauss2d(args: &Gauss2dArgs) -> crate::app::Outcome {
 
 fn run_gauss2d(args: &Gauss2dArgs) -> Result<()> {
     let setup = Setup::new(args.quick, args.seed);
-    let steps = if args.quick { 26 } else { 36 };
+    let steps = if args.quick { 30 } else { 40 };
     let bar = progress::bar(steps, "gauss2d");
     let blobs = gauss2d::blobs(setup.seed);
     let d_t = gauss2d::sample(&blobs, setup.points, setup.seed, 0);
@@ -94,6 +96,12 @@ fn run_gauss2d(args: &Gauss2dArgs) -> Result<()> {
     bar.inc(1);
     let disc_params = setup.discriminative_params(Scoring::SubtreeError);
     let (disc, _) = gauss2d::discriminative(&base, &d_d, &disc_params);
+    bar.inc(1);
+    let keep_current = DiscriminativeParams {
+        keep_current: true,
+        ..disc_params
+    };
+    let (disc_keep, _) = gauss2d::discriminative(&base, &d_d, &keep_current);
     bar.inc(1);
     let base_acc = acc(&base);
     let mut sweeps = std::collections::BTreeMap::new();
@@ -165,6 +173,7 @@ fn run_gauss2d(args: &Gauss2dArgs) -> Result<()> {
         &[0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0]
     };
     sweep("start_level", levels, &|p, v| p.start_level = v as u32);
+    sweep("subset", &[0.25, 0.5, 1.0], &|p, v| p.subset = v);
     // Iterations: each pass refines the previous pass's forest with a fresh subset.
     let iterations = if args.quick { 3 } else { 5 };
     let mut forest = base.clone();
@@ -201,6 +210,7 @@ fn run_gauss2d(args: &Gauss2dArgs) -> Result<()> {
         union_baseline_accuracy: acc(&union),
         discriminative_gain_accuracy: acc(&disc_gain),
         discriminative_accuracy: acc(&disc),
+        discriminative_keep_current_accuracy: acc(&disc_keep),
         paper: PAPER,
         sweeps,
     };
@@ -212,12 +222,17 @@ fn run_gauss2d(args: &Gauss2dArgs) -> Result<()> {
             let x: Vec<f64> = points.iter().map(|p| p.value).collect();
             let b: Vec<f64> = points.iter().map(|p| p.baseline_accuracy).collect();
             let d: Vec<f64> = points.iter().map(|p| p.discriminative_accuracy).collect();
+            let bayes = vec![report.bayes_accuracy; x.len()];
             line_chart(
                 &format!("gauss2d: accuracy vs {name}"),
                 name,
                 "accuracy",
                 &x,
-                &[("baseline", [120, 120, 120], &b), ("discriminative", [40, 90, 220], &d)],
+                &[
+                    ("baseline", [120, 120, 120], &b),
+                    ("discriminative", [40, 90, 220], &d),
+                    ("Bayes-optimal", [40, 160, 60], &bayes),
+                ],
             )
             .write_png(&dir.join(format!("sweep_{name}.png")))?;
         }
@@ -232,8 +247,9 @@ fn gauss2d_tables(r: &Gauss2dReport) -> String {
     let mut t = String::new();
     let _ = writeln!(
         t,
-        "gauss2d: {} points per set, {} trees, L = {}, m = {}, l_n = {}, seed {}",
-        r.setup.points, r.setup.trees, r.setup.max_depth, r.setup.tests, r.setup.min_leaf, r.setup.seed
+        "gauss2d: {} points per set, {} trees, L = {}, m = {}, l_n = {}, each tree's D'_d {} x |D_d| \
+         drawn with replacement, seed {}",
+        r.setup.points, r.setup.trees, r.setup.max_depth, r.setup.tests, r.setup.min_leaf, r.setup.subset, r.setup.seed
     );
     let _ = writeln!(t, "{:<44} {:>8} {:>8}", "forest", "ours", "paper");
     let rows = [
@@ -254,8 +270,15 @@ fn gauss2d_tables(r: &Gauss2dReport) -> String {
             r.paper.discriminative_accuracy,
         ),
     ];
+    let ours = [(
+        "the same, current test kept (ours)",
+        r.discriminative_keep_current_accuracy,
+    )];
     for (name, ours, paper) in rows {
         let _ = writeln!(t, "{name:<44} {ours:>8.4} {paper:>8.3}");
+    }
+    for (name, value) in ours {
+        let _ = writeln!(t, "{name:<44} {value:>8.4} {:>8}", "-");
     }
     let _ = writeln!(
         t,
@@ -265,14 +288,14 @@ fn gauss2d_tables(r: &Gauss2dReport) -> String {
     for (name, points) in &r.sweeps {
         let _ = writeln!(
             t,
-            "\nsweep {name}\n{:>10} {:>10} {:>15}",
-            name, "baseline", "discriminative"
+            "\nsweep {name}\n{:>10} {:>10} {:>15} {:>8}",
+            name, "baseline", "discriminative", "Bayes"
         );
         for p in points {
             let _ = writeln!(
                 t,
-                "{:>10} {:>10.4} {:>15.4}",
-                p.value, p.baseline_accuracy, p.discriminative_accuracy
+                "{:>10} {:>10.4} {:>15.4} {:>8.4}",
+                p.value, p.baseline_accuracy, p.discriminative_accuracy, r.bayes_accuracy
             );
         }
     }

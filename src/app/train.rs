@@ -3,7 +3,7 @@
 use crate::app::progress;
 use crate::app::{Exists, Failure, Outcome, parse_subset};
 use crate::training::{self, PixelParams, Target, TrainJob, TrainProgress};
-use crate::vision::forest::discriminative::{DiscriminativeParams, Scoring};
+use crate::vision::forest::discriminative::{DiscriminativeParams, ErrorScope, Scoring};
 use crate::vision::forest::model::{self, Model, ModelKind};
 use crate::vision::forest::{Forest, TrainParams};
 use anyhow::{Context, Result};
@@ -62,10 +62,31 @@ pub struct TrainArgs {
     /// the shrink rule coarsens the trees.
     #[arg(long, default_value_t = 0.5, value_parser = parse_subset)]
     pub subset: f64,
-    /// In discriminative training, refit the leaves that stay leaves to D'_d instead of
-    /// keeping what D_t taught them.
+    /// Draw each tree's D'_d with replacement (`--subset` x |D_d| draws; a bootstrap sample
+    /// at 1) instead of keeping each pixel of D_d with probability `--subset`.
     #[arg(long)]
+    pub bootstrap: bool,
+    /// In discriminative training, keep what D_t taught the leaves that stay leaves instead
+    /// of refitting them to D'_d (the paper refits them).
+    #[arg(long)]
+    pub keep_leaves: bool,
+    /// Refit the leaves (the default since the paper does; accepted for older scripts).
+    #[arg(long, hide = true, conflicts_with = "keep_leaves")]
     pub refit_leaves: bool,
+    /// In discriminative training, put each node's current test among its candidates,
+    /// winning ties, so no node's error rises when its test is chosen (the paper draws
+    /// fresh tests only).
+    #[arg(long)]
+    pub keep_current: bool,
+    /// Which joints a body pixel's error E counts in discriminative training: all of them,
+    /// as the paper defines E, or only those within the pixel's vote radius.
+    #[arg(long, value_enum, default_value_t = ErrorScope::AllJoints)]
+    pub error: ErrorScope,
+    /// Score each node's candidate tests on at most this many of its pixels, drawn at random
+    /// (all of them are still routed by the chosen test); 0 scores them on all. Makes large
+    /// test budgets such as the paper's 20,000 for part labels affordable.
+    #[arg(long, default_value_t = 0)]
+    pub score_pixels: usize,
     /// Mouse pixels drawn per training image.
     #[arg(long, default_value_t = 150, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub pixels: u32,
@@ -109,6 +130,7 @@ pub fn run(args: &TrainArgs) -> Outcome {
         tests: args.tests as usize,
         min_leaf: args.leaf as usize,
         seed: args.seed,
+        score_sample: args.score_pixels,
     };
     let job = TrainJob {
         target: match args.target {
@@ -124,8 +146,12 @@ pub fn run(args: &TrainArgs) -> Outcome {
             start_level: args.start_level,
             iterations: args.iterations as usize,
             subset: args.subset,
-            refit_leaves: args.refit_leaves,
+            bootstrap: args.bootstrap,
+            refit_leaves: !args.keep_leaves,
+            keep_current: args.keep_current,
+            error: args.error,
             scoring: Scoring::SubtreeError,
+            score_sample: params.score_sample,
             max_depth: params.max_depth,
             seed: args.seed ^ 0xD15C,
         },

@@ -172,7 +172,12 @@ pub fn draw_pixels(samples: &[Sample], params: &PixelParams) -> PixelSet {
     set
 }
 
-/// The offsets of every training pixel to the main-body joints (camera frame).
+/// A tail tip closer than this to the tail base (mm) is taken as a tail not visible.
+const HIDDEN_TAIL_MM: f64 = 15.0;
+
+/// The offsets of every training pixel to the main-body joints (camera frame), and the joints
+/// each is near (within the joint's vote radius; never the tail tip of a mouse whose tail is
+/// not visible).
 pub fn joint_targets(set: &PixelSet, samples: &[Sample], rig: &Rig) -> JointTargets {
     let cam = rig.depth.camera_from_world();
     let joints_cam: Vec<[nalgebra::Point3<f64>; BODY_JOINTS]> = samples
@@ -180,6 +185,16 @@ pub fn joint_targets(set: &PixelSet, samples: &[Sample], rig: &Rig) -> JointTarg
         .map(|s| std::array::from_fn(|j| cam * s.joints[Joint::MAIN_BODY[j].index()]))
         .collect();
     let radius: [f32; BODY_JOINTS] = std::array::from_fn(|j| Joint::MAIN_BODY[j].vote_radius_mm() as f32);
+    // A mouse whose tail is not visible teaches nothing about where a tail tip is seen: its
+    // pixels near the tail base would otherwise teach the leaves to put the tip there.
+    let tail_tip = Joint::MAIN_BODY
+        .iter()
+        .position(|j| *j == Joint::TailTip)
+        .expect("the tail tip is a main-body joint");
+    let tail_hidden: Vec<bool> = samples
+        .iter()
+        .map(|s| (s.joints[Joint::TailTip.index()] - s.joints[Joint::TailBase.index()]).norm() < HIDDEN_TAIL_MM)
+        .collect();
     let i = &rig.depth.intrinsics;
     let mut t = JointTargets::default();
     for k in 0..set.len() {
@@ -197,6 +212,9 @@ pub fn joint_targets(set: &PixelSet, samples: &[Sample], rig: &Rig) -> JointTarg
             }
             o
         });
+        if tail_hidden[set.image[k] as usize] {
+            near &= !(1 << tail_tip);
+        }
         t.offsets.push(offsets);
         t.near.push(near);
     }
@@ -331,13 +349,21 @@ pub fn train(job: &TrainJob<'_>, progress: &dyn TrainProgress) -> Result<(Model,
                 Some(Model::Body(_, f)) => Some(f.clone()),
                 _ => None,
             };
-            let second = dd
-                .as_ref()
-                .zip(targets_d.as_ref())
-                .map(|((_, _, set), t)| (set, JointObjective { targets: t }));
+            let second = dd.as_ref().zip(targets_d.as_ref()).map(|((_, _, set), t)| {
+                (
+                    set,
+                    JointObjective {
+                        targets: t,
+                        scope: job.disc.error,
+                    },
+                )
+            });
             let (forest, passes) = fit_forest(
                 &space_t,
-                &JointObjective { targets: &targets },
+                &JointObjective {
+                    targets: &targets,
+                    scope: job.disc.error,
+                },
                 from,
                 second,
                 job,
@@ -430,7 +456,7 @@ where
         .flat_map_iter(|(t, tree)| {
             (0..params.iterations)
                 .map(|it| {
-                    let mut s = subset(&all, params.subset, params.seed, t, it);
+                    let mut s = subset(&all, params, t, it);
                     let p = refine_tree(space, objective, tree, &mut s, params, t, it);
                     progress.tick();
                     p

@@ -7,6 +7,7 @@
 //! 3D point to the joint, counted only for pixels within the joint's radius (the paper's
 //! epsilon), with leaves that keep the mean offset and the spread of those offsets.
 
+use super::discriminative::ErrorScope;
 use super::{Objective, SplitSpace, uniform_thresholds};
 use crate::core::image::Region;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -209,6 +210,8 @@ pub struct JointTargets {
 #[derive(Clone, Copy, Debug)]
 pub struct JointObjective<'a> {
     pub targets: &'a JointTargets,
+    /// The joints a pixel's error sums (discriminative training's E; training ignores it).
+    pub scope: ErrorScope,
 }
 
 /// Per joint: count, sum of offsets (3), sum of squared norms; then the sample count.
@@ -320,14 +323,17 @@ impl Objective for JointObjective<'_> {
         out
     }
 
-    /// The summed error of the leaf's estimates for the joints this sample is near; a joint
+    /// The summed error of the leaf's estimates for the joints [`Self::scope`] counts; a joint
     /// the leaf has no estimate for counts as if the pixel itself were the estimate.
     fn error(&self, leaf: &JointLeaf, sample: u32) -> f64 {
         let s = sample as usize;
-        let near = self.targets.near[s];
+        let counted = match self.scope {
+            ErrorScope::AllJoints => u16::MAX,
+            ErrorScope::NearJoints => self.targets.near[s],
+        };
         let mut e = 0.0;
         for (j, o) in self.targets.offsets[s].iter().enumerate() {
-            if near & (1 << j) == 0 {
+            if counted & (1 << j) == 0 {
                 continue;
             }
             let v = &leaf[j];

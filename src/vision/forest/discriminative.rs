@@ -1,9 +1,15 @@
 //! The paper's discriminative training (sec. 2): re-choose each split node's test of a trained
-//! tree, root first, among the current test and `m` fresh random tests, keeping the one under
-//! which the subtree rooted at the node does best on a second data set. A split node reached by
-//! at most `l_n` samples shrinks to a leaf; a leaf reached by more grows a subtree; other
-//! leaves keep what the first data set taught them, as in the paper (or, with
-//! [`DiscriminativeParams::refit_leaves`], are refitted to the samples that reach them).
+//! tree, root first, among a fresh random draw of tests (as many as the baseline draws at a
+//! node), keeping the one under which the subtree rooted at the node does best on a second data
+//! set. A split node reached by at most `l_n` samples shrinks to a leaf; a leaf reached by more
+//! grows a subtree; the leaves that stay leaves store what maximises E on the new samples, the
+//! leaf rule applied to them, as the paper stores them.
+//!
+//! Two choices of ours can be switched on instead of the paper's (the model file records
+//! which): [`DiscriminativeParams::keep_current`] puts the node's current test among the
+//! candidates and lets it win ties, so a node's error on its own samples never rises when its
+//! test is chosen; [`DiscriminativeParams::refit_leaves`] off keeps what D_t taught the
+//! leaves. How E counts a body pixel's joints is the objective's ([`ErrorScope`]).
 //!
 //! Because shrinking compares a node's share of D'_d with `l_n`, D'_d should be about as large
 //! as the training set D_t: with half as many samples, every lowest level of split nodes
@@ -13,11 +19,10 @@
 //! Scoring a candidate needs each sample's error under the existing subtrees: every sample's
 //! error is computed once through the left subtree and once through the right one, and a
 //! candidate's total error is then one pass choosing, per sample, the side its test sends it
-//! to. The current test is always a candidate and wins ties, so a node's error on its own
-//! samples never rises at the moment its test is chosen.
+//! to (each feature's values are computed once for all its thresholds).
 
 use super::train::{Grower, best_split, partition};
-use super::{NOT_LEAF, Node, Objective, SplitSpace, TrainParams, Tree, node_rng};
+use super::{NOT_LEAF, Node, Objective, SplitSpace, TrainParams, Tree, node_rng, scoring_sample};
 use serde::{Deserialize, Serialize};
 
 /// How a node's candidate tests are compared.
@@ -43,19 +48,49 @@ pub struct DiscriminativeParams {
     pub iterations: usize,
     /// Fraction of D_d each tree sees per pass (D'_d).
     pub subset: f64,
-    /// Refit the leaves that stay leaves to the samples of D'_d that reach them, instead of
-    /// keeping what D_t taught them. Model files written before this choice existed refitted
-    /// them, and their descriptions lack the key.
-    #[serde(default = "leaves_refitted_before_the_choice")]
+    /// Draw D'_d with replacement, `subset x |D_d|` draws (a bootstrap sample at 1), instead
+    /// of keeping each sample of D_d with probability `subset`.
+    #[serde(default)]
+    pub bootstrap: bool,
+    /// Refit the leaves that stay leaves to the samples of D'_d that reach them (the paper),
+    /// instead of keeping what D_t taught them. Model files written before this choice existed
+    /// refitted them, and their descriptions lack the key.
+    #[serde(default = "yes")]
     pub refit_leaves: bool,
+    /// Put the node's current test among the candidates, winning ties (ours; the paper draws
+    /// a fresh set only). Model files written before this choice existed kept it.
+    #[serde(default = "yes")]
+    pub keep_current: bool,
+    /// Which joints a body pixel's error E counts. Model files written before this choice
+    /// existed counted the near ones.
+    #[serde(default = "near_joints_before_the_choice")]
+    pub error: ErrorScope,
     pub scoring: Scoring,
+    /// Score a node's candidates on at most this many of its samples (0: all), and grow
+    /// subtrees so ([`TrainParams::score_sample`]).
+    #[serde(default)]
+    pub score_sample: usize,
     /// Depth limit for subtrees grown at leaves.
     pub max_depth: u32,
     pub seed: u64,
 }
 
-fn leaves_refitted_before_the_choice() -> bool {
+/// Which of a body pixel's joints its error E sums.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorScope {
+    /// Every joint, as the paper defines E (eq. of the regression's E).
+    AllJoints,
+    /// Only the joints within the vote radius of the pixel, the ones its leaf votes for.
+    NearJoints,
+}
+
+fn yes() -> bool {
     true
+}
+
+fn near_joints_before_the_choice() -> ErrorScope {
+    ErrorScope::NearJoints
 }
 
 impl Default for DiscriminativeParams {
@@ -66,8 +101,12 @@ impl Default for DiscriminativeParams {
             start_level: 0,
             iterations: 1,
             subset: 0.5,
-            refit_leaves: false,
+            bootstrap: false,
+            refit_leaves: true,
+            keep_current: false,
+            error: ErrorScope::AllJoints,
             scoring: Scoring::SubtreeError,
+            score_sample: 0,
             max_depth: 20,
             seed: 1,
         }
@@ -81,8 +120,9 @@ pub struct PassStats {
     pub tests_changed: usize,
     pub shrunk: usize,
     pub grown: usize,
-    /// Summed error of the samples at the nodes whose tests were re-chosen, before and after
-    /// the choice (after <= before at every node).
+    /// Summed error of the samples at the nodes whose tests were re-chosen, under the test
+    /// the node had and under the one chosen (after <= before at every node with
+    /// [`DiscriminativeParams::keep_current`]).
     pub error_before: f64,
     pub error_after: f64,
 }
@@ -130,6 +170,7 @@ impl<S: SplitSpace, O: Objective> Refiner<'_, S, O> {
                 tests: self.params.tests,
                 min_leaf: self.params.min_leaf,
                 seed: self.params.seed ^ (self.iteration as u64).wrapping_mul(0x5851_F42D),
+                score_sample: self.params.score_sample,
             },
             tree_index: self.tree_index,
         }
@@ -145,7 +186,8 @@ impl<S: SplitSpace, O: Objective> Refiner<'_, S, O> {
     ) {
         let current = tree.nodes[node];
         if current.is_leaf() {
-            if samples.len() > self.params.min_leaf && depth < self.params.max_depth {
+            if samples.len() > self.params.min_leaf && depth < self.params.max_depth && depth >= self.params.start_level
+            {
                 // Grow a subtree in the leaf's place (its old payload stays, unreachable).
                 self.grower().grow(tree, node, samples, depth, path);
                 self.stats.grown += 1;
@@ -193,6 +235,8 @@ impl<S: SplitSpace, O: Objective> Refiner<'_, S, O> {
         let current = tree.nodes[node];
         let seed = self.params.seed ^ (self.iteration as u64 + 1).wrapping_mul(0x9E37_79B9);
         let mut rng = node_rng(seed, self.tree_index, path);
+        let scored = scoring_sample(samples, self.params.score_sample, &mut rng);
+        let samples = &*scored;
         let fresh = self.space.candidates(depth, samples, self.params.tests, &mut rng);
         self.stats.nodes_visited += 1;
         let (feature, threshold) = match self.params.scoring {
@@ -202,38 +246,40 @@ impl<S: SplitSpace, O: Objective> Refiner<'_, S, O> {
                     .iter()
                     .map(|&s| (self.subtree_error(tree, left, s), self.subtree_error(tree, left + 1, s)))
                     .unzip();
-                let total = |feature: &S::Feature, threshold: f32| -> f64 {
-                    samples
+                // A test's error on the node's samples, given each sample's value of its feature.
+                let error_under = |values: &[f32], threshold: f32| -> f64 {
+                    values
                         .iter()
-                        .enumerate()
-                        .map(|(i, &s)| {
-                            if self.space.value(s, feature) > threshold {
-                                err_l[i]
-                            } else {
-                                err_r[i]
-                            }
-                        })
+                        .zip(err_l.iter().zip(&err_r))
+                        .map(|(&v, (&l, &r))| if v > threshold { l } else { r })
                         .sum()
                 };
-                let before = total(&current.feature, current.threshold);
-                let mut best = (before, current.feature, current.threshold);
-                // Up to m fresh tests in all, spread over the drawn features.
-                let per_feature = (self.params.tests / fresh.len().max(1)).max(1);
+                let mut values: Vec<f32> = samples.iter().map(|&s| self.space.value(s, &current.feature)).collect();
+                let before = error_under(&values, current.threshold);
+                let mut best = self
+                    .params
+                    .keep_current
+                    .then_some((before, current.feature, current.threshold));
                 for (f, thresholds) in &fresh {
-                    for &t in thresholds.iter().take(per_feature) {
-                        let e = total(f, t);
-                        if e < best.0 {
-                            best = (e, *f, t);
+                    values.clear();
+                    values.extend(samples.iter().map(|&s| self.space.value(s, f)));
+                    for &t in thresholds {
+                        let e = error_under(&values, t);
+                        if best.is_none_or(|(b, ..)| e < b) {
+                            best = Some((e, *f, t));
                         }
                     }
                 }
+                let best = best.unwrap_or((before, current.feature, current.threshold));
                 self.stats.error_before += before;
                 self.stats.error_after += best.0;
                 (best.1, best.2)
             }
             Scoring::Gain => {
                 let mut all = fresh;
-                all.insert(0, (current.feature, vec![current.threshold]));
+                if self.params.keep_current {
+                    all.insert(0, (current.feature, vec![current.threshold]));
+                }
                 match best_split(self.space, self.objective, samples, &all) {
                     Some((f, t, _)) => (f, t),
                     None => (current.feature, current.threshold),
@@ -275,14 +321,16 @@ pub fn refine_tree<S: SplitSpace, O: Objective>(
     refiner.stats
 }
 
-/// Draws tree `t`'s subset D'_d of `pool` for pass `iteration`.
-pub fn subset(pool: &[u32], fraction: f64, seed: u64, tree: usize, iteration: usize) -> Vec<u32> {
+/// Draws tree `t`'s D'_d from `pool` for pass `iteration`, as `params` say.
+pub fn subset(pool: &[u32], params: &DiscriminativeParams, tree: usize, iteration: usize) -> Vec<u32> {
     use rand::Rng;
-    let mut rng = node_rng(seed ^ 0xD15C, tree, iteration as u64 + 1);
-    pool.iter()
-        .copied()
-        .filter(|_| rng.gen_bool(fraction.clamp(0.0, 1.0)))
-        .collect()
+    let mut rng = node_rng(params.seed ^ 0xD15C, tree, iteration as u64 + 1);
+    let fraction = params.subset.clamp(0.0, 1.0);
+    if params.bootstrap {
+        let draws = (fraction * pool.len() as f64).round() as usize;
+        return (0..draws).map(|_| pool[rng.gen_range(0..pool.len())]).collect();
+    }
+    pool.iter().copied().filter(|_| rng.gen_bool(fraction)).collect()
 }
 
 #[cfg(test)]
@@ -290,13 +338,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn descriptions_written_before_the_refit_choice_read_as_refitted() {
+    fn descriptions_written_before_the_choices_read_as_what_was_done_then() {
         let new = DiscriminativeParams::default();
         let json = serde_json::to_value(new).expect("serialises");
         let mut old = json.clone();
-        old.as_object_mut().expect("an object").remove("refit_leaves");
+        for key in ["refit_leaves", "keep_current", "error", "bootstrap"] {
+            old.as_object_mut().expect("an object").remove(key);
+        }
         let read = |v| serde_json::from_value::<DiscriminativeParams>(v).expect("reads");
-        assert!(!read(json).refit_leaves);
-        assert!(read(old).refit_leaves);
+        assert_eq!(read(json), new);
+        let old = read(old);
+        assert!(old.refit_leaves && old.keep_current && !old.bootstrap);
+        assert_eq!(old.error, ErrorScope::NearJoints);
     }
 }

@@ -300,6 +300,10 @@ pub struct TrainParams {
     /// A node with fewer samples than this becomes a leaf (l_n).
     pub min_leaf: usize,
     pub seed: u64,
+    /// Score a node's candidate tests on at most this many of its samples, drawn at random
+    /// (all of them still go down the chosen test); 0 scores them on all.
+    #[serde(default)]
+    pub score_sample: usize,
 }
 
 impl Default for TrainParams {
@@ -310,8 +314,25 @@ impl Default for TrainParams {
             tests: 100,
             min_leaf: 60,
             seed: 0,
+            score_sample: 0,
         }
     }
+}
+
+/// The samples a node's candidate tests are scored on: all of `samples`, or `bound` of them
+/// drawn at random without replacement when there are more (kept in their order, so samples
+/// of one image stay together). `rng` is used only when it draws.
+pub fn scoring_sample<'s>(
+    samples: &'s [u32],
+    bound: usize,
+    rng: &mut rand_chacha::ChaCha8Rng,
+) -> std::borrow::Cow<'s, [u32]> {
+    if bound == 0 || samples.len() <= bound {
+        return std::borrow::Cow::Borrowed(samples);
+    }
+    let mut picked = rand::seq::index::sample(rng, samples.len(), bound).into_vec();
+    picked.sort_unstable();
+    std::borrow::Cow::Owned(picked.into_iter().map(|i| samples[i]).collect())
 }
 
 /// The RNG of one node: a function of the seed, the tree and the node's path from the root
@@ -319,4 +340,21 @@ impl Default for TrainParams {
 /// the thread count and order of work.
 pub fn node_rng(seed: u64, tree: usize, path: u64) -> rand_chacha::ChaCha8Rng {
     crate::core::rng::item_rng(seed ^ 0xF0_4E57, tree as u64, path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_scoring_sample_is_bounded_ordered_and_drawn_from_the_node() {
+        let samples: Vec<u32> = (0..1000).map(|i| i * 3).collect();
+        let mut rng = node_rng(1, 0, 1);
+        assert_eq!(*scoring_sample(&samples, 0, &mut rng), samples[..]);
+        assert_eq!(*scoring_sample(&samples, 1000, &mut rng), samples[..]);
+        let drawn = scoring_sample(&samples, 100, &mut rng);
+        assert_eq!(drawn.len(), 100);
+        assert!(drawn.windows(2).all(|w| w[0] < w[1]), "in order, no repeats");
+        assert!(drawn.iter().all(|s| s % 3 == 0 && *s < 3000));
+    }
 }

@@ -2,11 +2,15 @@
 //! with the largest gain among `m` random candidates, until `L` levels or fewer than `l_n`
 //! samples.
 //!
+//! With [`TrainParams::score_sample`], a node's candidates are scored on a bounded random
+//! sample of its samples (the standard speed-up for large test budgets), and all of them are
+//! routed by the chosen test.
+//!
 //! Candidate thresholds are scored in one pass over the node's samples per feature: samples
 //! are binned between the sorted thresholds, the bins' statistics summed from one end, and the
 //! gain of every threshold read off the running sums.
 
-use super::{NOT_LEAF, Node, Objective, SplitSpace, TrainParams, Tree, node_rng};
+use super::{NOT_LEAF, Node, Objective, SplitSpace, TrainParams, Tree, node_rng, scoring_sample};
 use rayon::prelude::*;
 
 /// A chosen split: feature, threshold and gain.
@@ -127,8 +131,9 @@ impl<S: SplitSpace, O: Objective> Grower<'_, S, O> {
     pub fn grow(&self, tree: &mut Tree<S::Feature, O::Leaf>, index: usize, samples: &mut [u32], depth: u32, path: u64) {
         let split = if depth < self.params.max_depth && samples.len() >= self.params.min_leaf.max(2) {
             let mut rng = node_rng(self.params.seed, self.tree_index, path);
-            let candidates = self.space.candidates(depth, samples, self.params.tests, &mut rng);
-            best_split(self.space, self.objective, samples, &candidates).filter(|s| s.2 > 0.0)
+            let scored = scoring_sample(samples, self.params.score_sample, &mut rng);
+            let candidates = self.space.candidates(depth, &scored, self.params.tests, &mut rng);
+            best_split(self.space, self.objective, &scored, &candidates).filter(|s| s.2 > 0.0)
         } else {
             None
         };
