@@ -37,41 +37,44 @@ fn points(n: usize, seed: u64) -> Vec<[f32; 2]> {
         .collect()
 }
 
+/// The objective of two classes labelled `labels`.
+fn two_classes(labels: &[u8]) -> ClassObjective<'_> {
+    ClassObjective { labels, classes: 2 }
+}
+
+/// One classification tree on points and their labels.
+fn one_tree(xy: &[[f32; 2]], labels: &[u8], params: &TrainParams) -> Tree<u8, Vec<f32>> {
+    let mut all: Vec<u32> = (0..xy.len() as u32).collect();
+    train_tree(&Xy(xy), &two_classes(labels), &mut all, params, 0, 0)
+}
+
+/// The points a tree puts in the wrong class.
+fn misclassified(tree: &Tree<u8, Vec<f32>>, xy: &[[f32; 2]], labels: &[u8]) -> Vec<usize> {
+    (0..xy.len())
+        .filter(|&i| argmax(tree.leaf(|f| Xy(xy).value(i as u32, f))) != usize::from(labels[i]))
+        .collect()
+}
+
+fn one_tree_params(max_depth: u32, seed: u64, score_sample: usize) -> TrainParams {
+    TrainParams {
+        trees: 1,
+        max_depth,
+        tests: 50,
+        min_leaf: 2,
+        seed,
+        score_sample,
+    }
+}
+
 #[test]
 fn scoring_on_a_bounded_sample_still_separates_and_routes_every_sample() {
     let xy = points(20_000, 2);
     let labels: Vec<u8> = xy.iter().map(|p| u8::from(p[0] > 0.3 && p[1] > 0.6)).collect();
-    let space = Xy(&xy);
-    let objective = ClassObjective {
-        labels: &labels,
-        classes: 2,
-    };
-    let params = TrainParams {
-        trees: 1,
-        max_depth: 12,
-        tests: 50,
-        min_leaf: 2,
-        seed: 4,
-        score_sample: 500,
-    };
-    let mut all: Vec<u32> = (0..xy.len() as u32).collect();
-    let tree = train_tree(&space, &objective, &mut all, &params, 0, 0);
-    // Every sample reached a leaf whose payload counts it: the root saw all 20,000.
-    let wrong = (0..xy.len())
-        .filter(|&i| argmax(tree.leaf(|f| space.value(i as u32, f))) != usize::from(labels[i]))
-        .count();
+    let tree = one_tree(&xy, &labels, &one_tree_params(12, 4, 500));
+    // Every sample went down the chosen tests, not only the 500 each node scored on.
+    let wrong = misclassified(&tree, &xy, &labels).len();
     assert!(wrong < 200, "{wrong} of 20,000 misclassified");
-    let unbounded = train_tree(
-        &space,
-        &objective,
-        &mut (0..xy.len() as u32).collect::<Vec<_>>(),
-        &TrainParams {
-            score_sample: 0,
-            ..params
-        },
-        0,
-        0,
-    );
+    let unbounded = one_tree(&xy, &labels, &one_tree_params(12, 4, 0));
     assert_ne!(tree, unbounded, "the bound changed which tests were scored");
 }
 
@@ -83,25 +86,13 @@ fn a_tree_separates_separable_data() {
         .iter()
         .map(|p| u8::from(p[0] > 0.3 && p[1] > 0.6 || p[0] > 0.7))
         .collect();
-    let space = Xy(&xy);
-    let objective = ClassObjective {
-        labels: &labels,
-        classes: 2,
-    };
-    let params = TrainParams {
-        trees: 1,
-        max_depth: 20,
-        tests: 50,
-        min_leaf: 2,
-        seed: 3,
-        score_sample: 0,
-    };
-    let mut all: Vec<u32> = (0..xy.len() as u32).collect();
-    let tree = train_tree(&space, &objective, &mut all, &params, 0, 0);
-    for (i, &l) in labels.iter().enumerate() {
-        let predicted = argmax(tree.leaf(|f| space.value(i as u32, f)));
-        assert_eq!(predicted, usize::from(l), "point {:?}", xy[i]);
-    }
+    let tree = one_tree(&xy, &labels, &one_tree_params(20, 3, 0));
+    let wrong = misclassified(&tree, &xy, &labels);
+    assert!(
+        wrong.is_empty(),
+        "points {:?}",
+        wrong.iter().map(|&i| xy[i]).collect::<Vec<_>>()
+    );
 }
 
 #[test]
@@ -182,13 +173,7 @@ fn disc(tests: usize, start_level: u32) -> DiscriminativeParams {
 #[test]
 fn a_split_node_reached_by_few_samples_shrinks_to_a_leaf() {
     let (xy, labels) = labelled_by_x(400, 11);
-    let (space, objective) = (
-        Xy(&xy),
-        ClassObjective {
-            labels: &labels,
-            classes: 2,
-        },
-    );
+    let (space, objective) = (Xy(&xy), two_classes(&labels));
     // Root on x at 0.98 (left: x > 0.98, reached by a few samples), whose left child splits
     // on y.
     let mut tree = Tree {
@@ -210,13 +195,7 @@ fn a_split_node_reached_by_few_samples_shrinks_to_a_leaf() {
 #[test]
 fn a_leaf_reached_by_many_samples_grows_a_subtree_that_separates_them() {
     let (xy, labels) = labelled_by_x(2000, 12);
-    let (space, objective) = (
-        Xy(&xy),
-        ClassObjective {
-            labels: &labels,
-            classes: 2,
-        },
-    );
+    let (space, objective) = (Xy(&xy), two_classes(&labels));
     let mut tree = Tree {
         nodes: vec![leaf(0)],
         leaves: vec![vec![0.5, 0.5]],
@@ -228,22 +207,20 @@ fn a_leaf_reached_by_many_samples_grows_a_subtree_that_separates_them() {
     assert!(accuracy(&tree, &space, &labels) > 0.95);
 }
 
+/// A root testing y at 0.5, which says nothing about labels set by x; its leaves say class 1
+/// on the left (value > threshold) and 0 on the right, right for a test of x.
+fn root_on_y() -> Tree<u8, Vec<f32>> {
+    Tree {
+        nodes: vec![split(1, 0.5, 1), leaf(0), leaf(1)],
+        leaves: vec![vec![0.0, 1.0], vec![1.0, 0.0]],
+    }
+}
+
 #[test]
 fn a_better_test_replaces_a_bad_one_below_start_level_only() {
     let (xy, labels) = labelled_by_x(2000, 13);
-    let (space, objective) = (
-        Xy(&xy),
-        ClassObjective {
-            labels: &labels,
-            classes: 2,
-        },
-    );
-    // The root tests y, which says nothing about the labels; its leaves say class 1 on the
-    // left (value > threshold) and 0 on the right, right for a test of x.
-    let bad = Tree {
-        nodes: vec![split(1, 0.5, 1), leaf(0), leaf(1)],
-        leaves: vec![vec![0.0, 1.0], vec![1.0, 0.0]],
-    };
+    let (space, objective) = (Xy(&xy), two_classes(&labels));
+    let bad = root_on_y();
     let before = accuracy(&bad, &space, &labels);
     for (start_level, changes) in [(0, true), (1, false)] {
         let mut tree = bad.clone();
@@ -268,19 +245,9 @@ fn a_better_test_replaces_a_bad_one_below_start_level_only() {
 #[test]
 fn a_leaf_above_the_start_level_does_not_grow() {
     let (xy, labels) = labelled_by_x(2000, 12);
-    let (space, objective) = (
-        Xy(&xy),
-        ClassObjective {
-            labels: &labels,
-            classes: 2,
-        },
-    );
-    // A root testing y whose two leaves are each reached by about 1,000 samples (> l_n) of
-    // both classes.
-    let start = Tree {
-        nodes: vec![split(1, 0.5, 1), leaf(0), leaf(1)],
-        leaves: vec![vec![0.0, 1.0], vec![1.0, 0.0]],
-    };
+    let (space, objective) = (Xy(&xy), two_classes(&labels));
+    // Each of the root's leaves is reached by about 1,000 samples (> l_n) of both classes.
+    let start = root_on_y();
     for (start_level, grows) in [(1, true), (2, false)] {
         let mut tree = start.clone();
         let mut samples: Vec<u32> = (0..2000).collect();
