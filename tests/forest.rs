@@ -564,9 +564,9 @@ fn gauss2d_runs_end_to_end_at_small_scale() {
     );
 }
 
-/// `fixtures/models/body-baseline.forest` with `settings`, evaluated (segmentation included)
+/// `fixtures/models/body.forest` with `settings`, evaluated (segmentation included)
 /// on `count` images rendered under `rig` with `noise` from `seed`.
-fn eval_bundled_baseline(
+fn eval_bundled(
     rig: &mousepose::core::geometry::Rig,
     settings: mousepose::vision::forest::infer::VoteSettings,
     noise: mousepose::core::noise::NoiseModel,
@@ -577,7 +577,7 @@ fn eval_bundled_baseline(
     use mousepose::synth::dataset::{DatasetSpec, render_sample};
     use mousepose::synth::mouse::pose_library;
     use mousepose::vision::forest::infer::BodyEstimator;
-    let path = repo_root().join("fixtures/models/body-baseline.forest");
+    let path = repo_root().join("fixtures/models/body.forest");
     let Model::Body(_, forest) = model::load(&path, Some(ModelKind::Body)).expect("bundled body model") else {
         panic!("{} is not a body model", path.display());
     };
@@ -609,7 +609,7 @@ fn the_body_forest_finds_the_joints_under_a_higher_camera() {
     for height_mm in [600.0, 900.0, 1200.0] {
         let mut rig = Rig::default_rig();
         rig.depth.world_from_camera = look_at(Point3::new(0.0, 0.0, height_mm), Point3::origin(), -Vector3::y());
-        let report = eval_bundled_baseline(&rig, VoteSettings::default(), NoiseModel::None, 40, 0x41_71);
+        let report = eval_bundled(&rig, VoteSettings::default(), NoiseModel::None, 40, 0x41_71);
         println!("camera {height_mm} mm above the floor: {:.2} mm", report.mean_error_mm);
         assert_eq!(
             report.no_mouse, 0,
@@ -637,7 +637,7 @@ fn the_tail_tip_follows_the_segmented_tail_to_its_end() {
             follow_tail,
             ..VoteSettings::default()
         };
-        eval_bundled_baseline(&rig, settings, noise, 60, 0x7A11).per_joint_mm["tail_tip"]
+        eval_bundled(&rig, settings, noise, 60, 0x7A11).per_joint_mm["tail_tip"]
     };
     let (votes, followed) = (
         tail_tip(NoiseModel::StructuredLight, false),
