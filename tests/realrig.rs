@@ -539,8 +539,9 @@ fn detect_paws_finds_the_paws_in_single_bottom_views() {
     assert!(!tmp.path().join("out2").exists());
 }
 
-/// Mice well outside the training range (`--mice varied`): on this one (seed 505, a
-/// time-of-flight camera) the body forest alone swaps head and tail in some frames; the
+/// Mice well outside the standard range (`--mice varied`): on this one (seed 505, a
+/// time-of-flight camera) the body forest alone swaps head and tail in some frames (11 of
+/// 299 for the forest trained on mixed mice, 5 % and more for the one before); the
 /// orientation tracker's output does not, and `poses.csv` says how sure it is.
 #[test]
 fn varied_mice_keep_their_heads_in_front() {
@@ -565,11 +566,12 @@ fn varied_mice_keep_their_heads_in_front() {
     let s = replay(&options(&dir, &out)).unwrap();
     let o = s.orientation.unwrap();
     assert!(o.frames > 250, "{o:?}");
-    assert!(
-        o.flipped_forest * 20 > o.frames,
-        "the forest alone should flip here: {o:?}"
-    );
+    assert!(o.flipped_forest >= 10, "the forest alone should flip here: {o:?}");
     assert!(o.flipped_tracked * 50 <= o.frames, "more than 2 % flipped: {o:?}");
+    assert!(
+        o.flipped_tracked * 5 <= o.flipped_forest,
+        "the tracker should undo most of the forest's flips: {o:?}"
+    );
     assert!(o.heading_error_deg < 10.0, "{o:?}");
     let text = std::fs::read_to_string(out.join("poses.csv")).unwrap();
     let confidences: Vec<f64> = text

@@ -80,7 +80,7 @@ pub struct TrainArgs {
     pub keep_current: bool,
     /// Which joints a body pixel's error E counts in discriminative training: all of them,
     /// as the paper defines E, or only those within the pixel's vote radius.
-    #[arg(long, value_enum, default_value_t = ErrorScope::AllJoints)]
+    #[arg(long, default_value = "all-joints", value_name = "all-joints|near-joints")]
     pub error: ErrorScope,
     /// Score each node's candidate tests on at most this many of its pixels, drawn at random
     /// (all of them are still routed by the chosen test); 0 scores them on all. Makes large

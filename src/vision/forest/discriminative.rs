@@ -76,13 +76,25 @@ pub struct DiscriminativeParams {
 }
 
 /// Which of a body pixel's joints its error E sums.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ErrorScope {
     /// Every joint, as the paper defines E (eq. of the regression's E).
     AllJoints,
     /// Only the joints within the vote radius of the pixel, the ones its leaf votes for.
     NearJoints,
+}
+
+impl std::str::FromStr for ErrorScope {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "all-joints" => Ok(ErrorScope::AllJoints),
+            "near-joints" => Ok(ErrorScope::NearJoints),
+            _ => Err(format!("{s:?} is not a choice of joints: all-joints or near-joints")),
+        }
+    }
 }
 
 fn yes() -> bool {
