@@ -52,7 +52,7 @@ pub struct Blob {
 }
 
 /// Nine pairs of Gaussians, as the paper sets them up: the two of a pair are of opposite
-/// classes and overlap (their means lie 0.5 to 1.5 times their mean sigma apart, in a random
+/// classes and overlap (their means lie 1 to 3 times their mean sigma apart, in a random
 /// direction), means in (0, 1), sigma in (0.02, 0.2).
 pub fn blobs(seed: u64) -> Vec<Blob> {
     let mut rng = item_rng(seed, 0x6A55, 1);

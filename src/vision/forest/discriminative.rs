@@ -5,11 +5,11 @@
 //! grows a subtree; the leaves that stay leaves store what maximises E on the new samples, the
 //! leaf rule applied to them, as the paper stores them.
 //!
-//! Two choices of ours can be switched on instead of the paper's (the model file records
-//! which): [`DiscriminativeParams::keep_current`] puts the node's current test among the
-//! candidates and lets it win ties, so a node's error on its own samples never rises when its
-//! test is chosen; [`DiscriminativeParams::refit_leaves`] off keeps what D_t taught the
-//! leaves. How E counts a body pixel's joints is the objective's ([`ErrorScope`]).
+//! Three choices of ours can replace the paper's (the model file records which):
+//! [`DiscriminativeParams::keep_current`] puts the node's current test among the candidates
+//! and lets it win ties, so a node's error on its own samples never rises when its test is
+//! chosen; [`DiscriminativeParams::refit_leaves`] off keeps what D_t taught the leaves; and
+//! [`ErrorScope::NearJoints`] counts in a body pixel's E only the joints it votes for.
 //!
 //! Because shrinking compares a node's share of D'_d with `l_n`, D'_d should be about as large
 //! as the training set D_t: with half as many samples, every lowest level of split nodes
