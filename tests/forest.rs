@@ -655,3 +655,52 @@ fn the_tail_tip_follows_the_segmented_tail_to_its_end() {
         "following the tail: {followed:.2} mm against {votes:.2} mm"
     );
 }
+
+/// A mouse whose tail is not visible (its tip within a few mm of the tail base) teaches the
+/// leaves nothing about the tail tip; a mouse with its tail in view does.
+#[test]
+fn a_hidden_tail_teaches_no_tail_tip() {
+    use mousepose::core::geometry::Rig;
+    use mousepose::core::noise::{DepthNoise, NoiseModel};
+    use mousepose::core::skeleton::Joint;
+    use mousepose::synth::dataset::{DatasetSpec, render_sample};
+    use mousepose::synth::mouse::pose_library;
+    use mousepose::training::{draw_pixels, joint_targets};
+    let rig = Rig::default_rig();
+    let spec = DatasetSpec {
+        count: 2,
+        seed: 31,
+        noise: DepthNoise {
+            model: NoiseModel::None,
+            gaussian_mm: 0.0,
+        },
+        bottom_views: false,
+        mice: mousepose::synth::Mice::Standard,
+    };
+    let library = pose_library();
+    let mut samples: Vec<_> = (0..2).map(|i| render_sample(&rig, &spec, &library, i)).collect();
+    // The second mouse's tail tip moved to 4 mm from its tail base, as a tail not visible.
+    let base = samples[1].joints[Joint::TailBase.index()];
+    samples[1].joints[Joint::TailTip.index()] = base + nalgebra::Vector3::new(4.0, 0.0, 0.0);
+    let set = draw_pixels(
+        &samples,
+        &PixelParams {
+            per_image: 2000,
+            ..PixelParams::default()
+        },
+    );
+    let targets = joint_targets(&set, &samples, &rig);
+    let tip = 1u16 << (Joint::TailTip as usize);
+    let teaching = |image: u32| {
+        (0..set.len())
+            .filter(|&k| set.image[k] == image && targets.near[k] & tip != 0)
+            .count()
+    };
+    assert!(teaching(0) > 0, "the visible tail's pixels teach its tip");
+    assert_eq!(teaching(1), 0, "the hidden tail's pixels teach no tip");
+    let base_bit = 1u16 << (Joint::TailBase as usize);
+    assert!(
+        (0..set.len()).any(|k| set.image[k] == 1 && targets.near[k] & base_bit != 0),
+        "the other joints are still taught"
+    );
+}

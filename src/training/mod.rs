@@ -16,7 +16,7 @@ use crate::synth::render::Cage;
 use crate::vision::forest::classify::{ClassObjective, argmax};
 use crate::vision::forest::depth::{BODY_JOINTS, DepthImage, DepthSpace, JointObjective, JointTargets, PixelSet};
 use crate::vision::forest::discriminative::{DiscriminativeParams, PassStats, refine_tree, subset};
-use crate::vision::forest::infer::{BodyEstimator, Pixel, sample_pixels};
+use crate::vision::forest::infer::{BodyEstimator, Pixel, TAIL_TIP, sample_pixels};
 use crate::vision::forest::model::{DataProvenance, Model, ModelInfo, ModelKind};
 use crate::vision::forest::train::train_forest;
 use crate::vision::forest::{Forest, Objective, SplitSpace, TrainParams};
@@ -187,13 +187,16 @@ pub fn joint_targets(set: &PixelSet, samples: &[Sample], rig: &Rig) -> JointTarg
     let radius: [f32; BODY_JOINTS] = std::array::from_fn(|j| Joint::MAIN_BODY[j].vote_radius_mm() as f32);
     // A mouse whose tail is not visible teaches nothing about where a tail tip is seen: its
     // pixels near the tail base would otherwise teach the leaves to put the tip there.
-    let tail_tip = Joint::MAIN_BODY
+    let taught: Vec<u16> = samples
         .iter()
-        .position(|j| *j == Joint::TailTip)
-        .expect("the tail tip is a main-body joint");
-    let tail_hidden: Vec<bool> = samples
-        .iter()
-        .map(|s| (s.joints[Joint::TailTip.index()] - s.joints[Joint::TailBase.index()]).norm() < HIDDEN_TAIL_MM)
+        .map(|s| {
+            let tail = s.joints[Joint::TailTip.index()] - s.joints[Joint::TailBase.index()];
+            if tail.norm() < HIDDEN_TAIL_MM {
+                !(1 << TAIL_TIP)
+            } else {
+                u16::MAX
+            }
+        })
         .collect();
     let i = &rig.depth.intrinsics;
     let mut t = JointTargets::default();
@@ -212,11 +215,8 @@ pub fn joint_targets(set: &PixelSet, samples: &[Sample], rig: &Rig) -> JointTarg
             }
             o
         });
-        if tail_hidden[set.image[k] as usize] {
-            near &= !(1 << tail_tip);
-        }
         t.offsets.push(offsets);
-        t.near.push(near);
+        t.near.push(near & taught[set.image[k] as usize]);
     }
     t
 }

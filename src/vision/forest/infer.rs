@@ -461,7 +461,7 @@ fn ends_evidence(points: &[Vector3<f32>], up: &Vector3<f32>, centre: &Vector3<f3
 
 /// Where the tail base and the tail tip sit among the main-body joints.
 const TAIL_BASE: usize = Joint::TailBase as usize;
-const TAIL_TIP: usize = Joint::TailTip as usize;
+pub(crate) const TAIL_TIP: usize = Joint::TailTip as usize;
 const _: () = assert!(matches!(Joint::MAIN_BODY[TAIL_BASE], Joint::TailBase));
 const _: () = assert!(matches!(Joint::MAIN_BODY[TAIL_TIP], Joint::TailTip));
 
