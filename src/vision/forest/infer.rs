@@ -41,11 +41,18 @@ pub struct JointGuess {
 /// A joint's score is the share of its vote weight within this distance of its estimate.
 pub const SCORE_RADIUS_MM: f32 = 12.0;
 
+/// The vote radius [`VoteSettings::max_spread_mm2`] is stated for (mm).
+const SPREAD_RADIUS_MM: f32 = 25.0;
+
 /// Settings of vote aggregation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VoteSettings {
     /// Votes whose leaf spread (largest eigenvalue, mm^2) exceeds this are low-confidence:
-    /// used only when a joint has no confident vote.
+    /// used only when a joint has no confident vote. The bound is for a joint whose votes come
+    /// from within 25 mm of it (the paper's epsilon for most joints); each joint's bound is
+    /// this scaled by the square of its own radius over 25 mm: the tail's leaves, which
+    /// gather pixels from twice as far (50 mm), may spread twice as wide (four times the
+    /// variance), the ears' (15 mm) a little over half as wide.
     pub max_spread_mm2: f32,
     /// Mean-shift bandwidth, mm.
     pub bandwidth_mm: f32,
@@ -202,12 +209,16 @@ impl BodyEstimator {
             spread_prior_mm2: prior,
             ..
         } = self.settings;
+        let bounds: [f32; BODY_JOINTS] = std::array::from_fn(|j| {
+            let r = Joint::MAIN_BODY[j].vote_radius_mm() as f32 / SPREAD_RADIUS_MM;
+            max_spread * r * r
+        });
         let (points, confident, doubtful) = (&self.points, &mut self.confident, &mut self.doubtful);
         self.router.route(&self.forest, image, pixels, |tree, leaves| {
             for (p, &leaf) in points.iter().zip(leaves) {
-                for (j, v) in tree.leaves[leaf as usize].iter().enumerate() {
+                for ((j, v), bound) in tree.leaves[leaf as usize].iter().enumerate().zip(bounds) {
                     if v.weight > 0.0 {
-                        let cloud = if v.spread <= max_spread {
+                        let cloud = if v.spread <= bound {
                             &mut confident[j]
                         } else {
                             &mut doubtful[j]
