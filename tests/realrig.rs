@@ -542,8 +542,8 @@ fn detect_paws_finds_the_paws_in_single_bottom_views() {
 /// Mice well outside the standard range (`--mice varied`): on this one (seed 505, a
 /// time-of-flight camera) the body forest alone swaps head and tail in some frames (9 of 299
 /// for the forest trained on 24,000 images of mixed mice, 11 for the one of 12,000, 5 % and
-/// more for the one of standard mice); the
-/// orientation tracker's output does not, and `poses.csv` says how sure it is.
+/// more for the one of standard mice); the orientation tracker's output does not, and
+/// `poses.csv` says how sure it is.
 #[test]
 fn varied_mice_keep_their_heads_in_front() {
     use mousepose::synth::Mice;

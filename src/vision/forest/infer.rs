@@ -52,7 +52,7 @@ pub struct VoteSettings {
     /// from within 25 mm of it (the paper's epsilon for most joints); each joint's bound is
     /// this scaled by the square of its own radius over 25 mm: the tail's leaves, which
     /// gather pixels from twice as far (50 mm), may spread twice as wide (four times the
-    /// variance), the ears' (15 mm) a little over half as wide.
+    /// variance), the ears' (15 mm) three fifths as wide.
     pub max_spread_mm2: f32,
     /// Mean-shift bandwidth, mm.
     pub bandwidth_mm: f32,
