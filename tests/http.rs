@@ -478,3 +478,52 @@ fn a_client_that_never_finishes_its_request_does_not_hold_up_sigterm() {
     );
     drop((slow, idle));
 }
+
+/// The colour camera's state in a `/status`, and its reason when away.
+fn color_state(status: &serde_json::Value) -> (String, String) {
+    let state = &status["cameras"]["color"]["state"];
+    (
+        state["state"].as_str().unwrap_or("").to_owned(),
+        state["reason"].as_str().unwrap_or("").to_owned(),
+    )
+}
+
+/// A colour camera killed for good is `away` in `/status` within the configured stall time
+/// of its last frame (not once the driver's GigE timeouts let go of it), and the stall time
+/// is the rig config's: 400 ms here, against the default 2 s.
+#[test]
+fn a_killed_colour_camera_is_away_in_the_status_within_the_configured_stall_time() {
+    let _port = crate::capture_aravis::take_port();
+    let tmp = tempfile::tempdir().unwrap();
+    let camera = fake_camera();
+    let port = free_port();
+    let address: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    let rig = http_rig(tmp.path(), true, &format!("address = \"{address}\"\n"));
+    let text = std::fs::read_to_string(&rig).unwrap().replace("stall_ms = 1000", "stall_ms = 400");
+    std::fs::write(&rig, text).unwrap();
+    let child = daemon(&rig, None);
+    wait_status(address, Duration::from_secs(60), |s| {
+        color_state(s).0 == "streaming" && s["cameras"]["color"]["captured"].as_u64() > Some(30)
+    });
+    drop(camera);
+    let killed = Instant::now();
+    let away = wait_status(address, Duration::from_secs(30), |s| color_state(s).0 == "away");
+    let noticed = killed.elapsed();
+    let (_, reason) = color_state(&away);
+    let (status, _, err) = terminate(child, Duration::from_secs(30));
+    assert!(status.success(), "{status}: {err}");
+    // The goal is the stall time plus half a second; the test allows for a loaded machine.
+    assert!(
+        noticed < Duration::from_millis(400 + 2500),
+        "away {noticed:?} after the kill: {away:#}"
+    );
+    let silent: f64 = reason
+        .strip_prefix("no frame for ")
+        .and_then(|r| r.strip_suffix(" s"))
+        .and_then(|r| r.parse().ok())
+        .unwrap_or_else(|| panic!("reason {reason:?}"));
+    assert!(
+        (0.4..1.5).contains(&silent),
+        "taken for gone after {silent} s of silence, with a 0.4 s stall time"
+    );
+}

@@ -163,6 +163,10 @@ fn the_daemon_rides_out_a_colour_camera_restart_and_stops_cleanly_on_sigterm() {
     assert!(!outages.is_empty(), "{report:#}");
     let outage = &outages[0];
     assert!(outage["end_ns"].is_u64(), "the camera never came back: {report:#}");
+    // The outage is the real gap: from the last frame before the freeze to the first after
+    // it (4 s frozen), not from when the driver let go to the reopening.
+    let length_s = (outage["end_ns"].as_u64().unwrap() - outage["start_ns"].as_u64().unwrap()) as f64 * 1e-9;
+    assert!((3.5..6.0).contains(&length_s), "an outage of {length_s:.2} s: {report:#}");
     let before = outage["frames_before"].as_u64().unwrap();
     let captured = color["captured"].as_u64().unwrap();
     assert!(before > 10 && captured > before + 10, "{report:#}");
@@ -288,6 +292,10 @@ fn a_frozen_colour_camera_is_an_outage_while_depth_keeps_flowing() {
         "{report:#}"
     );
     assert!(outage["end_ns"].is_u64(), "the camera never came back: {report:#}");
+    // The outage is the real gap: from the last frame before the freeze to the first after
+    // it (4 s frozen), not from when the driver let go to the reopening.
+    let length_s = (outage["end_ns"].as_u64().unwrap() - outage["start_ns"].as_u64().unwrap()) as f64 * 1e-9;
+    assert!((3.5..6.0).contains(&length_s), "an outage of {length_s:.2} s: {report:#}");
     let before = outage["frames_before"].as_u64().unwrap();
     assert!(before > 30, "{report:#}");
     assert!(color["captured"].as_u64().unwrap() > before + 30, "{report:#}");

@@ -7,12 +7,16 @@
 
 use crate::app::{Failure, parse_seconds, print, print_json};
 use crate::io::output::Staging;
-use crate::io::session::{CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionWriter};
+use crate::io::session::{
+    CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionSummary, SessionWriter,
+};
 use crate::runtime::accounting::CameraSummary;
-use crate::runtime::capture::rig::{Started, open_color, open_depth};
-use crate::runtime::capture::{CaptureError, Clock, FrameSource};
+use crate::runtime::capture::rig::{open_color, open_depth};
+use crate::runtime::capture::supervise::{SharedHealth, Supervised, lock, log_camera_events};
+use crate::runtime::capture::{CaptureError, Captured, Clock, FrameSource};
 use crate::runtime::config::{ColorCamera, Config};
 use crate::runtime::pipeline::{PipelineError, Shutdown};
+use crate::runtime::sink::recorder::FrameRecorder;
 use crate::runtime::topology::{Edges, Epochs, Sources, Topology, TopologyError};
 use crate::vision::calibrate::RigCalibration;
 use anyhow::Context as _;
@@ -21,6 +25,7 @@ use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Why recording failed.
@@ -63,6 +68,8 @@ pub struct RecordSummary {
     pub seconds: f64,
     /// Per camera: captured = recorded + not recorded.
     pub cameras: BTreeMap<&'static str, CameraSummary>,
+    /// Per camera, the times it was away (each logged in the session's events).
+    pub outages: BTreeMap<&'static str, usize>,
     pub depth_frames: u64,
     pub color_frames: u64,
     pub depth_bytes: u64,
@@ -93,6 +100,9 @@ pub fn record(
     let staging = prepare_output(out, force)?;
     let dir = staging.as_ref().map_or(out, Staging::path);
     let camera = |role| move |source| RecordError::Camera { role, source };
+    // Both cameras must open now; once recording, they are supervised as the daemon's are
+    // (closed, reopened, their outages logged in the session) and recording rides out their
+    // outages.
     let mut depth = open_depth(&config.depth).map_err(camera(CameraRole::Depth))?;
     let color = config
         .color
@@ -120,22 +130,43 @@ pub fn record(
         meta.rig = Some(calibration.rig());
     }
     let mut writer = SessionWriter::create(dir, &meta)?;
-    let host_ns = clock.now_ns();
-    writer.log_event(&SessionEvent::SessionStarted { host_ns })?;
-    for c in &meta.cameras {
-        writer.log_event(&SessionEvent::CameraOpened {
-            host_ns,
-            role: c.role,
-            model: c.model.clone(),
-            serial: c.serial.clone(),
-        })?;
-    }
+    writer.log_event(&SessionEvent::SessionStarted {
+        host_ns: clock.now_ns(),
+    })?;
+
+    let epochs = Epochs::default();
+    let depth_config = config.depth.clone();
+    let depth = Supervised::new(
+        CameraRole::Depth,
+        Box::new(move || open_depth(&depth_config)),
+        config.reconnect,
+        Arc::clone(&epochs[0]),
+    )
+    .opened(depth, &clock);
+    let color = color.zip(config.color.clone()).map(|(first, color_config)| {
+        // The first opening is the camera opened above; later ones open it again.
+        let mut first = Some(first);
+        let open = move || match first.take() {
+            Some(c) => Ok(c),
+            None => open_color(&color_config),
+        };
+        Supervised::new(
+            CameraRole::Color,
+            Box::new(open),
+            config.reconnect,
+            Arc::clone(&epochs[1]),
+        )
+    });
+    let mut stall_watches = vec![depth.stall_watch()];
+    stall_watches.extend(color.as_ref().map(Supervised::stall_watch));
+    let mut healths = vec![depth.health()];
+    healths.extend(color.as_ref().map(Supervised::health));
 
     let topology = Topology {
         sources: Sources::Cameras {
-            depth: Box::new(Started(depth)),
+            depth: Box::new(depth),
             color: color.map(|c| Box::new(c) as Box<dyn FrameSource<Frame = _>>),
-            epochs: Epochs::default(),
+            epochs,
         },
         sync: config.sync,
         edges: Edges {
@@ -143,7 +174,10 @@ pub fn record(
             stage: config.stage_edge,
         },
         processing: None,
-        recorder: Some(Box::new(writer)),
+        recorder: Some(Box::new(SupervisedSession {
+            writer,
+            cameras: healths.clone(),
+        })),
     };
     let running = topology.start()?;
     let shutdown = running.shutdown();
@@ -151,6 +185,9 @@ pub fn record(
     let cpu0 = crate::runtime::capture::clock::process_cpu_s();
     while !stop.requested() && !shutdown.requested() && limit.is_none_or(|l| start.elapsed() < l) {
         std::thread::sleep(Duration::from_millis(20));
+        for watch in &stall_watches {
+            watch.check();
+        }
     }
     shutdown.request();
     let finished = running.join();
@@ -162,6 +199,11 @@ pub fn record(
         joined?;
         return Err(RecordError::RecorderEnded);
     };
+    log_camera_events(&healths, |e| writer.log_event(e))?;
+    let outages: BTreeMap<&'static str, usize> = [("depth", 0), ("color", 1)]
+        .into_iter()
+        .filter_map(|(name, i)| Some((name, lock(healths.get(i)?).outages.len())))
+        .collect();
     for (role, c) in &cams {
         let lost: Vec<String> = c.lost_before_capture.iter().map(|(k, v)| format!("{k} {v}")).collect();
         let dropped: Vec<String> = c.not_recorded.iter().map(|(k, v)| format!("{k} {v}")).collect();
@@ -187,12 +229,39 @@ pub fn record(
         dir: out.to_owned(),
         seconds: elapsed,
         cameras: cams,
+        outages,
         depth_frames: summary.depth_frames,
         color_frames: summary.color_frames,
         depth_bytes: summary.depth_bytes,
         color_bytes: summary.color_bytes,
         cpu_cores: cpu / elapsed.max(1e-9),
     })
+}
+
+/// The session being recorded, with the supervised cameras' events (outages, reopenings)
+/// logged into it before each frame.
+#[derive(Debug)]
+struct SupervisedSession {
+    writer: SessionWriter,
+    cameras: Vec<SharedHealth>,
+}
+
+impl FrameRecorder for SupervisedSession {
+    fn write(&mut self, frame: &Captured) -> Result<Option<&'static str>, SessionError> {
+        let writer = &mut self.writer;
+        log_camera_events(&self.cameras, |e| writer.log_event(e))?;
+        FrameRecorder::write(writer, frame)
+    }
+
+    fn log_event(&mut self, event: &SessionEvent) -> Result<(), SessionError> {
+        self.writer.log_event(event)
+    }
+
+    fn finish(self: Box<Self>) -> Result<Option<SessionSummary>, SessionError> {
+        let mut writer = self.writer;
+        log_camera_events(&self.cameras, |e| writer.log_event(e))?;
+        writer.finish().map(Some)
+    }
 }
 
 /// The rig config's calibration file, loaded and checked against the configured camera sizes

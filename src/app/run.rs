@@ -200,6 +200,10 @@ pub fn run(
             Arc::clone(&epochs[1]),
         )
     });
+    // The cameras' states are taken from these, in this thread, whatever the capture threads
+    // are doing.
+    let mut stall_watches = vec![depth.stall_watch()];
+    stall_watches.extend(color.as_ref().map(Supervised::stall_watch));
     let mut healths = vec![("depth", depth.health())];
     healths.extend(color.as_ref().map(|c| ("color", c.health())));
     let shared: Vec<SharedHealth> = healths.iter().map(|(_, h)| Arc::clone(h)).collect();
@@ -285,6 +289,9 @@ pub fn run(
     let mut last_line = String::new();
     while !stop.requested() && !shutdown.requested() && limit.is_none_or(|l| started.elapsed() < l) {
         std::thread::sleep(Duration::from_millis(100));
+        for watch in &stall_watches {
+            watch.check();
+        }
         if last_tick.elapsed() < Duration::from_secs(1) {
             continue;
         }

@@ -476,10 +476,12 @@ impl Checker<'_> {
         if !latency.is_finite() || latency.abs() > 1000.0 {
             return Err(self.bad("sync.color_latency_ms", format!("must be within ±1000, not {latency}")));
         }
+        let r = raw.reconnect;
+        let stall_ms = self.positive("reconnect.stall_ms", r.stall_ms.unwrap_or(2000.0), 600_000.0)?;
         let sync = crate::runtime::sync::SyncConfig {
             tolerance_ns: tolerance.map(|t| (t * 1e6) as u64),
             color: color.is_some(),
-            max_wait_ns: (ms("sync.max_wait_ms", raw.sync.max_wait_ms)?.unwrap_or(200.0) * 1e6) as u64,
+            max_wait_ns: (ms("sync.max_wait_ms", raw.sync.max_wait_ms)?.unwrap_or(stall_ms) * 1e6) as u64,
             color_latency_ns: (latency * 1e6) as i64,
         };
         let p = raw.pipeline;
@@ -520,8 +522,6 @@ impl Checker<'_> {
                 format!("must be from 0 to 90, not {min_free_percent}"),
             ));
         }
-        let r = raw.reconnect;
-        let stall_ms = self.positive("reconnect.stall_ms", r.stall_ms.unwrap_or(2000.0), 600_000.0)?;
         let max_wait_ms = self.positive("reconnect.max_wait_ms", r.max_wait_ms.unwrap_or(10_000.0), 600_000.0)?;
         let secs = |ms: f64| std::time::Duration::from_secs_f64(ms / 1000.0);
         let reconnect = Reconnect {

@@ -36,7 +36,10 @@ pub struct SyncConfig {
     /// once as a depth-only pair.
     pub color: bool,
     /// How long (capture time) a depth frame waits for a colour partner before it goes out
-    /// depth-only: a colour camera that stalls must not stall the pipeline.
+    /// depth-only; a colour camera that delivered nothing for twice as long (host time) is
+    /// not waited for at all. A colour camera that stalls must not stall the pipeline, and
+    /// one whose frames come late in a burst must still pair: as long as the daemon's stall
+    /// time by default, since until then the camera is not taken for gone.
     pub max_wait_ns: u64,
     /// The colour camera's minimal latency minus the depth camera's, when known (ns).
     pub color_latency_ns: i64,
@@ -47,11 +50,14 @@ impl Default for SyncConfig {
         Self {
             tolerance_ns: None,
             color: true,
-            max_wait_ns: 200_000_000,
+            max_wait_ns: DEFAULT_MAX_WAIT_NS,
             color_latency_ns: 0,
         }
     }
 }
+
+/// The default of [`SyncConfig::max_wait_ns`]: the default stall time of a camera.
+pub const DEFAULT_MAX_WAIT_NS: u64 = 2_000_000_000;
 
 /// What the synchroniser emits. Every frame pushed in comes out in exactly one of these.
 #[derive(Debug)]
@@ -248,6 +254,15 @@ pub struct Synchronizer {
     /// The newest capture time seen from each camera (host time line).
     newest_depth: Option<i64>,
     newest_color: Option<i64>,
+    /// Arrival (host clock) of the first depth frame, the newest depth frame and the last
+    /// colour frame: a colour camera silent for the longest wait is not waited for.
+    first_depth_arrival: Option<u64>,
+    newest_depth_arrival: u64,
+    last_color_arrival: Option<u64>,
+    /// Depth frames in the current run that went out depth-only because waiting for their
+    /// partner was given up, and in all runs.
+    given_up_run: u64,
+    given_up: u64,
 }
 
 impl Synchronizer {
@@ -264,6 +279,39 @@ impl Synchronizer {
             depth_interval_ns: None,
             newest_depth: None,
             newest_color: None,
+            first_depth_arrival: None,
+            newest_depth_arrival: 0,
+            last_color_arrival: None,
+            given_up_run: 0,
+            given_up: 0,
+        }
+    }
+
+    /// Depth frames that went out without waiting longer for a colour partner (the colour
+    /// camera late or silent for longer than the wait), over the whole run.
+    pub fn given_up(&self) -> u64 {
+        self.given_up
+    }
+
+    /// Whether the colour camera delivered nothing for twice the wait, by the host clock of
+    /// the frames (a camera that never delivered counts from the first depth frame). Twice:
+    /// frames held up for about the wait and then delivered in a burst must find their depth
+    /// partners still waiting.
+    fn color_silent(&self) -> bool {
+        let since = self.last_color_arrival.or(self.first_depth_arrival);
+        since.is_some_and(|t| self.newest_depth_arrival.saturating_sub(t) > self.config.max_wait_ns.saturating_mul(2))
+    }
+
+    /// Ends a run of depth frames given up on, with one warning saying how many.
+    fn end_given_up_run(&mut self) {
+        if self.given_up_run > 0 {
+            tracing::warn!(
+                frames = self.given_up_run,
+                wait_ms = self.config.max_wait_ns as f64 * 1e-6,
+                "pairing gave up on {} depth frames in a row: their colour frames were later than the wait or missing, so they went out depth-only",
+                self.given_up_run
+            );
+            self.given_up_run = 0;
         }
     }
 
@@ -292,6 +340,8 @@ impl Synchronizer {
             self.depth_interval_ns = Some(self.depth_interval_ns.map_or(dt, |i| i.min(dt)));
         }
         self.last_depth = Some(stamp);
+        self.first_depth_arrival.get_or_insert(stamp.host_ns);
+        self.newest_depth_arrival = self.newest_depth_arrival.max(stamp.host_ns);
         self.depth_clock.observe(stamp);
         let t = self.depth_clock.host_time(stamp);
         self.newest_depth = Some(self.newest_depth.map_or(t, |n| n.max(t)));
@@ -306,6 +356,7 @@ impl Synchronizer {
             return;
         }
         self.last_color = Some(stamp);
+        self.last_color_arrival = Some(self.last_color_arrival.map_or(stamp.host_ns, |t| t.max(stamp.host_ns)));
         self.color_clock.observe(stamp);
         let t = self.color_time(stamp);
         self.newest_color = Some(self.newest_color.map_or(t, |n| n.max(t)));
@@ -366,6 +417,7 @@ impl Synchronizer {
     /// have, then the colour frames left over.
     pub fn flush(&mut self, out: &mut Vec<SyncOutput>) {
         self.decide(out, true);
+        self.end_given_up_run();
         while let Some(c) = self.color.pop_front() {
             out.push(SyncOutput::UnpairedColor(c.frame));
         }
@@ -381,13 +433,15 @@ impl Synchronizer {
         let tol = self.tolerance_ns() as i64;
         while let Some(d) = self.depth.front() {
             let td = self.depth_clock.host_time(d.stamp);
-            let ready = end
-                || !self.config.color
-                || self.newest_color.is_some_and(|c| c > td + tol)
-                || self
+            let decided = end || !self.config.color || self.newest_color.is_some_and(|c| c > td + tol);
+            // Waiting given up: the frame waited the longest wait, or the colour camera has
+            // been silent that long.
+            let given_up = !decided
+                && (self
                     .newest_depth
-                    .is_some_and(|n| n - td > self.config.max_wait_ns as i64);
-            if !ready {
+                    .is_some_and(|n| n - td > self.config.max_wait_ns as i64)
+                    || self.color_silent());
+            if !decided && !given_up {
                 break;
             }
             let Some(d) = self.depth.pop_front() else {
@@ -422,6 +476,12 @@ impl Synchronizer {
                 }
                 None => (None, 0),
             };
+            if given_up && color.is_none() {
+                self.given_up_run += 1;
+                self.given_up += 1;
+            } else {
+                self.end_given_up_run();
+            }
             out.push(SyncOutput::Pair(FramePair {
                 depth: d.frame,
                 color,
@@ -695,7 +755,10 @@ mod tests {
 
     #[test]
     fn a_stalled_color_camera_does_not_hold_depth_frames() {
-        let mut sync = Synchronizer::new(SyncConfig::default());
+        let mut sync = Synchronizer::new(SyncConfig {
+            max_wait_ns: 200_000_000,
+            ..SyncConfig::default()
+        });
         let mut out = Vec::new();
         for k in 0..30u64 {
             let t = k * 33_333_333;
@@ -710,6 +773,86 @@ mod tests {
         }
         // 200 ms of waiting at most: all but the last six frames are out.
         assert!(out.len() >= 23, "{} pairs out", out.len());
+    }
+
+    /// Depth frames paired with their true colour partner, of all depth frames.
+    fn right_share(out: &[SyncOutput], d: &[(f64, Stamp)], c: &[(f64, Stamp)], period: f64) -> f64 {
+        let right = out
+            .iter()
+            .filter(|o| match o {
+                SyncOutput::Pair(p) => {
+                    let t = d.iter().find(|x| x.1.seq == p.depth.stamp.seq).map(|x| x.0);
+                    let want = t.and_then(|t| true_partner(c, t, period));
+                    want.is_some() && p.color.as_ref().map(|f| f.stamp.seq) == want
+                }
+                _ => false,
+            })
+            .count();
+        right as f64 / d.len() as f64
+    }
+
+    #[test]
+    fn colour_frames_held_up_for_two_seconds_and_delivered_in_a_burst_still_pair() {
+        // 30 s at 30 fps; the colour frames taken in [10 s, 12 s) reach the host at 12 s, 0.1 ms
+        // apart and before the next frame (a network stall, then a burst).
+        let period = 1.0 / 30.0;
+        let d = stream(900, period, 0.0, 1_000_000_000, 0.0, 6.0, &[0.0], &[false]);
+        let mut c = stream(900, period, 0.25 * period, 3_000_000_000, 0.0, 3.0, &[0.0], &[false]);
+        let mut burst = 0;
+        for (t, stamp) in &mut c {
+            if (10.0..12.0).contains(t) {
+                stamp.host_ns = 5_000_000_000 + 12_000_000_000 + burst * 100_000;
+                burst += 1;
+            }
+        }
+        let mut sync = Synchronizer::new(SyncConfig::default());
+        let out = {
+            let mut arrivals: Vec<(u64, bool, Stamp)> = d
+                .iter()
+                .map(|x| (x.1.host_ns, true, x.1))
+                .chain(c.iter().map(|x| (x.1.host_ns, false, x.1)))
+                .collect();
+            arrivals.sort_by_key(|a| (a.0, !a.1));
+            let mut out = Vec::new();
+            for (_, is_depth, s) in arrivals {
+                if is_depth {
+                    sync.push_depth(depth(s), &mut out);
+                } else {
+                    sync.push_color(color(s), &mut out);
+                }
+            }
+            sync.flush(&mut out);
+            out
+        };
+        let share = right_share(&out, &d, &c, period);
+        assert!(
+            share >= 0.97,
+            "{:.1} % of depth frames with their true partner",
+            share * 100.0
+        );
+        assert!(sync.given_up() <= 27, "{} given up", sync.given_up());
+    }
+
+    #[test]
+    fn a_colour_camera_silent_for_longer_than_the_wait_is_not_waited_for() {
+        let mut sync = Synchronizer::new(SyncConfig::default());
+        let mut out = Vec::new();
+        let stamp = |seq: u64| Stamp {
+            seq,
+            device_ns: seq * 33_333_333,
+            host_ns: 1_000_000_000 + seq * 33_333_333,
+        };
+        for k in 0..30 {
+            sync.push_depth(depth(stamp(k)), &mut out);
+            sync.push_color(color(stamp(k)), &mut out);
+        }
+        // The colour camera dies; for its first two seconds of silence depth frames wait
+        // (its frames may yet come in a burst), then none waits any more.
+        for k in 30..300 {
+            sync.push_depth(depth(stamp(k)), &mut out);
+        }
+        assert!(sync.pending().0 <= 1, "{:?} pending", sync.pending());
+        assert!(sync.given_up() > 200, "{} given up", sync.given_up());
     }
 
     #[test]

@@ -56,6 +56,10 @@ pub struct CameraHealth {
     /// stuck in a driver call stops updating it.
     #[serde(skip)]
     pub alive: Option<Instant>,
+    /// The last sign of life from the camera itself: its last frame, or its opening when no
+    /// frame came since; when it was, and the host clock (ns) then. [`StallWatch`] reads it.
+    #[serde(skip)]
+    pub last_sign: Option<(Instant, u64)>,
     pub outages: Vec<Outage>,
     /// The camera's metadata from its latest opening.
     #[serde(skip)]
@@ -72,6 +76,82 @@ pub type SharedHealth = Arc<Mutex<CameraHealth>>;
 /// a few field stores).
 pub fn lock(health: &SharedHealth) -> std::sync::MutexGuard<'_, CameraHealth> {
     health.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Takes a camera for gone: state away, an outage from `since_ns` (its last sign of life), and
+/// the event for the session. A camera already away with its outage still open stays in that
+/// outage: a watchdog and the capture thread may both notice the same silence.
+fn mark_away(h: &mut CameraHealth, role: CameraRole, reason: String, since_ns: u64) {
+    let open = h.outages.last().is_some_and(|o| o.end_ns.is_none());
+    if !open {
+        tracing::warn!(camera = %role, frames = h.frames, "camera lost: {reason}");
+        h.events.push(SessionEvent::CameraDisconnected {
+            host_ns: since_ns,
+            role,
+            reason: reason.clone(),
+        });
+        let frames_before = h.frames;
+        h.outages.push(Outage {
+            start_ns: since_ns,
+            end_ns: None,
+            reason: reason.clone(),
+            frames_before,
+            attempts: 0,
+        });
+    }
+    if !matches!(h.state, Some(CameraState::Away(_))) {
+        h.state = Some(CameraState::Away(reason));
+    }
+}
+
+/// Marks a streaming camera away once its last sign of life is `stall` old, from outside its
+/// capture thread: that thread may be stuck in a driver call (a GigE read or close waits on
+/// timeouts of seconds), and the state the status shows must not wait for it. The daemon
+/// calls [`StallWatch::check`] a few times a second; the capture thread closes and reopens the
+/// camera on its own time.
+#[derive(Clone, Debug)]
+pub struct StallWatch {
+    role: CameraRole,
+    stall: Duration,
+    health: SharedHealth,
+}
+
+impl StallWatch {
+    /// Checks the camera now; true when this check took it for gone.
+    pub fn check(&self) -> bool {
+        let mut h = lock(&self.health);
+        if h.state != Some(CameraState::Streaming) {
+            return false;
+        }
+        let Some((at, host_ns)) = h.last_sign else {
+            return false;
+        };
+        let silent = at.elapsed();
+        if silent < self.stall {
+            return false;
+        }
+        let reason = format!("no frame for {:.1} s", silent.as_secs_f64());
+        mark_away(&mut h, self.role, reason, host_ns);
+        true
+    }
+}
+
+/// Hands the events the cameras gathered since the last call (outages, reopenings) to `log`,
+/// oldest first per camera, and forgets them.
+///
+/// # Errors
+/// The first error of `log`; the events not yet logged are lost with it.
+pub fn log_camera_events<E>(
+    cameras: &[SharedHealth],
+    mut log: impl FnMut(&SessionEvent) -> Result<(), E>,
+) -> Result<(), E> {
+    for h in cameras {
+        let events = std::mem::take(&mut lock(h).events);
+        for e in &events {
+            log(e)?;
+        }
+    }
+    Ok(())
 }
 
 /// Opens one camera (not started).
@@ -168,6 +248,36 @@ where
         Arc::clone(&self.health)
     }
 
+    /// The supervisor of a camera already opened and started by the caller (who needed its
+    /// metadata first); `open` serves only the reopenings.
+    pub fn opened(mut self, source: S, clock: &Clock) -> Self {
+        let host_ns = clock.now_ns();
+        let meta = source.meta();
+        let mut h = lock(&self.health);
+        h.events.push(SessionEvent::CameraOpened {
+            host_ns,
+            role: self.role,
+            model: meta.model.clone(),
+            serial: meta.serial.clone(),
+        });
+        h.meta = Some(meta);
+        h.state = Some(CameraState::Streaming);
+        h.last_sign = Some((Instant::now(), host_ns));
+        drop(h);
+        self.current = Some(source);
+        self.last_frame = Instant::now();
+        self
+    }
+
+    /// The watch that marks this camera away from outside its capture thread.
+    pub fn stall_watch(&self) -> StallWatch {
+        StallWatch {
+            role: self.role,
+            stall: self.policy.stall,
+            health: self.health(),
+        }
+    }
+
     /// Tries to open and start the camera now; on failure it is away until the next try.
     fn try_open(&mut self, clock: &Clock) {
         let opened = (self.open)().and_then(|mut s| s.start(clock).map(|()| s));
@@ -179,8 +289,8 @@ where
                 let meta = source.meta();
                 // Back: it was open before (not merely failing to open the first time).
                 let back = h.meta.is_some();
+                // The outage ends with the first frame back (`accept`), not with the opening.
                 if let Some(outage) = h.outages.last_mut().filter(|o| o.end_ns.is_none()) {
-                    outage.end_ns = Some(host_ns);
                     outage.attempts += 1;
                 }
                 if back {
@@ -201,6 +311,7 @@ where
                 });
                 h.meta = Some(meta);
                 h.state = Some(CameraState::Streaming);
+                h.last_sign = Some((now, host_ns));
                 // The camera may count from 0 again: carry on from the last number given out.
                 self.seq_offset = u64::MAX;
                 self.current = Some(source);
@@ -232,8 +343,14 @@ where
         }
     }
 
-    /// Closes the camera after a fault and starts an outage.
+    /// Takes the camera for gone (the state first, so that the status never waits on the
+    /// driver), then closes it; the next try comes after the first wait.
     fn lose(&mut self, reason: String, clock: &Clock) {
+        {
+            let mut h = lock(&self.health);
+            let since_ns = h.last_sign.map_or_else(|| clock.now_ns(), |(_, ns)| ns);
+            mark_away(&mut h, self.role, reason, since_ns);
+        }
         if let Some(mut source) = self.current.take() {
             for (why, n) in source.losses() {
                 *self.losses.entry(why).or_default() += n;
@@ -242,23 +359,6 @@ where
                 tracing::debug!(camera = %self.role, "closing the lost camera: {}", error_chain(&e));
             }
         }
-        let host_ns = clock.now_ns();
-        let mut h = lock(&self.health);
-        tracing::warn!(camera = %self.role, frames = h.frames, "camera lost: {reason}");
-        h.events.push(SessionEvent::CameraDisconnected {
-            host_ns,
-            role: self.role,
-            reason: reason.clone(),
-        });
-        let frames_before = h.frames;
-        h.outages.push(Outage {
-            start_ns: host_ns,
-            end_ns: None,
-            reason: reason.clone(),
-            frames_before,
-            attempts: 0,
-        });
-        h.state = Some(CameraState::Away(reason));
         self.wait = self.policy.first_wait;
         self.next_try = Instant::now() + self.wait;
     }
@@ -285,7 +385,24 @@ where
         }
         stamp.seq = seq.max(self.next_seq);
         self.next_seq = stamp.seq + 1;
-        lock(&self.health).frames += 1;
+        let host_ns = stamp.host_ns;
+        let mut h = lock(&self.health);
+        h.frames += 1;
+        h.last_sign = Some((Instant::now(), host_ns));
+        if let Some(outage) = h.outages.last_mut().filter(|o| o.end_ns.is_none()) {
+            outage.end_ns = Some(host_ns);
+        }
+        if matches!(h.state, Some(CameraState::Away(_))) {
+            // Taken for gone by the stall watch, and back on the same stream without a reopen.
+            tracing::info!(camera = %self.role, "camera back: frames again after a silence");
+            h.events.push(SessionEvent::CameraReconnected {
+                host_ns,
+                role: self.role,
+            });
+            h.state = Some(CameraState::Streaming);
+            self.epoch.fetch_add(1, Ordering::Release);
+        }
+        drop(h);
         Some(frame)
     }
 }
@@ -322,10 +439,13 @@ where
         }
     }
 
-    /// Tries the camera once; a camera that cannot be opened is not an error here, it is away.
+    /// Tries the camera once (unless it came [`Supervised::opened`]); a camera that cannot be
+    /// opened is not an error here, it is away.
     fn start(&mut self, clock: &Clock) -> Result<(), CaptureError> {
         self.clock = Some(clock.clone());
-        self.try_open(clock);
+        if self.current.is_none() {
+            self.try_open(clock);
+        }
         Ok(())
     }
 
@@ -405,6 +525,11 @@ mod tests {
         /// A frame of this width with this camera frame number.
         Frame(u32, u64),
         Fail,
+        /// A driver call that does not return for this many milliseconds.
+        Hang(u64),
+        /// A driver call that returns a frame (width 4, this number) after this many
+        /// milliseconds.
+        Late(u64, u64),
     }
 
     #[derive(Debug)]
@@ -429,7 +554,12 @@ mod tests {
             Ok(())
         }
         fn next_frame(&mut self, _timeout: Duration) -> Result<Option<DepthFrame>, CaptureError> {
-            match self.0.pop_front() {
+            let mut step = self.0.pop_front();
+            if let Some(Step::Late(ms, seq)) = step {
+                std::thread::sleep(Duration::from_millis(ms));
+                step = Some(Step::Frame(4, seq));
+            }
+            match step {
                 Some(Step::Frame(width, seq)) => {
                     let stamp = Stamp {
                         seq,
@@ -438,6 +568,11 @@ mod tests {
                     };
                     Ok(Some(DepthFrame::empty(stamp, width, 1)))
                 }
+                Some(Step::Hang(ms)) => {
+                    std::thread::sleep(Duration::from_millis(ms));
+                    Ok(None)
+                }
+                Some(Step::Late(..)) => unreachable!("made a frame above"),
                 Some(Step::Fail) => Err(CaptureError::Disconnected {
                     backend: "scripted",
                     id: "0".into(),
@@ -544,5 +679,83 @@ mod tests {
         let h = s.health();
         let h = lock(&h);
         assert!(h.outages[0].reason.starts_with("no frame for"), "{:?}", h.outages);
+    }
+
+    #[test]
+    fn a_camera_stuck_in_its_driver_is_away_within_the_stall_time_and_its_outage_starts_at_its_last_frame() {
+        use std::sync::atomic::AtomicBool;
+        let (mut s, _) = supervised(vec![Some(vec![Step::Frame(4, 7), Step::Hang(3000)]), None]);
+        s.start(&Clock::replay(0)).unwrap();
+        assert_eq!(read(&mut s, 1), vec![7]);
+        let watch = s.stall_watch();
+        let health = s.health();
+        let returned = Arc::new(AtomicBool::new(false));
+        let capture = {
+            let returned = Arc::clone(&returned);
+            std::thread::Builder::new()
+                .name("cap-test".into())
+                .spawn(move || {
+                    // The read that hangs for 3 s in the driver.
+                    let _ = s.next_frame(Duration::from_millis(1));
+                    returned.store(true, Ordering::Release);
+                })
+                .unwrap()
+        };
+        let deadline = Instant::now() + Duration::from_secs(2);
+        while !watch.check() {
+            assert!(
+                Instant::now() < deadline,
+                "never taken for gone: {:?}",
+                lock(&health).state
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert!(
+            !returned.load(Ordering::Acquire),
+            "taken for gone only once the driver call returned"
+        );
+        {
+            let h = lock(&health);
+            assert!(matches!(h.state, Some(CameraState::Away(_))), "{:?}", h.state);
+            assert_eq!(h.outages.len(), 1);
+            assert_eq!(h.outages[0].start_ns, 7, "the outage starts at the last frame");
+        }
+        assert!(!watch.check(), "one silence, one outage");
+        capture.join().unwrap();
+        assert_eq!(
+            lock(&health).outages.len(),
+            1,
+            "the capture thread's own notice adds none"
+        );
+    }
+
+    #[test]
+    fn a_camera_back_on_its_stream_after_a_silence_ends_the_outage_at_its_first_frame() {
+        use Step::{Frame, Late};
+        let (mut s, epoch) = supervised(vec![Some(vec![Frame(4, 1), Late(200, 2)])]);
+        s.start(&Clock::replay(0)).unwrap();
+        assert_eq!(read(&mut s, 1), vec![1]);
+        let watch = s.stall_watch();
+        let health = s.health();
+        // The driver call hangs for 200 ms, then returns a frame on the same stream.
+        let capture = std::thread::Builder::new()
+            .name("cap-test".into())
+            .spawn(move || read(&mut s, 1))
+            .unwrap();
+        let deadline = Instant::now() + Duration::from_secs(1);
+        while !watch.check() {
+            assert!(Instant::now() < deadline, "never taken for gone");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert_eq!(capture.join().unwrap(), vec![2]);
+        let h = lock(&health);
+        assert_eq!(h.state, Some(CameraState::Streaming));
+        assert_eq!(h.outages.len(), 1, "{:?}", h.outages);
+        assert_eq!((h.outages[0].start_ns, h.outages[0].end_ns), (1, Some(2)));
+        assert_eq!(
+            epoch.load(Ordering::Acquire),
+            1,
+            "the synchroniser starts the clock again"
+        );
     }
 }

@@ -278,15 +278,11 @@ impl ChunkRecorder {
 
     /// The cameras' events (outages, reopenings) into the session.
     fn log_camera_events(&mut self) -> Result<(), SessionError> {
-        for h in &self.cameras {
-            let events = std::mem::take(&mut lock(h).events);
-            if let Some(w) = &mut self.writer {
-                for e in &events {
-                    w.log_event(e)?;
-                }
-            }
-        }
-        Ok(())
+        let writer = &mut self.writer;
+        crate::runtime::capture::supervise::log_camera_events(&self.cameras, |e| match writer {
+            Some(w) => w.log_event(e),
+            None => Ok(()),
+        })
     }
 
     /// Writes `frame` into its chunk's session, or says why not.
