@@ -499,7 +499,9 @@ fn a_killed_colour_camera_is_away_in_the_status_within_the_configured_stall_time
     let port = free_port();
     let address: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
     let rig = http_rig(tmp.path(), true, &format!("address = \"{address}\"\n"));
-    let text = std::fs::read_to_string(&rig).unwrap().replace("stall_ms = 1000", "stall_ms = 400");
+    let text = std::fs::read_to_string(&rig)
+        .unwrap()
+        .replace("stall_ms = 1000", "stall_ms = 400");
     std::fs::write(&rig, text).unwrap();
     let child = daemon(&rig, None);
     wait_status(address, Duration::from_secs(60), |s| {

@@ -196,3 +196,70 @@ fn a_camera_that_records_no_frame_fails_the_recording_loudly() {
     // The depth frames are still there, in a whole session.
     assert!(SessionReader::open(&out).unwrap().complete());
 }
+
+/// `record` rides out a colour camera killed and started again mid-recording, as `run` does:
+/// the recording goes on, the outage is in the session's events and the summary, and colour
+/// frames are recorded after the camera's return.
+#[test]
+fn a_recording_rides_out_a_colour_camera_killed_and_started_again() {
+    use mousepose::io::session::SessionEvent;
+    let _openni = crate::capture_openni::serial();
+    let _port = crate::capture_aravis::take_port();
+    let camera = crate::capture_aravis::start_fake_program(&["-s", "MP-REC"]);
+    let text = format!(
+        "{DUMMY_DEPTH}[color]\nbackend = \"aravis\"\naddress = \"127.0.0.1\"\npixel_format = \"mono8\"\nfps = 30.0\n\
+         [reconnect]\nstall_ms = 500\nmax_wait_ms = 500\n"
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("session");
+    let recorder = {
+        let (config, out) = (config(&text), out.clone());
+        std::thread::Builder::new()
+            .name("record".into())
+            .spawn(move || record(&config, &out, Some(10.0), false, &Shutdown::default()))
+            .unwrap()
+    };
+    std::thread::sleep(Duration::from_secs(3));
+    drop(camera);
+    std::thread::sleep(Duration::from_secs(2));
+    let _camera = crate::capture_aravis::start_fake_program(&["-s", "MP-REC"]);
+    let summary = recorder
+        .join()
+        .unwrap()
+        .expect("the recording goes on through the outage");
+    assert!(summary.outages["color"] >= 1, "{summary:?}");
+    let r = SessionReader::open(&out).unwrap();
+    assert!(r.complete());
+    let events = r.events().unwrap();
+    let at = |want: fn(&SessionEvent) -> bool| events.iter().position(want);
+    let lost = at(|e| {
+        matches!(
+            e,
+            SessionEvent::CameraDisconnected {
+                role: CameraRole::Color,
+                ..
+            }
+        )
+    });
+    let back = at(|e| {
+        matches!(
+            e,
+            SessionEvent::CameraReconnected {
+                role: CameraRole::Color,
+                ..
+            }
+        )
+    });
+    assert!(lost.is_some() && back > lost, "{events:?}");
+    // Colour frames on both sides of the outage, numbered on past the frames before it.
+    let stamps = r.timestamps(CameraRole::Color).unwrap();
+    assert!(stamps.windows(2).all(|w| w[0].seq < w[1].seq));
+    let lost_ns = events[lost.unwrap()].host_ns().unwrap();
+    let before = stamps.iter().filter(|s| s.host_ns <= lost_ns).count();
+    let after = stamps.len() - before;
+    assert!(
+        before > 30 && after > 30,
+        "{before} colour frames before the outage, {after} after"
+    );
+    assert!(summary.cameras["depth"].captured > 250, "{summary:?}");
+}

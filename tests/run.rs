@@ -166,7 +166,10 @@ fn the_daemon_rides_out_a_colour_camera_restart_and_stops_cleanly_on_sigterm() {
     // The outage is the real gap: from the last frame before the freeze to the first after
     // it (4 s frozen), not from when the driver let go to the reopening.
     let length_s = (outage["end_ns"].as_u64().unwrap() - outage["start_ns"].as_u64().unwrap()) as f64 * 1e-9;
-    assert!((3.5..6.0).contains(&length_s), "an outage of {length_s:.2} s: {report:#}");
+    assert!(
+        (3.5..6.0).contains(&length_s),
+        "an outage of {length_s:.2} s: {report:#}"
+    );
     let before = outage["frames_before"].as_u64().unwrap();
     let captured = color["captured"].as_u64().unwrap();
     assert!(before > 10 && captured > before + 10, "{report:#}");
@@ -295,10 +298,29 @@ fn a_frozen_colour_camera_is_an_outage_while_depth_keeps_flowing() {
     // The outage is the real gap: from the last frame before the freeze to the first after
     // it (4 s frozen), not from when the driver let go to the reopening.
     let length_s = (outage["end_ns"].as_u64().unwrap() - outage["start_ns"].as_u64().unwrap()) as f64 * 1e-9;
-    assert!((3.5..6.0).contains(&length_s), "an outage of {length_s:.2} s: {report:#}");
+    assert!(
+        (3.5..6.0).contains(&length_s),
+        "an outage of {length_s:.2} s: {report:#}"
+    );
     let before = outage["frames_before"].as_u64().unwrap();
     assert!(before > 30, "{report:#}");
     assert!(color["captured"].as_u64().unwrap() > before + 30, "{report:#}");
+    // The first chunk holds both cameras and whole seconds of poses (the colour camera is
+    // tried before the pipeline starts, so its opening does not end the chunk at once).
+    let first = chunks(&tmp.path().join("out")).remove(0);
+    let first_session = SessionReader::open(&first).unwrap();
+    assert!(
+        first_session
+            .meta()
+            .camera(mousepose::io::session::CameraRole::Color)
+            .is_some(),
+        "chunk {first:?} has no colour camera"
+    );
+    let rows = std::fs::read_to_string(first.join("poses.csv"))
+        .unwrap()
+        .lines()
+        .count();
+    assert!(rows > 30, "{rows} lines in the first chunk's poses");
     // Depth went on through the outage: about 30 frames a second for the whole run.
     let depth = &report["cameras"]["depth"];
     assert!(depth["captured"].as_u64().unwrap() > 350, "{report:#}");

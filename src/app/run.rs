@@ -10,7 +10,7 @@ use crate::core::geometry::Rig;
 use crate::io::session::CameraRole;
 use crate::runtime::capture::rig::{ColorSource, open_color, open_depth};
 use crate::runtime::capture::supervise::{CameraState, SharedHealth, Supervised, lock};
-use crate::runtime::capture::{CaptureError, FrameSource};
+use crate::runtime::capture::{CaptureError, Clock, FrameSource};
 use crate::runtime::config::{Config, DepthCamera};
 use crate::runtime::http::HttpServer;
 use crate::runtime::models::Models;
@@ -185,13 +185,13 @@ pub fn run(
 
     let epochs = Epochs::default();
     let depth_config = config.depth.clone();
-    let depth = Supervised::new(
+    let mut depth = Supervised::new(
         CameraRole::Depth,
         Box::new(move || open_depth(&depth_config)),
         config.reconnect,
         Arc::clone(&epochs[0]),
     );
-    let color = config.color.clone().map(|color_config| {
+    let mut color = config.color.clone().map(|color_config| {
         let open = move || -> Result<ColorSource, CaptureError> { open_color(&color_config) };
         Supervised::new(
             CameraRole::Color,
@@ -200,6 +200,14 @@ pub fn run(
             Arc::clone(&epochs[1]),
         )
     });
+    // Both cameras are tried before the pipeline starts them, so that the first chunk's
+    // session holds both: a colour camera opening a moment after depth frames began to flow
+    // would end that chunk at once (a chunk holds the cameras open when it began).
+    let clock = Clock::Monotonic;
+    depth.start(&clock)?;
+    if let Some(color) = &mut color {
+        color.start(&clock)?;
+    }
     // The cameras' states are taken from these, in this thread, whatever the capture threads
     // are doing.
     let mut stall_watches = vec![depth.stall_watch()];

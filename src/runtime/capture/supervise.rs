@@ -441,7 +441,12 @@ where
 
     /// Tries the camera once (unless it came [`Supervised::opened`]); a camera that cannot be
     /// opened is not an error here, it is away.
+    /// A second call (the daemon tries its cameras before its pipeline starts them) does
+    /// nothing.
     fn start(&mut self, clock: &Clock) -> Result<(), CaptureError> {
+        if self.clock.is_some() {
+            return Ok(());
+        }
         self.clock = Some(clock.clone());
         if self.current.is_none() {
             self.try_open(clock);

@@ -8,6 +8,8 @@ use crate::core::skeleton::Joint;
 use crate::runtime::pipeline::{Stage, StageError};
 use crate::vision::paws::PawDetector;
 use nalgebra::Point3;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// How far beyond the body's joints (mm, on the glass) a paw can be: a limb's reach sideways
 /// and the snout's and tail base's overhang.
@@ -18,8 +20,9 @@ pub const FOOTPRINT_MARGIN_MM: f64 = 18.0;
 pub struct PawStage {
     detector: Option<PawDetector>,
     color: Camera,
-    /// Whether the colour frames' size was found not to match (said once).
-    warned: bool,
+    /// Whether the colour frames' size was found not to match: said once, by whichever of
+    /// the stage's workers (its clones) finds it first.
+    warned: Arc<AtomicBool>,
 }
 
 impl PawStage {
@@ -29,7 +32,7 @@ impl PawStage {
         Self {
             detector,
             color,
-            warned: false,
+            warned: Arc::default(),
         }
     }
 }
@@ -93,8 +96,7 @@ impl Stage for PawStage {
                 // The rig's colour camera is another size (a live rig without a calibration
                 // for this camera mode): no paws rather than paws in the wrong place. The
                 // joints then come from the fusion's defaults, as without a paw model.
-                if !self.warned {
-                    self.warned = true;
+                if !self.warned.swap(true, Ordering::Relaxed) {
                     tracing::warn!(
                         "colour frames are {}x{} but the rig's colour camera is {}x{}: no paw detection (calibrate this camera)",
                         color.width,
@@ -112,5 +114,65 @@ impl Stage for PawStage {
         }
         out.push(input);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::frame::{ColorFrame, DepthFrame, FramePair, PixelFormat, Stamp};
+    use crate::core::geometry::Rig;
+    use crate::core::pose::Pose;
+    use crate::runtime::stages::PoseRecord;
+
+    /// Warnings caught while `f` runs.
+    fn warnings(f: impl FnOnce()) -> Vec<String> {
+        use tracing_subscriber::layer::SubscriberExt as _;
+        let log = Arc::new(crate::runtime::watch::events::EventLog::default());
+        let subscriber =
+            tracing_subscriber::registry().with(crate::runtime::watch::events::EventLayer(Arc::clone(&log)));
+        tracing::subscriber::with_default(subscriber, f);
+        log.recent().into_iter().map(|e| e.text).collect()
+    }
+
+    #[test]
+    fn a_wrong_colour_size_is_said_once_whatever_the_number_of_workers() {
+        let rig = Rig::default_rig();
+        let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/models/paws.xml");
+        let stage = PawStage::new(Some(PawDetector::load(&models).unwrap()), rig.color);
+        let mut workers = vec![stage.clone(), stage];
+        let said = warnings(|| {
+            for w in &mut workers {
+                let stamp = Stamp::default();
+                let color = ColorFrame {
+                    stamp,
+                    width: 2,
+                    height: 2,
+                    format: PixelFormat::Mono8,
+                    data: vec![0; 4],
+                };
+                let pair = FramePair {
+                    depth: Arc::new(DepthFrame::empty(stamp, 4, 4)),
+                    color: Some(Arc::new(color)),
+                    skew_ns: 0,
+                };
+                let record = PoseRecord {
+                    depth: stamp,
+                    color: Some(stamp),
+                    skew_ns: 0,
+                    status: PoseStatus::Ok,
+                    pose: Pose::default(),
+                    paws: Vec::new(),
+                    headings: None,
+                    orientation: None,
+                };
+                w.process(Posed { pair, record }, &mut Vec::new()).unwrap();
+            }
+        });
+        assert_eq!(
+            said.iter().filter(|m| m.contains("no paw detection")).count(),
+            1,
+            "{said:?}"
+        );
     }
 }
