@@ -704,3 +704,100 @@ fn a_hidden_tail_teaches_no_tail_tip() {
         "the other joints are still taught"
     );
 }
+
+/// Issue 27, item 4: a mouse whose tail the camera does not see gets no tail tip guessed off
+/// its body. Each mouse is segmented, then its pixels behind the tail base (the tail) are
+/// taken out, as a depth camera that loses the 3-5 mm tail shows it; the tail tip of either
+/// orientation is then either not reported or within 19 mm of a pixel of the mouse. With the
+/// tail in view, the tip is still reported.
+#[test]
+fn a_tail_not_seen_gets_no_tail_tip_off_the_mouse() {
+    use mousepose::core::geometry::Rig;
+    use mousepose::core::noise::{DepthNoise, NoiseModel};
+    use mousepose::core::skeleton::Joint;
+    use mousepose::synth::dataset::{DatasetSpec, render_sample};
+    use mousepose::synth::mouse::pose_library;
+    use mousepose::training::{MaskSource, segmented_image};
+    use mousepose::vision::forest::depth::DepthImage;
+    use mousepose::vision::forest::infer::{BodyEstimator, VoteSettings, sample_pixels};
+    use nalgebra::{Point2, Point3, Vector3};
+    let rig = Rig::default_rig();
+    let path = repo_root().join("fixtures/models/body.forest");
+    let Model::Body(_, forest) = model::load(&path, Some(ModelKind::Body)).expect("bundled body model") else {
+        panic!("{} is not a body model", path.display());
+    };
+    let mut estimator = BodyEstimator::new(forest, VoteSettings::default());
+    let spec = DatasetSpec {
+        count: 40,
+        seed: 0x7A27,
+        noise: DepthNoise {
+            model: NoiseModel::None,
+            gaussian_mm: 0.0,
+        },
+        bottom_views: false,
+        mice: mousepose::synth::Mice::Standard,
+    };
+    let library = pose_library();
+    let mut segmenter = MaskSource::for_rig(&rig).unwrap().segmenter().unwrap();
+    let camera_from_world = rig.depth.world_from_camera.inverse();
+    let up = (camera_from_world.rotation * Vector3::z()).cast::<f32>();
+    let tip = Joint::MAIN_BODY.iter().position(|j| *j == Joint::TailTip).unwrap();
+    let (mut hidden_off, mut hidden_frames, mut seen_reported, mut seen_frames) = (0, 0, 0, 0);
+    let mut pixels = Vec::new();
+    for i in 0..spec.count {
+        let s = render_sample(&rig, &spec, &library, i);
+        let Some(image) = segmented_image(&mut segmenter, &s.top.depth, s.top.region).unwrap() else {
+            continue;
+        };
+        let r = image.region;
+        let world = |k: usize, d: f32| {
+            let pixel = Point2::new(
+                f64::from(r.x0) + (k % r.width as usize) as f64,
+                f64::from(r.y0) + (k / r.width as usize) as f64,
+            );
+            rig.depth.world_from_camera * rig.depth.intrinsics.unproject(&pixel, f64::from(d))
+        };
+        // The tail: pixels more than 3 mm behind the tail base, along the rump to tail base.
+        let base = s.joints[Joint::TailBase.index()];
+        let back = s.joints[Joint::TailBase.index()] - s.joints[Joint::Rump.index()];
+        let back = Vector3::new(back.x, back.y, 0.0).normalize();
+        let mut crop = vec![0u16; r.len()];
+        let mut mask = vec![false; r.len()];
+        for (k, d) in image.on_mouse() {
+            let p = world(k, d);
+            if (p - base).dot(&back) <= 3.0 {
+                crop[k] = d as u16;
+                mask[k] = true;
+            }
+        }
+        let tailless = DepthImage::from_mask(r, &crop, &mask);
+        for (view, hidden) in [(&image, false), (&tailless, true)] {
+            sample_pixels(view, 200, &mut pixels);
+            let oriented = estimator.estimate_oriented(view, &pixels, &rig.depth.intrinsics, &up);
+            let surface: Vec<Point3<f64>> = view.on_mouse().map(|(k, d)| world(k, d)).collect();
+            if !hidden {
+                // The orientation with the head at the tail's end puts its tip off the mouse.
+                seen_frames += 1;
+                seen_reported += usize::from(oriented.ahead.iter().any(|g| g[tip].is_some()));
+                continue;
+            }
+            for guesses in &oriented.ahead {
+                let reported = guesses[tip].map(|g| rig.depth.world_from_camera * Point3::from(g.position_mm.cast()));
+                if hidden {
+                    hidden_frames += 1;
+                    let off = reported.is_some_and(|p| surface.iter().all(|q| (q - p).norm() > 19.0));
+                    hidden_off += usize::from(off);
+                }
+            }
+        }
+    }
+    println!(
+        "tail hidden: {hidden_off} of {hidden_frames} tips off the mouse; tail seen: {seen_reported} of {seen_frames} reported"
+    );
+    assert!(hidden_frames >= 60, "{hidden_frames} hypotheses");
+    assert_eq!(hidden_off, 0, "tail tips more than 19 mm off the mouse");
+    assert!(
+        seen_reported * 10 >= seen_frames * 8,
+        "{seen_reported} of {seen_frames} tips reported with the tail in view"
+    );
+}

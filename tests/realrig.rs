@@ -583,3 +583,151 @@ fn varied_mice_keep_their_heads_in_front() {
     assert_eq!(confidences.len() as u64, s.statuses["ok"]);
     assert!(confidences.iter().all(|c| (0.5..=1.0).contains(c)));
 }
+
+/// A round arena (floor `radius_mm` in radius at the world's `z = 0`, strewn with bedding up
+/// to `bedding_mm` high, walls 150 mm high) standing in a room whose floor, all around it, is
+/// the plane `z = room_mm + room_slope * x`: the largest flat region of the view is the
+/// room's floor, not the arena's, and the arena's floor is tilted against it.
+fn raised_arena(cam: &Camera, radius_mm: f64, bedding_mm: f64, room_mm: f64, room_slope: f64) -> Vec<f32> {
+    const WALL_MM: f64 = 150.0;
+    let i = &cam.intrinsics;
+    let o = cam.centre();
+    let mut out = Vec::with_capacity((i.width * i.height) as usize);
+    for y in 0..i.height {
+        for x in 0..i.width {
+            let d = cam.world_from_camera.rotation * i.ray(&Point2::new(f64::from(x), f64::from(y)));
+            let at = |t: f64| o + d * t;
+            let r = |p: Point3<f64>| (p.x * p.x + p.y * p.y).sqrt();
+            let (t_floor, t_top) = (-o.z / d.z, (WALL_MM - o.z) / d.z);
+            let z = if r(at(t_floor)) <= radius_mm && r(at(t_top)) <= radius_mm {
+                // Bedding: bumps a few pixels across, fixed in time.
+                let p = at(t_floor);
+                let bump = (((p.x * 0.31).sin() * (p.y * 0.27).cos() + 1.0) / 2.0).powi(2) * bedding_mm;
+                t_floor - bump / -d.z
+            } else if r(at(t_top)) <= radius_mm {
+                let (mut near, mut far) = (t_top, t_floor);
+                for _ in 0..40 {
+                    let mid = (near + far) / 2.0;
+                    if r(at(mid)) <= radius_mm {
+                        near = mid;
+                    } else {
+                        far = mid;
+                    }
+                }
+                near
+            } else if r(at(t_top)) <= radius_mm + 10.0 {
+                t_top
+            } else {
+                // o.z + t d.z = room + slope (o.x + t d.x)
+                (room_mm + room_slope * o.x - o.z) / (d.z - room_slope * d.x)
+            };
+            out.push(z as f32);
+        }
+    }
+    out
+}
+
+/// Issue 27, item 3: the automatic arena finds the mouse where the largest flat region of the
+/// view is not its floor: a bedded arena whose floor, about 770 mm away, is tilted against the
+/// room's floor around it, and an arena a tenth of the view. (Both gave `no_mouse` in every
+/// frame: the floor was the room's, 250-300 mm below the mouse.)
+#[test]
+fn arenas_on_tilted_bedded_floors_and_small_arenas_are_found() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mice: Vec<MouseInstance> = (0..12)
+        .map(|k| {
+            let a = k as f64 * 0.9;
+            mouse(k, 60.0 * a.cos(), 60.0 * a.sin(), a + 1.6)
+        })
+        .collect();
+    for (name, tilt_deg, radius_mm, room_mm, slope, share) in [
+        ("tilted", 5.0, 220.0, -250.0, 0.08, 0.15..0.5),
+        ("small", 2.0, 175.0, -300.0, 0.0, 0.05..0.2),
+    ] {
+        let cam = camera(nominal(512, 424), 770.0, tilt_deg);
+        let background = raised_arena(&cam, radius_mm, 3.0, room_mm, slope);
+        let dir = tmp.path().join(name);
+        write_recording(&dir, &cam, &background, &mice, 30.0, &resolution(&cam.intrinsics));
+        let out = tmp.path().join(format!("{name}-out"));
+        let s = replay(&options(&dir, &out)).unwrap();
+        assert!(
+            share.contains(&s.world.arena_share),
+            "{name}: arena share {}",
+            s.world.arena_share
+        );
+        assert!((s.world.camera_height_mm - 768.5).abs() < 3.0, "{name}: {:?}", s.world);
+        assert!(
+            (s.world.camera_tilt_deg - tilt_deg).abs() < 0.5,
+            "{name}: {:?}",
+            s.world
+        );
+        let errors: Vec<f64> = rows(&out)
+            .iter()
+            .zip(&mice)
+            .filter_map(|((_, z), m)| z.map(|z| (z - true_mean_z(m)).abs()))
+            .collect();
+        // Before: no frame posed. Now 10 of 12 in the bedded, tilted arena (the two others
+        // are not yet understood).
+        assert!(
+            errors.len() * 4 >= mice.len() * 3,
+            "{name}: {} of {} frames posed",
+            errors.len(),
+            mice.len()
+        );
+        let error = errors.iter().sum::<f64>() / errors.len() as f64;
+        assert!(error < 5.0, "{name}: mean height off by {error:.1} mm");
+        assert!(s.warnings.is_empty(), "{name}: {:?}", s.warnings);
+        let check = s.world.arena_check.unwrap();
+        assert_eq!(check.mouse_sized_outside, 0, "{name}: {check:?}");
+    }
+}
+
+/// Issue 27, item 3: when something of a mouse's size moves outside the arena used and no
+/// frame has a mouse, replay says so: a warning on stderr, `warnings` and `world.arena_check`
+/// in `summary.json`, and `frame.png` with the arena's outline.
+#[test]
+fn a_mouse_outside_the_arena_is_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cam = camera(nominal(512, 424), 700.0, 4.0);
+    let background = raised_arena(&cam, 230.0, 0.0, -250.0, 0.0);
+    let mice: Vec<MouseInstance> = (0..10)
+        .map(|k| {
+            let a = k as f64 * 0.9;
+            mouse(k, -60.0 + 25.0 * a.cos(), 25.0 * a.sin(), a + 1.6)
+        })
+        .collect();
+    let dir = tmp.path().join("rec");
+    write_recording(&dir, &cam, &background, &mice, 30.0, &resolution(&cam.intrinsics));
+    // The arena given: a disc of floor the mouse never enters.
+    let i = &cam.intrinsics;
+    let mut mask = RgbImage::new(i.width, i.height, [0; 3]);
+    let c = cam.project_world(&Point3::new(150.0, 0.0, 0.0)).unwrap();
+    mask.disc((c.x, c.y), 50.0 * i.fx / 700.0, [255, 255, 255]);
+    let roi = tmp.path().join("roi.png");
+    mask.write_png(&roi).unwrap();
+    let out = tmp.path().join("o");
+    let o = mousepose()
+        .arg("replay")
+        .arg(&dir)
+        .arg("--roi")
+        .arg(&roi)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("--roi") && err.contains("outside the arena"), "{err}");
+    let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["statuses"]["no_mouse"], 10, "{summary}");
+    let check = &summary["world"]["arena_check"];
+    assert!(check["mouse_sized_outside"].as_u64().unwrap() >= 5, "{check}");
+    assert_eq!(check["mouse_sized_inside"], 0, "{check}");
+    assert!(summary["warnings"].as_array().unwrap().len() == 2, "{summary}");
+    let picture = read_png(&out.join("frame.png"));
+    let outline = picture
+        .iter()
+        .filter(|p| **p == mousepose::runtime::stages::overlay::ARENA_OUTLINE)
+        .count();
+    assert!(outline > 100, "{outline} pixels of the arena's outline");
+}

@@ -20,7 +20,7 @@ use crate::runtime::sink::poses::{POSES_FILE, PoseTally, PoseWriter};
 use crate::runtime::stages::PoseRecord;
 use crate::runtime::stages::segment::SegmentStage;
 use crate::runtime::topology::{Edges, Processing, Sources, Topology, TopologyError};
-use crate::vision::segment::{Background, SegmentError, SegmenterConfig};
+use crate::vision::segment::{ArenaCheck, Background, SegmentError, SegmenterConfig};
 use clap::Args;
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
@@ -109,6 +109,11 @@ pub struct WorldSummary {
     /// The arena's share of the depth image, and whether it was given (`--roi`) or found.
     pub arena_share: f64,
     pub arena_from: &'static str,
+    /// Of the depth frames sampled for the background, how many showed something of a
+    /// mouse's size inside the arena and outside it; absent when the background is a
+    /// synthetic session's rendered cage.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub arena_check: Option<ArenaCheck>,
 }
 
 /// `summary.json`.
@@ -152,25 +157,64 @@ pub struct ReplaySummary {
     /// tracker, by each frame's own evidence, and by the body forest alone.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub orientation: Option<crate::runtime::sink::poses::OrientationCheck>,
+    /// What the user should know about the replay (the arena missing the mouse), one
+    /// sentence each; also printed on stderr.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
-/// The picture of the frame pair of `pose` (see [`crate::runtime::stages::overlay`]); `None`
-/// when its frames cannot be read again.
-fn picture(recording: &Recording, rig: &Rig, pose: &PoseRecord) -> Option<RgbImage> {
+/// The picture of the frame pair of `pose` (see [`crate::runtime::stages::overlay`]) with
+/// the arena's outline; `None` when its frames cannot be read again.
+fn picture(recording: &Recording, rig: &Rig, pose: &PoseRecord, arena: &[u8]) -> Option<RgbImage> {
     let depth = recording.depth_frame(pose.depth.seq)?;
     let color = pose.color.and_then(|c| recording.color_frame(c.seq));
-    Some(crate::runtime::stages::overlay::draw(rig, &depth, color.as_ref(), pose))
+    Some(crate::runtime::stages::overlay::draw_in_arena(
+        rig,
+        &depth,
+        color.as_ref(),
+        pose,
+        Some(arena),
+    ))
 }
 
-/// The picture of a recording where no frame had a mouse: its middle depth frame, saying so.
-fn picture_without_mouse(recording: &Recording, rig: &Rig) -> Option<RgbImage> {
+/// The picture of a recording where no frame had a mouse: its middle depth frame with the
+/// arena's outline, saying so, and saying when something of a mouse's size moved outside
+/// the arena.
+fn picture_without_mouse(recording: &Recording, rig: &Rig, arena: &[u8], outside: bool) -> Option<RgbImage> {
     let frames = recording.sample_depth(1).ok()?;
     let depth = frames.first()?;
+    let note = if outside {
+        "no mouse found in any frame inside the arena (outlined), but a mouse-sized thing moved outside it: pass --roi"
+    } else {
+        "no mouse found in any frame (arena outlined)"
+    };
     Some(crate::runtime::stages::overlay::draw_note(
         rig,
         depth,
-        "no mouse found in any frame",
+        note,
+        Some(arena),
     ))
+}
+
+/// The warnings of a replay: something of a mouse's size outside the arena as often as
+/// inside it (or with no mouse found at all), and a recording in which no frame had a mouse.
+fn arena_warnings(check: Option<&ArenaCheck>, from: &str, pairs: u64, found: u64) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if let Some(c) = check
+        && c.mouse_sized_outside > 0
+        && (c.mouse_sized_outside >= c.mouse_sized_inside || found == 0)
+    {
+        warnings.push(format!(
+            "something of a mouse's size moved outside the arena {from} in {} of {} sampled frames (inside it in {}): if the mouse is there, give the arena with --roi",
+            c.mouse_sized_outside, c.sampled_frames, c.mouse_sized_inside
+        ));
+    }
+    if pairs > 0 && found == 0 {
+        warnings.push(format!(
+            "no mouse found in any of {pairs} frames: if the mouse is in view, the arena {from} (outlined in {PICTURE_FILE}) may miss it; give it with --roi"
+        ));
+    }
+    warnings
 }
 
 /// Frames the background model is built from, spread over the session.
@@ -251,7 +295,9 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         cy: rig.depth.intrinsics.cy,
         arena_share: arena.iter().filter(|&&m| m != 0).count() as f64 / arena.len().max(1) as f64,
         arena_from: if options.roi.is_some() { "roi" } else { "found" },
+        arena_check: background.arena_check(),
     };
+    let arena = arena.to_vec();
     let segmenter = SegmenterConfig::default()
         .build(background)
         .map_err(ReplayError::Background)?
@@ -311,7 +357,7 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         body_model,
         paw_model,
         realtime: options.realtime,
-        world,
+        world: world.clone(),
         duplicate_timestamps: recording.duplicate_timestamps(),
         pairs: tally.rows,
         statuses: tally.statuses.clone(),
@@ -326,12 +372,22 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         mean_error_mm: tally.mean_error_mm(),
         group_error_mm: tally.group_error_mm(),
         orientation: (tally.orientation.frames > 0).then_some(tally.orientation),
+        warnings: arena_warnings(
+            world.arena_check.as_ref(),
+            if options.roi.is_some() { "given" } else { "found" },
+            tally.rows,
+            tally.statuses.get("ok").copied().unwrap_or(0),
+        ),
     };
+    for warning in &summary.warnings {
+        tracing::warn!(message = "The arena may miss the mouse.", detail = %warning);
+    }
     {
         let path = staging.path().join(PICTURE_FILE);
+        let outside = summary.world.arena_check.is_some_and(|c| c.mouse_sized_outside > 0);
         let img = match &tally.snapshot {
-            Some(pose) => picture(&recording, &rig, pose),
-            None => picture_without_mouse(&recording, &rig),
+            Some(pose) => picture(&recording, &rig, pose, &arena),
+            None => picture_without_mouse(&recording, &rig, &arena, outside),
         };
         img.and_then(|img| img.write_png(&path).ok())
             .ok_or_else(|| ReplayError::Write {
@@ -389,6 +445,9 @@ pub fn summary_text(summary: &ReplaySummary, out: &Path) -> String {
         w.arena_share * 100.0,
         w.arena_from
     );
+    for warning in &summary.warnings {
+        let _ = writeln!(text, "warning: {warning}");
+    }
     if let Some(n) = summary.duplicate_timestamps.filter(|&n| n > 0) {
         let _ = writeln!(
             text,

@@ -37,6 +37,12 @@ pub const RAISED_PAW_TOWARDS_FACE: f64 = 0.25;
 /// body joints and bone lengths are not exact).
 const REACH_SLACK: f64 = 1.1;
 
+/// A paw lies at least this far (mm, for a mouse of scale 1) to its own side of the spine
+/// seen from above: a standing mouse's paws lie 9-11 mm out, a grooming mouse's fore paws
+/// about 4 mm out at its face; the snout, the chin, the belly, the genitals and the tail base,
+/// which a paw detector takes for paws on real bottom views, lie on the spine.
+pub const MIN_OFF_SPINE_MM: f64 = 3.0;
+
 /// Tuning of the fusion.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FusionConfig {
@@ -81,6 +87,8 @@ pub struct BodyAxes {
     pub snout: Point3<f64>,
     /// The bone lengths at that scale.
     pub bones: BoneLengths,
+    /// The spine seen from above, snout to tail base (world x, y).
+    pub spine: [Point2<f64>; 7],
 }
 
 impl BodyAxes {
@@ -95,6 +103,11 @@ impl BodyAxes {
         let mut length = 0.0;
         for w in spine.windows(2) {
             length += (p(w[0])? - p(w[1])?).norm();
+        }
+        let mut seen_from_above = [Point2::origin(); 7];
+        for (q, j) in seen_from_above.iter_mut().zip(spine) {
+            let at = p(*j)?;
+            *q = Point2::new(at.x, at.y);
         }
         let scale = (length / BoneLengths::default().body_length()).clamp(0.8, 1.25);
         let bones = BoneLengths::default().scaled(scale);
@@ -121,7 +134,29 @@ impl BodyAxes {
             withers_frame,
             head_frame: frame(muzzle, horizontal(muzzle).unwrap_or(fore_forward)),
             snout,
+            spine: seen_from_above,
         })
+    }
+
+    /// How far `p` lies to the left of the spine seen from above (mm; negative to the
+    /// right): its distance to the nearest point of the spine's segments, signed by the side
+    /// of that segment it lies on.
+    pub fn off_spine(&self, p: &Point3<f64>) -> f64 {
+        let q = Point2::new(p.x, p.y);
+        let mut best = (f64::INFINITY, 0.0);
+        for w in self.spine.windows(2) {
+            // From the rear point to the front one: left of it is the mouse's left.
+            let (front, rear) = (w[0], w[1]);
+            let d = front - rear;
+            let t = ((q - rear).dot(&d) / d.norm_squared().max(1e-12)).clamp(0.0, 1.0);
+            let off = q - (rear + d * t);
+            let distance = off.norm();
+            if distance < best.0 {
+                let cross = d.x * off.y - d.y * off.x;
+                best = (distance, if cross < 0.0 { -distance } else { distance });
+            }
+        }
+        best.1
     }
 
     /// Where a paw no camera sees is put: its stance on the glass, or for the fore paws of a
@@ -246,9 +281,13 @@ impl Fuser {
         self.seen.sort_by(|a, b| b.score.total_cmp(&a.score));
         self.seen.truncate(self.config.max_detections);
 
+        // The limbs hang from the body: no surer than its least sure joint (a joint not
+        // reported, such as a tail tip no camera saw, does not count).
         let body_score = Joint::MAIN_BODY
             .iter()
-            .map(|j| pose.joint(*j).score)
+            .map(|j| pose.joint(*j))
+            .filter(|e| e.source != JointSource::Missing)
+            .map(|e| e.score)
             .fold(f64::INFINITY, f64::min)
             .clamp(0.0, 1.0);
         let assigned = self.assign(seq, pose, &axes);
@@ -323,10 +362,21 @@ impl Fuser {
                 )
             };
             let left = Vector3::z().cross(&forward);
+            let reach = axes.bones.limb(limb.fore).iter().sum::<f64>() * REACH_SLACK;
+            let lifted = axes.default_paw(limb, pose);
+            let sole = PAW_SOLE_MM * axes.scale;
             for (i, s) in self.seen.iter().enumerate().take(8) {
                 let side = (s.position - pair_middle).dot(&left) * limb.side.sign();
                 if side < -2.0 * axes.scale {
                     continue; // on the other side of the body
+                }
+                // A box no leg of this body can put a paw in is something else (the snout,
+                // the tail base, a mark on the glass): out of the leg's reach, or on the spine.
+                let placed = s.place(&root, reach, &lifted, sole);
+                if (placed - root).norm() > reach
+                    || axes.off_spine(&placed) * limb.side.sign() < MIN_OFF_SPINE_MM * axes.scale
+                {
+                    continue;
                 }
                 let flat = |p: &Point3<f64>| Vector3::new(s.position.x - p.x, s.position.y - p.y, 0.0).norm();
                 let d = remembered.map_or(flat(&stance), |r| flat(&r).min(flat(&stance)));
@@ -554,6 +604,77 @@ mod tests {
                 assert!(error(&m, &fused, j) < 4.0, "{j:?}: {}", error(&m, &fused, j));
             }
         }
+    }
+
+    /// Issue 27, item 5: a paw detector on real bottom views also boxes the snout, the chin
+    /// and the tail base. With the real paws hidden, no leg takes such a box; with them in
+    /// view, each leg still takes its own paw.
+    #[test]
+    fn boxes_at_the_snout_or_the_tail_base_fit_no_leg() {
+        let rig = Rig::default_rig();
+        for heading in [0.0, 1.1, -2.4] {
+            let placement = Placement {
+                x_mm: -20.0,
+                y_mm: 25.0,
+                heading,
+                ..Placement::default()
+            };
+            let (m, pose, paws) = scene(&placement, &rig);
+            let on_glass = |j: Joint| {
+                let p = m.joint(j);
+                rig.color.project_world(&Point3::new(p.x, p.y, 0.0)).expect("in view")
+            };
+            let chin = {
+                let (s, h) = (m.joint(Joint::Snout), m.joint(Joint::Head));
+                rig.color
+                    .project_world(&Point3::new((s.x + h.x) / 2.0, (s.y + h.y) / 2.0, 0.0))
+                    .expect("in view")
+            };
+            let tail_root = {
+                let (b, r) = (m.joint(Joint::TailBase), m.joint(Joint::Rump));
+                rig.color
+                    .project_world(&Point3::new((b.x * 2.0 + r.x) / 3.0, (b.y * 2.0 + r.y) / 3.0, 0.0))
+                    .expect("in view")
+            };
+            let false_boxes: Vec<PawDetection> = [on_glass(Joint::Snout), chin, on_glass(Joint::TailBase), tail_root]
+                .into_iter()
+                .map(|c| detection_at(c, 5.0))
+                .collect();
+            let mut fuser = Fuser::new(rig.color, FusionConfig::default());
+            let mut fused = pose.clone();
+            fuser.fuse(0, &mut fused, &false_boxes);
+            for j in Joint::PAWS {
+                assert_eq!(
+                    fused.joint(j).source,
+                    JointSource::Default,
+                    "{j:?} took a box on the spine at heading {heading}"
+                );
+            }
+            // The real paws beside the false boxes, in a fresh fuser: each leg takes its own.
+            let mut all = paws.clone();
+            all.extend(false_boxes);
+            let mut fuser = Fuser::new(rig.color, FusionConfig::default());
+            let mut fused = pose.clone();
+            fuser.fuse(0, &mut fused, &all);
+            for j in Joint::PAWS {
+                assert_eq!(fused.joint(j).source, JointSource::Paw, "{j:?} at heading {heading}");
+                assert!(
+                    error(&m, &fused, j) < 1.0,
+                    "{j:?} at heading {heading}: {}",
+                    error(&m, &fused, j)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn off_spine_is_signed_by_the_side() {
+        let rig = Rig::default_rig();
+        let (m, pose, _) = scene(&Placement::default(), &rig);
+        let axes = BodyAxes::of(&pose).expect("a whole body");
+        assert!(axes.off_spine(&m.joint(Joint::MidBack)).abs() < 1e-6);
+        assert!(axes.off_spine(&m.joint(Joint::LeftHindPaw)) > MIN_OFF_SPINE_MM);
+        assert!(axes.off_spine(&m.joint(Joint::RightForePaw)) < -MIN_OFF_SPINE_MM);
     }
 
     #[test]

@@ -17,13 +17,28 @@ use nalgebra::{Point3, Vector3};
 /// Height of every panel, pixels.
 const PANEL: u32 = 480;
 
+/// The colour of the arena's outline in pictures.
+pub const ARENA_OUTLINE: [u8; 3] = [255, 0, 255];
+
 /// The three panels side by side.
 pub fn draw(rig: &Rig, depth: &DepthFrame, color: Option<&ColorFrame>, record: &PoseRecord) -> RgbImage {
+    draw_in_arena(rig, depth, color, record, None)
+}
+
+/// [`draw`], with the outline of `arena` (1 = inside, row-major over the depth image) in
+/// [`ARENA_OUTLINE`] on the depth panel when it is given.
+pub fn draw_in_arena(
+    rig: &Rig,
+    depth: &DepthFrame,
+    color: Option<&ColorFrame>,
+    record: &PoseRecord,
+    arena: Option<&[u8]>,
+) -> RgbImage {
     let joints = record
         .pose
         .joints
         .map(|j| (j.source != JointSource::Missing).then_some(j.position_mm));
-    let mut panels = vec![top_panel(rig, depth, &joints)];
+    let mut panels = vec![top_panel(rig, depth, &joints, arena)];
     if let Some(color) = color {
         panels.push(bottom_panel(rig, color, record));
     }
@@ -47,19 +62,58 @@ pub fn depth_view(rig: &Rig, frame: &DepthFrame, record: &PoseRecord, floor: &Fl
 
 /// A whole depth frame coloured by height above the floor, magnified to about the panels'
 /// height, with `note` written across its top: the picture of a recording in which no frame
-/// had a mouse.
-pub fn draw_note(rig: &Rig, depth: &DepthFrame, note: &str) -> RgbImage {
+/// had a mouse; with the outline of `arena` (as in [`draw_in_arena`]) when it is given.
+pub fn draw_note(rig: &Rig, depth: &DepthFrame, note: &str, arena: Option<&[u8]>) -> RgbImage {
     let floor = FloorPlane::of_camera(&rig.depth);
     let zoom = (PANEL / depth.height.max(1)).max(1);
-    let mut img = frame_picture(depth, &rig.depth.intrinsics, &floor).upscale(zoom);
+    let mut img = frame_picture(depth, &rig.depth.intrinsics, &floor);
+    if let Some(arena) = arena {
+        outline(&mut img, arena, depth.width, (0, 0));
+    }
+    let mut img = img.upscale(zoom);
     caption(&mut img, note);
     img
+}
+
+/// Paints, in `img` (showing the depth image from pixel `origin` on), the pixels of `arena`
+/// (1 = inside, `width` pixels a row) that have a neighbour outside it.
+fn outline(img: &mut RgbImage, arena: &[u8], width: u32, origin: (u32, u32)) {
+    let width = width as usize;
+    if width == 0 {
+        return;
+    }
+    let height = arena.len() / width;
+    let inside = |x: usize, y: usize| arena.get(y * width + x).is_some_and(|&m| m != 0);
+    for y in 0..img.height {
+        for x in 0..img.width {
+            let (ax, ay) = ((origin.0 + x) as usize, (origin.1 + y) as usize);
+            if ax >= width || ay >= height || !inside(ax, ay) {
+                continue;
+            }
+            let edge = ax == 0
+                || ay == 0
+                || ax + 1 == width
+                || ay + 1 == height
+                || !inside(ax - 1, ay)
+                || !inside(ax + 1, ay)
+                || !inside(ax, ay - 1)
+                || !inside(ax, ay + 1);
+            if edge {
+                img.put(i64::from(x), i64::from(y), ARENA_OUTLINE);
+            }
+        }
+    }
 }
 
 /// The depth frame around the mouse, magnified 4 times, coloured by height above the floor
 /// (the world's `z = 0`: the rig's, or the one fitted to a recording without a calibration),
 /// with the skeleton.
-fn top_panel(rig: &Rig, frame: &DepthFrame, joints: &[Option<Point3<f64>>; JOINT_COUNT]) -> RgbImage {
+fn top_panel(
+    rig: &Rig,
+    frame: &DepthFrame,
+    joints: &[Option<Point3<f64>>; JOINT_COUNT],
+    arena: Option<&[u8]>,
+) -> RgbImage {
     let projected: Vec<_> = joints
         .iter()
         .flatten()
@@ -92,7 +146,11 @@ fn top_panel(rig: &Rig, frame: &DepthFrame, joints: &[Option<Point3<f64>>; JOINT
         height: h,
     };
     let floor = FloorPlane::of_camera(&rig.depth);
-    let mut img = height_picture(&crop, region, &rig.depth.intrinsics, &floor).upscale(zoom);
+    let mut img = height_picture(&crop, region, &rig.depth.intrinsics, &floor);
+    if let Some(arena) = arena {
+        outline(&mut img, arena, frame.width, (x0, y0));
+    }
+    let mut img = img.upscale(zoom);
     crate::core::image::draw_joints(
         &mut img,
         &rig.depth,

@@ -7,7 +7,10 @@
 //!
 //! The tail tip then moves to the far end of the segmented tail ([`TailEnd`]): few training
 //! pixels lie on the thin tail, so its votes are the loosest of all, while the end of the
-//! segmented tail is where the tip is, whenever the tail was segmented to its end.
+//! segmented tail is where the tip is, whenever the tail was segmented to its end. Under
+//! either orientation ([`BodyEstimator::estimate_oriented`], what the pipeline runs), a joint
+//! the votes put off the mouse ([`OFF_MOUSE_MM`] from every pixel of it) is not taken for a
+//! seen one: the tail tip is then withdrawn (no tail seen there), any other joint scored low.
 //!
 //! Buffers live in the estimator and are reused, so estimating a frame allocates nothing once
 //! the first frame has sized them.
@@ -92,6 +95,8 @@ pub struct BodyEstimator {
     points: Vec<Vector3<f32>>,
     router: Router,
     tail_end: TailEnd,
+    /// The mouse's surface points (camera frame) of the frame being judged ([`Self::judge_placement`]).
+    surface: Vec<Vector3<f32>>,
 }
 
 /// Runs pixels down the trees: the trees in their packed form, and buffers kept between
@@ -150,6 +155,7 @@ impl BodyEstimator {
             points: Vec::new(),
             router,
             tail_end: TailEnd::default(),
+            surface: Vec::new(),
         }
     }
 
@@ -312,7 +318,8 @@ impl BodyEstimator {
     /// [`orientation::end_of`]) takes the densest of its modes on the head's side of the
     /// centre, a rear joint on the other; where the votes have no mode on that side (the
     /// forest put all of them at the wrong end), the joint is the forest's estimate mirrored
-    /// across the centre, scored by the votes near it.
+    /// across the centre, scored by the votes near it. Last, the joints off the mouse are
+    /// judged ([`judge_placement`]): a tail tip off it is `None`.
     pub fn estimate_oriented(
         &mut self,
         image: &DepthImage,
@@ -372,6 +379,18 @@ impl BodyEstimator {
                 self.follow_tail(image, intrinsics, guesses);
             }
         }
+        self.surface.clear();
+        self.surface.extend(image.on_mouse().map(|(k, d)| {
+            let r = image.region;
+            let pixel = Point2::new(
+                f64::from(r.x0) + (k % r.width as usize) as f64,
+                f64::from(r.y0) + (k / r.width as usize) as f64,
+            );
+            intrinsics.unproject(&pixel, f64::from(d)).coords.cast::<f32>()
+        }));
+        for guesses in &mut oriented.ahead {
+            judge_placement(&self.surface, guesses);
+        }
         oriented
     }
 
@@ -386,6 +405,38 @@ impl BodyEstimator {
             && let Some(end) = self.tail_end.find(image, intrinsics, base.position_mm, tip.position_mm)
         {
             tip.position_mm = end;
+        }
+    }
+}
+
+/// A joint further than this (mm) from every point of the mouse's surface is not placed by
+/// what the camera saw. On real depth rigs the tail is often not seen at all (3-5 mm thick,
+/// at about 1.9 mm a pixel and 2 mm of noise), yet the forest still votes for a tip behind the
+/// body, on the floor or the wall. Joints inside the body lie within about 10 mm of its
+/// surface.
+pub const OFF_MOUSE_MM: f32 = 15.0;
+
+/// The score, at most, of a joint other than the tail tip that lies off the mouse.
+pub const OFF_MOUSE_SCORE: f32 = 0.05;
+
+/// Withdraws what the evidence cannot place (see [`OFF_MOUSE_MM`]): the tail tip off the
+/// mouse is not reported (no tail is seen there), and any other joint off it keeps its place
+/// (the skeleton needs it) with a score of at most [`OFF_MOUSE_SCORE`]. `surface` holds the
+/// mouse's 3D points in the frame of `guesses`; without any, nothing is judged.
+fn judge_placement(surface: &[Vector3<f32>], guesses: &mut [Option<JointGuess>; BODY_JOINTS]) {
+    if surface.is_empty() {
+        return;
+    }
+    let reach2 = OFF_MOUSE_MM * OFF_MOUSE_MM;
+    for (j, guess) in guesses.iter_mut().enumerate() {
+        let Some(g) = guess else { continue };
+        if surface.iter().any(|p| (p - g.position_mm).norm_squared() <= reach2) {
+            continue;
+        }
+        if j == TAIL_TIP {
+            *guess = None;
+        } else {
+            g.score = g.score.min(OFF_MOUSE_SCORE);
         }
     }
 }

@@ -14,12 +14,22 @@
 //! rearing at the wall stays inside.
 
 use super::SegmentError;
-use super::floor::{FLOOR_MIN_INLIERS, FloorPlane, best_plane, fit_floor};
+use super::activity::Blob;
+use super::floor::{FLOOR_MIN_INLIERS, FloorPlane, best_plane, best_plane_local, fit_floor};
 
 /// The floor region holds at least this share of the readings.
 const MIN_FLOOR_SHARE: f64 = 0.05;
 /// The arena reaches this far (mm on the floor) past its floor region.
 pub const ARENA_MARGIN_MM: f64 = 40.0;
+/// Flat regions besides the largest one weighed against the mouse's whereabouts, at most.
+const MORE_CANDIDATES: usize = 4;
+
+/// Where the mouse can stand: the heights above a floor (mm) at which a reading may be it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Heights {
+    pub min_mm: f64,
+    pub max_mm: f64,
+}
 
 /// The floor and the arena (1 = inside, row-major over the background's region).
 pub(super) struct FloorFit {
@@ -30,8 +40,16 @@ pub(super) struct FloorFit {
 /// Finds the floor and the arena of a background of `width` x `height` readings (mm, 0 = none)
 /// whose rays are `rays`, with a camera of focal length `focal_px`.
 ///
+/// `evidence` holds the mouse-sized things seen in frames of the recording (see
+/// [`super::activity`]). When the largest flat region of the view does not carry all of them
+/// at a mouse's heights (`heights`: a floor beside the arena, a table, the lab's floor below
+/// a raised or sloping arena), other flat regions are tried (planes found from nearby
+/// readings, so that a region a tenth of the view is found too), and the one that carries
+/// the most of them is the arena; the largest one keeps it unless another carries more.
+///
 /// # Errors
 /// No plane facing the camera, or no flat region of it holding one reading in 20.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn find_arena(
     depth: &[f32],
     rays: &[[f32; 2]],
@@ -39,21 +57,12 @@ pub(super) fn find_arena(
     height: usize,
     focal_px: f64,
     tolerance: f64,
+    evidence: &[Blob],
+    heights: Heights,
 ) -> Result<FloorFit, SegmentError> {
     let (plane, held, sampled) = best_plane(depth, rays, tolerance, None)?;
-    let height_of = |i: usize| {
-        let (z, r) = (f64::from(depth[i]), rays[i]);
-        plane
-            .normal
-            .dot(&nalgebra::Vector3::new(f64::from(r[0]), f64::from(r[1]), 1.0))
-            * z
-            + plane.offset_mm
-    };
-    let near_floor: Vec<u8> = (0..depth.len())
-        .map(|i| u8::from(depth[i] > 0.0 && height_of(i).abs() <= tolerance))
-        .collect();
     let valid = depth.iter().filter(|&&z| z > 0.0).count();
-    let region = floor_region(&near_floor, width, height);
+    let region = floor_region(&near_plane(depth, rays, &plane, tolerance), width, height);
     let count = region.iter().filter(|&&v| v != 0).count();
     if (count as f64) < MIN_FLOOR_SHARE * valid as f64 {
         return Err(SegmentError::Floor {
@@ -69,18 +78,115 @@ pub(super) fn find_arena(
     } else {
         fit_floor(depth, rays, tolerance, Some(&region))?
     };
+    let first = FloorFit {
+        arena: arena_of(depth, &region, width, height, focal_px),
+        floor,
+    };
+    if evidence.is_empty() {
+        return Ok(first);
+    }
+    let carried = |fit: &FloorFit| evidence.iter().filter(|b| stands_on(b, fit, rays, heights)).count();
+    let mut best = (carried(&first), first);
+    if best.0 == evidence.len() {
+        return Ok(best.1);
+    }
+    // Other flat regions: planes of the readings not yet explained, one after the other.
+    let mut left: Vec<u8> = near_plane(depth, rays, &plane, tolerance)
+        .iter()
+        .zip(depth)
+        .map(|(&near, &z)| u8::from(near == 0 && z > 0.0))
+        .collect();
+    for round in 0..MORE_CANDIDATES {
+        let remaining = left.iter().filter(|&&v| v != 0).count();
+        if (remaining as f64) < MIN_FLOOR_SHARE * valid as f64 {
+            break;
+        }
+        let Ok(plane) = best_plane_local(depth, rays, width, tolerance, &left, round as u64) else {
+            break;
+        };
+        let near = near_plane(depth, rays, &plane, tolerance);
+        for (l, &n) in left.iter_mut().zip(&near) {
+            if n != 0 {
+                *l = 0;
+            }
+        }
+        let region = floor_region(&near, width, height);
+        let count = region.iter().filter(|&&v| v != 0).count();
+        if (count as f64) < MIN_FLOOR_SHARE * valid as f64 {
+            continue;
+        }
+        let Ok(floor) = fit_floor(depth, rays, tolerance, Some(&region)) else {
+            continue;
+        };
+        let fit = FloorFit {
+            arena: arena_of(depth, &region, width, height, focal_px),
+            floor,
+        };
+        let n = carried(&fit);
+        if n > best.0 {
+            best = (n, fit);
+        }
+    }
+    Ok(best.1)
+}
+
+/// 1 where a reading lies within `tolerance` of `plane`.
+fn near_plane(depth: &[f32], rays: &[[f32; 2]], plane: &FloorPlane, tolerance: f64) -> Vec<u8> {
+    depth
+        .iter()
+        .zip(rays)
+        .map(|(&z, r)| {
+            let h = plane
+                .normal
+                .dot(&nalgebra::Vector3::new(f64::from(r[0]), f64::from(r[1]), 1.0))
+                * f64::from(z)
+                + plane.offset_mm;
+            u8::from(z > 0.0 && h.abs() <= tolerance)
+        })
+        .collect()
+}
+
+/// Whether most of `blob` lies inside the arena of `fit`, at a mouse's heights above its floor.
+fn stands_on(blob: &Blob, fit: &FloorFit, rays: &[[f32; 2]], heights: Heights) -> bool {
+    let on = blob
+        .pixels
+        .iter()
+        .filter(|&&(i, z)| {
+            let i = i as usize;
+            let (Some(&inside), Some(r)) = (fit.arena.get(i), rays.get(i)) else {
+                return false;
+            };
+            let h = fit
+                .floor
+                .normal
+                .dot(&nalgebra::Vector3::new(f64::from(r[0]), f64::from(r[1]), 1.0))
+                * f64::from(z)
+                + fit.floor.offset_mm;
+            inside != 0 && (heights.min_mm..=heights.max_mm).contains(&h)
+        })
+        .count();
+    2 * on >= blob.pixels.len()
+}
+
+/// The arena of a floor region: its holes filled (whatever stands on the floor), widened by
+/// [`ARENA_MARGIN_MM`] at the floor's median depth.
+fn arena_of(depth: &[f32], region: &[u8], width: usize, height: usize, focal_px: f64) -> Vec<u8> {
     let mut floor_depths: Vec<f32> = depth
         .iter()
-        .zip(&region)
+        .zip(region)
         .filter(|&(_, &m)| m != 0)
         .map(|(&z, _)| z)
         .collect();
-    let mid = floor_depths.len() / 2;
-    let floor_depth = f64::from(*floor_depths.select_nth_unstable_by(mid, f32::total_cmp).1);
+    let floor_depth = if floor_depths.is_empty() {
+        1.0
+    } else {
+        let mid = floor_depths.len() / 2;
+        f64::from(*floor_depths.select_nth_unstable_by(mid, f32::total_cmp).1)
+    };
     let margin_px = (ARENA_MARGIN_MM * focal_px / floor_depth.max(1.0)).ceil() as usize;
-    let mut arena = fill_holes(&region, width, height);
+    let mut arena = fill_holes(region, width, height);
     widen(&mut arena, width, height, margin_px);
-    Ok(FloorFit { floor, arena })
+    arena
 }
 
 /// The floor region among the connected regions of `mask`: the largest solid one, else the

@@ -4,7 +4,8 @@
 //! with the rays of its pixels, the arena and the floor plane fitted inside it (`arena`), and
 //! refreshed from frames without a mouse.
 
-use super::arena::{FloorFit, find_arena};
+use super::activity::{ArenaCheck, Blob, mouse_blobs};
+use super::arena::{FloorFit, Heights, find_arena};
 use super::floor::fit_floor;
 use super::{FloorPlane, SegmentError, SegmenterConfig, check_buffer, check_frame};
 use crate::core::frame::DepthFrame;
@@ -30,6 +31,9 @@ pub struct Background {
     pub(super) refit_every: usize,
     pub(super) step_mm: f32,
     pub(super) floor_tolerance_mm: f32,
+    /// What the frames the model was made from say about the arena (none for a model made
+    /// from one image of the empty cage).
+    check: Option<ArenaCheck>,
 }
 
 /// Of a pixel's readings, those within this (mm) of its far readings make its model.
@@ -97,7 +101,17 @@ impl Background {
                 f32::from(kept[kept.len() / 2])
             })
             .collect();
-        Self::from_depth_in(&model, region, intrinsics, config, arena)
+        let width = region.width as usize;
+        let focal = (intrinsics.fx, intrinsics.fy);
+        let min_area = f64::from(config.min_area_mm2);
+        let blobs: Vec<Blob> = frames
+            .iter()
+            .enumerate()
+            .flat_map(|(k, f)| mouse_blobs(k, &f.data, &model, width, focal, min_area))
+            .collect();
+        let mut background = Self::build(&model, region, intrinsics, config, arena, &blobs)?;
+        background.check = Some(ArenaCheck::of(&blobs, frames.len(), &background.arena));
+        Ok(background)
     }
 
     /// A background from one depth image of the empty cage over `region` of the camera's image
@@ -131,6 +145,19 @@ impl Background {
         config: &SegmenterConfig,
         arena: Option<&[u8]>,
     ) -> Result<Self, SegmentError> {
+        Self::build(depth, region, intrinsics, config, arena, &[])
+    }
+
+    /// [`Background::from_depth_in`], the arena chosen with the help of the mouse-sized
+    /// things seen in the recording's frames when it is not given (see `find_arena`).
+    fn build(
+        depth: &[f32],
+        region: Region,
+        intrinsics: &Intrinsics,
+        config: &SegmenterConfig,
+        arena: Option<&[u8]>,
+        evidence: &[Blob],
+    ) -> Result<Self, SegmentError> {
         config.validate()?;
         check_intrinsics(intrinsics)?;
         check_buffer(depth.len(), region, Region::full(intrinsics))?;
@@ -162,6 +189,11 @@ impl Background {
                 region.height as usize,
                 intrinsics.fx,
                 tolerance,
+                evidence,
+                Heights {
+                    min_mm: f64::from(config.min_height_mm),
+                    max_mm: f64::from(config.max_height_mm),
+                },
             )?,
         };
         Ok(Self {
@@ -175,7 +207,14 @@ impl Background {
             refit_every: config.background_frames,
             step_mm: config.background_step_mm,
             floor_tolerance_mm: config.floor_tolerance_mm,
+            check: None,
         })
+    }
+
+    /// What the frames the model was made from say about the arena: in how many something of
+    /// a mouse's size stood inside it and outside it. `None` for a model made from one image.
+    pub fn arena_check(&self) -> Option<ArenaCheck> {
+        self.check
     }
 
     /// The part of the image the model covers.

@@ -226,6 +226,96 @@ pub(super) fn best_plane(
     Ok((plane, count, points.len()))
 }
 
+/// Of a local hypothesis's three readings, the second and third lie within this many pixels
+/// of the first (in both directions).
+const LOCAL_WINDOW_PX: usize = 20;
+
+/// Like [`best_plane`] over the readings inside `mask` (1 = inside) of an image `width`
+/// pixels wide, with each hypothesis drawn from three readings near each other, so that a
+/// plane holding a small share of them (an arena a tenth of the view) is drawn about as
+/// often as its share, rather than its share cubed. `round` varies the seed.
+///
+/// # Errors
+/// Fewer than three readings, or no plane facing the camera.
+pub(super) fn best_plane_local(
+    depth: &[f32],
+    rays: &[[f32; 2]],
+    width: usize,
+    tolerance: f64,
+    mask: &[u8],
+    round: u64,
+) -> Result<FloorPlane, SegmentError> {
+    let inside = |i: usize| mask.get(i).is_some_and(|&v| v != 0) && depth.get(i).is_some_and(|&z| z > 0.0);
+    let candidates: Vec<usize> = (0..depth.len()).filter(|&i| inside(i)).collect();
+    if candidates.len() < 3 || width == 0 {
+        return Err(SegmentError::Floor {
+            reason: format!("only {} pixels have a reading", candidates.len()),
+        });
+    }
+    let point = |i: usize| {
+        let r = rays[i];
+        Vector3::new(f64::from(r[0]), f64::from(r[1]), 1.0) * f64::from(depth[i])
+    };
+    let stride = candidates.len().div_ceil(FLOOR_SAMPLES).max(1);
+    let points: Vec<Vector3<f64>> = candidates.iter().step_by(stride).map(|&i| point(i)).collect();
+    let score_stride = points.len().div_ceil(FLOOR_SCORE_SAMPLES).max(1);
+    let scoring: Vec<Vector3<f64>> = points.iter().step_by(score_stride).copied().collect();
+    let min_facing = FLOOR_MAX_TILT_DEG.to_radians().cos();
+    let sight = points.iter().map(|p| p.normalize()).sum::<Vector3<f64>>().normalize();
+    let faces_camera = |p: &FloorPlane| -p.normal.dot(&sight) >= min_facing && p.offset_mm >= MIN_FLOOR_DISTANCE_MM;
+    let inliers = |plane: &FloorPlane, pts: &[Vector3<f64>]| {
+        pts.iter()
+            .filter(|p| (plane.normal.dot(p) + plane.offset_mm).abs() <= tolerance)
+            .count()
+    };
+    let height = depth.len() / width;
+    let mut rng = ChaCha8Rng::seed_from_u64(0x10CA_1000 + round);
+    let mut best: Option<(usize, FloorPlane)> = None;
+    for _ in 0..2 * RANSAC_ITERATIONS {
+        let first = candidates[rng.gen_range(0..candidates.len())];
+        let (x, y) = (first % width, first / width);
+        let mut near = || {
+            let nx = rng.gen_range(x.saturating_sub(LOCAL_WINDOW_PX)..(x + LOCAL_WINDOW_PX + 1).min(width));
+            let ny = rng.gen_range(y.saturating_sub(LOCAL_WINDOW_PX)..(y + LOCAL_WINDOW_PX + 1).min(height));
+            let i = ny * width + nx;
+            inside(i).then(|| point(i))
+        };
+        let (Some(b), Some(c)) = (near(), near()) else {
+            continue;
+        };
+        let a = point(first);
+        let Some(plane) = oriented((b - a).cross(&(c - a)), a) else {
+            continue;
+        };
+        if !faces_camera(&plane) {
+            continue;
+        }
+        let score = inliers(&plane, &scoring);
+        if best.is_none_or(|(s, _)| score > s) {
+            best = Some((score, plane));
+        }
+    }
+    let Some((_, mut plane)) = best else {
+        return Err(SegmentError::Floor {
+            reason: "no plane facing the camera".to_owned(),
+        });
+    };
+    let mut support = Vec::with_capacity(points.len());
+    for _ in 0..3 {
+        support.clear();
+        support.extend(
+            points
+                .iter()
+                .filter(|p| (plane.normal.dot(p) + plane.offset_mm).abs() <= tolerance),
+        );
+        match plane_through(&support) {
+            Some(p) if faces_camera(&p) => plane = p,
+            _ => break,
+        }
+    }
+    Ok(plane)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

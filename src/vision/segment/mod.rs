@@ -39,12 +39,14 @@
 //! This file holds the front, [`Segmenter`], with its errors, the buffers it reuses and the
 //! checks of what it is given. The rest is one job a file: `config` (the settings, and a
 //! segmenter built from them), `background` (the empty-cage model), `arena` (where the mouse
-//! can be: the largest flat region of the floor plane, or a given mask), `floor` (the floor
+//! can be: the flat region the mouse is seen on, or a given mask), `activity` (the
+//! mouse-sized things that moved in the frames the background is made of), `floor` (the floor
 //! plane fitted inside it), `mask` (steps 1 to 4: the strong mask, the densest tiles, depth jumps, the
 //! floor's noise, the largest component and its growth) and `mouse` (steps 5 and 6: the mask
 //! tidied inside its box, and the [`Mouse`] with its figures); `picture` colours a depth
 //! image by height above the fitted floor for every picture the program draws.
 
+mod activity;
 mod arena;
 mod background;
 mod config;
@@ -53,6 +55,7 @@ mod mask;
 mod mouse;
 mod picture;
 
+pub use activity::{ArenaCheck, MOUSE_MAX_AREA_MM2};
 pub use arena::ARENA_MARGIN_MM;
 pub use background::Background;
 pub use config::SegmenterConfig;
