@@ -91,14 +91,15 @@ fn options(session: &Path, out: &Path) -> ReplayOptions {
     crate::util::replay_options(session, out, 2)
 }
 
-/// Per row of `poses.csv`: its status and the mean z of joints 1-12 when it has them.
+/// Per row of `poses.csv`: its status and the mean z of joints 1-12 (the tail tip left out)
+/// when it has them.
 fn rows(out: &Path) -> Vec<(String, Option<f64>)> {
     let text = std::fs::read_to_string(out.join("poses.csv")).unwrap();
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
     let status = col("status");
-    let z_cols: Vec<usize> = Joint::MAIN_BODY
+    let z_cols: Vec<usize> = BODY_BUT_TAIL_TIP
         .iter()
         .map(|j| col(&format!("{}_z", j.name())))
         .collect();
@@ -113,8 +114,23 @@ fn rows(out: &Path) -> Vec<(String, Option<f64>)> {
 }
 
 fn true_mean_z(m: &MouseInstance) -> f64 {
-    Joint::MAIN_BODY.iter().map(|&j| m.joint(j).z).sum::<f64>() / Joint::MAIN_BODY.len() as f64
+    BODY_BUT_TAIL_TIP.iter().map(|&j| m.joint(j).z).sum::<f64>() / BODY_BUT_TAIL_TIP.len() as f64
 }
+
+/// Joints 1-12 but the tail tip, which is unknown where no tail is seen.
+const BODY_BUT_TAIL_TIP: [Joint; 11] = [
+    Joint::Snout,
+    Joint::Head,
+    Joint::Neck,
+    Joint::Withers,
+    Joint::MidBack,
+    Joint::Rump,
+    Joint::TailBase,
+    Joint::LeftEar,
+    Joint::RightEar,
+    Joint::LeftHip,
+    Joint::RightHip,
+];
 
 /// Checks the replay's camera height and the mouse's heights against the truth; returns the
 /// mean absolute error of the joints' mean height (mm).
