@@ -264,6 +264,18 @@ fn the_endpoints_answer_while_the_daemon_runs_and_the_page_renders_in_chromium()
         assert!(before.keys().any(|(n, _)| n == family), "no {family} in\n{text}");
     }
     assert_eq!(value(&before, "mousepose_camera_up", &[("camera", "color")]), 1.0);
+    // Counters an alert takes the increase of are there from the start, at 0 until the
+    // first event (a series that appears with its first increment hides that increment).
+    for camera in ["depth", "color"] {
+        for (name, reason) in [
+            ("mousepose_frames_dropped_total", "queue_full"),
+            ("mousepose_frames_lost_before_capture_total", "camera_gap"),
+            ("mousepose_frames_not_recorded_total", "disk_low"),
+        ] {
+            value(&before, name, &[("camera", camera), ("reason", reason)]);
+        }
+    }
+    value(&before, "mousepose_poses_total", &[("status", "no_background")]);
     std::thread::sleep(Duration::from_secs(2));
     let after = parse_exposition(&String::from_utf8(fetch(address, "/metrics", None).body).unwrap()).unwrap();
     for camera in ["depth", "color"] {
@@ -528,4 +540,38 @@ fn a_killed_colour_camera_is_away_in_the_status_within_the_configured_stall_time
         (0.4..1.5).contains(&silent),
         "taken for gone after {silent} s of silence, with a 0.4 s stall time"
     );
+}
+
+/// Idle connections cannot use up the daemon's descriptors: 300 clients that connect and
+/// never ask are closed after the idle time-out, `/status` still answers while they are open,
+/// and the daemon's open descriptors come back to what they were.
+#[test]
+fn idle_connections_are_closed_and_do_not_use_up_the_descriptors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let port = free_port();
+    let address: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    let rig = http_rig(tmp.path(), false, &format!("address = \"{address}\"\n"));
+    let child = daemon(&rig, None);
+    wait_status(address, Duration::from_secs(60), |s| s["poses"].as_u64() > Some(5));
+    let descriptors = || std::fs::read_dir(format!("/proc/{}/fd", child.0.id())).unwrap().count();
+    let before = descriptors();
+    let idle: Vec<std::net::TcpStream> = (0..300)
+        .map(|_| std::net::TcpStream::connect(address).unwrap())
+        .collect();
+    // Answered while the idle clients hold their connections (after them in the queue at
+    // worst: within the idle time-out).
+    let answered = get(address, "/status", None, Duration::from_secs(15)).expect("/status answers");
+    assert_eq!(answered.status, 200);
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while descriptors() > before + 20 {
+        assert!(
+            Instant::now() < deadline,
+            "{} descriptors open with 300 idle clients, {before} before them",
+            descriptors()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    drop(idle);
+    let (status, _, err) = terminate(child, Duration::from_secs(30));
+    assert!(status.success(), "{status}: {err}");
 }

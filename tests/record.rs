@@ -216,7 +216,7 @@ fn a_recording_rides_out_a_colour_camera_killed_and_started_again() {
         let (config, out) = (config(&text), out.clone());
         std::thread::Builder::new()
             .name("record".into())
-            .spawn(move || record(&config, &out, Some(10.0), false, &Shutdown::default()))
+            .spawn(move || record(&config, &out, Some(10.0), false, &Shutdown::default()).map_err(|e| e.to_string()))
             .unwrap()
     };
     std::thread::sleep(Duration::from_secs(3));

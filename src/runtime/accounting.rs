@@ -32,6 +32,13 @@ pub struct CameraCounters {
     pub lost: Mutex<BTreeMap<String, u64>>,
 }
 
+/// The reasons a frame is dropped, lost before capture or not recorded that any rig can meet;
+/// the metrics show each from the start at 0, so that an alert on its increase sees the first
+/// one. (Sources add reasons of their own, such as damaged buffers, as they meet them.)
+pub const DROPPED_REASONS: [&str; 3] = ["queue_full", "seq_out_of_order", "time_out_of_order"];
+pub const LOST_REASONS: [&str; 2] = ["camera_gap", "wrong_size"];
+pub const NOT_RECORDED_REASONS: [&str; 3] = ["queue_full", "disk_low", "write_error"];
+
 /// Adds `n` to `reason`'s count (nothing for 0).
 pub fn bump(map: &Mutex<BTreeMap<String, u64>>, reason: &str, n: u64) {
     if n > 0 {

@@ -3,9 +3,11 @@
 //! name starts with `mousepose_`; labels are few-valued (camera, reason, stage, edge, status),
 //! never a path, a message or a frame number. `docs/metrics.md` lists them.
 
+use crate::runtime::accounting::{CameraSummary, DROPPED_REASONS, LOST_REASONS, NOT_RECORDED_REASONS};
 use crate::runtime::capture::clock::{monotonic_ns, process_cpu_s, process_resident_bytes};
 use crate::runtime::capture::supervise::{CameraState, lock};
 use crate::runtime::pipeline::Histogram;
+use crate::runtime::stages::PoseStatus;
 use crate::runtime::watch::Watch;
 use prometheus_client::collector::Collector;
 use prometheus_client::encoding::{DescriptorEncoder, EncodeCounterValue, EncodeMetric as _, NoLabelSet};
@@ -13,6 +15,7 @@ use prometheus_client::metrics::MetricType;
 use prometheus_client::metrics::counter::ConstCounter;
 use prometheus_client::metrics::gauge::ConstGauge;
 use prometheus_client::registry::{Registry, Unit};
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
@@ -95,23 +98,26 @@ impl Collector for WatchCollector {
         let w = &self.0;
         let mut f = Families(encoder);
         let cameras = w.parts.pipeline.cameras();
-        let per_camera = |get: &dyn Fn(&crate::runtime::accounting::CameraSummary) -> u64| -> Vec<(Labels, u64)> {
+        let per_camera = |get: &dyn Fn(&CameraSummary) -> u64| -> Vec<(Labels, u64)> {
             cameras
                 .iter()
                 .map(|(name, c)| (label("camera", name), get(c)))
                 .collect()
         };
-        let by_reason =
-            |get: &dyn Fn(&crate::runtime::accounting::CameraSummary) -> &std::collections::BTreeMap<String, u64>| {
-                cameras
-                    .iter()
-                    .flat_map(|(name, c)| {
-                        get(c)
-                            .iter()
-                            .map(|(reason, n)| (labels2("camera", name, "reason", reason), *n))
-                    })
-                    .collect::<Vec<_>>()
-            };
+        // Every known reason from the start (at 0), then any other the sources met.
+        let by_reason = |get: &dyn Fn(&CameraSummary) -> &BTreeMap<String, u64>, known: &[&str]| {
+            cameras
+                .iter()
+                .flat_map(|(name, c)| {
+                    let mut counts: BTreeMap<&str, u64> = known.iter().map(|&r| (r, 0)).collect();
+                    counts.extend(get(c).iter().map(|(r, n)| (r.as_str(), *n)));
+                    counts
+                        .into_iter()
+                        .map(|(reason, n)| (labels2("camera", name, "reason", reason), n))
+                        .collect::<Vec<_>>()
+                })
+                .collect::<Vec<_>>()
+        };
         f.counter(
             "mousepose_frames_captured",
             "Frames the camera delivered.",
@@ -134,13 +140,13 @@ impl Collector for WatchCollector {
             "mousepose_frames_dropped",
             "Frames delivered but not processed, by reason.",
             None,
-            &by_reason(&|c| &c.dropped),
+            &by_reason(&|c| &c.dropped, &DROPPED_REASONS),
         )?;
         f.counter(
             "mousepose_frames_lost_before_capture",
             "Frames the camera never delivered (gaps in its frame counter, damaged buffers), by reason.",
             None,
-            &by_reason(&|c| &c.lost_before_capture),
+            &by_reason(&|c| &c.lost_before_capture, &LOST_REASONS),
         )?;
         f.counter(
             "mousepose_frames_recorded",
@@ -152,7 +158,7 @@ impl Collector for WatchCollector {
             "mousepose_frames_not_recorded",
             "Frames delivered but not recorded, by reason.",
             None,
-            &by_reason(&|c| &c.not_recorded),
+            &by_reason(&|c| &c.not_recorded, &NOT_RECORDED_REASONS),
         )?;
 
         let now_ns = monotonic_ns();
@@ -246,10 +252,13 @@ impl Collector for WatchCollector {
             "mousepose_poses",
             "Poses made, by status (ok, no_mouse, ...).",
             None,
-            &live
-                .statuses
+            &PoseStatus::ALL
                 .iter()
-                .map(|(status, n)| (label("status", status), *n))
+                .map(|s| (s.name(), 0))
+                .chain(live.statuses.iter().map(|(status, n)| (*status, *n)))
+                .collect::<BTreeMap<&str, u64>>()
+                .into_iter()
+                .map(|(status, n)| (label("status", status), n))
                 .collect::<Vec<_>>(),
         )?;
         f.counter(

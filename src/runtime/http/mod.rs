@@ -4,13 +4,15 @@
 //! (`/live/depth.png`, `/live/bottom.png`).
 //!
 //! It only reads: every handler reads the [`Watch`] (counters and the latest snapshot), never
-//! waits on a stage, and frames never cross it. Requests are bounded: at most
+//! waits on a stage, and frames never cross it. Connections are bounded ([`conn`]: at most
+//! 256 open, each closed after 6 s idle) and so are requests: at most
 //! [`MAX_IN_FLIGHT`] at once (more get 503), each done within [`REQUEST_TIMEOUT`], pictures
 //! drawn at most five times a second whatever the number of clients, and the server's threads
 //! run at a lower priority than the pipeline's. A non-loopback address needs `allow_remote` in
 //! the config and then a bearer token on every request.
 
 pub mod client;
+pub mod conn;
 pub mod metrics;
 
 use crate::core::geometry::Rig;
@@ -179,7 +181,7 @@ fn serve(listener: std::net::TcpListener, state: Arc<Served>, stop: tokio::sync:
     };
     let app = router(state);
     let result = runtime.block_on(async move {
-        let listener = tokio::net::TcpListener::from_std(listener)?;
+        let listener = conn::Bounded::new(tokio::net::TcpListener::from_std(listener)?);
         axum::serve(listener, app)
             .with_graceful_shutdown(async move {
                 drop(stop.await);

@@ -41,11 +41,12 @@ impl PoseStatus {
         }
     }
 
+    /// Every status.
+    pub const ALL: [PoseStatus; 3] = [PoseStatus::Ok, PoseStatus::NoMouse, PoseStatus::NoBackground];
+
     /// The status a value of the `status` column stands for.
     pub fn from_name(name: &str) -> Option<Self> {
-        [PoseStatus::Ok, PoseStatus::NoMouse, PoseStatus::NoBackground]
-            .into_iter()
-            .find(|s| s.name() == name)
+        Self::ALL.into_iter().find(|s| s.name() == name)
     }
 }
 
