@@ -37,8 +37,9 @@ const MAX_CONFIG_BYTES: u64 = 1 << 20;
 struct RawConfig {
     depth: RawDepth,
     color: Option<RawColor>,
-    #[serde(default)]
-    aravis: RawAravis,
+    /// Read by earlier versions and never used: an empty table is taken (with a warning), a
+    /// list of interfaces refused.
+    aravis: Option<RawAravis>,
     #[serde(default)]
     sync: RawSync,
     #[serde(default)]
@@ -80,18 +81,46 @@ struct RawColor {
     address: Option<String>,
     serial: Option<String>,
     device: Option<PathBuf>,
-    #[serde(default = "default_pixel_format")]
-    pixel_format: String,
+    pixel_format: Option<String>,
     width: Option<u32>,
     height: Option<u32>,
     region: Option<[u32; 4]>,
     exposure_us: Option<f64>,
     gain_db: Option<f64>,
     fps: Option<f64>,
-    #[serde(default = "default_trigger")]
-    trigger: String,
-    #[serde(default = "default_buffers")]
-    buffers: usize,
+    trigger: Option<String>,
+    buffers: Option<usize>,
+}
+
+impl RawColor {
+    /// The keys given that belong to the other backend than `backend`.
+    fn foreign_keys(&self, backend: &str) -> Vec<&'static str> {
+        let aravis_only = [
+            ("address", self.address.is_some()),
+            ("serial", self.serial.is_some()),
+            ("pixel_format", self.pixel_format.is_some()),
+            ("region", self.region.is_some()),
+            ("exposure_us", self.exposure_us.is_some()),
+            ("gain_db", self.gain_db.is_some()),
+            ("trigger", self.trigger.is_some()),
+            ("buffers", self.buffers.is_some()),
+        ];
+        let v4l2_only = [
+            ("device", self.device.is_some()),
+            ("width", self.width.is_some()),
+            ("height", self.height.is_some()),
+        ];
+        let foreign: &[(&'static str, bool)] = match backend {
+            "aravis" => &v4l2_only,
+            "v4l2" => &aravis_only,
+            _ => &[],
+        };
+        foreign
+            .iter()
+            .filter(|(_, given)| *given)
+            .map(|(key, _)| *key)
+            .collect()
+    }
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -181,6 +210,13 @@ fn default_fps() -> f64 {
 fn default_pixel_format() -> String {
     "bayer_rg8".to_owned()
 }
+/// The largest sensor side a colour region may reach, pixels.
+const MAX_SENSOR_PX: u64 = 16_384;
+/// The longest exposure, µs.
+const MAX_EXPOSURE_US: f64 = 10_000_000.0;
+/// The highest analogue gain a GenICam camera offers, dB (Basler's and FLIR's reach 24-48).
+const MAX_GAIN_DB: f64 = 48.0;
+
 fn default_trigger() -> String {
     "free_run".to_owned()
 }
@@ -285,8 +321,6 @@ pub struct Config {
     pub path: PathBuf,
     pub depth: DepthCamera,
     pub color: Option<ColorCamera>,
-    /// Network interfaces Aravis may discover cameras on (none: no discovery at all).
-    pub aravis_interfaces: Vec<String>,
     pub sync: crate::runtime::sync::SyncConfig,
     /// Edges out of the capture threads.
     pub capture_edge: EdgeConfig,
@@ -529,12 +563,20 @@ impl Checker<'_> {
             first_wait: secs(250.0_f64.min(max_wait_ms)),
             max_wait: secs(max_wait_ms),
         };
+        if let Some(aravis) = raw.aravis {
+            if !aravis.interfaces.is_empty() {
+                return Err(self.bad(
+                    "aravis.interfaces",
+                    "is not used: mousepose never looks for GigE Vision cameras by broadcast; it opens the [color] address (remove the [aravis] table)",
+                ));
+            }
+            tracing::warn!(config = ?self.path, "the [aravis] table is not used (cameras are opened by their address): remove it");
+        }
         let http = self.http(raw.http)?;
         Ok(Config {
             path: self.path.to_owned(),
             depth,
             color,
-            aravis_interfaces: raw.aravis.interfaces,
             sync,
             capture_edge,
             stage_edge,
@@ -608,6 +650,13 @@ impl Checker<'_> {
 
     fn color(&self, c: RawColor) -> Result<ColorCamera, ConfigError> {
         let fps = c.fps.map(|f| self.positive("color.fps", f, 1000.0)).transpose()?;
+        if let Some(key) = c.foreign_keys(&c.backend).first() {
+            let other = if c.backend == "aravis" { "v4l2" } else { "aravis" };
+            return Err(self.bad(
+                &format!("color.{key}"),
+                format!("is a setting of the {other} backend, not of {:?}", c.backend),
+            ));
+        }
         match c.backend.as_str() {
             "aravis" => {
                 if c.address.is_none() && c.serial.is_none() {
@@ -618,38 +667,65 @@ impl Checker<'_> {
                         return Err(self.bad("color.address", format!("must be an IPv4 address, not {a:?}")));
                     }
                 }
+                let pixel_format_name = c.pixel_format.unwrap_or_else(default_pixel_format);
                 let pixel_format = PixelFormat::ALL
                     .into_iter()
-                    .find(|f| f.name() == c.pixel_format)
+                    .find(|f| f.name() == pixel_format_name)
                     .ok_or_else(|| {
                         let names: Vec<&str> = PixelFormat::ALL.iter().map(|f| f.name()).collect();
                         self.bad(
                             "color.pixel_format",
-                            format!("must be one of {}, not {:?}", names.join(", "), c.pixel_format),
+                            format!("must be one of {}, not {pixel_format_name:?}", names.join(", ")),
                         )
                     })?;
-                if let Some([_, _, w, h]) = c.region {
+                if let Some([x, y, w, h]) = c.region {
                     if w == 0 || h == 0 {
                         return Err(self.bad("color.region", "must have a width and height above 0"));
                     }
+                    if u64::from(x) + u64::from(w) > MAX_SENSOR_PX || u64::from(y) + u64::from(h) > MAX_SENSOR_PX {
+                        return Err(self.bad(
+                            "color.region",
+                            format!("must lie within {MAX_SENSOR_PX}x{MAX_SENSOR_PX} pixels, not [{x}, {y}, {w}, {h}]"),
+                        ));
+                    }
                 }
-                let trigger = match c.trigger.as_str() {
+                let trigger = c.trigger.unwrap_or_else(default_trigger);
+                let trigger = match trigger.as_str() {
                     "free_run" => TriggerMode::FreeRun,
                     t => match t.strip_prefix("line:") {
-                        Some(line) if !line.is_empty() => TriggerMode::Line(line.to_owned()),
+                        Some(line)
+                            if !line.is_empty()
+                                && line.len() <= 32
+                                && line.chars().all(|ch| ch.is_ascii_alphanumeric() || ch == '_') =>
+                        {
+                            TriggerMode::Line(line.to_owned())
+                        }
                         _ => {
                             return Err(self.bad(
                                 "color.trigger",
-                                format!("must be \"free_run\" or \"line:<LINE>\" (e.g. \"line:Line1\"), not {t:?}"),
+                                format!(
+                                    "must be \"free_run\" or \"line:<LINE>\" with a GenICam line name of letters, digits and _ (e.g. \"line:Line1\"), not {t:?}"
+                                ),
                             ));
                         }
                     },
                 };
-                if c.exposure_us.is_some_and(|e| !(e.is_finite() && e > 0.0)) {
-                    return Err(self.bad("color.exposure_us", "must be above 0"));
+                if let Some(e) = c.exposure_us {
+                    if !(e.is_finite() && e > 0.0 && e <= MAX_EXPOSURE_US) {
+                        return Err(self.bad(
+                            "color.exposure_us",
+                            format!("must be above 0 and at most {MAX_EXPOSURE_US} (10 s), not {e}"),
+                        ));
+                    }
                 }
-                if !(1..=256).contains(&c.buffers) {
-                    return Err(self.bad("color.buffers", format!("must be from 1 to 256, not {}", c.buffers)));
+                if let Some(g) = c.gain_db {
+                    if !(g.is_finite() && (0.0..=MAX_GAIN_DB).contains(&g)) {
+                        return Err(self.bad("color.gain_db", format!("must be from 0 to {MAX_GAIN_DB} dB, not {g}")));
+                    }
+                }
+                let buffers = c.buffers.unwrap_or_else(default_buffers);
+                if !(1..=256).contains(&buffers) {
+                    return Err(self.bad("color.buffers", format!("must be from 1 to 256, not {buffers}")));
                 }
                 Ok(ColorCamera::Aravis {
                     address: c.address,
@@ -660,17 +736,25 @@ impl Checker<'_> {
                     gain_db: c.gain_db,
                     fps,
                     trigger,
-                    buffers: c.buffers,
+                    buffers,
                 })
             }
             "v4l2" => {
                 let device = c
                     .device
                     .ok_or_else(|| self.bad("color.device", "is needed for a v4l2 camera (e.g. /dev/video0)"))?;
+                let (width, height) = (c.width.unwrap_or(640), c.height.unwrap_or(480));
+                if !(1..=MAX_SENSOR_PX).contains(&u64::from(width)) || !(1..=MAX_SENSOR_PX).contains(&u64::from(height))
+                {
+                    return Err(self.bad(
+                        "color.width",
+                        format!("width and height must be from 1 to {MAX_SENSOR_PX}, not {width}x{height}"),
+                    ));
+                }
                 Ok(ColorCamera::V4l2 {
                     device,
-                    width: c.width.unwrap_or(640),
-                    height: c.height.unwrap_or(480),
+                    width,
+                    height,
                     fps: fps.unwrap_or(30.0),
                 })
             }
@@ -698,6 +782,44 @@ mod tests {
         assert_eq!(c.capture_edge.when_full, WhenFull::DropNewest);
         assert_eq!(c.chunk, std::time::Duration::from_secs(3600));
         assert_eq!(c.reconnect.stall, std::time::Duration::from_secs(2));
+    }
+
+    #[test]
+    fn colour_settings_out_of_range_or_of_the_other_backend_are_refused_by_name() {
+        let base = "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n";
+        let aravis = "[color]\nbackend = \"aravis\"\naddress = \"127.0.0.1\"\n";
+        let v4l2 = "[color]\nbackend = \"v4l2\"\ndevice = \"/dev/video0\"\n";
+        for (table, text, key) in [
+            (aravis, "gain_db = 100.0\n", "color.gain_db"),
+            (aravis, "gain_db = -3.0\n", "color.gain_db"),
+            (aravis, "gain_db = nan\n", "color.gain_db"),
+            (aravis, "exposure_us = 1e9\n", "color.exposure_us"),
+            (aravis, "region = [4294967295, 0, 2, 2]\n", "color.region"),
+            (aravis, "region = [0, 0, 20000, 10]\n", "color.region"),
+            (aravis, "trigger = \"line:Line 1; x\"\n", "color.trigger"),
+            (aravis, "device = \"/dev/video0\"\n", "color.device"),
+            (aravis, "width = 640\n", "color.width"),
+            (v4l2, "address = \"127.0.0.1\"\n", "color.address"),
+            (v4l2, "gain_db = 0.0\n", "color.gain_db"),
+            (v4l2, "width = 0\n", "color.width"),
+            ("[aravis]\ninterfaces = [\"eth0\"]\n", "", "aravis.interfaces"),
+        ] {
+            let e = parse(&format!("{base}{table}{text}")).unwrap_err().to_string();
+            assert!(e.contains(key), "{table}{text}: {e}");
+        }
+        let c = parse(&format!(
+            "{base}{aravis}gain_db = 12.0\ntrigger = \"line:Line1\"\n[aravis]\n"
+        ))
+        .unwrap();
+        assert!(matches!(
+            c.color,
+            Some(ColorCamera::Aravis {
+                gain_db: Some(12.0),
+                trigger: TriggerMode::Line(_),
+                buffers: 16,
+                ..
+            })
+        ));
     }
 
     #[test]
