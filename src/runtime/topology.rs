@@ -450,19 +450,18 @@ fn run_source<S: FrameSource>(
         let counters = acct.camera(role);
         counters.captured.fetch_add(1, Ordering::Relaxed);
         let slot = usize::from(role == CameraRole::Color);
-        let missing = gaps[slot].observe(frame.stamp().seq);
-        if missing > 0 {
-            // A frame the source counted as lost (a damaged buffer or record) had its frame
-            // number too: counted once, by the source's reason, not again as a gap.
-            let lost: u64 = source
-                .losses()
-                .into_iter()
-                .filter_map(|(reason, n)| (loss_of(reason, own_role).0 == role).then_some(n))
-                .sum();
-            let explained = lost.saturating_sub(accounted[slot]);
-            accounted[slot] = lost;
-            bump(&counters.lost, "camera_gap", missing.saturating_sub(explained));
-        }
+        let missing = gaps[slot].observe(frame.stamp());
+        // A frame the source counted as lost (a damaged buffer or record) since this camera's
+        // previous frame had its frame number too: counted once, by the source's reason, not
+        // again as a gap. Losses before a camera's first frame explain no later gap.
+        let lost: u64 = source
+            .losses()
+            .into_iter()
+            .filter_map(|(reason, n)| (loss_of(reason, own_role).0 == role).then_some(n))
+            .sum();
+        let explained = lost.saturating_sub(accounted[slot]);
+        accounted[slot] = lost;
+        bump(&counters.lost, "camera_gap", missing.saturating_sub(explained));
         let mut frame = Some(frame);
         for (k, (tx, recorder)) in outputs.iter().enumerate() {
             let item = if k + 1 == outputs.len() {
@@ -563,13 +562,14 @@ mod tests {
     use crate::io::session::CameraMeta;
     use crate::runtime::capture::CaptureError;
 
-    /// A depth camera delivering frames numbered `seqs`, of which it reports the ones between
-    /// as lost (damaged) from the third frame on: `damaged` of them.
+    /// A depth camera delivering frames numbered `seqs`, of which it reports `damaged` as
+    /// lost (damaged) once it has delivered `damaged_from` frames.
     #[derive(Debug)]
     struct Numbered {
         seqs: Vec<u64>,
         delivered: usize,
         damaged: u64,
+        damaged_from: usize,
     }
 
     impl FrameSource for Numbered {
@@ -606,7 +606,14 @@ mod tests {
             self.delivered == self.seqs.len()
         }
         fn losses(&self) -> Vec<(&'static str, u64)> {
-            vec![("incomplete", if self.delivered >= 3 { self.damaged } else { 0 })]
+            vec![(
+                "incomplete",
+                if self.delivered >= self.damaged_from {
+                    self.damaged
+                } else {
+                    0
+                },
+            )]
         }
         fn stop(&mut self) -> Result<(), CaptureError> {
             Ok(())
@@ -616,11 +623,31 @@ mod tests {
     #[test]
     fn a_frame_the_source_counts_as_lost_is_not_counted_again_as_a_gap() {
         // 2 is damaged (counted by the source), 4 and 5 never came.
-        let depth = Numbered {
+        let lost = lost_of(Numbered {
             seqs: vec![0, 1, 3, 6],
             delivered: 0,
             damaged: 1,
-        };
+            damaged_from: 3,
+        });
+        assert_eq!(lost.get("incomplete"), Some(&1), "{lost:?}");
+        assert_eq!(lost.get("camera_gap"), Some(&2), "{lost:?}");
+    }
+
+    #[test]
+    fn a_damaged_first_frame_does_not_hide_a_later_gap() {
+        // 0 is damaged (known with the first frame delivered), 4 never came.
+        let lost = lost_of(Numbered {
+            seqs: vec![1, 2, 3, 5],
+            delivered: 0,
+            damaged: 1,
+            damaged_from: 1,
+        });
+        assert_eq!(lost.get("incomplete"), Some(&1), "{lost:?}");
+        assert_eq!(lost.get("camera_gap"), Some(&1), "{lost:?}");
+    }
+
+    /// The frames `depth` lost before capture, by reason, once the pipeline has run it.
+    fn lost_of(depth: Numbered) -> BTreeMap<String, u64> {
         let topology = Topology {
             sources: Sources::Cameras {
                 depth: Box::new(depth),
@@ -633,8 +660,6 @@ mod tests {
             recorder: None,
         };
         let finished = topology.start().unwrap().join();
-        let lost = &finished.cameras["depth"].lost_before_capture;
-        assert_eq!(lost.get("incomplete"), Some(&1), "{lost:?}");
-        assert_eq!(lost.get("camera_gap"), Some(&2), "{lost:?}");
+        finished.cameras["depth"].lost_before_capture.clone()
     }
 }

@@ -74,18 +74,79 @@ pub use crate::core::error_chain;
 
 /// Frames missing from one camera's sequence numbers (the camera's own drops, or frames lost
 /// on the way).
+///
+/// A counter does not always just grow: a 32-bit counter wraps, a camera that restarts counts
+/// from 0 again, and a damaged stamp can carry a wild number. A frame whose number goes back,
+/// or jumps ahead much further than the time since the last frame allows, is set aside; three
+/// such frames in a row mean the counter really started again (the frames lost at the restart
+/// are then estimated from the time between the frames), while a lone one is ignored. A number
+/// that goes round 2^32 is a wrap and counts the numbers in between.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct SeqGaps {
-    last: Option<u64>,
+    /// The newest frame of the counter in use.
+    last: Option<Stamp>,
+    /// The shortest host time per counter step seen (the frame interval).
+    interval_ns: Option<u64>,
+    /// The first of the frames set aside in a row, and how many there are.
+    aside: Option<(Stamp, u32)>,
+}
+
+/// Frames set aside in a row that mean a counter started again.
+const COUNTER_RESTART_AFTER: u32 = 3;
+
+/// Frames between `last` and `next` (exclusive) by the time between them, for a camera
+/// delivering a frame every `interval_ns`.
+pub fn frames_between_by_time(last: Stamp, next: Stamp, interval_ns: u64) -> u64 {
+    let dt = next.host_ns.saturating_sub(last.host_ns);
+    ((dt + interval_ns / 2) / interval_ns.max(1)).saturating_sub(1)
+}
+
+/// Counter steps from `last` to `next` when `next` went round a 32-bit counter's end.
+pub fn wrapped_steps(last: u64, next: u64) -> Option<u64> {
+    const END: u64 = 1 << 32;
+    const NEAR: u64 = 1 << 24;
+    (last < END && last >= END - NEAR && next < NEAR).then(|| END - last + next)
 }
 
 impl SeqGaps {
-    /// How many numbers are missing between the highest one seen so far and `seq` (0 for the
-    /// first frame, and for a frame that does not move forward).
-    pub fn observe(&mut self, seq: u64) -> u64 {
-        let missing = self.last.map_or(0, |l| seq.saturating_sub(l).saturating_sub(1));
-        self.last = Some(self.last.map_or(seq, |l| l.max(seq)));
-        missing
+    /// How many numbers are missing before `stamp` (0 for the first frame, and for a frame set
+    /// aside); see the type's documentation.
+    pub fn observe(&mut self, stamp: Stamp) -> u64 {
+        let Some(last) = self.last else {
+            self.last = Some(stamp);
+            return 0;
+        };
+        let steps = match stamp.seq.checked_sub(last.seq).filter(|&d| d > 0) {
+            Some(d) => Some(d),
+            None => wrapped_steps(last.seq, stamp.seq),
+        };
+        let by_time = self.interval_ns.map(|i| frames_between_by_time(last, stamp, i) + 1);
+        let plausible = steps.is_some_and(|d| by_time.is_none_or(|t| d <= 2 * t + 8));
+        if !plausible {
+            let (first, n) = self.aside.get_or_insert((stamp, 0));
+            *n += 1;
+            if *n < COUNTER_RESTART_AFTER {
+                return 0;
+            }
+            // The counter started again at the first frame set aside: the frames lost there
+            // by the time, and the ones between the frames set aside by their numbers.
+            let (first, n) = (*first, *n);
+            self.aside = None;
+            self.last = Some(first);
+            let at_restart = self.interval_ns.map_or(0, |i| frames_between_by_time(last, first, i));
+            // The frames set aside between the first and this one were delivered.
+            return at_restart + self.observe(stamp).saturating_sub(u64::from(n - 2));
+        }
+        // Frames set aside since the last one were delivered: not missing (a wild number on
+        // a frame in its place).
+        let aside = self.aside.take().map_or(0, |(_, n)| u64::from(n));
+        let steps = steps.unwrap_or(1);
+        let per_step = stamp.host_ns.saturating_sub(last.host_ns) / steps;
+        if per_step > 0 {
+            self.interval_ns = Some(self.interval_ns.map_or(per_step, |i| i.min(per_step)));
+        }
+        self.last = Some(stamp);
+        (steps - 1).saturating_sub(aside)
     }
 }
 
@@ -199,4 +260,53 @@ pub struct DeviceInfo {
     pub serial: String,
     /// Other facts worth showing (vendor, address, driver), free-form.
     pub details: String,
+}
+
+#[cfg(test)]
+mod seq_gaps_tests {
+    use super::*;
+
+    /// Frames at 30 fps: (counter, frame index in time).
+    fn gaps(frames: &[(u64, u64)]) -> Vec<u64> {
+        let mut g = SeqGaps::default();
+        frames
+            .iter()
+            .map(|&(seq, k)| {
+                g.observe(Stamp {
+                    seq,
+                    device_ns: k * 33_333_333,
+                    host_ns: 1_000_000_000 + k * 33_333_333,
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn gaps_in_a_growing_counter_are_its_missing_numbers() {
+        assert_eq!(gaps(&[(5, 0), (6, 1), (9, 4), (10, 5)]), [0, 0, 2, 0]);
+    }
+
+    #[test]
+    fn a_32_bit_wrap_counts_the_frames_lost_across_it() {
+        let end = 1u64 << 32;
+        // end-2, end-1, [0, 1 lost], 2
+        assert_eq!(
+            gaps(&[(end - 3, 0), (end - 2, 1), (end - 1, 2), (2, 5), (3, 6)]),
+            [0, 0, 0, 2, 0]
+        );
+    }
+
+    #[test]
+    fn a_counter_that_starts_again_counts_the_frames_lost_at_the_restart_by_time() {
+        // 100..103, then 4 frame times without a frame, then the counter from 0.
+        let out = gaps(&[(100, 0), (101, 1), (102, 2), (103, 3), (0, 8), (1, 9), (2, 10), (4, 12)]);
+        assert_eq!(out.iter().sum::<u64>(), 4 + 1, "{out:?}");
+        assert_eq!(out[7], 1, "gaps after the restart are counted again: {out:?}");
+    }
+
+    #[test]
+    fn one_frame_with_a_wild_counter_counts_no_gap() {
+        let out = gaps(&[(10, 0), (11, 1), (12, 2), (1 << 40, 3), (14, 4), (15, 5)]);
+        assert_eq!(out, [0, 0, 0, 0, 0, 0], "the wild frame's own number is ignored");
+    }
 }

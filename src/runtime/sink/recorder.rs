@@ -61,7 +61,7 @@ pub fn write_frames(
             Captured::Color(f) => (CameraRole::Color, f.stamp),
         };
         let slot = usize::from(role == CameraRole::Color);
-        let missing = gaps[slot].observe(stamp.seq);
+        let missing = gaps[slot].observe(stamp);
         if missing > 0 {
             writer.log_event(&SessionEvent::FramesDropped {
                 host_ns: stamp.host_ns,
