@@ -235,6 +235,70 @@ fn bad_numbers_are_refused_with_one_sentence() {
     assert!(!Path::new(out).exists(), "nothing written on bad input");
 }
 
+/// Issue 31 item 6: every floating-point flag of every command refuses `nan`, infinities
+/// and values below its range in one sentence (exit code 1), never a panic.
+#[test]
+fn issue31_every_float_flag_refuses_nan_infinity_and_negatives() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let out = tmp.path().join("out");
+    let out = out.to_str().unwrap();
+    let rig = tmp.path().join("rig.toml");
+    let rig = rig.to_str().unwrap();
+    // Each command with its float flag last; the value is joined to it.
+    let commands: &[&[&str]] = &[
+        &["run", "--config", rig, "--seconds"],
+        &["record", "--config", rig, "--out", out, "--seconds"],
+        &["synth", "session", "--out", out, "--seconds"],
+        &["synth", "session", "--out", out, "--seconds", "1", "--fps"],
+        &["synth", "dataset", "--out", out, "--images", "3", "--noise-mm"],
+        &["synth", "chessboard", "--out", out, "--square-mm"],
+        &[
+            "calibrate",
+            "intrinsics",
+            "--images",
+            "*.png",
+            "--out",
+            out,
+            "--square-mm",
+        ],
+        &[
+            "calibrate",
+            "extrinsics",
+            "--depth-intrinsics",
+            "d.yml",
+            "--color-intrinsics",
+            "c.yml",
+            "--depth-image",
+            "d.png",
+            "--color-image",
+            "c.png",
+            "--out",
+            out,
+            "--square-mm",
+        ],
+        &["train", "body", "--data", out, "--out", out, "--subset"],
+        &["export", "video", out, "--out", "v.mp4", "--from"],
+        &["export", "video", out, "--out", "v.mp4", "--to"],
+        &["detect", "paws", "a.png", "--out", out, "--px-per-mm"],
+    ];
+    for command in commands {
+        for value in ["nan", "NaN", "inf", "-inf", "-1"] {
+            // `--flag=value`: clap takes `-inf` after a space for a flag of its own.
+            let (flag, rest) = command.split_last().unwrap();
+            let joined = format!("{flag}={value}");
+            let mut args = rest.to_vec();
+            args.push(&joined);
+            let o = run(&args);
+            let err = stderr(&o);
+            assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+            assert!(!err.contains("panicked"), "{args:?}: {err}");
+            let first = err.lines().next().unwrap_or_default();
+            assert!(first.starts_with("error:") && first.contains(value), "{args:?}: {err}");
+        }
+    }
+    assert!(!Path::new(out).exists(), "nothing written on bad input");
+}
+
 #[test]
 fn unwritable_output_is_a_clear_error() {
     let o = run(&[

@@ -40,7 +40,7 @@ pub struct IntrinsicsArgs {
     #[arg(long, default_value = "9x6")]
     pub board: String,
     /// The side of one square, millimetres.
-    #[arg(long = "square-mm", value_name = "S", default_value_t = 20.0)]
+    #[arg(long = "square-mm", value_name = "S", value_parser = parse_square_mm, allow_negative_numbers = true, default_value_t = 20.0)]
     pub square_mm: f64,
     /// The intrinsics file to write (OpenCV FileStorage YAML).
     #[arg(long, value_name = "FILE")]
@@ -71,7 +71,7 @@ pub struct ExtrinsicsArgs {
     #[arg(long, default_value = "9x6")]
     pub board: String,
     /// The side of one square, millimetres, as printed (it sets the scale of the poses).
-    #[arg(long = "square-mm", value_name = "S")]
+    #[arg(long = "square-mm", value_name = "S", value_parser = parse_square_mm, allow_negative_numbers = true)]
     pub square_mm: f64,
     /// The depth camera's serial, stored in the calibration.
     #[arg(long, value_name = "SERIAL")]
@@ -107,7 +107,7 @@ pub struct ChessboardArgs {
     pub board: String,
     /// The side of one square, millimetres (40: a 400 x 280 mm board, which poses both cameras
     /// within 0.3 mm; 20 mm squares give about 1 mm).
-    #[arg(long = "square-mm", value_name = "S", default_value_t = 40.0)]
+    #[arg(long = "square-mm", value_name = "S", value_parser = parse_square_mm, allow_negative_numbers = true, default_value_t = 40.0)]
     pub square_mm: f64,
     /// Intrinsics views per camera.
     #[arg(long, value_name = "N", default_value_t = 15, value_parser = clap::value_parser!(u32).range(1..=500))]
@@ -180,6 +180,10 @@ struct IntrinsicsJson<'a> {
     views: &'a [String],
     skipped: &'a [String],
     source: &'static str,
+}
+
+fn parse_square_mm(s: &str) -> Result<f64, String> {
+    crate::app::parse_ranged(s, "a square side in millimetres", 0.5, 1000.0)
 }
 
 fn board(size: &str, square_mm: f64) -> Result<Board, Failure> {

@@ -39,7 +39,7 @@ pub struct DetectPawsArgs {
     pub model: Option<PathBuf>,
     /// How many image pixels a millimetre on the glass spans (the default rig's colour camera:
     /// 2 at full resolution).
-    #[arg(long, value_name = "S", default_value_t = default_px_per_mm(), value_parser = parse_px_per_mm)]
+    #[arg(long, value_name = "S", default_value_t = default_px_per_mm(), value_parser = parse_px_per_mm, allow_negative_numbers = true)]
     pub px_per_mm: f64,
     /// Print the detections as one JSON object.
     #[arg(long)]

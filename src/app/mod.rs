@@ -149,7 +149,11 @@ where
         .trim()
         .parse()
         .map_err(|_| format!("expected {what} from {lo} to {hi}, got {s:?}"))?;
-    if v < lo || v > hi {
+    // A value that compares with nothing (a float's `nan`) is outside the range too.
+    use std::cmp::Ordering::{Equal, Greater, Less};
+    let inside =
+        matches!(v.partial_cmp(&lo), Some(Greater | Equal)) && matches!(v.partial_cmp(&hi), Some(Less | Equal));
+    if !inside {
         return Err(format!("expected {what} from {lo} to {hi}, got {s}"));
     }
     Ok(v)

@@ -60,7 +60,7 @@ pub struct TrainArgs {
     pub start_level: u32,
     /// Fraction of D_d each tree sees (D'_d); it should hold about as many pixels as D_t, or
     /// the shrink rule coarsens the trees.
-    #[arg(long, default_value_t = 0.5, value_parser = parse_subset)]
+    #[arg(long, default_value_t = 0.5, value_parser = parse_subset, allow_negative_numbers = true)]
     pub subset: f64,
     /// Draw each tree's D'_d with replacement (`--subset` x |D_d| draws; a bootstrap sample
     /// at 1) instead of keeping each pixel of D_d with probability `--subset`.

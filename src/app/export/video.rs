@@ -38,10 +38,10 @@ pub struct VideoArgs {
     #[arg(long, value_name = "DIR")]
     pub session: Option<PathBuf>,
     /// Start this many seconds after the first frame.
-    #[arg(long, value_name = "S", value_parser = parse_offset)]
+    #[arg(long, value_name = "S", value_parser = parse_offset, allow_negative_numbers = true)]
     pub from: Option<f64>,
     /// End this many seconds after the first frame.
-    #[arg(long, value_name = "S", value_parser = parse_offset)]
+    #[arg(long, value_name = "S", value_parser = parse_offset, allow_negative_numbers = true)]
     pub to: Option<f64>,
     /// H.264 quality, 0 (lossless) to 51 (worst); 23 is x264's default.
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(0..=51))]
