@@ -124,3 +124,96 @@ fn batch_on_slurm_runs_a_job_array_and_gathers_every_summary() {
     assert!(out.status.success(), "{said}\n{}", String::from_utf8_lossy(&out.stderr));
     assert!(said.contains("slurm-test: passed"), "{said}");
 }
+
+fn signal(pid: u32, name: &str) {
+    let status = std::process::Command::new("kill")
+        .arg(format!("-{name}"))
+        .arg(pid.to_string())
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+/// Issue 31 item 11: a second batch into the output directory of a running one is refused at
+/// once, naming the holder's process id, and takes nothing from it; the chunks of a daemon's
+/// runs (every run has a `chunk-0000`) make a batch, each output named by run and chunk.
+#[test]
+fn issue31_batches_lock_their_output_and_accept_the_chunks_of_many_runs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fixture = repo_root().join("fixtures/sessions/synthetic-small");
+    let runs = tmp.path().join("runs");
+    for chunk in [
+        "20260101T000000Z/chunk-0000",
+        "20260101T000000Z/chunk-0001",
+        "20260102T000000Z/chunk-0000",
+    ] {
+        copy_dir(&fixture, &runs.join(chunk));
+    }
+    let out = tmp.path().join("out");
+    let models = repo_root().join("fixtures/models");
+    let batch = |pattern: &str| {
+        let mut c = mousepose();
+        c.arg("replay")
+            .arg(pattern)
+            .arg("--out")
+            .arg(&out)
+            .arg("--models")
+            .arg(&models)
+            .args(["--workers", "1"]);
+        c
+    };
+    let pattern = format!("{}/*/chunk-*", runs.display());
+
+    // The first batch, held still once it has taken the directory.
+    let mut first = batch(&pattern)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let lock = out.join(".mousepose-batch.lock");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    while std::fs::read_to_string(&lock).map_or(true, |t| t.trim() != first.id().to_string()) {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the first batch never took its lock"
+        );
+        assert!(
+            first.try_wait().unwrap().is_none(),
+            "the first batch ended before the test could hold it"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    signal(first.id(), "STOP");
+    let second = batch(&pattern).output().unwrap();
+    signal(first.id(), "CONT");
+    let err = String::from_utf8_lossy(&second.stderr);
+    assert_eq!(second.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("in use by another batch") && err.contains(&first.id().to_string()),
+        "{err}"
+    );
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+
+    let first = first.wait_with_output().unwrap();
+    assert!(first.status.success(), "{}", String::from_utf8_lossy(&first.stderr));
+    let names: Vec<(String, String)> = table(&out);
+    assert_eq!(
+        names,
+        vec![
+            ("20260101T000000Z-chunk-0000".to_owned(), "done".to_owned()),
+            ("20260101T000000Z-chunk-0001".to_owned(), "done".to_owned()),
+            ("20260102T000000Z-chunk-0000".to_owned(), "done".to_owned()),
+        ]
+    );
+    for (name, _) in &names {
+        assert!(out.join(name).join("summary.json").is_file(), "{name}");
+    }
+    // Once the first is over, the directory is free again: everything is finished, skipped.
+    let again = batch(&pattern).output().unwrap();
+    assert!(again.status.success(), "{}", String::from_utf8_lossy(&again.stderr));
+    assert!(
+        table(&out).iter().all(|(_, status)| status == "skipped"),
+        "{:?}",
+        table(&out)
+    );
+}

@@ -424,3 +424,189 @@ fn one_colour_frame_of_another_size_is_skipped_and_counted_not_the_end_of_the_re
     let skipped: u64 = color.lost_before_capture.values().sum::<u64>() + color.dropped_total;
     assert_eq!(skipped, 1, "{color:?}");
 }
+
+/// Halves a depth frame (every other pixel of every other row), as a camera that changed its
+/// mode for one frame would deliver it.
+fn halve(f: &mut mousepose::core::frame::DepthFrame) {
+    let (w, h) = (f.width as usize, f.height as usize);
+    f.data = (0..h / 2)
+        .flat_map(|y| (0..w / 2).map(move |x| (x, y)))
+        .map(|(x, y)| f.data[2 * y * w + 2 * x])
+        .collect();
+    f.width /= 2;
+    f.height /= 2;
+}
+
+/// Issue 31 item 3: one depth frame of half the size mid-session (or first) is skipped and
+/// counted `wrong_size`, as the daemon does, and the replay goes on.
+#[test]
+fn issue31_a_half_size_depth_frame_is_skipped_and_counted_not_the_end_of_the_replay() {
+    let tmp = tempfile::tempdir().unwrap();
+    let reader = SessionReader::open(fixture()).unwrap();
+    let baseline = replay(&options(&fixture(), &tmp.path().join("baseline"), 2)).unwrap();
+    // The rendered session (its empty cage known), and the same frames as a recording, whose
+    // background is modelled from up to 31 frames spread over it (here all of them, the odd
+    // one among them).
+    assert!(reader.depth_count() <= 31);
+    for (name, odd, source) in [
+        ("rendered", 5, mousepose::io::session::SessionSource::Synthetic),
+        ("recorded", 5, mousepose::io::session::SessionSource::Recorded),
+    ] {
+        let session = tmp.path().join(name);
+        std::fs::create_dir(&session).unwrap();
+        let mut meta = reader.meta().clone();
+        meta.source = source;
+        let mut w = SessionWriter::create(&session, &meta).unwrap();
+        for (k, f) in reader.depth_frames().enumerate() {
+            let mut f = f.unwrap();
+            if k == odd {
+                halve(&mut f);
+            }
+            w.write_depth(&f).unwrap();
+        }
+        for f in reader.color_frames().unwrap() {
+            w.write_color(&f.unwrap()).unwrap();
+        }
+        w.finish().unwrap();
+        let s = replay(&options(&session, &tmp.path().join(format!("{name}-out")), 2))
+            .unwrap_or_else(|e| panic!("{name}: {:#}", anyhow::Error::from(e)));
+        assert_accounted(&s);
+        let depth = &s.cameras["depth"];
+        assert_eq!(
+            depth.lost_before_capture.get("wrong_size"),
+            Some(&1),
+            "{name}: {depth:?}"
+        );
+        // The frame is counted once: not again as a gap in the frame counter (the session's
+        // own gaps, rendered drops, are as they were).
+        let gaps = &baseline.cameras["depth"].lost_before_capture.get("camera_gap");
+        assert_eq!(&depth.lost_before_capture.get("camera_gap"), gaps, "{name}: {depth:?}");
+        assert_eq!(depth.captured, baseline.cameras["depth"].captured - 1, "{name}");
+        assert_eq!(s.pairs, baseline.pairs - 1, "{name}");
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(tmp.path().join(format!("{name}-out/summary.json"))).unwrap())
+                .unwrap();
+        assert_eq!(summary["cameras"]["depth"]["lost_before_capture"]["wrong_size"], 1);
+    }
+}
+
+/// Damages the payload of the depth records of `session` whose index `damage` picks (the
+/// index file is kept: the records are known but do not read back).
+fn damage_depth_records(session: &Path, damage: impl Fn(usize, usize) -> bool) {
+    let path = session.join("depth/frames.mpstore");
+    let mut bytes = std::fs::read(&path).unwrap();
+    let mut starts = Vec::new();
+    let mut at = 16; // the file's header
+    while at + 16 <= bytes.len() {
+        assert_eq!(&bytes[at..at + 4], b"MPRC", "a record at {at}");
+        let len = u32::from_le_bytes(bytes[at + 4..at + 8].try_into().unwrap()) as usize;
+        starts.push((at + 16, len));
+        at += 16 + len;
+    }
+    let count = starts.len();
+    for (k, &(payload, len)) in starts.iter().enumerate() {
+        if damage(k, count) {
+            for b in &mut bytes[payload + len / 2..payload + len / 2 + 8.min(len / 2)] {
+                *b ^= 0x5a;
+            }
+        }
+    }
+    std::fs::write(&path, bytes).unwrap();
+}
+
+/// Issue 31 item 4: a session with few intact depth frames keeps its results whatever
+/// becomes of the picture: poses.csv and summary.json are written and the exit code is 0;
+/// a picture that cannot be drawn is a warning, and the summary says so.
+#[test]
+fn issue31_a_picture_never_costs_the_results() {
+    let tmp = tempfile::tempdir().unwrap();
+    let replay_cli = |session: &Path, out: &Path| {
+        mousepose()
+            .arg("replay")
+            .arg(session)
+            .arg("--out")
+            .arg(out)
+            .arg("--models")
+            .arg(repo_root().join("fixtures/models"))
+            .output()
+            .unwrap()
+    };
+    // The first frame and the whole second half do not read back: no pose in the second half
+    // to draw, and the first frame, drawn when no mouse is seen, is damaged.
+    let few = tmp.path().join("few");
+    copy_dir(&fixture(), &few);
+    damage_depth_records(&few, |k, count| k == 0 || k >= count / 2);
+    // No depth frame reads back at all: nothing to draw.
+    let none = tmp.path().join("none");
+    copy_dir(&fixture(), &none);
+    damage_depth_records(&none, |_, _| true);
+    for (session, drawn) in [(&few, true), (&none, false)] {
+        let out = tmp
+            .path()
+            .join(format!("{}-out", session.file_name().unwrap().to_string_lossy()));
+        let o = replay_cli(session, &out);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(0), "{session:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+        let rows = std::fs::read_to_string(out.join("poses.csv")).unwrap().lines().count() - 1;
+        assert_eq!(summary["pairs"].as_u64(), Some(rows as u64), "{session:?}");
+        assert!(
+            summary["cameras"]["depth"]["lost_before_capture"]["corrupt"]
+                .as_u64()
+                .unwrap()
+                > 0
+        );
+        assert_eq!(out.join("frame.png").is_file(), drawn, "{session:?}");
+        if drawn {
+            assert!(rows > 0, "{session:?}");
+            assert_eq!(summary["picture"], "frame.png");
+            assert!(summary.get("picture_error").is_none(), "{summary:#}");
+        } else {
+            assert!(summary["picture"].is_null(), "{summary:#}");
+            assert!(summary["picture_error"].as_str().is_some(), "{summary:#}");
+            assert!(err.contains("No picture"), "{err}");
+        }
+    }
+}
+
+/// Issue 31 item 11: a replay stopped by SIGTERM (or Ctrl-C) removes its hidden partial
+/// directory and writes nothing, with one sentence and exit code 2.
+#[test]
+fn issue31_a_replay_stopped_by_sigterm_leaves_nothing_behind() {
+    let tmp = tempfile::tempdir().unwrap();
+    let session = tmp.path().join("s");
+    synth(&session, 8.0, 7, false);
+    let out = tmp.path().join("o");
+    // At the recorded pace: still running when the signal comes.
+    let child = mousepose()
+        .arg("replay")
+        .arg(&session)
+        .arg("--out")
+        .arg(&out)
+        .arg("--realtime")
+        .arg("--models")
+        .arg(repo_root().join("fixtures/models"))
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let partial = tmp.path().join(format!(".o.partial-{}", child.id()));
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    while !partial.join("poses.csv").exists() {
+        assert!(std::time::Instant::now() < deadline, "no {partial:?}");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let status = std::process::Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("stopped by a signal"), "{err}");
+    assert!(!partial.exists(), "{partial:?} left behind");
+    assert!(!out.exists());
+}

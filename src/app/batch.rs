@@ -1,7 +1,10 @@
 //! Many sessions at once: `mousepose replay S1 S2 ... --out DIR` (or a glob) and
 //! `mousepose batch SESSIONS... --out DIR [--slurm]`.
 //!
-//! Each session goes to `DIR/<session name>/`. A session whose `summary.json` is there is
+//! Each session goes to `DIR/<session name>/` (a daemon's chunk to `DIR/<run>-<chunk>/`:
+//! every run has a `chunk-0000`). One batch at a time writes into a `DIR`: it holds the lock
+//! file [`LOCK_FILE`] while it runs. A signal stops the batch, and the session under way
+//! leaves nothing behind. A session whose `summary.json` is there is
 //! finished and skipped; anything else there (a directory a crash left without its summary,
 //! a hidden `.NAME.partial-PID` staging directory) is removed and the session replayed
 //! again. One table for all (`DIR/batch.csv`, and printed) says, per session, whether it was
@@ -11,8 +14,8 @@
 //! task per session, each task a `mousepose replay`); the command waits for the array to end
 //! and gathers the summaries the same way.
 
-use crate::app::replay::{ReplayOptions, SUMMARY_FILE, replay};
-use crate::app::{Failure, print, print_json};
+use crate::app::replay::{ReplayOptions, SUMMARY_FILE, replay_until};
+use crate::app::{Failure, Interrupt, print, print_json};
 use anyhow::Context as _;
 use clap::Args;
 use serde::Serialize;
@@ -99,7 +102,29 @@ pub fn expand_sessions(args: &[PathBuf]) -> Result<Vec<PathBuf>, Failure> {
     Ok(sessions)
 }
 
-/// Each session's output directory under `out`, named after the session's directory.
+/// The name of a session's output: its directory's name, and for a chunk of a daemon's run
+/// (`RUN/chunk-0003`, every run has a `chunk-0000`) the run's name before it
+/// (`RUN-chunk-0003`).
+fn output_name(session: &Path) -> Option<String> {
+    let name = session.file_name()?.to_string_lossy().into_owned();
+    let run = session
+        .parent()
+        .and_then(Path::file_name)
+        .map(|n| n.to_string_lossy().into_owned());
+    match run {
+        Some(run) if is_chunk_name(&name) => Some(format!("{run}-{name}")),
+        _ => Some(name),
+    }
+}
+
+/// Whether `name` is a chunk's directory name as the daemon writes it: `chunk-` and digits.
+fn is_chunk_name(name: &str) -> bool {
+    name.strip_prefix("chunk-")
+        .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// Each session's output directory under `out`, named after the session's directory (a
+/// daemon's chunk after its run and itself, see [`output_name`]).
 ///
 /// # Errors
 /// Two sessions with the same name (their outputs would collide), or a session without a
@@ -108,9 +133,7 @@ pub fn plan(sessions: &[PathBuf], out: &Path) -> Result<Vec<BatchItem>, Failure>
     let mut items: Vec<BatchItem> = Vec::new();
     for session in sessions {
         let absolute = std::fs::canonicalize(session).unwrap_or_else(|_| session.clone());
-        let name = absolute
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
+        let name = output_name(&absolute)
             .ok_or_else(|| Failure::usage(anyhow::anyhow!("the session {session:?} has no name")))?;
         if let Some(other) = items.iter().find(|i| i.name == name) {
             return Err(Failure::usage(anyhow::anyhow!(
@@ -204,32 +227,47 @@ pub struct BatchOptions {
 }
 
 /// Replays every session of `items` here, one after the other, skipping finished ones;
-/// `progress` is told each session's name as it starts.
-pub fn run_local(items: &[BatchItem], options: &BatchOptions, mut progress: impl FnMut(&str)) -> Vec<BatchRow> {
+/// `progress` is told each session's name as it starts. A signal (`interrupt`) stops the
+/// batch: the session being replayed leaves nothing behind, and the rows end there.
+pub fn run_local(
+    items: &[BatchItem],
+    options: &BatchOptions,
+    interrupt: &Interrupt,
+    mut progress: impl FnMut(&str),
+) -> Vec<BatchRow> {
     items
         .iter()
-        .map(|item| {
+        .map_while(|item| {
+            if interrupt.requested() {
+                return None;
+            }
             progress(&item.name);
+            Some(item)
+        })
+        .map(|item| {
             if item.finished() && !options.force {
                 return row_from_summary(item, "skipped");
             }
             if let Err(e) = clear_unfinished(item) {
                 return failed_row(item, format!("{e:#}"));
             }
-            let result = replay(&ReplayOptions {
-                session: item.session.clone(),
-                out: item.out.clone(),
-                models: options.models.clone(),
-                realtime: false,
-                workers: options.workers,
-                overlays: None,
-                calibration: options.calibration.clone(),
-                // A batch's sessions each carry their rig, or are placed on their own floor
-                // with the camera table's intrinsics; one mask or lens for all is not offered.
-                intrinsics: None,
-                roi: None,
-                force: true,
-            });
+            let result = replay_until(
+                &ReplayOptions {
+                    session: item.session.clone(),
+                    out: item.out.clone(),
+                    models: options.models.clone(),
+                    realtime: false,
+                    workers: options.workers,
+                    overlays: None,
+                    calibration: options.calibration.clone(),
+                    // A batch's sessions each carry their rig, or are placed on their own floor
+                    // with the camera table's intrinsics; one mask or lens for all is not offered.
+                    intrinsics: None,
+                    roi: None,
+                    force: true,
+                },
+                interrupt,
+            );
             match result {
                 Ok(_) => row_from_summary(item, "done"),
                 Err(e) => {
@@ -345,13 +383,74 @@ pub fn replay_many(sessions: &[PathBuf], out: &Path, options: &BatchOptions, jso
     std::fs::create_dir_all(out).with_context(|| format!("creating {out:?}"))?;
     let out = std::fs::canonicalize(out).with_context(|| format!("reading {out:?}"))?;
     let items = plan(&sessions, &out)?;
+    let _lock = BatchLock::take(&out)?;
+    let interrupt = Interrupt::install().context("installing the signal handlers")?;
     let bar = crate::app::progress::bar(items.len() as u64, "sessions");
-    let rows = run_local(&items, options, |name| {
+    let rows = run_local(&items, options, &interrupt, |name| {
         bar.set_message(name.to_owned());
         bar.inc(1);
     });
     bar.finish_and_clear();
+    if interrupt.requested() {
+        let done = rows.iter().filter(|r| r.status != "failed").count();
+        return Err(Failure::from(anyhow::anyhow!(
+            "stopped by a signal after {done} of {} sessions; the one under way left nothing behind (run the batch again to go on)",
+            items.len()
+        )));
+    }
     report(&out, &rows, json)
+}
+
+/// The lock file a batch holds in its output directory while it runs.
+pub const LOCK_FILE: &str = ".mousepose-batch.lock";
+
+/// A batch's hold on its output directory: two batches into one directory would each
+/// remove what the other has not finished. Released when dropped (or when the process
+/// ends, however it ends: an advisory `flock`).
+#[derive(Debug)]
+pub struct BatchLock {
+    _file: std::fs::File,
+}
+
+impl BatchLock {
+    /// Takes the lock of `out`, writing this process's id into it.
+    ///
+    /// # Errors
+    /// Another batch holds it (a usage error naming its process id), or the file cannot be
+    /// created.
+    pub fn take(out: &Path) -> Result<Self, Failure> {
+        use std::io::{Read as _, Seek as _, Write as _};
+        let path = out.join(LOCK_FILE);
+        let mut file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .with_context(|| format!("creating the lock file {path:?}"))?;
+        if let Err(e) = rustix::fs::flock(&file, rustix::fs::FlockOperation::NonBlockingLockExclusive) {
+            if e != rustix::io::Errno::WOULDBLOCK {
+                return Err(Failure::from(
+                    anyhow::Error::from(std::io::Error::from(e)).context(format!("locking {path:?}")),
+                ));
+            }
+            let mut text = String::new();
+            let _ = file.read_to_string(&mut text);
+            let holder = match text.trim() {
+                "" => "another process".to_owned(),
+                pid => format!("process {pid}"),
+            };
+            return Err(Failure::usage(anyhow::anyhow!(
+                "the output directory {out:?} is in use by another batch ({holder}, see {LOCK_FILE}): wait for it to end or choose another --out"
+            )));
+        }
+        let written = file
+            .set_len(0)
+            .and_then(|()| file.rewind())
+            .and_then(|()| writeln!(file, "{}", std::process::id()));
+        written.with_context(|| format!("writing {path:?}"))?;
+        Ok(Self { _file: file })
+    }
 }
 
 /// `mousepose replay` with several sessions or a pattern.
@@ -579,7 +678,8 @@ pub struct BatchArgs {
     /// Session directories, or glob patterns matching them (quote them).
     #[arg(value_name = "SESSIONS", required = true)]
     pub sessions: Vec<PathBuf>,
-    /// The directory each session's output goes into (DIR/<session name>/), with batch.csv.
+    /// The directory each session's output goes into (DIR/<session name>/, a daemon's chunk
+    /// DIR/<run>-<chunk>/), with batch.csv; one batch at a time per DIR.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// The models directory; the bundled models by default.
@@ -620,6 +720,7 @@ pub fn command(args: &BatchArgs) -> crate::app::Outcome {
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {:?}", args.out))?;
     let out = std::fs::canonicalize(&args.out).with_context(|| format!("reading {:?}", args.out))?;
     let items = plan(&sessions, &out)?;
+    let _lock = BatchLock::take(&out)?;
     let rows = run_slurm(&items, &out, &options, &args.resources)?;
     report(&out, &rows, args.json)
 }

@@ -298,3 +298,61 @@ pub(crate) fn write_report_file(dir: &Path, name: &str, bytes: &[u8]) -> anyhow:
 pub(crate) fn report_dir(dir: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating report directory {dir:?}"))
 }
+
+/// SIGINT and SIGTERM seen by an offline command (`replay`, a batch), so that it stops its
+/// work cleanly (removing what it had not finished) instead of dying mid-write.
+#[derive(Debug, Clone, Default)]
+pub struct Interrupt {
+    flag: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    /// Whether the signals set `flag` (otherwise it is never set: library use and tests).
+    installed: bool,
+}
+
+impl Interrupt {
+    /// Catches SIGINT and SIGTERM from now on, for the life of the process.
+    ///
+    /// # Errors
+    /// The handlers cannot be installed.
+    pub fn install() -> std::io::Result<Self> {
+        let flag = std::sync::Arc::<std::sync::atomic::AtomicBool>::default();
+        for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+            signal_hook::flag::register(signal, std::sync::Arc::clone(&flag))?;
+        }
+        Ok(Self { flag, installed: true })
+    }
+
+    /// Whether a signal came.
+    pub fn requested(&self) -> bool {
+        self.flag.load(std::sync::atomic::Ordering::Acquire)
+    }
+
+    /// Sets `other` too when a signal comes (at once if one came already), until the guard
+    /// is dropped: a running pipeline's shutdown flag.
+    ///
+    /// # Errors
+    /// The handlers cannot be installed.
+    pub fn forward_to(&self, other: &std::sync::Arc<std::sync::atomic::AtomicBool>) -> std::io::Result<Forwarded> {
+        let mut ids = Vec::new();
+        if self.installed {
+            for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+                ids.push(signal_hook::flag::register(signal, std::sync::Arc::clone(other))?);
+            }
+            if self.requested() {
+                other.store(true, std::sync::atomic::Ordering::Release);
+            }
+        }
+        Ok(Forwarded(ids))
+    }
+}
+
+/// Signals forwarded by [`Interrupt::forward_to`]; dropped, they no longer are.
+#[derive(Debug)]
+pub struct Forwarded(Vec<signal_hook::SigId>);
+
+impl Drop for Forwarded {
+    fn drop(&mut self) {
+        for id in self.0.drain(..) {
+            signal_hook::low_level::unregister(id);
+        }
+    }
+}

@@ -6,7 +6,8 @@
 //! do not decode) are counted apart. `summary.json` holds those counts, the per-stage latency,
 //! the throughput and, for synthetic sessions, the error against the ground truth.
 
-use crate::app::{Failure, print, print_json};
+use crate::app::{Failure, Interrupt, print, print_json};
+use crate::core::frame::DepthFrame;
 use crate::core::geometry::Rig;
 use crate::core::image::RgbImage;
 use crate::io::mask::{MaskError, read_mask_png};
@@ -80,6 +81,10 @@ pub enum ReplayError {
     Start(#[from] TopologyError),
     #[error("the pipeline stopped")]
     Pipeline(#[from] PipelineError),
+    #[error("stopped by a signal before the end: nothing was written")]
+    Interrupted,
+    #[error("cannot install the signal handlers")]
+    Signals(#[source] std::io::Error),
 }
 
 /// How the pairs compare with a synthetic session's true pairs.
@@ -161,6 +166,11 @@ pub struct ReplaySummary {
     /// sentence each; also printed on stderr.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// The picture written beside the results (`frame.png`); `None` when it could not be
+    /// drawn or written, and then `picture_error` says why (the results are whole without it).
+    pub picture: Option<&'static str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub picture_error: Option<String>,
 }
 
 /// The picture of the frame pair of `pose` (see [`crate::runtime::stages::overlay`]) with
@@ -177,12 +187,13 @@ fn picture(recording: &Recording, rig: &Rig, pose: &PoseRecord, arena: &[u8]) ->
     ))
 }
 
-/// The picture of a recording where no frame had a mouse: its middle depth frame with the
-/// arena's outline, saying so, and saying when something of a mouse's size moved outside
-/// the arena.
+/// The picture of a recording where no frame had a mouse: its first depth frame that reads
+/// back and has the size of most frames, with the arena's outline, saying so, and saying when
+/// something of a mouse's size moved outside the arena.
 fn picture_without_mouse(recording: &Recording, rig: &Rig, arena: &[u8], outside: bool) -> Option<RgbImage> {
-    let frames = recording.sample_depth(1).ok()?;
-    let depth = frames.first()?;
+    let frames = recording.sample_depth(BACKGROUND_FRAMES).ok()?;
+    let size = common_size(&frames)?;
+    let depth = frames.iter().find(|f| (f.width, f.height) == size)?;
     let note = if outside {
         "no mouse found in any frame inside the arena (outlined), but a mouse-sized thing moved outside it: pass --roi"
     } else {
@@ -243,14 +254,31 @@ fn background_in(recording: &Recording, rig: &Rig, arena: Option<&[u8]>) -> Resu
                 .map_err(ReplayError::Background);
         }
     }
-    let frames = recording.sample_depth(BACKGROUND_FRAMES)?;
+    let mut frames = recording.sample_depth(BACKGROUND_FRAMES)?;
+    // A frame of another size (a camera that changed its mode for a moment) is left out: the
+    // model covers the size most frames have, and the replay skips the others.
     let mut intrinsics = rig.depth.intrinsics;
-    if let Some(f) = frames.first() {
-        intrinsics.width = f.width;
-        intrinsics.height = f.height;
+    if let Some((width, height)) = common_size(&frames) {
+        frames.retain(|f| (f.width, f.height) == (width, height));
+        intrinsics.width = width;
+        intrinsics.height = height;
     }
     Background::from_frames_in(&frames, &intrinsics, &SegmenterConfig::default(), arena)
         .map_err(ReplayError::Background)
+}
+
+/// The size most of `frames` have (the earliest of them on a tie); `None` without frames.
+fn common_size(frames: &[DepthFrame]) -> Option<(u32, u32)> {
+    let mut counts: Vec<((u32, u32), usize)> = Vec::new();
+    for f in frames {
+        let size = (f.width, f.height);
+        match counts.iter_mut().find(|(s, _)| *s == size) {
+            Some((_, n)) => *n += 1,
+            None => counts.push((size, 1)),
+        }
+    }
+    // `max_by_key` keeps the last of equal counts: look from the end to keep the earliest.
+    counts.iter().rev().max_by_key(|(_, n)| *n).map(|(s, _)| *s)
 }
 
 /// Runs the replay and writes `poses.csv` and `summary.json` into `options.out`.
@@ -258,6 +286,16 @@ fn background_in(recording: &Recording, rig: &Rig, arena: Option<&[u8]>) -> Resu
 /// # Errors
 /// See [`ReplayError`]; nothing is left at `options.out` on failure.
 pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
+    replay_until(options, &Interrupt::default())
+}
+
+/// [`replay`], stopped early by `interrupt` (SIGINT, SIGTERM): then
+/// [`ReplayError::Interrupted`], and nothing is left behind, not even the hidden staging
+/// directory.
+///
+/// # Errors
+/// See [`ReplayError`]; nothing is left at `options.out` on failure.
+pub fn replay_until(options: &ReplayOptions, interrupt: &Interrupt) -> Result<ReplaySummary, ReplayError> {
     let recording = Recording::open(&options.session)?;
     let models = Models::load(options.models.as_deref())?;
     let (body_model, paw_model) = (models.body_path(), models.paws_path());
@@ -277,6 +315,7 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         None => None,
     };
     let background = background_in(&recording, &chosen.rig, roi.as_deref())?;
+    let depth_size = (background.region().width, background.region().height);
     let floor = background.floor_plane();
     if !chosen.calibrated {
         // No calibration: the world is the floor's, z the height above it.
@@ -320,6 +359,7 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         sources: Sources::Recording {
             recording: &recording,
             realtime: options.realtime,
+            depth_size: Some(depth_size),
         },
         sync: recording.sync_config(),
         edges: Edges::replay(),
@@ -334,8 +374,24 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
         }),
         recorder: None,
     };
-    let finished = topology.start()?.join();
+    if interrupt.requested() {
+        return Err(ReplayError::Interrupted);
+    }
+    let running = topology.start()?;
+    // A signal stops the reader; the stages drain what it sent, then the staging directory
+    // is removed (dropped uncommitted).
+    let forwarded = interrupt
+        .forward_to(&running.shutdown().flag())
+        .map_err(ReplayError::Signals);
+    if forwarded.is_err() {
+        running.shutdown().request();
+    }
+    let finished = running.join();
+    drop(forwarded?);
     let stages = finished.outcome?;
+    if interrupt.requested() {
+        return Err(ReplayError::Interrupted);
+    }
 
     let tally: PoseTally = tally.lock().unwrap_or_else(PoisonError::into_inner).clone();
     let pairing = truth.as_ref().map(|t| {
@@ -378,22 +434,32 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
             tally.rows,
             tally.statuses.get("ok").copied().unwrap_or(0),
         ),
+        picture: None,
+        picture_error: None,
     };
     for warning in &summary.warnings {
         tracing::warn!(message = "The arena may miss the mouse.", detail = %warning);
     }
-    {
-        let path = staging.path().join(PICTURE_FILE);
-        let outside = summary.world.arena_check.is_some_and(|c| c.mouse_sized_outside > 0);
-        let img = match &tally.snapshot {
-            Some(pose) => picture(&recording, &rig, pose, &arena),
-            None => picture_without_mouse(&recording, &rig, &arena, outside),
-        };
-        img.and_then(|img| img.write_png(&path).ok())
-            .ok_or_else(|| ReplayError::Write {
-                path: path.clone(),
-                source: std::io::Error::other("cannot draw or write the picture"),
-            })?;
+    // The picture is a convenience: without it (no frame that reads back, a write error) the
+    // results are still whole, and written.
+    let mut summary = summary;
+    let outside = summary.world.arena_check.is_some_and(|c| c.mouse_sized_outside > 0);
+    let img = match &tally.snapshot {
+        Some(pose) => picture(&recording, &rig, pose, &arena),
+        None => picture_without_mouse(&recording, &rig, &arena, outside),
+    };
+    let written = match img {
+        Some(img) => img
+            .write_png(&staging.path().join(PICTURE_FILE))
+            .map_err(|e| format!("cannot write {PICTURE_FILE}: {e}")),
+        None => Err("no depth frame of the session reads back to draw it".to_owned()),
+    };
+    match written {
+        Ok(()) => summary.picture = Some(PICTURE_FILE),
+        Err(error) => {
+            tracing::warn!(message = "No picture; the results are complete without it.", %error);
+            summary.picture_error = Some(error);
+        }
     }
     let path = staging.path().join(SUMMARY_FILE);
     let json = serde_json::to_vec_pretty(&summary).map_err(std::io::Error::from);
@@ -470,6 +536,9 @@ pub fn summary_text(summary: &ReplaySummary, out: &Path) -> String {
             let _ = writeln!(text, "{group:>14}: {e:.2} mm");
         }
     }
+    if let Some(error) = &summary.picture_error {
+        let _ = writeln!(text, "no picture ({PICTURE_FILE}): {error}; the results are complete");
+    }
     if let Some(o) = &summary.orientation {
         let share = |n: u64| 100.0 * n as f64 / o.frames as f64;
         let _ = writeln!(
@@ -489,7 +558,8 @@ pub fn summary_text(summary: &ReplaySummary, out: &Path) -> String {
 pub struct ReplayArgs {
     /// The session directory (written by `record`, `run` or `synth session`, or a MoSeq
     /// recording). Several sessions, or a glob pattern (quoted), make a batch: each session
-    /// goes to DIR/<session name>/, finished ones are skipped, and DIR/batch.csv sums up.
+    /// goes to DIR/<session name>/ (a daemon's chunk to DIR/<run>-<chunk>/), finished ones
+    /// are skipped, and DIR/batch.csv sums up; one batch at a time per DIR.
     #[arg(value_name = "SESSION", required = true)]
     pub sessions: Vec<PathBuf>,
     /// The directory to write poses.csv and summary.json into (a batch: the sessions' parent).
@@ -543,7 +613,8 @@ pub fn command(args: &ReplayArgs) -> crate::app::Outcome {
         roi: args.roi.clone(),
         force: args.force,
     };
-    let summary = replay(&options).map_err(|e| {
+    let interrupt = Interrupt::install().map_err(ReplayError::Signals)?;
+    let summary = replay_until(&options, &interrupt).map_err(|e| {
         let usage = match &e {
             ReplayError::Output(OutputError::NotEmpty(_) | OutputError::NotADirectory(_)) => true,
             ReplayError::Recording(r) => r.is_input_problem(),

@@ -55,7 +55,13 @@ pub enum Sources<'a> {
         epochs: Epochs,
     },
     /// A recording read back: as fast as the pipeline takes it, or at its recorded pace.
-    Recording { recording: &'a Recording, realtime: bool },
+    /// Depth frames of another size than `depth_size` (when given: what the background
+    /// model covers) are skipped and counted `wrong_size`.
+    Recording {
+        recording: &'a Recording,
+        realtime: bool,
+        depth_size: Option<(u32, u32)>,
+    },
 }
 
 /// Reopen counters of the two cameras (depth, colour); see [`Sources::Cameras`].
@@ -265,11 +271,15 @@ impl Topology<'_> {
                 }
                 has_color
             }
-            Sources::Recording { recording, realtime } => {
+            Sources::Recording {
+                recording,
+                realtime,
+                depth_size,
+            } => {
                 let clock = Clock::replay(0);
                 match recording {
                     Recording::Session(reader) => {
-                        let player = SessionPlayer::new(reader, realtime);
+                        let player = SessionPlayer::new(reader, realtime).with_depth_size(depth_size);
                         spawn_source(&mut runner, "replay", player, &clock, |c| c, &outputs, &acct)
                     }
                     Recording::Moseq { config, .. } => {

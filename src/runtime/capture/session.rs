@@ -27,6 +27,10 @@ pub struct SessionPlayer {
     start: Option<(Instant, u64)>,
     clock: Option<Clock>,
     corrupt: [u64; 2],
+    /// The size depth frames must have (what the background model covers); `None`: any.
+    depth_size: Option<(u32, u32)>,
+    /// Depth frames of another size, skipped (a live run's `wrong_size`).
+    wrong_size: u64,
     done: bool,
 }
 
@@ -45,8 +49,19 @@ impl SessionPlayer {
             start: None,
             clock: None,
             corrupt: [0; 2],
+            depth_size: None,
+            wrong_size: 0,
             done: false,
         }
+    }
+
+    /// The same source, skipping depth frames of another size than `width` x `height` and
+    /// counting them as `wrong_size`, as a live run does (a camera that changed its mode for
+    /// a frame).
+    #[must_use]
+    pub fn with_depth_size(mut self, size: Option<(u32, u32)>) -> Self {
+        self.depth_size = size;
+        self
     }
 
     /// The metadata of the camera with `role`, if the session has one.
@@ -77,6 +92,17 @@ impl SessionPlayer {
         while self.next_depth.is_none() {
             match self.depth.next() {
                 None => break,
+                Some(Ok(f)) if self.depth_size.is_some_and(|size| size != (f.width, f.height)) => {
+                    if self.wrong_size == 0 {
+                        tracing::warn!(
+                            seq = f.stamp.seq,
+                            size = ?(f.width, f.height),
+                            expected = ?self.depth_size,
+                            "depth frames of another size are skipped and counted (wrong_size)"
+                        );
+                    }
+                    self.wrong_size += 1;
+                }
                 Some(Ok(f)) => self.next_depth = Some(f),
                 Some(Err(SessionError::Frame { .. })) => self.corrupt[0] += 1,
                 Some(Err(e)) => return Err(self.recording_error(e)),
@@ -178,6 +204,7 @@ impl FrameSource for SessionPlayer {
             ("color_corrupt", self.corrupt[1] + dc),
             ("depth_truncated", u64::from(td)),
             ("color_truncated", u64::from(tc)),
+            ("depth_wrong_size", self.wrong_size),
         ]
     }
 
