@@ -607,3 +607,68 @@ fn a_camera_that_cannot_be_stopped_at_the_end_does_not_fail_the_run() {
         "{report:#}"
     );
 }
+
+/// Issue 31 item 7: on a disk that fills up (no threshold: the writes fail with ENOSPC),
+/// recording resumes within seconds of space coming back, not at the next chunk (an hour
+/// away here); no chunk is left with an empty `session.toml` or an empty `summary.json`.
+#[test]
+fn issue31_recording_resumes_soon_after_a_full_disk_and_every_chunk_reads_back() {
+    if !is_root() {
+        eprintln!("skipped: mounting a small tmpfs needs root");
+        return;
+    }
+    let tmp = tempfile::tempdir().expect("test set-up");
+    let out = tmp.path().join("out");
+    let _disk = Tmpfs::mount(&out, "32m");
+    // About 6 MB left: full within two seconds of frames.
+    let filler = out.join("filler");
+    std::fs::write(&filler, vec![1u8; 26 << 20]).expect("test set-up");
+    let rig = tmp.path().join("rig.toml");
+    std::fs::write(
+        &rig,
+        format!(
+            "[depth]\n{}[output]\ndir = {out:?}\nchunk_minutes = 60\nmin_free_gb = 0\nmin_free_percent = 0\n\
+             [http]\naddress = \"127.0.0.1:0\"\n",
+            session_depth()
+        ),
+    )
+    .expect("test set-up");
+    let daemon = daemon(&rig, None);
+    // Full for long enough that recording tries again (and fails) while it is.
+    std::thread::sleep(Duration::from_secs(16));
+    std::fs::remove_file(&filler).expect("test set-up");
+    std::thread::sleep(Duration::from_secs(10));
+    let (status, stdout, err) = terminate(daemon, Duration::from_secs(30));
+    assert!(status.success(), "{status}: {err}");
+    assert!(err.contains("recording paused"), "{err}");
+    let report = report(&stdout);
+    assert_accounted(&report["cameras"]["depth"]);
+    let chunks = chunks(&out);
+    // Recording went on after the space came back, in a chunk of its own.
+    let later: usize = chunks[1..]
+        .iter()
+        .filter_map(|c| SessionReader::open(c).ok())
+        .map(|s| s.depth_count())
+        .sum();
+    assert!(
+        later > 0,
+        "nothing recorded after the disk had room again: {chunks:?}\n{err}"
+    );
+    for chunk in &chunks {
+        // Every session begun reads back (no empty or cut session.toml) ...
+        if chunk.join("session.toml").exists() {
+            let session = SessionReader::open(chunk).unwrap_or_else(|e| panic!("{chunk:?}: {e}"));
+            assert!(session.depth_count() > 0, "{chunk:?}");
+        }
+        // ... and a summary is whole or absent, never empty; no hidden partial file is left.
+        for entry in std::fs::read_dir(chunk).expect("test set-up") {
+            let name = entry.expect("test set-up").file_name().to_string_lossy().into_owned();
+            assert!(!name.contains(".partial-"), "{chunk:?}: {name}");
+        }
+        if let Ok(text) = std::fs::read(chunk.join("summary.json")) {
+            serde_json::from_slice::<serde_json::Value>(&text).unwrap_or_else(|e| panic!("{chunk:?}: {e}"));
+        }
+    }
+    // The first chunk, closed while the disk was full, got its summary once there was room.
+    assert!(chunks[0].join("summary.json").is_file(), "{chunks:?}");
+}

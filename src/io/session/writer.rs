@@ -98,6 +98,33 @@ struct TruthWriter {
     pairs: LineWriter,
 }
 
+/// The files and directories a session writer creates in `dir`.
+fn session_entries(dir: &Path) -> [PathBuf; 5] {
+    [
+        dir.join(META_FILE),
+        dir.join(EVENTS_FILE),
+        dir.join(CameraRole::Depth.name()),
+        dir.join(CameraRole::Color.name()),
+        dir.join(TRUTH_DIR),
+    ]
+}
+
+/// Removes a session's files and directories from `dir`, leaving anything else.
+fn remove_session_entries(dir: &Path) -> Result<()> {
+    for path in session_entries(dir) {
+        let removed = if path.is_dir() {
+            fs::remove_dir_all(&path)
+        } else {
+            fs::remove_file(&path)
+        };
+        match removed {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io_error(&path, "remove")(e)),
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
 /// Writes a session directory. See the [module documentation](super) for the layout.
 ///
 /// Frames, events and truth rows are handed to the operating system as they are written, so
@@ -144,6 +171,48 @@ impl SessionWriter {
                 path: dir.to_path_buf(),
             });
         }
+        Self::start(dir, meta, options)
+    }
+
+    /// Starts a session in `dir`, which may hold files of other kinds (a daemon chunk's
+    /// `poses.csv`) but none of a session's, with the default [`WriterOptions`].
+    ///
+    /// # Errors
+    /// [`SessionError::NotEmpty`] when `dir` holds a session's file or directory; otherwise
+    /// as [`SessionWriter::create_with`].
+    pub fn create_beside(dir: impl AsRef<Path>, meta: &SessionMeta) -> Result<Self> {
+        let dir = dir.as_ref();
+        if session_entries(dir).iter().any(|p| p.exists()) {
+            return Err(SessionError::NotEmpty {
+                path: dir.to_path_buf(),
+            });
+        }
+        Self::start(dir, meta, WriterOptions::default())
+    }
+
+    /// Removes what a session that never got a frame put in `dir` (a session begun on a full
+    /// disk: an empty or cut `session.toml` would be refused by every reader).
+    ///
+    /// # Errors
+    /// A file or directory exists and cannot be removed.
+    pub fn abandon(self) -> Result<()> {
+        let dir = self.dir.clone();
+        drop(self);
+        remove_session_entries(&dir)
+    }
+
+    /// [`SessionWriter::create_with`] once `dir` is known to be free for a session: on
+    /// failure, nothing of the session is left.
+    fn start(dir: &Path, meta: &SessionMeta, options: WriterOptions) -> Result<Self> {
+        let started = Self::start_files(dir, meta, options);
+        if started.is_err() {
+            // Best effort: the error to report is the one that stopped the start.
+            let _ = remove_session_entries(dir);
+        }
+        started
+    }
+
+    fn start_files(dir: &Path, meta: &SessionMeta, options: WriterOptions) -> Result<Self> {
         let meta_path = dir.join(META_FILE);
         if let Some(reason) = meta.problem() {
             return Err(SessionError::Format {

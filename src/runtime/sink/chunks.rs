@@ -6,7 +6,10 @@
 //! when a camera appears that the current chunk's session does not hold) and creates their
 //! directories; the recorder ([`ChunkRecorder`]) and the pose sink ([`ChunkPoses`]) each follow
 //! it by the host time of what they write. A full disk pauses raw recording ([`DiskWatch`]);
-//! a write error pauses it and starts a new chunk later; poses go on either way, and none of
+//! a write error pauses it, and it resumes once the disk has room again: in a new chunk when
+//! the broken session had frames, otherwise by starting the current chunk's session again
+//! (a session that could not start leaves nothing behind). Summaries are written whole or
+//! not at all, and tried again while the run goes on. Poses go on either way, and none of
 //! this stops the run.
 
 use crate::io::session::{
@@ -114,18 +117,37 @@ impl Chunks {
         if !self.plan.record {
             return;
         }
-        let mut meta = self.plan.meta.clone();
-        meta.created = crate::runtime::capture::clock::utc_now();
-        meta.cameras = self.plan.cameras.iter().filter_map(|h| lock(h).meta.clone()).collect();
-        let created = SessionWriter::create(&dir, &meta).and_then(|mut w| {
-            w.log_event(&SessionEvent::SessionStarted { host_ns: start })?;
-            Ok(w)
-        });
-        match created {
+        match self.new_session(index, start) {
             Ok(w) => {
                 opened.writers.insert(index, w);
             }
             Err(e) => tracing::error!(chunk = index, "cannot start the chunk's session: {}", error_chain(&e)),
+        }
+    }
+
+    /// Starts the session of chunk `index` at `host_ns` (beside the chunk's `poses.csv`, when
+    /// it is started again after a failed start). Nothing of it is left on failure: a
+    /// `session.toml` cut by a full disk would make the chunk unreadable.
+    ///
+    /// # Errors
+    /// The session's files cannot be created or written.
+    pub fn new_session(&self, index: usize, host_ns: u64) -> Result<SessionWriter, SessionError> {
+        let mut meta = self.plan.meta.clone();
+        meta.created = crate::runtime::capture::clock::utc_now();
+        meta.cameras = self.plan.cameras.iter().filter_map(|h| lock(h).meta.clone()).collect();
+        let mut w = SessionWriter::create_beside(self.dir(index), &meta)?;
+        match w.log_event(&SessionEvent::SessionStarted { host_ns }) {
+            Ok(()) => Ok(w),
+            Err(e) => {
+                if let Err(cleanup) = w.abandon() {
+                    tracing::debug!(
+                        chunk = index,
+                        "cannot remove the session begun: {}",
+                        error_chain(&cleanup)
+                    );
+                }
+                Err(e)
+            }
         }
     }
 }
@@ -193,8 +215,13 @@ impl DiskWatch {
     }
 }
 
-/// How long recording pauses after a write error before it tries a new chunk.
-const WRITE_RETRY: Duration = Duration::from_secs(10);
+/// How long recording pauses after a write error (or a session that cannot be started)
+/// before it tries again.
+const WRITE_RETRY: Duration = Duration::from_secs(5);
+
+/// Free bytes needed before recording tries again after a write error (statvfs, checked at
+/// each try): a disk that is still full is not worth a new chunk.
+const RESUME_FREE_BYTES: u64 = 8 << 20;
 
 /// What the recorder branch of a live run shows while it runs (the daemon's status and
 /// metrics read it; the recorder thread writes it).
@@ -219,6 +246,11 @@ pub struct ChunkRecorder {
     disk: DiskWatch,
     /// Set after a write error: nothing is written before then.
     paused_until: Option<Instant>,
+    /// The session broke after frames were written in it: the next try begins a new chunk.
+    /// Otherwise (no session, or one without a frame) it starts a session in this chunk.
+    broken: bool,
+    /// Tries to start a session that failed since the last one that worked (logged once).
+    failed_starts: u64,
     cameras: Vec<SharedHealth>,
     gauges: Arc<RecorderGauges>,
 }
@@ -232,8 +264,39 @@ impl ChunkRecorder {
             counted: 0,
             disk,
             paused_until: None,
+            broken: false,
+            failed_starts: 0,
             cameras,
             gauges,
+        }
+    }
+
+    /// Starts a session in the current chunk, which has none (its start failed, or the one
+    /// it had broke before its first frame); `false` when it cannot, and then pauses.
+    fn start_here(&mut self, host_ns: u64) -> bool {
+        match self.chunks.new_session(self.index, host_ns) {
+            Ok(w) => {
+                if self.failed_starts > 0 {
+                    tracing::info!(chunk = self.index, "recording resumed");
+                }
+                self.failed_starts = 0;
+                self.writer = Some(w);
+                self.counted = 0;
+                true
+            }
+            Err(e) => {
+                if self.failed_starts == 0 {
+                    tracing::error!(
+                        chunk = self.index,
+                        retry_s = WRITE_RETRY.as_secs(),
+                        "recording paused: cannot start the chunk's session: {}",
+                        error_chain(&e)
+                    );
+                }
+                self.failed_starts += 1;
+                self.paused_until = Some(Instant::now() + WRITE_RETRY);
+                false
+            }
         }
     }
 
@@ -274,6 +337,7 @@ impl ChunkRecorder {
         self.index = index;
         self.writer = self.chunks.take_writer(index);
         self.counted = 0;
+        self.broken = false;
     }
 
     /// The cameras' events (outages, reopenings) into the session.
@@ -295,12 +359,22 @@ impl ChunkRecorder {
         if self.paused_until.is_some_and(|t| Instant::now() < t) {
             return Ok(Some("write_error"));
         }
+        let retry = self.paused_until.is_some();
+        if retry {
+            // A disk still full is not tried (nor is a new chunk begun on it).
+            self.disk.low();
+            if self.disk.free_bytes().is_some_and(|free| free < RESUME_FREE_BYTES) {
+                self.paused_until = Some(Instant::now() + WRITE_RETRY);
+                return Ok(Some("write_error"));
+            }
+            self.paused_until = None;
+        }
         let mut index = self.chunks.at(host_ns);
-        if self.paused_until.take().is_some()
+        if (retry && std::mem::take(&mut self.broken))
             || (self.index != usize::MAX && self.writer.as_ref().is_some_and(|w| !w.has_camera(role)))
         {
-            // After a write error, or for a camera the chunk's session does not hold (one
-            // that opened after the chunk began): a new chunk.
+            // After a write error in a session with frames, or for a camera the chunk's
+            // session does not hold (one that opened after the chunk began): a new chunk.
             index = self.chunks.split(host_ns);
         }
         if self.index == usize::MAX || index > self.index {
@@ -308,6 +382,9 @@ impl ChunkRecorder {
         }
         if self.disk.low() {
             return Ok(Some("disk_low"));
+        }
+        if self.writer.is_none() && !self.start_here(host_ns) {
+            return Ok(Some("write_error"));
         }
         let result = self.log_camera_events().and_then(|()| match &mut self.writer {
             Some(w) => crate::runtime::sink::recorder::FrameRecorder::write(w, frame).map(|_| true),
@@ -318,13 +395,28 @@ impl ChunkRecorder {
             Ok(false) => Ok(Some("write_error")),
             Err(e) => {
                 // The frames written so far stay readable: the store appends whole records.
+                // A session without a frame is removed (its chunk gets a session again when
+                // the disk has room); one with frames is kept and the next try begins a new
+                // chunk.
                 tracing::error!(
                     chunk = self.index,
                     retry_s = WRITE_RETRY.as_secs(),
                     "recording paused: {}",
                     error_chain(&e)
                 );
-                self.writer = None;
+                if let Some(w) = self.writer.take() {
+                    if w.depth_frames() + w.color_frames() == 0 {
+                        if let Err(e) = w.abandon() {
+                            tracing::warn!(
+                                chunk = self.index,
+                                "cannot remove the session without frames: {}",
+                                error_chain(&e)
+                            );
+                        }
+                    } else {
+                        self.broken = true;
+                    }
+                }
                 self.paused_until = Some(Instant::now() + WRITE_RETRY);
                 Ok(Some("write_error"))
             }
@@ -389,6 +481,35 @@ pub struct ChunkPoses {
     last_ns: Option<u64>,
     rows_lost: u64,
     live: Arc<Mutex<Live>>,
+    /// Summaries of closed chunks that could not be written yet (a full disk), with when
+    /// they were last tried: tried again every [`SUMMARY_RETRY`] and at the end.
+    unwritten: Vec<(PathBuf, Vec<u8>)>,
+    tried: Option<Instant>,
+}
+
+/// How often summaries that could not be written are tried again.
+const SUMMARY_RETRY: Duration = Duration::from_secs(1);
+
+/// Writes `bytes` to `path` whole or not at all: into a hidden file beside it, renamed into
+/// place (a full disk leaves no empty or cut file behind).
+///
+/// # Errors
+/// The file cannot be written or renamed (the hidden file is removed then).
+pub fn write_whole(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = path.with_file_name(format!(".{name}.partial-{}", std::process::id()));
+    let written = std::fs::File::create(&tmp).and_then(|mut f| {
+        std::io::Write::write_all(&mut f, bytes)?;
+        f.sync_all()
+    });
+    let result = written.and_then(|()| std::fs::rename(&tmp, path));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
 }
 
 impl ChunkPoses {
@@ -401,7 +522,30 @@ impl ChunkPoses {
             last_ns: None,
             rows_lost: 0,
             live,
+            unwritten: Vec::new(),
+            tried: None,
         }
+    }
+
+    /// Tries again to write the summaries that could not be written; `force`: now, whenever
+    /// the last try was.
+    fn write_unwritten(&mut self, force: bool) {
+        if self.unwritten.is_empty() || (!force && self.tried.is_some_and(|t| t.elapsed() < SUMMARY_RETRY)) {
+            return;
+        }
+        self.tried = Some(Instant::now());
+        self.unwritten.retain(|(path, text)| match write_whole(path, text) {
+            Ok(()) => {
+                tracing::info!("{path:?} written after all");
+                false
+            }
+            Err(e) => {
+                if force {
+                    tracing::error!("cannot write {path:?}: {e}");
+                }
+                true
+            }
+        });
     }
 
     /// Finishes the current chunk's `poses.csv` and writes its `summary.json`.
@@ -425,11 +569,18 @@ impl ChunkPoses {
             rows_lost: std::mem::take(&mut self.rows_lost),
         };
         let path = self.chunks.dir(self.index).join(CHUNK_SUMMARY_FILE);
-        let written = serde_json::to_vec_pretty(&summary)
-            .map_err(std::io::Error::other)
-            .and_then(|text| std::fs::write(&path, text));
-        if let Err(e) = written {
-            tracing::error!(chunk = self.index, "cannot write {path:?}: {e}");
+        match serde_json::to_vec_pretty(&summary) {
+            Ok(text) => {
+                if let Err(e) = write_whole(&path, &text) {
+                    tracing::error!(
+                        chunk = self.index,
+                        "cannot write {path:?} (tried again while the run goes on): {e}"
+                    );
+                    self.unwritten.push((path, text));
+                    self.tried = Some(Instant::now());
+                }
+            }
+            Err(e) => tracing::error!(chunk = self.index, "cannot write {path:?}: {e}"),
         }
         tracing::info!(chunk = self.index, rows = summary.rows, "chunk closed");
     }
@@ -452,6 +603,7 @@ impl Sink for ChunkPoses {
     type In = Fused;
 
     fn write(&mut self, item: Fused) -> Result<(), StageError> {
+        self.write_unwritten(false);
         let host_ns = item.record.depth.host_ns;
         let index = self.chunks.at(host_ns);
         if self.index == usize::MAX || index > self.index {
@@ -486,6 +638,7 @@ impl Sink for ChunkPoses {
 
     fn flush(&mut self) -> Result<(), StageError> {
         self.close();
+        self.write_unwritten(true);
         Ok(())
     }
 }
