@@ -672,3 +672,49 @@ fn issue31_recording_resumes_soon_after_a_full_disk_and_every_chunk_reads_back()
     // The first chunk, closed while the disk was full, got its summary once there was room.
     assert!(chunks[0].join("summary.json").is_file(), "{chunks:?}");
 }
+
+/// Issue 31 item 7, poses: a `poses.csv` that cannot be written on a full disk is written
+/// again within seconds of space coming back, in the same chunk when it held no row (a run
+/// that only makes poses: nothing else would begin a new chunk for an hour).
+#[test]
+fn issue31_poses_are_written_again_soon_after_a_full_disk() {
+    if !is_root() {
+        eprintln!("skipped: mounting a small tmpfs needs root");
+        return;
+    }
+    let tmp = tempfile::tempdir().expect("test set-up");
+    let out = tmp.path().join("out");
+    let _disk = Tmpfs::mount(&out, "16m");
+    // Not a byte left.
+    let filler = out.join("filler");
+    assert!(
+        std::fs::write(&filler, vec![1u8; 20 << 20]).is_err(),
+        "the disk did not fill"
+    );
+    let rig = tmp.path().join("rig.toml");
+    std::fs::write(
+        &rig,
+        format!(
+            "[depth]\n{}[output]\ndir = {out:?}\nrecord = \"never\"\nchunk_minutes = 60\nmin_free_gb = 0\n\
+             min_free_percent = 0\n[http]\naddress = \"127.0.0.1:0\"\n",
+            session_depth()
+        ),
+    )
+    .expect("test set-up");
+    let daemon = daemon(&rig, None);
+    std::thread::sleep(Duration::from_secs(4));
+    std::fs::remove_file(&filler).expect("test set-up");
+    std::thread::sleep(Duration::from_secs(9));
+    let (status, stdout, err) = terminate(daemon, Duration::from_secs(30));
+    assert!(status.success(), "{status}: {err}");
+    let report = report(&stdout);
+    assert!(report["poses_not_written"].as_u64().unwrap_or(0) > 0, "{report:#}");
+    let chunks = chunks(&out);
+    assert_eq!(chunks.len(), 1, "{chunks:?}");
+    let poses = std::fs::read_to_string(chunks[0].join("poses.csv")).expect("poses.csv");
+    assert!(poses.lines().count() > 30, "{} lines\n{err}", poses.lines().count());
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(chunks[0].join("summary.json")).expect("summary.json"))
+            .expect("a whole summary");
+    assert!(summary["rows_lost"].as_u64().unwrap_or(0) > 0, "{summary:#}");
+}

@@ -739,4 +739,16 @@ mod tests {
         assert!(parse_time("1 hour").is_err());
         assert_eq!(shell_quote("a'b"), "'a'\\''b'");
     }
+
+    #[test]
+    fn a_daemons_chunks_are_named_by_run_and_chunk() {
+        let name = |p: &str| output_name(Path::new(p));
+        assert_eq!(
+            name("/d/20261123T221726Z/chunk-0003").as_deref(),
+            Some("20261123T221726Z-chunk-0003")
+        );
+        assert_eq!(name("/d/mouse-a").as_deref(), Some("mouse-a"));
+        assert_eq!(name("/d/run/chunk-notes").as_deref(), Some("chunk-notes"));
+        assert_eq!(name("/chunk-0000").as_deref(), Some("chunk-0000"));
+    }
 }

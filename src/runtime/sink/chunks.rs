@@ -476,10 +476,15 @@ pub struct Live {
 pub struct ChunkPoses {
     chunks: Arc<Chunks>,
     index: usize,
-    writer: Option<(PoseWriter, Arc<Mutex<PoseTally>>)>,
+    writer: Option<PoseWriter>,
+    /// The current chunk's tally, kept when its `poses.csv` breaks.
+    tally: Option<Arc<Mutex<PoseTally>>>,
     first_ns: Option<u64>,
     last_ns: Option<u64>,
     rows_lost: u64,
+    /// Set when the current chunk's `poses.csv` could not be created or broke: no rows are
+    /// written before then, when it is tried again (see [`ChunkPoses::try_again`]).
+    retry_at: Option<Instant>,
     live: Arc<Mutex<Live>>,
     /// Summaries of closed chunks that could not be written yet (a full disk), with when
     /// they were last tried: tried again every [`SUMMARY_RETRY`] and at the end.
@@ -518,9 +523,11 @@ impl ChunkPoses {
             chunks,
             index: usize::MAX,
             writer: None,
+            tally: None,
             first_ns: None,
             last_ns: None,
             rows_lost: 0,
+            retry_at: None,
             live,
             unwritten: Vec::new(),
             tried: None,
@@ -553,13 +560,17 @@ impl ChunkPoses {
         if self.index == usize::MAX {
             return;
         }
-        let mut tally = PoseTally::default();
-        if let Some((mut w, t)) = self.writer.take() {
+        if let Some(mut w) = self.writer.take() {
             if let Err(e) = w.flush() {
                 tracing::error!(chunk = self.index, "cannot finish poses.csv: {e}");
             }
-            tally = t.lock().unwrap_or_else(PoisonError::into_inner).clone();
         }
+        self.retry_at = None;
+        let tally = self
+            .tally
+            .take()
+            .map(|t| t.lock().unwrap_or_else(PoisonError::into_inner).clone())
+            .unwrap_or_default();
         let summary = ChunkSummary {
             chunk: self.index,
             rows: tally.rows,
@@ -588,15 +599,58 @@ impl ChunkPoses {
     fn open(&mut self, index: usize) {
         self.close();
         self.index = index;
-        let dir = self.chunks.dir(index);
+        self.create();
+    }
+
+    /// Creates the current chunk's `poses.csv` (anew: what was there holds no row); on
+    /// failure, tries again later.
+    fn create(&mut self) {
+        let dir = self.chunks.dir(self.index);
         match PoseWriter::create(&dir, HashMap::new(), u64::MAX) {
             Ok(w) => {
-                let tally = w.tally();
-                self.writer = Some((w, tally));
+                if self.retry_at.take().is_some() || self.rows_lost > 0 {
+                    tracing::info!(chunk = self.index, "poses written again");
+                }
+                self.tally = Some(w.tally());
+                self.writer = Some(w);
             }
-            Err(e) => tracing::error!(chunk = index, "cannot create poses.csv in {dir:?}: {e}"),
+            Err(e) => {
+                if self.retry_at.is_none() {
+                    tracing::error!(chunk = self.index, "cannot create poses.csv in {dir:?}: {e}");
+                }
+                self.retry_at = Some(Instant::now() + WRITE_RETRY);
+            }
         }
     }
+
+    /// After `poses.csv` could not be created or broke, once its time has come and the disk
+    /// has room: a new chunk when the broken file holds rows (a cut last row cannot be
+    /// appended to), otherwise the file created again in this chunk.
+    fn try_again(&mut self, host_ns: u64) {
+        if self.writer.is_some() || self.retry_at.is_none_or(|t| Instant::now() < t) {
+            return;
+        }
+        let dir = self.chunks.dir(self.index);
+        let free = rustix::fs::statvfs(&dir).map(|st| st.f_bavail.saturating_mul(st.f_frsize));
+        if free.is_ok_and(|free| free < RESUME_FREE_BYTES) {
+            self.retry_at = Some(Instant::now() + WRITE_RETRY);
+            return;
+        }
+        if holds_rows(&dir.join(crate::runtime::sink::poses::POSES_FILE)) {
+            let index = self.chunks.split(host_ns);
+            self.open(index);
+        } else {
+            self.create();
+        }
+    }
+}
+
+/// Whether the `poses.csv` at `path` holds a row after its header (looking at its start only).
+fn holds_rows(path: &Path) -> bool {
+    use std::io::Read as _;
+    let mut start = Vec::new();
+    let read = std::fs::File::open(path).and_then(|f| f.take(1 << 16).read_to_end(&mut start));
+    read.is_ok() && start.iter().filter(|&&b| b == b'\n').count() >= 2
 }
 
 impl Sink for ChunkPoses {
@@ -609,12 +663,13 @@ impl Sink for ChunkPoses {
         if self.index == usize::MAX || index > self.index {
             self.open(index);
         }
+        self.try_again(host_ns);
         self.first_ns.get_or_insert(host_ns);
         self.last_ns = Some(host_ns);
         let record = item.record.clone();
         let frames = item.frames.clone();
         let written = match &mut self.writer {
-            Some((w, _)) => w.write(item).and_then(|()| w.hand_over().map_err(Into::into)),
+            Some(w) => w.write(item).and_then(|()| w.hand_over().map_err(Into::into)),
             None => Err("no poses.csv open".into()),
         };
         if let Err(e) = written {
@@ -622,8 +677,10 @@ impl Sink for ChunkPoses {
                 tracing::error!(chunk = self.index, "cannot write poses: {e}");
             }
             self.rows_lost += 1;
-            // Try again in the next chunk.
-            self.writer = None;
+            if self.writer.take().is_some() {
+                // Tried again once the disk has room (see `try_again`).
+                self.retry_at = Some(Instant::now() + WRITE_RETRY);
+            }
         }
         let lost = self.writer.is_none();
         let mut live = self.live.lock().unwrap_or_else(PoisonError::into_inner);
