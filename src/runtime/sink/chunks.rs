@@ -370,9 +370,9 @@ impl ChunkRecorder {
             self.paused_until = None;
         }
         let mut index = self.chunks.at(host_ns);
-        if (retry && std::mem::take(&mut self.broken))
-            || (self.index != usize::MAX && self.writer.as_ref().is_some_and(|w| !w.has_camera(role)))
-        {
+        // A chunk begun while recording was paused serves as the new chunk.
+        let broken = retry && std::mem::take(&mut self.broken) && index <= self.index;
+        if broken || (self.index != usize::MAX && self.writer.as_ref().is_some_and(|w| !w.has_camera(role))) {
             // After a write error in a session with frames, or for a camera the chunk's
             // session does not hold (one that opened after the chunk began): a new chunk.
             index = self.chunks.split(host_ns);
