@@ -105,7 +105,7 @@ pub fn frames_between_by_time(last: Stamp, next: Stamp, interval_ns: u64) -> u64
 pub fn wrapped_steps(last: u64, next: u64) -> Option<u64> {
     const END: u64 = 1 << 32;
     const NEAR: u64 = 1 << 24;
-    (last < END && last >= END - NEAR && next < NEAR).then(|| END - last + next)
+    ((END - NEAR..END).contains(&last) && next < NEAR).then(|| END - last + next)
 }
 
 impl SeqGaps {
