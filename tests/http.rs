@@ -285,9 +285,15 @@ fn the_endpoints_answer_while_the_daemon_runs_and_the_page_renders_in_chromium()
     let e2e = |s: &Series| value(s, "mousepose_end_to_end_latency_seconds_count", &[]);
     assert!(e2e(&after) > e2e(&before));
 
-    let depth = fetch(address, "/live/depth.png", None);
-    assert_eq!((depth.status, depth.content_type.as_deref()), (200, Some("image/png")));
-    assert!(depth.body.starts_with(b"\x89PNG"));
+    for picture in ["/live/depth.png", "/live/mouse.png"] {
+        let png = fetch(address, picture, None);
+        assert_eq!(
+            (png.status, png.content_type.as_deref()),
+            (200, Some("image/png")),
+            "{picture}"
+        );
+        assert!(png.body.starts_with(b"\x89PNG"), "{picture}");
+    }
     let events = fetch(address, "/events", None);
     let events: serde_json::Value = serde_json::from_slice(&events.body).unwrap();
     assert!(

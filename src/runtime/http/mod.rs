@@ -1,13 +1,13 @@
 //! The daemon's window: a small HTTP server (tokio + axum on one thread of its own) with the
 //! live page (`/`), Prometheus metrics (`/metrics`), the run report so far (`/status`), the
 //! last minutes' rates (`/history`), the last events (`/events`) and the latest pictures
-//! (`/live/depth.png`, `/live/bottom.png`).
+//! (`/live/depth.png`, `/live/mouse.png`, `/live/bottom.png`).
 //!
 //! It only reads: every handler reads the [`Watch`] (counters and the latest snapshot), never
 //! waits on a stage, and frames never cross it. Connections are bounded ([`conn`]: at most
 //! 256 open, each closed after 6 s idle) and so are requests: at most
 //! [`MAX_IN_FLIGHT`] at once (more get 503), each done within [`REQUEST_TIMEOUT`], pictures
-//! drawn at most five times a second whatever the number of clients, and the server's threads
+//! drawn at most twice a second whatever the number of clients, and the server's threads
 //! run at a lower priority than the pipeline's. A non-loopback address needs `allow_remote` in
 //! the config and then a bearer token on every request.
 
@@ -205,8 +205,9 @@ struct Served {
     pictures: tokio::sync::Mutex<Option<Pictures>>,
 }
 
-/// Pictures are drawn at most this often, however fast poses come.
-const PICTURE_INTERVAL: Duration = Duration::from_millis(200);
+/// Pictures are drawn at most this often, however fast poses come and however many pages are
+/// open: drawing and encoding them is the page's main cost to the machine.
+const PICTURE_INTERVAL: Duration = Duration::from_millis(500);
 
 /// The live pictures of one frame pair, as PNG.
 #[derive(Debug, Clone)]
@@ -215,6 +216,8 @@ struct Pictures {
     key: (u64, Option<u64>),
     drawn: std::time::Instant,
     depth: axum::body::Bytes,
+    /// The depth image around the mouse, magnified.
+    mouse: axum::body::Bytes,
     bottom: Option<axum::body::Bytes>,
 }
 
@@ -226,6 +229,7 @@ fn router(state: Arc<Served>) -> Router {
         .route("/history", get(history))
         .route("/events", get(events))
         .route("/live/depth.png", get(depth_png))
+        .route("/live/mouse.png", get(mouse_png))
         .route("/live/bottom.png", get(bottom_png))
         .layer(axum::middleware::from_fn_with_state(Arc::clone(&state), guard))
         .with_state(state)
@@ -326,6 +330,13 @@ async fn depth_png(State(s): State<Arc<Served>>) -> Response {
     }
 }
 
+async fn mouse_png(State(s): State<Arc<Served>>) -> Response {
+    match pictures(&s).await {
+        Some(p) => with_type("image/png", p.mouse),
+        None => (StatusCode::NOT_FOUND, "no pose yet\n").into_response(),
+    }
+}
+
 async fn bottom_png(State(s): State<Arc<Served>>) -> Response {
     match pictures(&s).await.and_then(|p| p.bottom) {
         Some(png) => with_type("image/png", png),
@@ -352,6 +363,7 @@ async fn pictures(s: &Arc<Served>) -> Option<Pictures> {
         let depth = overlay::depth_view(&rig, &frames.depth, &record, &floor)
             .to_png()
             .ok()?;
+        let mouse = overlay::mouse_view(&rig, &frames.depth, &record).to_png().ok()?;
         let bottom = frames
             .color
             .as_deref()
@@ -360,6 +372,7 @@ async fn pictures(s: &Arc<Served>) -> Option<Pictures> {
             key,
             drawn: std::time::Instant::now(),
             depth: depth.into(),
+            mouse: mouse.into(),
             bottom: bottom.map(Into::into),
         })
     })

@@ -46,6 +46,16 @@ pub fn draw_in_arena(
     RgbImage::hstack(&panels, 4, [255, 255, 255])
 }
 
+/// The depth image around the mouse, magnified, with the skeleton: the live page's close-up
+/// beside the whole cage (where the mouse is a few per cent of the picture).
+pub fn mouse_view(rig: &Rig, frame: &DepthFrame, record: &PoseRecord) -> RgbImage {
+    let joints = record
+        .pose
+        .joints
+        .map(|j| (j.source != JointSource::Missing).then_some(j.position_mm));
+    top_panel(rig, frame, &joints, None)
+}
+
 /// The whole depth frame coloured by height above `floor` (the segmenter's, fitted to the
 /// camera's view), with the skeleton: the daemon's live view.
 pub fn depth_view(rig: &Rig, frame: &DepthFrame, record: &PoseRecord, floor: &FloorPlane) -> RgbImage {
@@ -189,25 +199,29 @@ fn rgb_at(frame: &ColorFrame, x: u32, y: u32) -> [u8; 3] {
 /// The bottom view around the mouse's footprint, scaled to the panel's height, with the paw
 /// detections (yellow) and the fused paws (blue discs).
 pub fn bottom_panel(rig: &Rig, frame: &ColorFrame, record: &PoseRecord) -> RgbImage {
+    let whole = (0, 0, frame.width, frame.height);
+    // The footprint only where the rig's colour camera is this frame's (a camera without a
+    // calibration for its mode shows its whole frame), and only when it is more than a sliver.
+    let calibrated = (frame.width, frame.height) == (rig.color.intrinsics.width, rig.color.intrinsics.height);
     let (x0, y0, x1, y1) = footprint(&record.pose, &rig.color, FOOTPRINT_MARGIN_MM)
-        .map_or((0, 0, frame.width, frame.height), |(roi, _)| roi);
-    // Within the frame, even when the rig's colour camera is not this frame's (uncalibrated).
-    let (x0, y0) = (
-        x0.min(frame.width.saturating_sub(1)),
-        y0.min(frame.height.saturating_sub(1)),
-    );
+        .filter(|_| calibrated)
+        .map(|(roi, _)| roi)
+        .filter(|&(x0, y0, x1, y1)| x1.min(frame.width) >= x0 + 8 && y1.min(frame.height) >= y0 + 8)
+        .unwrap_or(whole);
     let (x1, y1) = (x1.min(frame.width), y1.min(frame.height));
     let (w, h) = (x1.saturating_sub(x0).max(1), y1.saturating_sub(y0).max(1));
-    let k = f64::from(PANEL) / f64::from(h);
-    let out_w = ((f64::from(w) * k).round() as u32).clamp(1, 2 * PANEL);
+    // As tall as the other panels, but never wider than two of them: the frame's aspect kept.
+    let k = (f64::from(PANEL) / f64::from(h)).min(f64::from(2 * PANEL) / f64::from(w));
+    let out_w = ((f64::from(w) * k).round() as u32).max(1);
+    let out_h = ((f64::from(h) * k).round() as u32).max(1);
     let mut native = Vec::with_capacity(w as usize * h as usize * 3);
     for y in y0..y0 + h {
         for x in x0..x0 + w {
             native.extend_from_slice(&rgb_at(frame, x, y));
         }
     }
-    let mut img = RgbImage::new(out_w, PANEL, [0; 3]);
-    for oy in 0..PANEL {
+    let mut img = RgbImage::new(out_w, out_h, [0; 3]);
+    for oy in 0..out_h {
         let sy = ((f64::from(oy) / k) as u32).min(h - 1);
         for ox in 0..out_w {
             let sx = ((f64::from(ox) / k) as u32).min(w - 1);
@@ -252,4 +266,44 @@ fn side_panel(record: &PoseRecord, joints: &[Option<Point3<f64>>; JOINT_COUNT]) 
         3.0,
     );
     img
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::frame::Stamp;
+    use crate::core::pose::Pose;
+    use crate::runtime::stages::PoseStatus;
+
+    #[test]
+    fn the_bottom_view_of_an_uncalibrated_camera_is_its_whole_frame_in_its_own_aspect() {
+        let rig = Rig::default_rig();
+        // A mouse in the middle of the cage, and a colour camera of another mode than the
+        // rig's (a 256x64 region), whose footprint would be a sliver at its edge.
+        let mut pose = Pose::default();
+        for (k, j) in Joint::MAIN_BODY.into_iter().enumerate() {
+            let e = pose.joint_mut(j);
+            e.position_mm = Point3::new(k as f64 * 5.0 - 30.0, 0.0, 20.0);
+            e.source = JointSource::Depth;
+        }
+        let record = PoseRecord {
+            depth: Stamp::default(),
+            color: Some(Stamp::default()),
+            skew_ns: 0,
+            status: PoseStatus::Ok,
+            pose,
+            paws: Vec::new(),
+            headings: None,
+            orientation: None,
+        };
+        let frame = ColorFrame {
+            stamp: Stamp::default(),
+            width: 256,
+            height: 64,
+            format: PixelFormat::Mono8,
+            data: vec![128; 256 * 64],
+        };
+        let img = bottom_panel(&rig, &frame, &record);
+        assert_eq!((img.width, img.height), (2 * PANEL, PANEL / 2), "the whole 4:1 frame");
+    }
 }
