@@ -791,46 +791,74 @@ mod tests {
         right as f64 / d.len() as f64
     }
 
-    #[test]
-    fn colour_frames_held_up_for_two_seconds_and_delivered_in_a_burst_still_pair() {
-        // 30 s at 30 fps; the colour frames taken in [10 s, 12 s) reach the host at 12 s, 0.1 ms
-        // apart and before the next frame (a network stall, then a burst).
+    /// 30 s at 30 fps with the colour frames taken in [10 s, 10 s + `held_s`) reaching the host
+    /// together at its end, 0.1 ms apart and before the next frame (a network stall, then a
+    /// burst): the share of depth frames paired with their true partner, and the depth frames
+    /// given up on.
+    fn burst(held_s: f64) -> (f64, u64) {
+        burst_with(held_s, SyncConfig::default())
+    }
+
+    fn burst_with(held_s: f64, config: SyncConfig) -> (f64, u64) {
         let period = 1.0 / 30.0;
         let d = stream(900, period, 0.0, 1_000_000_000, 0.0, 6.0, &[0.0], &[false]);
         let mut c = stream(900, period, 0.25 * period, 3_000_000_000, 0.0, 3.0, &[0.0], &[false]);
         let mut burst = 0;
         for (t, stamp) in &mut c {
-            if (10.0..12.0).contains(t) {
-                stamp.host_ns = 5_000_000_000 + 12_000_000_000 + burst * 100_000;
+            if (10.0..10.0 + held_s).contains(t) {
+                stamp.host_ns = 5_000_000_000 + ((10.0 + held_s) * 1e9) as u64 + burst * 100_000;
                 burst += 1;
             }
         }
-        let mut sync = Synchronizer::new(SyncConfig::default());
-        let out = {
-            let mut arrivals: Vec<(u64, bool, Stamp)> = d
-                .iter()
-                .map(|x| (x.1.host_ns, true, x.1))
-                .chain(c.iter().map(|x| (x.1.host_ns, false, x.1)))
-                .collect();
-            arrivals.sort_by_key(|a| (a.0, !a.1));
-            let mut out = Vec::new();
-            for (_, is_depth, s) in arrivals {
-                if is_depth {
-                    sync.push_depth(depth(s), &mut out);
-                } else {
-                    sync.push_color(color(s), &mut out);
-                }
+        let mut sync = Synchronizer::new(config);
+        let mut arrivals: Vec<(u64, bool, Stamp)> = d
+            .iter()
+            .map(|x| (x.1.host_ns, true, x.1))
+            .chain(c.iter().map(|x| (x.1.host_ns, false, x.1)))
+            .collect();
+        arrivals.sort_by_key(|a| (a.0, !a.1));
+        let mut out = Vec::new();
+        for (_, is_depth, s) in arrivals {
+            if is_depth {
+                sync.push_depth(depth(s), &mut out);
+            } else {
+                sync.push_color(color(s), &mut out);
             }
-            sync.flush(&mut out);
-            out
-        };
-        let share = right_share(&out, &d, &c, period);
+        }
+        sync.flush(&mut out);
+        (right_share(&out, &d, &c, period), sync.given_up())
+    }
+
+    #[test]
+    fn colour_frames_held_up_for_two_seconds_and_delivered_in_a_burst_still_pair() {
+        let (share, given_up) = burst(2.0);
         assert!(
             share >= 0.97,
             "{:.1} % of depth frames with their true partner",
             share * 100.0
         );
-        assert!(sync.given_up() <= 27, "{} given up", sync.given_up());
+        assert!(given_up <= 27, "{given_up} given up");
+    }
+
+    /// The pairing figures under bursts of 1-4 s:
+    /// `cargo test --lib burst_pairing_figures -- --ignored --nocapture`.
+    #[test]
+    #[ignore = "a measurement: prints the pairing figures under bursts"]
+    fn burst_pairing_figures() {
+        let before = SyncConfig {
+            max_wait_ns: 200_000_000,
+            ..SyncConfig::default()
+        };
+        for held_s in [1.0, 2.0, 3.0, 4.0] {
+            let (share, given_up) = burst(held_s);
+            let (share_200, given_up_200) = burst_with(held_s, before);
+            eprintln!(
+                "colour held {held_s} s then a burst: {:.1} % of 900 depth frames with their true partner, {given_up} given up \
+                 (with the earlier 200 ms wait: {:.1} %, {given_up_200})",
+                share * 100.0,
+                share_200 * 100.0
+            );
+        }
     }
 
     #[test]
