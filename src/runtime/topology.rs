@@ -449,8 +449,12 @@ fn run_source<S: FrameSource>(
     let own_role = source.meta().role;
     source.start(clock)?;
     let mut gaps = [SeqGaps::default(); 2];
-    // Per camera, the source's own losses already set against gaps in its frame numbers.
+    // Per camera, the source's own losses already set against gaps in its frame numbers, and
+    // the ones that came between two frames without a gap between them (damaged bytes that
+    // were no frame, such as garbage between a recording's records): not frames lost.
     let mut accounted = [0u64; 2];
+    let mut not_frames = [0u64; 2];
+    let mut seen = [false; 2];
     'frames: while !shutdown.requested() && !source.finished() {
         let Some(frame) = source.next_frame(Duration::from_millis(100))? else {
             continue;
@@ -472,6 +476,10 @@ fn run_source<S: FrameSource>(
         let explained = lost.saturating_sub(accounted[slot]);
         accounted[slot] = lost;
         bump(&counters.lost, "camera_gap", missing.saturating_sub(explained));
+        // Before a camera's first frame there is no number to tell: those losses count.
+        if std::mem::replace(&mut seen[slot], true) {
+            not_frames[slot] += explained.saturating_sub(missing);
+        }
         let mut frame = Some(frame);
         for (k, (tx, recorder)) in outputs.iter().enumerate() {
             let item = if k + 1 == outputs.len() {
@@ -490,7 +498,10 @@ fn run_source<S: FrameSource>(
     }
     for (reason, n) in source.losses() {
         let (role, reason) = loss_of(reason, own_role);
-        bump(&acct.camera(role).lost, reason, n);
+        let slot = usize::from(role == CameraRole::Color);
+        let not_frame = n.min(not_frames[slot]);
+        not_frames[slot] -= not_frame;
+        bump(&acct.camera(role).lost, reason, n - not_frame);
     }
     // Every frame is in by now: a camera that cannot be stopped cleanly (gone at the same
     // moment, as when a rig powers down) is worth a warning, not the run.
@@ -653,6 +664,20 @@ mod tests {
             damaged_from: 1,
         });
         assert_eq!(lost.get("incomplete"), Some(&1), "{lost:?}");
+        assert_eq!(lost.get("camera_gap"), Some(&1), "{lost:?}");
+    }
+
+    #[test]
+    fn damage_between_two_frames_without_a_gap_is_no_frame_lost() {
+        // Garbage between the records of 1 and 2 (the source steps over it and counts it),
+        // and no number missing: nothing was lost; 5 never came.
+        let lost = lost_of(Numbered {
+            seqs: vec![0, 1, 2, 3, 4, 6],
+            delivered: 0,
+            damaged: 1,
+            damaged_from: 3,
+        });
+        assert_eq!(lost.get("incomplete"), None, "{lost:?}");
         assert_eq!(lost.get("camera_gap"), Some(&1), "{lost:?}");
     }
 
