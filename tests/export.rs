@@ -219,11 +219,18 @@ fn video_export_has_a_frame_per_pose_row_and_the_window_asked_for() {
     let out = mousepose()
         .args(["export", "video"])
         .arg(&run)
-        .args(["--from", "0.2", "--to", "0.6", "--out"])
+        .args(["--from", "0.2", "--to", "0.6", "--json", "--out"])
         .arg(&part)
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let said: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(said["out"], part.to_str().unwrap());
+    assert_eq!(said["frames"], expected);
+    assert_eq!(
+        (said["width"].as_u64(), said["height"].as_u64()),
+        (Some(width.into()), Some(height.into()))
+    );
     assert_eq!(probe(&part), (expected as u64, width, height, "h264".to_owned()));
 
     // An existing file is kept without --force; a window past the end is refused.
@@ -266,6 +273,12 @@ fn nwb_export_reads_back_with_24_series_and_passes_nwbinspector() {
             "m1",
             "--age",
             "P84D",
+            "--sex",
+            "F",
+            "--strain",
+            "C57BL/6J",
+            "--subject-description",
+            "group-housed, 12 h light cycle",
             "--experimenter",
             "Doe, Jane",
             "--institution",
@@ -274,13 +287,18 @@ fn nwb_export_reads_back_with_24_series_and_passes_nwbinspector() {
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("warning"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     // Read back by pynwb; checked by nwbinspector.
     let check = r#"
 import json, sys
 import numpy as np
 from pynwb import NWBHDF5IO
 import ndx_pose
-from nwbinspector import inspect_nwbfile, Importance
+from nwbinspector import inspect_nwbfile, Importance, load_config
 with NWBHDF5IO(sys.argv[1], "r") as io:
     f = io.read()
     pe = f.processing["behavior"]["PoseEstimation"]
@@ -299,10 +317,18 @@ with NWBHDF5IO(sys.argv[1], "r") as io:
         "software": pe.source_software,
         "devices": sorted(f.devices.keys()),
         "subject": f.subject.subject_id,
+        "age": f.subject.age,
+        "strain": f.subject.strain,
+        "sex": f.subject.sex,
+        "subject_description": f.subject.description,
         "snout_x0": float(series["snout"].data[0][0]),
     }
-critical = [m for m in inspect_nwbfile(nwbfile_path=sys.argv[1]) if m.importance == Importance.CRITICAL]
-out["critical"] = [m.message for m in critical]
+# At nwbinspector's default threshold, and with DANDI's configuration (what `dandi validate`
+# runs): nothing critical, no best-practice violation, no error.
+serious = lambda ms: [f"{m.importance.name} {m.check_function_name}: {m.message}" for m in ms
+                      if m.importance.value >= Importance.BEST_PRACTICE_VIOLATION.value]
+out["critical"] = serious(inspect_nwbfile(nwbfile_path=sys.argv[1]))
+out["dandi"] = serious(inspect_nwbfile(nwbfile_path=sys.argv[1], config=load_config("dandi")))
 print(json.dumps(out))
 "#;
     let read = Command::new(python).args(["-c", check]).arg(&nwb).output().unwrap();
@@ -331,6 +357,11 @@ print(json.dumps(out))
     assert_eq!(v["devices"], serde_json::json!(["color_camera", "depth_camera"]));
     assert_eq!(v["subject"], "m1");
     assert_eq!(v["critical"], serde_json::json!([]), "{v}");
+    assert_eq!(v["dandi"], serde_json::json!([]), "{v}");
+    assert_eq!(v["age"], "P84D");
+    assert_eq!(v["strain"], "C57BL/6J");
+    assert_eq!(v["sex"], "F");
+    assert_eq!(v["subject_description"], "group-housed, 12 h light cycle");
     // The first row's snout, as poses.csv has it.
     let csv = std::fs::read_to_string(run.join("poses.csv")).unwrap();
     let snout_x: f64 = csv.lines().nth(1).unwrap().split(',').nth(8).unwrap().parse().unwrap();
@@ -348,4 +379,183 @@ print(json.dumps(out))
     assert_eq!(missing.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&missing.stderr).contains("cannot run"));
     assert!(!tmp.path().join("b.nwb").exists());
+}
+
+/// Runs the daemon for a few seconds on the fixture session's depth frames (no colour camera,
+/// chunks of 3 s, recording) and returns its first chunk, closed, with its `summary.json`.
+fn daemon_chunk(dir: &Path) -> PathBuf {
+    let rig = crate::run::rig_full(
+        dir,
+        &crate::run::session_depth(),
+        false,
+        "",
+        "address = \"127.0.0.1:0\"\n",
+    );
+    let run = mousepose()
+        .args(["run", "--seconds", "4", "--json", "--config"])
+        .arg(&rig)
+        .env("MOUSEPOSE_MODELS", repo_root().join("fixtures/models"))
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let runs: Vec<PathBuf> = std::fs::read_dir(dir.join("out"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(runs.len(), 1, "{runs:?}");
+    let chunk = runs[0].join("chunk-0000");
+    assert!(chunk.join("summary.json").is_file(), "{chunk:?} was not closed");
+    chunk
+}
+
+#[test]
+fn a_daemon_chunk_exports_to_nwb_moseq_and_video() {
+    let tmp = tempfile::tempdir().unwrap();
+    let chunk = daemon_chunk(tmp.path());
+    let csv = std::fs::read_to_string(chunk.join("poses.csv")).unwrap();
+    let rows = csv.lines().count() - 1;
+    assert!(rows > 10, "{rows} rows");
+    let reader = SessionReader::open(&chunk).unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(chunk.join("summary.json")).unwrap()).unwrap();
+    // The chunk's summary names the models its poses come from.
+    let body_model = summary["body_model"].as_str().unwrap().to_owned();
+    assert!(body_model.ends_with("body.forest"), "{summary}");
+
+    // MoSeq: the chunk is a session.
+    let moseq = tmp.path().join("moseq");
+    let out = mousepose()
+        .args(["export", "moseq", "--json"])
+        .arg(&chunk)
+        .arg("--out")
+        .arg(&moseq)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let said: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(said["depth_frames"], reader.depth_count());
+    let ts = std::fs::read_to_string(moseq.join(DEPTH_TS)).unwrap();
+    assert_eq!(ts.lines().count(), reader.depth_count());
+
+    // Video: a frame per row of poses.csv, its frames from the chunk's own session.
+    let video = tmp.path().join("chunk.mp4");
+    let out = mousepose()
+        .args(["export", "video"])
+        .arg(&chunk)
+        .arg("--out")
+        .arg(&video)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(probe(&video).0 as usize, rows);
+
+    // NWB: one sample per row, the models as scorer.
+    let python = Path::new(mousepose::app::export::nwb::DEFAULT_PYTHON);
+    assert!(python.is_file(), "{python:?} is missing: run scripts/setup.sh");
+    let nwb = tmp.path().join("chunk.nwb");
+    let out = mousepose()
+        .args(["export", "nwb"])
+        .arg(&chunk)
+        .arg("--out")
+        .arg(&nwb)
+        .args(["--subject-id", "m1", "--age", "P84D", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let said: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        (said["rows"].as_u64(), said["series"].as_u64()),
+        (Some(rows as u64), Some(24))
+    );
+    assert_eq!(said["warnings"], serde_json::json!([]));
+    let check = r#"
+import json, sys
+from pynwb import NWBHDF5IO
+import ndx_pose
+with NWBHDF5IO(sys.argv[1], "r") as io:
+    pe = io.read().processing["behavior"]["PoseEstimation"]
+    first = next(iter(pe.pose_estimation_series.values()))
+    print(json.dumps({"series": len(pe.pose_estimation_series), "timestamps": len(first.timestamps), "scorer": pe.scorer}))
+"#;
+    let read = Command::new(python).args(["-c", check]).arg(&nwb).output().unwrap();
+    assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&read.stdout).unwrap();
+    assert_eq!(v["series"], 24);
+    assert_eq!(v["timestamps"], rows);
+    assert!(v["scorer"].as_str().unwrap().contains(&body_model), "{v}");
+}
+
+#[test]
+fn nwb_export_without_an_age_warns_of_dandi_and_invents_none() {
+    let python = Path::new(mousepose::app::export::nwb::DEFAULT_PYTHON);
+    assert!(python.is_file(), "{python:?} is missing: run scripts/setup.sh");
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    replay_to(&fixture(), &run, None);
+    let export = |name: &str, flags: &[&str]| {
+        let nwb = tmp.path().join(name);
+        let out = mousepose()
+            .args(["export", "nwb"])
+            .arg(&run)
+            .arg("--out")
+            .arg(&nwb)
+            .args(flags)
+            .output()
+            .unwrap();
+        (nwb, out)
+    };
+    let subject = |nwb: &Path| -> serde_json::Value {
+        let script = r#"
+import json, sys
+from pynwb import NWBHDF5IO
+import ndx_pose
+from nwbinspector import inspect_nwbfile, load_config
+with NWBHDF5IO(sys.argv[1], "r") as io:
+    s = io.read().subject
+    out = {"age": s.age, "date_of_birth": s.date_of_birth.isoformat() if s.date_of_birth else None}
+out["dandi"] = sorted({m.check_function_name for m in inspect_nwbfile(nwbfile_path=sys.argv[1], config=load_config("dandi")) if m.importance.name == "CRITICAL"})
+print(json.dumps(out))
+"#;
+        let read = Command::new(python).args(["-c", script]).arg(nwb).output().unwrap();
+        assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+        serde_json::from_slice(&read.stdout).unwrap()
+    };
+
+    // No age, no date of birth: written, with a warning naming what DANDI refuses.
+    let (nwb, out) = export("bare.nwb", &[]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("warning") && err.contains("DANDI") && err.contains("check_subject_age"),
+        "{err}"
+    );
+    let v = subject(&nwb);
+    assert_eq!(v["age"], serde_json::Value::Null);
+    assert_eq!(v["date_of_birth"], serde_json::Value::Null);
+    assert_eq!(v["dandi"], serde_json::json!(["check_subject_age"]), "{v}");
+
+    // A date of birth instead: no warning, DANDI content.
+    let (nwb, out) = export("born.nwb", &["--date-of-birth", "1999-10-02"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("warning"));
+    let v = subject(&nwb);
+    assert_eq!(v["date_of_birth"], "1999-10-02T00:00:00+00:00");
+    assert_eq!(v["dandi"], serde_json::json!([]), "{v}");
+
+    // What DANDI would refuse is refused here, in one sentence, before anything is written.
+    for (flag, value, says) in [
+        ("--age", "90 days", "ISO 8601 duration"),
+        ("--age", "P100D/P80D", "does not increase"),
+        ("--date-of-birth", "2000-02-30", "YYYY-MM-DD"),
+        ("--date-of-birth", "2001-01-01", "after the session's start"),
+        ("--species", "mouse", "Latin binomial"),
+        ("--weight", "25", "unit"),
+    ] {
+        let name = format!("bad-{}.nwb", flag.trim_start_matches('-'));
+        let (nwb, out) = export(&name, &[flag, value]);
+        assert_eq!(out.status.code(), Some(1), "{flag} {value}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(says), "{flag} {value}: {err}");
+        assert!(!nwb.exists(), "{flag} {value}");
+    }
 }

@@ -224,6 +224,8 @@ pub fn run(
         record: config.record,
         cameras: shared.clone(),
         meta: chunk_meta(notes, config.calibration.as_ref().map(|_| rig), latency),
+        body_model: models.body_path(),
+        paw_model: models.paws_path(),
     });
     let live = Arc::new(Mutex::new(Live::default()));
     let floor = FloorSlot::default();

@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 pub enum ExportCommand {
     /// A run's poses as NWB 2.x with ndx-pose (24 PoseEstimationSeries, the skeleton, the
     /// cameras), written by pynwb.
-    Nwb(nwb::NwbArgs),
+    Nwb(Box<nwb::NwbArgs>),
     /// A session in MoSeq's layout: depth.avi (FFV1 16-bit), depth_ts.txt, metadata.json,
     /// and the colour camera as color.avi (FFV1) with color_ts.txt.
     Moseq(moseq::MoseqArgs),
@@ -35,10 +35,12 @@ pub fn run(command: &ExportCommand) -> crate::app::Outcome {
     }
 }
 
-/// What a run's `summary.json` says about how it was made.
+/// What a run's `summary.json` says about how it was made: a replay's names its session; a
+/// daemon's chunk's does not (the chunk is its session, when the daemon recorded).
 #[derive(Debug, serde::Deserialize)]
 struct RunSummary {
-    session: PathBuf,
+    #[serde(default)]
+    session: Option<PathBuf>,
     #[serde(default)]
     calibration: Option<PathBuf>,
 }
@@ -56,6 +58,10 @@ pub enum RunError {
     },
     #[error("the session {session:?} that {summary:?} names is not there (give it with --session)")]
     SessionGone { session: PathBuf, summary: PathBuf },
+    #[error(
+        "{0:?} holds poses but no recorded frames, and its summary names no session (a daemon's chunk recorded with `record = false`?); give the session with --session"
+    )]
+    NoSession(PathBuf),
 }
 
 /// A run (a replay's output directory, or a daemon's chunk) and the session it was made from.
@@ -69,7 +75,8 @@ pub struct Run {
 
 impl Run {
     /// Finds the session of `dir`: `session` when given, `dir` itself when it is a session
-    /// (a daemon's chunk), else the one its `summary.json` names.
+    /// (a daemon's chunk, whose `summary.json` names no session), else the one its
+    /// `summary.json` names.
     ///
     /// # Errors
     /// See [`RunError`].
@@ -92,15 +99,16 @@ impl Run {
         let session = match (session, &summary) {
             (Some(s), _) => s.to_owned(),
             (None, _) if dir.join(META_FILE).is_file() => dir.to_owned(),
-            (None, Some(summary)) => {
-                if !summary.session.is_dir() {
+            (None, Some(summary)) => match &summary.session {
+                Some(named) if named.is_dir() => named.clone(),
+                Some(named) => {
                     return Err(RunError::SessionGone {
-                        session: summary.session.clone(),
+                        session: named.clone(),
                         summary: summary_path,
                     });
                 }
-                summary.session.clone()
-            }
+                None => return Err(RunError::NoSession(dir.to_owned())),
+            },
             (None, None) => return Err(RunError::NotARun(dir.to_owned())),
         };
         Ok(Self {

@@ -53,6 +53,10 @@ pub struct MoseqArgs {
     /// Replace the output directory if it is not empty.
     #[arg(long)]
     pub force: bool,
+    /// Print what was written as one JSON object (`out`, `depth_frames`, `color_frames`,
+    /// `skipped_frames`).
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// `metadata.json`: the keys MoSeq's acquisition writes (moseq2-extract reads the resolution,
@@ -296,6 +300,9 @@ pub fn command(args: &MoseqArgs) -> crate::app::Outcome {
     );
     bar.finish_and_clear();
     let e = result.map_err(|f| f.context(format!("exporting {:?} for MoSeq", run.session)))?;
+    if args.json {
+        return Ok(crate::app::print_json(&e)?);
+    }
     let mut text = format!(
         "{} depth frames to {:?}, {} colour frames to {:?}",
         e.depth_frames,

@@ -48,11 +48,16 @@ def main(poses_csv, meta_json, out):
         source_script_file_name="mousepose",
     )
     s = meta["subject"]
+    born = s.get("date_of_birth")
     nwb.subject = Subject(
         subject_id=s["subject_id"],
         species=s["species"],
         sex=s["sex"],
         age=s.get("age") or None,
+        date_of_birth=datetime.fromisoformat(born) if born else None,
+        strain=s.get("strain") or None,
+        genotype=s.get("genotype") or None,
+        weight=s.get("weight") or None,
         description=s.get("description") or None,
     )
     devices = [

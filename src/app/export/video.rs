@@ -49,6 +49,9 @@ pub struct VideoArgs {
     /// Replace the file if it exists.
     #[arg(long)]
     pub force: bool,
+    /// Print what was written as one JSON object (`out`, `frames`, `width`, `height`).
+    #[arg(long)]
+    pub json: bool,
 }
 
 fn parse_offset(s: &str) -> Result<f64, String> {
@@ -67,7 +70,7 @@ pub struct VideoOptions {
 }
 
 /// What was written.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct VideoExport {
     pub frames: u64,
     pub width: u32,
@@ -227,6 +230,18 @@ pub fn command(args: &VideoArgs) -> crate::app::Outcome {
     });
     bar.finish_and_clear();
     let v = result.map_err(|f| f.context(format!("drawing the video of {:?}", args.run)))?;
+    if args.json {
+        #[derive(serde::Serialize)]
+        struct Written<'a> {
+            out: &'a std::path::Path,
+            #[serde(flatten)]
+            video: VideoExport,
+        }
+        return Ok(crate::app::print_json(&Written {
+            out: &args.out,
+            video: v,
+        })?);
+    }
     Ok(print(&format!(
         "{} frames of {}x{} to {:?}\n",
         v.frames, v.width, v.height, args.out

@@ -42,6 +42,10 @@ pub struct ChunkPlan {
     pub cameras: Vec<SharedHealth>,
     /// The rest of each session's metadata (cameras and creation time are filled per chunk).
     pub meta: SessionMeta,
+    /// The body forest and the paw cascade the poses come from, named in each chunk's
+    /// `summary.json` (as a replay's names them).
+    pub body_model: PathBuf,
+    pub paw_model: Option<PathBuf>,
 }
 
 #[derive(Debug, Default)]
@@ -456,6 +460,9 @@ pub struct ChunkSummary {
     pub last_host_ns: Option<u64>,
     /// Rows that could not be written.
     pub rows_lost: u64,
+    pub software_version: &'static str,
+    pub body_model: PathBuf,
+    pub paw_model: Option<PathBuf>,
 }
 
 /// The latest pose and counts, for the status line (and the live page).
@@ -578,6 +585,9 @@ impl ChunkPoses {
             first_host_ns: self.first_ns.take(),
             last_host_ns: self.last_ns.take(),
             rows_lost: std::mem::take(&mut self.rows_lost),
+            software_version: env!("CARGO_PKG_VERSION"),
+            body_model: self.chunks.plan.body_model.clone(),
+            paw_model: self.chunks.plan.paw_model.clone(),
         };
         let path = self.chunks.dir(self.index).join(CHUNK_SUMMARY_FILE);
         match serde_json::to_vec_pretty(&summary) {
