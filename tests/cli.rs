@@ -414,11 +414,21 @@ fn train_and_eval_body_and_parts_on_the_fixture_dataset() {
             parts.to_str().unwrap(),
             "--discriminative",
             data,
+            "--json",
         ][..],
         &small,
     ]
     .concat());
     assert!(o.status.success(), "{}", stderr(&o));
+    // --json: what was written, as one JSON object.
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert_eq!(v["out"], parts.to_str().unwrap());
+    assert_eq!(
+        (v["kind"].as_str(), v["trees"].as_u64()),
+        (Some("parts"), Some(2)),
+        "{v}"
+    );
+    assert!(v["nodes"].as_u64().is_some_and(|n| n > 1), "{v}");
     let o = run(&[
         "eval",
         "parts",
@@ -457,4 +467,116 @@ fn train_and_eval_body_and_parts_on_the_fixture_dataset() {
     let o = run(&["eval", "body", "--model", data, "--data", data]);
     assert_ne!(o.status.code(), Some(0));
     assert!(!stderr(&o).contains("panicked"));
+}
+
+/// Every flag and argument of `cmd` and its subcommands, as "path --flag", that `--help`
+/// shows without a description; and every subcommand without one.
+fn undescribed(cmd: &clap::Command, path: &str, found: &mut Vec<String>) {
+    for arg in cmd.get_arguments() {
+        if arg.is_hide_set() || ["help", "version"].contains(&arg.get_id().as_str()) {
+            continue;
+        }
+        let described = arg
+            .get_help()
+            .or(arg.get_long_help())
+            .is_some_and(|h| !h.to_string().trim().is_empty());
+        if !described {
+            let name = arg
+                .get_long()
+                .map_or_else(|| arg.get_id().to_string(), |l| format!("--{l}"));
+            found.push(format!("{path} {name}"));
+        }
+    }
+    for sub in cmd.get_subcommands() {
+        let sub_path = format!("{path} {}", sub.get_name());
+        if sub.get_about().is_none_or(|a| a.to_string().trim().is_empty()) {
+            found.push(sub_path.clone());
+        }
+        undescribed(sub, &sub_path, found);
+    }
+}
+
+#[test]
+fn every_command_and_flag_has_a_description_in_its_help() {
+    let mut found = Vec::new();
+    undescribed(&mousepose::app::cli(), "mousepose", &mut found);
+    assert!(found.is_empty(), "without a description in --help: {found:#?}");
+    // What the walk reads is what --help prints.
+    let help = run(&["export", "nwb", "--help"]);
+    let text = String::from_utf8_lossy(&help.stdout);
+    assert!(
+        text.contains("--experimenter <NAME>") && text.contains("Who ran the experiment"),
+        "{text}"
+    );
+}
+
+#[test]
+fn an_invalid_rust_log_is_refused_with_one_sentence() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("s");
+    let o = mousepose()
+        .args(["synth", "session", "--seconds", "0.1", "--out"])
+        .arg(&out)
+        .env("RUST_LOG", "verbose")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("RUST_LOG=\"verbose\" is not a log filter"), "{err}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn synth_commands_print_what_they_wrote_as_json() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let dataset = tmp.path().join("d");
+    let o = run(&[
+        "synth",
+        "dataset",
+        "--images",
+        "2",
+        "--json",
+        "--out",
+        dataset.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert_eq!(v["out"], dataset.to_str().unwrap());
+    assert_eq!(v["images"], 2);
+
+    let session = tmp.path().join("s");
+    let o = run(&[
+        "synth",
+        "session",
+        "--seconds",
+        "0.2",
+        "--json",
+        "--out",
+        session.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    let reader = SessionReader::open(&session).expect("a session");
+    assert_eq!(v["depth_frames"], reader.depth_count());
+    assert_eq!(v["color_frames"], reader.color_count());
+    assert!(Path::new(v["preview"].as_str().expect("preview")).is_file(), "{v}");
+
+    let boards = tmp.path().join("c");
+    let o = run(&[
+        "synth",
+        "chessboard",
+        "--views",
+        "1",
+        "--json",
+        "--out",
+        boards.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert_eq!(
+        (v["out"].as_str(), v["views"].as_u64()),
+        (boards.to_str(), Some(1)),
+        "{v}"
+    );
 }

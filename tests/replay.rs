@@ -609,4 +609,42 @@ fn issue31_a_replay_stopped_by_sigterm_leaves_nothing_behind() {
     assert!(err.contains("stopped by a signal"), "{err}");
     assert!(!partial.exists(), "{partial:?} left behind");
     assert!(!out.exists());
+#[test]
+fn a_single_replay_shows_its_progress_on_a_terminal_only() {
+    let tmp = tempfile::tempdir().unwrap();
+    let models = repo_root().join("fixtures/models");
+    let frames = SessionReader::open(fixture()).unwrap().depth_count();
+    // On a terminal (`script` gives the command one): a bar of rows against the session's
+    // depth frames, on stderr.
+    let out = tmp.path().join("tty");
+    let command = format!(
+        "{:?} replay {:?} --out {:?} --models {:?} 2>&1 >/dev/null",
+        env!("CARGO_BIN_EXE_mousepose"),
+        fixture(),
+        out,
+        models
+    );
+    let tty = std::process::Command::new("script")
+        .args(["-qefc", &command, "/dev/null"])
+        .env_remove("JOURNAL_STREAM")
+        .output()
+        .unwrap();
+    assert!(tty.status.success(), "{}", String::from_utf8_lossy(&tty.stderr));
+    let shown = String::from_utf8_lossy(&tty.stdout);
+    assert!(shown.contains("replay ["), "{shown:?}");
+    assert!(shown.contains(&format!("/{frames}")), "{shown:?}");
+    assert!(out.join("poses.csv").is_file());
+    // In a pipe: no bar.
+    let piped = mousepose()
+        .arg("replay")
+        .arg(fixture())
+        .arg("--out")
+        .arg(tmp.path().join("pipe"))
+        .arg("--models")
+        .arg(&models)
+        .env_remove("JOURNAL_STREAM")
+        .output()
+        .unwrap();
+    assert!(piped.status.success());
+    assert!(!String::from_utf8_lossy(&piped.stderr).contains("replay ["));
 }

@@ -121,6 +121,9 @@ pub struct ChessboardArgs {
     /// Replace the output directory if it is not empty.
     #[arg(long)]
     pub force: bool,
+    /// Print what was written as one JSON object (`out`, `views`).
+    #[arg(long)]
+    pub json: bool,
 }
 
 fn refuse_existing(path: &Path, force: bool) -> Outcome {
@@ -413,5 +416,8 @@ pub fn synth_chessboard(args: &ChessboardArgs) -> Outcome {
     bar.finish_and_clear();
     let out = staging.commit()?;
     tracing::info!(message = "Chessboard views written.", path = %out.display(), views = args.views);
+    if args.json {
+        crate::app::print_json(&serde_json::json!({ "out": out, "views": args.views }))?;
+    }
     Ok(())
 }

@@ -196,13 +196,47 @@ pub(crate) fn parse_binning(s: &str) -> Result<u32, String> {
     }
 }
 
+/// The levels a `RUST_LOG` directive may name.
+const LOG_LEVELS: [&str; 6] = ["off", "error", "warn", "info", "debug", "trace"];
+
+/// The log filter of `RUST_LOG` (`info` when unset or empty): comma-separated directives,
+/// each a level, a module of mousepose (`mousepose::runtime`), or `target=level`. A word that
+/// is none of these (a misspelt level) is refused rather than read as a target that never
+/// logs.
+///
+/// # Errors
+/// One sentence naming the directive that is wrong.
+fn log_filter(value: Option<&str>) -> Result<tracing_subscriber::EnvFilter, String> {
+    let Some(value) = value.map(str::trim).filter(|v| !v.is_empty()) else {
+        return Ok(tracing_subscriber::EnvFilter::new("info"));
+    };
+    let levels = LOG_LEVELS.join(", ");
+    for directive in value.split(',').map(str::trim).filter(|d| !d.is_empty()) {
+        let bare = !directive.contains(['=', '[']);
+        let ours = directive == "mousepose" || directive.starts_with("mousepose::");
+        if bare && !ours && !LOG_LEVELS.contains(&directive.to_ascii_lowercase().as_str()) {
+            return Err(format!(
+                "RUST_LOG={value:?} is not a log filter: {directive:?} is neither a level ({levels}) nor target=level"
+            ));
+        }
+    }
+    tracing_subscriber::EnvFilter::builder()
+        .with_regex(false)
+        .parse(value)
+        .map_err(|e| format!("RUST_LOG={value:?} is not a log filter ({e}); use a level ({levels}) or target=level"))
+}
+
 /// Sets up logging to stderr: plain lines for journald under systemd, with colours on a
 /// terminal; `RUST_LOG` picks the level (default `info`).
-fn init_logging() {
+///
+/// # Errors
+/// `RUST_LOG` is set but not a log filter.
+fn init_logging() -> Result<(), String> {
     use tracing_subscriber::layer::SubscriberExt as _;
     use tracing_subscriber::util::SubscriberInitExt as _;
     let journald = std::env::var_os("JOURNAL_STREAM").is_some();
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into());
+    let value = std::env::var_os("RUST_LOG").map(|v| v.to_string_lossy().into_owned());
+    let filter = log_filter(value.as_deref())?;
     // The last events also go to the daemon's live page.
     let events = crate::runtime::watch::events::EventLayer(crate::runtime::watch::events::EventLog::global());
     let registry = tracing_subscriber::registry().with(filter).with(events);
@@ -211,7 +245,7 @@ fn init_logging() {
         // back to plain lines on stderr (which the journal takes too) without a journal socket.
         if let Ok(layer) = tracing_journald::layer() {
             drop(registry.with(layer).try_init());
-            return;
+            return Ok(());
         }
     }
     let fmt = tracing_subscriber::fmt::layer()
@@ -226,6 +260,7 @@ fn init_logging() {
     };
     // A subscriber installed already (in tests) is fine.
     drop(result);
+    Ok(())
 }
 
 /// Runs the command line and returns the process's exit code: 0 on success, 1 for bad
@@ -240,7 +275,10 @@ pub fn main() -> ExitCode {
             return ExitCode::from(code);
         }
     };
-    init_logging();
+    if let Err(e) = init_logging() {
+        eprintln!("error: {e}");
+        return ExitCode::from(1);
+    }
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(failure) => {
@@ -353,6 +391,36 @@ impl Drop for Forwarded {
     fn drop(&mut self) {
         for id in self.0.drain(..) {
             signal_hook::low_level::unregister(id);
+        }
+    }
+}
+
+/// The command line's definition: every command, flag and its help (for tests and tools).
+pub fn cli() -> clap::Command {
+    <Cli as clap::CommandFactory>::command()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::log_filter;
+
+    #[test]
+    fn rust_log_takes_levels_modules_and_targets_and_refuses_the_rest() {
+        for good in [
+            "debug",
+            "WARN",
+            "info,mousepose::runtime=debug",
+            "mousepose",
+            "axum=warn",
+            "",
+        ] {
+            assert!(log_filter(Some(good)).is_ok(), "{good}");
+        }
+        assert!(log_filter(None).is_ok());
+        for bad in ["verbose", "debg", "info,loud", "mousepose=loud", "x=1=2"] {
+            let e = log_filter(Some(bad)).expect_err(bad);
+            assert!(e.starts_with(&format!("RUST_LOG={bad:?} is not a log filter")), "{e}");
+            assert!(!e.contains('\n'), "{e}");
         }
     }
 }

@@ -286,7 +286,7 @@ fn common_size(frames: &[DepthFrame]) -> Option<(u32, u32)> {
 /// # Errors
 /// See [`ReplayError`]; nothing is left at `options.out` on failure.
 pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
-    replay_until(options, &Interrupt::default())
+    replay_with(options, &Interrupt::default(), |_, _| {})
 }
 
 /// [`replay`], stopped early by `interrupt` (SIGINT, SIGTERM): then
@@ -296,6 +296,23 @@ pub fn replay(options: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
 /// # Errors
 /// See [`ReplayError`]; nothing is left at `options.out` on failure.
 pub fn replay_until(options: &ReplayOptions, interrupt: &Interrupt) -> Result<ReplaySummary, ReplayError> {
+    replay_with(options, interrupt, |_, _| {})
+}
+
+/// How often a replay reports its progress.
+const PROGRESS_EVERY: std::time::Duration = std::time::Duration::from_millis(200);
+
+/// [`replay_until`], calling `progress` with the rows written and the depth frames of the
+/// recording every [`PROGRESS_EVERY`] while the pipeline runs (from a thread of its own), and
+/// once at the end.
+///
+/// # Errors
+/// See [`ReplayError`]; nothing is left at `options.out` on failure.
+pub fn replay_with(
+    options: &ReplayOptions,
+    interrupt: &Interrupt,
+    progress: impl Fn(u64, u64) + Sync,
+) -> Result<ReplaySummary, ReplayError> {
     let recording = Recording::open(&options.session)?;
     let models = Models::load(options.models.as_deref())?;
     let (body_model, paw_model) = (models.body_path(), models.paws_path());
@@ -386,8 +403,33 @@ pub fn replay_until(options: &ReplayOptions, interrupt: &Interrupt) -> Result<Re
     if forwarded.is_err() {
         running.shutdown().request();
     }
-    let finished = running.join();
+    let total = recording.depth_count() as u64;
+    // Dropping `stop` ends the watcher at once.
+    let (stop, stopped) = crossbeam_channel::bounded::<()>(1);
+    let finished = std::thread::scope(|scope| {
+        let watcher = std::thread::Builder::new()
+            .name("progress".to_owned())
+            .spawn_scoped(scope, || {
+                loop {
+                    let rows = tally.lock().unwrap_or_else(PoisonError::into_inner).rows;
+                    progress(rows, total);
+                    if !matches!(
+                        stopped.recv_timeout(PROGRESS_EVERY),
+                        Err(crossbeam_channel::RecvTimeoutError::Timeout)
+                    ) {
+                        break;
+                    }
+                }
+            });
+        let finished = running.join();
+        drop(stop);
+        if let Ok(w) = watcher {
+            drop(w.join());
+        }
+        finished
+    });
     drop(forwarded?);
+    progress(tally.lock().unwrap_or_else(PoisonError::into_inner).rows, total);
     let stages = finished.outcome?;
     if interrupt.requested() {
         return Err(ReplayError::Interrupted);
@@ -614,7 +656,14 @@ pub fn command(args: &ReplayArgs) -> crate::app::Outcome {
         force: args.force,
     };
     let interrupt = Interrupt::install().map_err(ReplayError::Signals)?;
-    let summary = replay_until(&options, &interrupt).map_err(|e| {
+    // Rows written against the recording's depth frames (about one row per frame).
+    let bar = crate::app::progress::bar(0, "replay");
+    let result = replay_with(&options, &interrupt, |rows, total| {
+        bar.set_length(total.max(rows));
+        bar.set_position(rows);
+    });
+    bar.finish_and_clear();
+    let summary = result.map_err(|e| {
         let usage = match &e {
             ReplayError::Output(OutputError::NotEmpty(_) | OutputError::NotADirectory(_)) => true,
             ReplayError::Recording(r) => r.is_input_problem(),

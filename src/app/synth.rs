@@ -48,6 +48,9 @@ pub struct DatasetArgs {
     /// Leave out the bottom colour views (smaller and faster, for body and part training).
     #[arg(long)]
     no_bottom: bool,
+    /// Print what was written as one JSON object (`out`, `images`).
+    #[arg(long)]
+    json: bool,
     /// standard: mice in the range the bundled forests were trained on; varied: sizes, body
     /// shapes, backs and tails well outside it (see `synth session --mice`); mixed: every
     /// other image varied.
@@ -83,6 +86,10 @@ pub struct SessionArgs {
     /// Depth camera only (the paper's single-depth-image mode).
     #[arg(long)]
     no_color: bool,
+    /// Print what was written as one JSON object (`out`, `depth_frames`, `color_frames`,
+    /// `preview`).
+    #[arg(long)]
+    json: bool,
     /// standard: mice like the ones the bundled forests were trained on; varied: sizes,
     /// body shapes, backs and tails well outside that range (a stress test); mixed: varied
     /// for odd seeds.
@@ -121,6 +128,9 @@ fn synth_dataset(args: &DatasetArgs) -> Outcome {
     bar.finish_and_clear();
     let out = staging.commit()?;
     tracing::info!(message = "Dataset written.", path = %out.display(), images = spec.count);
+    if args.json {
+        crate::app::print_json(&serde_json::json!({ "out": out, "images": spec.count }))?;
+    }
     Ok(())
 }
 
@@ -154,5 +164,13 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         color_frames = summary.color_frames,
         preview = %out.join(crate::synth::session::PREVIEW_FILE).display(),
     );
+    if args.json {
+        crate::app::print_json(&serde_json::json!({
+            "out": out,
+            "depth_frames": summary.depth_frames,
+            "color_frames": summary.color_frames,
+            "preview": out.join(crate::synth::session::PREVIEW_FILE),
+        }))?;
+    }
     Ok(())
 }

@@ -100,6 +100,10 @@ pub struct TrainArgs {
     /// Replace the model file if it exists.
     #[arg(long)]
     pub force: bool,
+    /// Print what was written as one JSON object (`out`, `kind`, the model's size,
+    /// `training_seconds`).
+    #[arg(long)]
+    pub json: bool,
 }
 
 struct Bar(ProgressBar);
@@ -184,6 +188,20 @@ pub fn run(args: &TrainArgs) -> Outcome {
         Model::Parts(_, f) => counts(f),
     };
     let changed: usize = passes.iter().map(|p| p.tests_changed).sum();
+    if args.json {
+        crate::app::print_json(&serde_json::json!({
+            "out": args.out,
+            "kind": match args.target {
+                ModelTarget::Body => "body",
+                ModelTarget::Parts | ModelTarget::Paws => "parts",
+            },
+            "trees": trees,
+            "nodes": nodes,
+            "leaves": leaves,
+            "training_seconds": info.training_seconds,
+            "discriminative_tests_changed": changed,
+        }))?;
+    }
     tracing::info!(
         message = "Model written.",
         path = %args.out.display(),
@@ -270,6 +288,16 @@ fn train_paws(args: &TrainArgs) -> Result<()> {
         );
     }
     let last = trained.stages.last();
+    if args.json {
+        crate::app::print_json(&serde_json::json!({
+            "out": args.out,
+            "kind": "paws",
+            "stages": trained.cascade.stages.len(),
+            "weak": weak,
+            "features": trained.cascade.features.len(),
+            "training_seconds": started.elapsed().as_secs_f64(),
+        }))?;
+    }
     tracing::info!(
         message = "Paw cascade written.",
         path = %args.out.display(),
