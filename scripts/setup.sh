@@ -52,10 +52,8 @@ if ! "$nwb_venv/bin/python3" -c 'import pynwb, ndx_pose, nwbinspector' >/dev/nul
     echo "setup: the Python environment $nwb_venv (pynwb, ndx-pose) is missing and making it needs root" >&2
     exit 1
   fi
-  echo "setup: making the Python environment $nwb_venv (pynwb, ndx-pose, nwbinspector)" >&2
-  mkdir -p "$(dirname "$nwb_venv")"
-  /usr/bin/python3 -m venv "$nwb_venv"
-  "$nwb_venv/bin/pip" install -q --disable-pip-version-check 'pynwb>=3' 'ndx-pose>=0.2' nwbinspector
+  # The same script the Debian package installs as /usr/share/mousepose/nwb-env.
+  "$(dirname "$0")/nwb-env" "$nwb_venv"
 fi
 
 if ! command -v cargo >/dev/null 2>&1; then

@@ -233,6 +233,8 @@ fn package_holds_the_daemon_and_its_system_files() {
         "libopencv-imgproc",
         "libc6",
         "systemd",
+        // `export moseq`, `export video` and MoSeq replays run the ffmpeg program.
+        "ffmpeg",
     ] {
         assert!(
             names.iter().any(|n| n.starts_with(prefix)),
@@ -259,6 +261,7 @@ fn package_holds_the_daemon_and_its_system_files() {
         ("/usr/lib/tmpfiles.d/mousepose.conf", "-rw-r--r--"),
         ("/lib/udev/rules.d/60-mousepose.rules", "-rw-r--r--"),
         ("/etc/mousepose/rig.toml", "-rw-r--r--"),
+        ("/usr/share/mousepose/nwb-env", "-rwxr-xr-x"),
         ("/usr/share/doc/mousepose/README.md", "-rw-r--r--"),
         ("/usr/share/doc/mousepose/copyright", "-rw-r--r--"),
     ];
@@ -295,6 +298,7 @@ fn package_holds_the_daemon_and_its_system_files() {
         ("usr/share/mousepose/models/body.forest", "fixtures/models/body.forest"),
         ("usr/share/mousepose/models/paws.xml", "fixtures/models/paws.xml"),
         ("usr/share/doc/mousepose/README.md", "README.md"),
+        ("usr/share/mousepose/nwb-env", "scripts/nwb-env"),
     ] {
         let same = fs::read(root.join(installed)).expect("reads the packaged file")
             == fs::read(repo_root().join(source)).expect("reads the source");
@@ -357,4 +361,57 @@ fn package_holds_the_daemon_and_its_system_files() {
         );
     }
     assert!(systemctl_verbs(postinst).contains(&"daemon-reload".to_owned()));
+
+    // The NWB environment: one command, named by the package's README and description.
+    let readme = fs::read_to_string(root.join("usr/share/doc/mousepose/README.md")).expect("reads the README");
+    assert!(readme.contains("sudo /usr/share/mousepose/nwb-env"));
+    assert!(field("Description").contains("/usr/share/mousepose/nwb-env"));
+    let syntax = Command::new("sh")
+        .arg("-n")
+        .arg(root.join("usr/share/mousepose/nwb-env"))
+        .output()
+        .expect("runs sh -n");
+    assert!(syntax.status.success(), "{}", both(&syntax));
+
+    // At install, the shipped config's Dummy depth device is named, and only while it is there.
+    let said = run_postinst(
+        &scripts["postinst"],
+        &fs::read_to_string(root.join("etc/mousepose/rig.toml")).expect("reads"),
+    );
+    assert!(said.contains("Dummy") && said.contains("degraded"), "{said}");
+    let edited = fs::read_to_string(repo_root().join("docs/rig.example.toml"))
+        .expect("reads")
+        .replace("uri = \"Dummy\"", "uri = \"1d27/0601@1/5\"");
+    let said = run_postinst(&scripts["postinst"], &edited);
+    assert!(!said.contains("Dummy"), "{said}");
+}
+
+/// Runs `postinst configure` (a first install) with `config` as its rig.toml, the system
+/// programs it calls stubbed, and returns what it printed.
+fn run_postinst(postinst: &str, config: &str) -> String {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let rig = tmp.path().join("rig.toml");
+    fs::write(&rig, config).expect("writes");
+    let stubs = tmp.path().join("bin");
+    fs::create_dir(&stubs).expect("mkdir");
+    for program in ["systemd-sysusers", "systemd-tmpfiles", "udevadm", "systemctl"] {
+        let path = stubs.join(program);
+        fs::write(&path, "#!/bin/sh\nexit 0\n").expect("writes");
+        fs::set_permissions(&path, fs::Permissions::from_mode(0o755)).expect("chmod");
+    }
+    let script = tmp.path().join("postinst");
+    fs::write(
+        &script,
+        postinst.replace("/etc/mousepose/rig.toml", rig.to_str().expect("a UTF-8 path")),
+    )
+    .expect("writes");
+    let path = format!("{}:{}", stubs.display(), std::env::var("PATH").unwrap_or_default());
+    let o = Command::new("sh")
+        .arg(&script)
+        .arg("configure")
+        .env("PATH", path)
+        .output()
+        .expect("runs postinst");
+    assert!(o.status.success(), "{}", both(&o));
+    both(&o)
 }
