@@ -559,3 +559,73 @@ print(json.dumps(out))
         assert!(!nwb.exists(), "{flag} {value}");
     }
 }
+
+#[test]
+fn video_frames_keep_the_cameras_times_and_their_panels_stay_in_place() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    replay_to(&fixture(), &run, None);
+    let rows = mousepose::runtime::sink::poses::read_poses(&run.join("poses.csv")).unwrap();
+
+    // Every picture of the run has the same size: the bottom view's width does not follow the
+    // mouse's footprint, so the side view never moves.
+    let reader = SessionReader::open(fixture()).unwrap();
+    let rig = reader.meta().rig.unwrap();
+    let depth: Vec<_> = reader.depth_frames().map(Result::unwrap).collect();
+    let color: Vec<_> = reader.color_frames().unwrap().map(Result::unwrap).collect();
+    let (mut with_colour, mut slotted) = (std::collections::BTreeSet::new(), std::collections::BTreeSet::new());
+    for row in &rows {
+        let d = depth.iter().find(|f| f.stamp.seq == row.depth.seq).unwrap();
+        let c = row.color.and_then(|s| color.iter().find(|f| f.stamp.seq == s.seq));
+        if c.is_some() {
+            let picture = mousepose::runtime::stages::overlay::draw(&rig, d, c, row);
+            with_colour.insert((picture.width, picture.height));
+        }
+        // A pair without its colour frame keeps an empty bottom view in its place.
+        let picture = mousepose::runtime::stages::overlay::draw_panels(&rig, d, c, row, true, None);
+        slotted.insert((picture.width, picture.height));
+    }
+    assert_eq!(with_colour.len(), 1, "{with_colour:?}");
+    assert_eq!(slotted, with_colour);
+
+    // Each frame is shown at its depth frame's device time from the first (the fixture drops
+    // a frame: a constant 30 fps would show every later frame 33 ms early).
+    let video = tmp.path().join("v.mp4");
+    let out = mousepose()
+        .args(["export", "video"])
+        .arg(&run)
+        .arg("--out")
+        .arg(&video)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let probe = Command::new("ffprobe")
+        .args([
+            "-v",
+            "error",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "frame=pts_time",
+            "-of",
+            "csv=p=0",
+        ])
+        .arg(&video)
+        .output()
+        .unwrap();
+    assert!(probe.status.success());
+    let shown: Vec<f64> = String::from_utf8_lossy(&probe.stdout)
+        .lines()
+        .map(|l| l.trim().trim_end_matches(','))
+        .filter(|l| !l.is_empty())
+        .map(|l| l.parse().unwrap())
+        .collect();
+    let t0 = rows[0].depth.device_ns;
+    let times: Vec<f64> = rows.iter().map(|r| (r.depth.device_ns - t0) as f64 / 1e9).collect();
+    let gaps = times.windows(2).filter(|w| w[1] - w[0] > 0.05).count();
+    assert!(gaps > 0, "the fixture no longer drops a frame: {times:?}");
+    assert_eq!(shown.len(), times.len());
+    for (k, (s, t)) in shown.iter().zip(&times).enumerate() {
+        assert!((s - t).abs() < 0.001, "frame {k} shown at {s} s, taken at {t} s");
+    }
+}

@@ -609,6 +609,8 @@ fn issue31_a_replay_stopped_by_sigterm_leaves_nothing_behind() {
     assert!(err.contains("stopped by a signal"), "{err}");
     assert!(!partial.exists(), "{partial:?} left behind");
     assert!(!out.exists());
+}
+
 #[test]
 fn a_single_replay_shows_its_progress_on_a_terminal_only() {
     let tmp = tempfile::tempdir().unwrap();

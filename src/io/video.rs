@@ -1,6 +1,10 @@
 //! Writing videos through the `ffmpeg` command line: raw frames are piped into a child
 //! process, which encodes them into a file (FFV1 for lossless exports, H.264 for viewing).
 //!
+//! Frames go in as raw video at a constant rate, or, for a video whose frames keep their own
+//! times ([`EncoderSpec::timed`]), each in a minimal Matroska stream (uncompressed RGB blocks
+//! with microsecond timestamps) that ffmpeg passes through as variable frame rate.
+//!
 //! The child's error output is read on a named thread (so that a chatty ffmpeg never blocks on
 //! a full pipe) and its last lines name the cause when encoding fails. The video is written to
 //! a hidden file beside the destination and renamed into place by [`Encoder::finish`], so an
@@ -27,6 +31,8 @@ pub enum VideoError {
     },
     #[error("frame of {got} bytes, the video's frames are {expected} bytes")]
     FrameSize { got: usize, expected: usize },
+    #[error("frame time {got_us} us is not after the previous frame's ({previous_us} us)")]
+    TimeOrder { got_us: u64, previous_us: u64 },
     #[error("cannot move the finished video to {path:?}")]
     Rename {
         path: PathBuf,
@@ -48,6 +54,9 @@ pub struct EncoderSpec {
     /// Bytes per pixel of the piped frames.
     pub bytes_per_pixel: usize,
     pub fps: f64,
+    /// Frames carry their own times ([`Encoder::write_at`]), kept in the file (variable frame
+    /// rate); `fps` is then only the time of frames written without one.
+    pub timed: bool,
     /// Options before the output file (codec, its pixel format, its settings).
     pub output_args: Vec<String>,
 }
@@ -69,6 +78,7 @@ impl EncoderSpec {
             input_pix_fmt,
             bytes_per_pixel,
             fps,
+            timed: false,
             output_args: [
                 "-c:v",
                 "ffv1",
@@ -98,6 +108,7 @@ impl EncoderSpec {
             input_pix_fmt: "rgb24",
             bytes_per_pixel: 3,
             fps,
+            timed: false,
             output_args: vec![
                 "-c:v".into(),
                 "libx264".into(),
@@ -111,6 +122,25 @@ impl EncoderSpec {
                 "+faststart".into(),
             ],
         }
+    }
+
+    /// The same video with each frame's own time kept (variable frame rate; RGB frames only):
+    /// frames are written by [`Encoder::write_at`].
+    #[must_use]
+    pub fn timed(mut self) -> Self {
+        self.timed = true;
+        // The frames' own times, kept to 1/90000 s (the encoder's time base would otherwise be
+        // one over the frame rate ffmpeg guesses, rounding each time to a whole frame).
+        let keep = [
+            "-fps_mode",
+            "passthrough",
+            "-enc_time_base:v",
+            "1:90000",
+            "-video_track_timescale",
+            "90000",
+        ];
+        self.output_args.splice(0..0, keep.map(str::to_owned));
+        self
     }
 
     fn frame_bytes(&self) -> usize {
@@ -128,6 +158,78 @@ pub struct Encoder {
     partial: PathBuf,
     dest: PathBuf,
     frames: u64,
+    /// The time of the last frame written, microseconds.
+    last_us: Option<u64>,
+}
+
+/// Minimal Matroska (EBML) for piping timed raw frames to ffmpeg: one video track of
+/// uncompressed 24-bit RGB, each frame a cluster with its own timestamp (1 us units).
+mod mkv {
+    /// An element: its ID, its size as an 8-byte EBML number, its payload.
+    fn element(out: &mut Vec<u8>, id: &[u8], payload: &[u8]) {
+        out.extend_from_slice(id);
+        let size = payload.len() as u64 | (1 << 56);
+        out.extend_from_slice(&size.to_be_bytes());
+        out.extend_from_slice(payload);
+    }
+
+    fn uint(out: &mut Vec<u8>, id: &[u8], value: u64) {
+        element(out, id, &value.to_be_bytes());
+    }
+
+    /// The EBML header, the start of a segment of unknown size, its info (timestamps in
+    /// microseconds) and the one track.
+    pub fn header(width: u32, height: u32) -> Vec<u8> {
+        let mut out = Vec::new();
+        let mut ebml = Vec::new();
+        uint(&mut ebml, &[0x42, 0x86], 1); // EBMLVersion
+        uint(&mut ebml, &[0x42, 0xF7], 1); // EBMLReadVersion
+        uint(&mut ebml, &[0x42, 0xF2], 4); // EBMLMaxIDLength
+        uint(&mut ebml, &[0x42, 0xF3], 8); // EBMLMaxSizeLength
+        element(&mut ebml, &[0x42, 0x82], b"matroska"); // DocType
+        uint(&mut ebml, &[0x42, 0x87], 4); // DocTypeVersion
+        uint(&mut ebml, &[0x42, 0x85], 2); // DocTypeReadVersion
+        element(&mut out, &[0x1A, 0x45, 0xDF, 0xA3], &ebml);
+        // Segment, size unknown (all ones).
+        out.extend_from_slice(&[0x18, 0x53, 0x80, 0x67, 0x01, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF]);
+        let mut info = Vec::new();
+        uint(&mut info, &[0x2A, 0xD7, 0xB1], 1000); // TimestampScale: 1 us
+        element(&mut info, &[0x4D, 0x80], b"mousepose"); // MuxingApp
+        element(&mut info, &[0x57, 0x41], b"mousepose"); // WritingApp
+        element(&mut out, &[0x15, 0x49, 0xA9, 0x66], &info);
+        let mut video = Vec::new();
+        uint(&mut video, &[0xB0], u64::from(width)); // PixelWidth
+        uint(&mut video, &[0xBA], u64::from(height)); // PixelHeight
+        element(&mut video, &[0x2E, 0xB5, 0x24], b"RGB\x18"); // ColourSpace: 24-bit RGB
+        let mut track = Vec::new();
+        uint(&mut track, &[0xD7], 1); // TrackNumber
+        uint(&mut track, &[0x73, 0xC5], 1); // TrackUID
+        uint(&mut track, &[0x83], 1); // TrackType: video
+        element(&mut track, &[0x86], b"V_UNCOMPRESSED"); // CodecID
+        element(&mut track, &[0xE0], &video);
+        let mut entry = Vec::new();
+        element(&mut entry, &[0xAE], &track);
+        element(&mut out, &[0x16, 0x54, 0xAE, 0x6B], &entry); // Tracks
+        out
+    }
+
+    /// The cluster head of a frame of `frame_len` bytes at `t_us`: the frame's bytes follow.
+    pub fn cluster_head(t_us: u64, frame_len: usize) -> Vec<u8> {
+        // SimpleBlock: track 1, relative time 0, keyframe.
+        let block_head = [0x81, 0, 0, 0x80];
+        let block_len = block_head.len() + frame_len;
+        let mut out = Vec::with_capacity(64);
+        let mut time = Vec::new();
+        uint(&mut time, &[0xE7], t_us); // Timestamp
+        let cluster_len = time.len() + 1 + 8 + block_len;
+        out.extend_from_slice(&[0x1F, 0x43, 0xB6, 0x75]);
+        out.extend_from_slice(&(cluster_len as u64 | (1 << 56)).to_be_bytes());
+        out.extend_from_slice(&time);
+        out.push(0xA3);
+        out.extend_from_slice(&(block_len as u64 | (1 << 56)).to_be_bytes());
+        out.extend_from_slice(&block_head);
+        out
+    }
 }
 
 /// The last part of ffmpeg's error output, on one line.
@@ -154,11 +256,17 @@ impl Encoder {
             None => format!(".{name}.partial-{}", std::process::id()),
         };
         let partial = dest.with_file_name(partial_name);
-        let mut child = Command::new(&spec.program)
-            .args(["-nostdin", "-hide_banner", "-v", "error", "-y"])
-            .args(["-f", "rawvideo", "-pix_fmt", spec.input_pix_fmt])
-            .args(["-s", &format!("{}x{}", spec.width, spec.height)])
-            .args(["-framerate", &format!("{}", spec.fps), "-i", "-", "-an"])
+        let mut command = Command::new(&spec.program);
+        command.args(["-nostdin", "-hide_banner", "-v", "error", "-y"]);
+        if spec.timed {
+            command.args(["-f", "matroska", "-i", "-", "-an"]);
+        } else {
+            command
+                .args(["-f", "rawvideo", "-pix_fmt", spec.input_pix_fmt])
+                .args(["-s", &format!("{}x{}", spec.width, spec.height)])
+                .args(["-framerate", &format!("{}", spec.fps), "-i", "-", "-an"]);
+        }
+        let mut child = command
             .args(&spec.output_args)
             .arg(&partial)
             .stdin(Stdio::piped())
@@ -191,15 +299,30 @@ impl Encoder {
                 });
             }
         };
-        Ok(Self {
-            spec,
+        let mut encoder = Self {
             child,
             stdin,
             stderr,
             partial,
             dest: dest.to_owned(),
             frames: 0,
-        })
+            last_us: None,
+            spec,
+        };
+        if encoder.spec.timed {
+            let header = mkv::header(encoder.spec.width, encoder.spec.height);
+            encoder.pipe(&header)?;
+        }
+        Ok(encoder)
+    }
+
+    /// Writes `bytes` to ffmpeg.
+    fn pipe(&mut self, bytes: &[u8]) -> Result<(), VideoError> {
+        let written = match self.stdin.as_mut() {
+            Some(stdin) => stdin.write_all(bytes),
+            None => Err(io::Error::from(io::ErrorKind::BrokenPipe)),
+        };
+        written.map_err(|_| self.failure())
     }
 
     /// Frames written so far.
@@ -207,26 +330,56 @@ impl Encoder {
         self.frames
     }
 
-    /// Pipes one frame (`width * height * bytes_per_pixel` bytes, row-major) to ffmpeg.
+    /// Pipes one frame (`width * height * bytes_per_pixel` bytes, row-major) to ffmpeg; a
+    /// timed video gives it the time of the frame after the last at `fps`.
     ///
     /// # Errors
     /// A frame of the wrong size, or ffmpeg stopped (its error output says why).
     pub fn write(&mut self, frame: &[u8]) -> Result<(), VideoError> {
-        if frame.len() != self.spec.frame_bytes() {
-            return Err(VideoError::FrameSize {
-                got: frame.len(),
-                expected: self.spec.frame_bytes(),
-            });
+        if self.spec.timed {
+            let step = (1e6 / self.spec.fps.max(1e-3)).round() as u64;
+            let t_us = self.last_us.map_or(0, |t| t + step.max(1));
+            return self.write_at(frame, t_us);
         }
-        let written = match self.stdin.as_mut() {
-            Some(stdin) => stdin.write_all(frame),
-            None => Err(io::Error::from(io::ErrorKind::BrokenPipe)),
-        };
-        if written.is_err() {
-            return Err(self.failure());
-        }
+        self.check_size(frame)?;
+        self.pipe(frame)?;
         self.frames += 1;
         Ok(())
+    }
+
+    /// Pipes one frame shown at `t_us` microseconds (a timed video; see
+    /// [`EncoderSpec::timed`]; an untimed one takes the frame at its constant rate).
+    ///
+    /// # Errors
+    /// A frame of the wrong size, a time not after the previous frame's, or ffmpeg stopped.
+    pub fn write_at(&mut self, frame: &[u8], t_us: u64) -> Result<(), VideoError> {
+        if !self.spec.timed {
+            return self.write(frame);
+        }
+        self.check_size(frame)?;
+        if let Some(previous_us) = self.last_us.filter(|&p| t_us <= p) {
+            return Err(VideoError::TimeOrder {
+                got_us: t_us,
+                previous_us,
+            });
+        }
+        let head = mkv::cluster_head(t_us, frame.len());
+        self.pipe(&head)?;
+        self.pipe(frame)?;
+        self.last_us = Some(t_us);
+        self.frames += 1;
+        Ok(())
+    }
+
+    fn check_size(&self, frame: &[u8]) -> Result<(), VideoError> {
+        if frame.len() == self.spec.frame_bytes() {
+            Ok(())
+        } else {
+            Err(VideoError::FrameSize {
+                got: frame.len(),
+                expected: self.spec.frame_bytes(),
+            })
+        }
     }
 
     /// Closes the pipe, waits for ffmpeg and moves the video into place.

@@ -4,15 +4,19 @@
 //! ffmpeg with libx264.
 //!
 //! The frames are read again from the run's session, in order, and matched to the rows of
-//! `poses.csv` by their sequence numbers. `--from`/`--to` select seconds from the first
-//! depth frame (its device clock).
+//! `poses.csv` by their sequence numbers (rows whose depth frame the session does not hold,
+//! e.g. a daemon's chunk while recording was paused, are left out and counted). `--from`/`--to`
+//! select seconds from the first depth frame (its device clock). Every frame of the video has
+//! the same size (a recording with a colour camera shows an empty bottom view where a pair
+//! has no colour frame) and is shown at its depth frame's device time from the first frame
+//! drawn: the file has variable frame rate timestamps, not a constant rate.
 
 use crate::app::chart::{draw_text, text_width};
 use crate::app::export::{Run, check_file_out};
 use crate::app::{Failure, print};
 use crate::core::frame::{ColorFrame, DepthFrame};
 use crate::core::image::RgbImage;
-use crate::io::session::SessionReader;
+use crate::io::session::{CameraRole, SessionReader};
 use crate::io::video::{Encoder, EncoderSpec};
 use crate::runtime::sink::poses::{POSES_FILE, read_poses};
 use crate::runtime::stages::PoseRecord;
@@ -23,8 +27,6 @@ use std::path::PathBuf;
 
 /// Height of the line of counters above the pictures, pixels.
 const COUNTER_BAR_PX: u32 = 24;
-/// Space between the overlay's panels (as `overlay::draw` leaves it).
-const GAP_PX: u32 = 4;
 
 #[derive(Debug, Args)]
 pub struct VideoArgs {
@@ -75,6 +77,10 @@ pub struct VideoExport {
     pub frames: u64,
     pub width: u32,
     pub height: u32,
+    /// Rows of the window whose depth frame is not in the session, left out.
+    pub rows_without_frames: u64,
+    /// The last frame's time from the first, microseconds.
+    pub duration_us: u64,
 }
 
 /// `img` placed at the top left of a `width` x `height` canvas (cut off where larger).
@@ -129,7 +135,18 @@ pub fn export_video(options: &VideoOptions, mut progress: impl FnMut(u64, u64)) 
             rows.last().map_or(0.0, seconds)
         )));
     }
-    let has_color = chosen.iter().any(|r| r.color.is_some());
+    let recorded: std::collections::HashSet<u64> = reader.seqs(CameraRole::Depth).into_iter().collect();
+    let in_window = chosen.len() as u64;
+    let chosen: Vec<&PoseRecord> = chosen.into_iter().filter(|r| recorded.contains(&r.depth.seq)).collect();
+    let rows_without_frames = in_window - chosen.len() as u64;
+    let Some(first_drawn) = chosen.first() else {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "none of the run's depth frames between {from} s and {to} s is in the session {:?} (is it the run's session?)",
+            run.session
+        )));
+    };
+    let t_first = first_drawn.depth.device_ns;
+    let has_color = reader.meta().camera(CameraRole::Color).is_some();
     check_file_out(&options.out, options.force)?;
 
     let mut depth_frames = reader.depth_frames().filter_map(Result::ok);
@@ -137,11 +154,8 @@ pub fn export_video(options: &VideoOptions, mut progress: impl FnMut(u64, u64)) 
     let mut color: Option<ColorFrame> = None;
     let mut encoder: Option<Encoder> = None;
     let (mut width, mut height) = (0, 0);
-    let fps = reader
-        .meta()
-        .camera(crate::io::session::CameraRole::Depth)
-        .map_or(30.0, |c| c.fps)
-        .max(1.0);
+    let mut last_us: Option<u64> = None;
+    let fps = reader.meta().camera(CameraRole::Depth).map_or(30.0, |c| c.fps).max(1.0);
     let total = chosen.len() as u64;
     for (k, row) in chosen.iter().enumerate() {
         let depth: DepthFrame = loop {
@@ -166,17 +180,16 @@ pub fn export_video(options: &VideoOptions, mut progress: impl FnMut(u64, u64)) 
             }
         }
         let this_color = row.color.and_then(|c| color.as_ref().filter(|f| f.stamp.seq == c.seq));
-        let picture = overlay::draw(&rig, &depth, this_color, row);
+        // Every picture has the same size: panels of fixed sizes, an empty bottom view where
+        // a pair of a recording with a colour camera has no colour frame.
+        let picture = overlay::draw_panels(&rig, &depth, this_color, row, has_color, None);
         let encoder = match &mut encoder {
             Some(e) => e,
             None => {
-                // Wide enough for the widest bottom view the overlay draws (twice its height).
-                let plain = overlay::draw(&rig, &depth, None, row);
-                let bottom = if has_color { GAP_PX + 2 * plain.height } else { 0 };
-                width = (plain.width + bottom).max(picture.width).next_multiple_of(2);
-                height = (plain.height + COUNTER_BAR_PX).next_multiple_of(2);
+                width = picture.width.next_multiple_of(2);
+                height = (picture.height + COUNTER_BAR_PX).next_multiple_of(2);
                 encoder.insert(Encoder::start(
-                    EncoderSpec::h264(width, height, fps, options.crf),
+                    EncoderSpec::h264(width, height, fps, options.crf).timed(),
                     &options.out,
                 )?)
             }
@@ -202,14 +215,25 @@ pub fn export_video(options: &VideoOptions, mut progress: impl FnMut(u64, u64)) 
             [90, 90, 90],
             2,
         );
-        encoder.write(&canvas.data)?;
+        // The depth frame's device time from the first frame drawn (times that do not
+        // increase are nudged by a microsecond, as a container needs).
+        let t_us = row.depth.device_ns.saturating_sub(t_first) / 1000;
+        let t_us = last_us.map_or(t_us, |last| t_us.max(last + 1));
+        encoder.write_at(&canvas.data, t_us)?;
+        last_us = Some(t_us);
         progress(k as u64 + 1, total);
     }
     let frames = encoder.as_ref().map_or(0, Encoder::frames);
     if let Some(e) = encoder {
         e.finish()?;
     }
-    Ok(VideoExport { frames, width, height })
+    Ok(VideoExport {
+        frames,
+        width,
+        height,
+        rows_without_frames,
+        duration_us: last_us.unwrap_or(0),
+    })
 }
 
 /// `mousepose export video`.
@@ -242,8 +266,20 @@ pub fn command(args: &VideoArgs) -> crate::app::Outcome {
             video: v,
         })?);
     }
-    Ok(print(&format!(
-        "{} frames of {}x{} to {:?}\n",
-        v.frames, v.width, v.height, args.out
-    ))?)
+    let mut text = format!(
+        "{} frames of {}x{} over {:.3} s (the cameras' times) to {:?}",
+        v.frames,
+        v.width,
+        v.height,
+        v.duration_us as f64 / 1e6,
+        args.out
+    );
+    if v.rows_without_frames > 0 {
+        text.push_str(&format!(
+            "; {} rows without their depth frame in the session left out",
+            v.rows_without_frames
+        ));
+    }
+    text.push('\n');
+    Ok(print(&text)?)
 }
