@@ -379,6 +379,72 @@ fn an_arena_a_quarter_of_the_view_is_found_or_given_and_its_floor_fitted() {
     assert!((0.15..0.45).contains(&s.world.arena_share), "{}", s.world.arena_share);
     let error = check_heights(&s, &out, &mice, 700.0, 6.0);
     assert!(error < 5.0, "mean height off by {error:.1} mm");
+    // The arena's floor in the fitted world frame: within the 440 mm disc's bounding square
+    // (the floor frame turns the view about z only), most of it (the segmenter's arena
+    // leaves out the floor by the walls).
+    let size = |a: &mousepose::vision::behaviour::Arena| a.size_mm();
+    let found = s.world.arena_mm.expect("the arena on the floor");
+    let (l, w) = size(&found);
+    assert!((350.0..460.0).contains(&l) && (350.0..460.0).contains(&w), "{found:?}");
+    // The report takes it as its cage, and its thresholds from the flags.
+    let report = |run: &Path, name: &str, flags: &[&str]| -> serde_json::Value {
+        let o = mousepose()
+            .arg("report")
+            .arg(run)
+            .arg("--out")
+            .arg(tmp.path().join(name))
+            .arg("--json")
+            .args(flags)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let v = report(&out, "report-found", &[]);
+    assert_eq!(v["arena"]["from"], "recording", "{v}");
+    assert!(
+        (v["arena"]["x_max_mm"].as_f64().unwrap() - found.x_max_mm).abs() < 1e-6,
+        "{v}"
+    );
+    // Every mouse circles 70 mm from the arena's centre: in the central rectangle.
+    assert!(
+        v["centre_s"].as_f64().unwrap() > 0.0 && v["wall_s"].as_f64().unwrap() == 0.0,
+        "{v}"
+    );
+    let v = report(
+        &out,
+        "report-given",
+        &[
+            "--arena",
+            "-1000,-1000,-900,-900",
+            "--rearing",
+            "25",
+            "--walk-min",
+            "20",
+            "--walk-max",
+            "300",
+            "--wall",
+            "30",
+        ],
+    );
+    assert_eq!(v["arena"]["from"], "flag", "{v}");
+    assert_eq!(v["arena"]["x_min_mm"], -1000.0);
+    assert_eq!(
+        (
+            &v["config"]["rear_head_mm"],
+            &v["config"]["walk_min_mm_s"],
+            &v["config"]["walk_max_mm_s"],
+            &v["config"]["wall_band_mm"]
+        ),
+        (
+            &serde_json::json!(25.0),
+            &serde_json::json!(20.0),
+            &serde_json::json!(300.0),
+            &serde_json::json!(30.0)
+        )
+    );
+    // Far outside that arena, the mouse is never in its centre.
+    assert_eq!(v["centre_s"].as_f64(), Some(0.0), "{v}");
 
     // The same arena drawn by hand as a PNG mask.
     let mut mask = RgbImage::new(i.width, i.height, [0; 3]);
@@ -395,6 +461,8 @@ fn an_arena_a_quarter_of_the_view_is_found_or_given_and_its_floor_fitted() {
     .unwrap();
     assert_eq!(s.world.arena_from, "roi");
     check_heights(&s, &out, &mice, 700.0, 6.0);
+    let (l, w) = size(&s.world.arena_mm.expect("the given arena on the floor"));
+    assert!((300.0..420.0).contains(&l) && (300.0..420.0).contains(&w), "{l} x {w}");
     // A mask of another size is refused with exit code 1.
     RgbImage::new(10, 10, [255; 3]).write_png(&roi).unwrap();
     let o = mousepose()

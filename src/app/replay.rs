@@ -119,6 +119,52 @@ pub struct WorldSummary {
     /// synthetic session's rendered cage.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub arena_check: Option<ArenaCheck>,
+    /// The arena's floor in this world frame: the rectangle that holds all but the outermost
+    /// 0.5 % of the floor points it sees on each side, mm (what `report` takes as the cage).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub arena_mm: Option<crate::vision::behaviour::Arena>,
+}
+
+/// Floor points of the background lie within this of the world's z = 0, mm.
+const FLOOR_BAND_MM: f64 = 15.0;
+
+/// The rectangle of the floor that the arena's pixels (`mask` over `region` of the depth
+/// image, non-zero inside) see, from the background's depth there (`depth`, 0 = no reading):
+/// only the points on the floor (within [`FLOOR_BAND_MM`] of z = 0; walls and what stands on
+/// the floor left out), each side at the 0.5th percentile of the points so that a few stray
+/// pixels do not widen it. `None` when no arena pixel sees the floor.
+fn arena_on_floor(
+    mask: &[u8],
+    depth: &[f32],
+    region: crate::core::image::Region,
+    camera: &crate::core::geometry::Camera,
+) -> Option<crate::vision::behaviour::Arena> {
+    let width = region.width.max(1);
+    let (mut xs, mut ys) = (Vec::new(), Vec::new());
+    for (k, (&m, &z)) in mask.iter().zip(depth).enumerate() {
+        if m == 0 || z <= 0.0 {
+            continue;
+        }
+        let (x, y) = (k as u32 % width, k as u32 / width);
+        let pixel = nalgebra::Point2::new(f64::from(region.x0 + x), f64::from(region.y0 + y));
+        let p = camera.world_from_camera * camera.intrinsics.unproject(&pixel, f64::from(z));
+        if p.z.abs() <= FLOOR_BAND_MM {
+            xs.push(p.x);
+            ys.push(p.y);
+        }
+    }
+    if xs.is_empty() {
+        return None;
+    }
+    xs.sort_by(f64::total_cmp);
+    ys.sort_by(f64::total_cmp);
+    let at = |v: &[f64], q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    Some(crate::vision::behaviour::Arena {
+        x_min_mm: at(&xs, 0.005),
+        y_min_mm: at(&ys, 0.005),
+        x_max_mm: at(&xs, 0.995),
+        y_max_mm: at(&ys, 0.995),
+    })
 }
 
 /// `summary.json`.
@@ -352,6 +398,7 @@ pub fn replay_with(
         arena_share: arena.iter().filter(|&&m| m != 0).count() as f64 / arena.len().max(1) as f64,
         arena_from: if options.roi.is_some() { "roi" } else { "found" },
         arena_check: background.arena_check(),
+        arena_mm: arena_on_floor(arena, background.depth(), background.region(), &rig.depth),
     };
     let arena = arena.to_vec();
     let segmenter = SegmenterConfig::default()

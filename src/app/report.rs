@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! DIR/index.html     the page: figures, tables, how each measure is taken
-//! DIR/path.png       the body's path in the cage (blue at the start, red at the end)
+//! DIR/path.png       the body's path in the arena (blue at the start, red at the end)
 //! DIR/speed.png      speed over time; distance.png: distance travelled
 //! DIR/zones.png      time in the centre, between, and by the walls
 //! DIR/rearing.png    head height over time, with the rearing threshold
@@ -27,7 +27,7 @@ use crate::core::skeleton::Joint;
 use crate::io::output::Staging;
 use crate::runtime::sink::poses::{POSES_FILE, read_poses};
 use crate::runtime::stages::{PoseRecord, PoseStatus};
-use crate::vision::behaviour::{Behaviour, BehaviourConfig, FrameInput, PAW_NAMES, analyse};
+use crate::vision::behaviour::{Arena, Behaviour, BehaviourConfig, FrameInput, PAW_NAMES, analyse_in};
 use anyhow::Context as _;
 use clap::Args;
 use nalgebra::{Point2, Vector2};
@@ -46,12 +46,107 @@ pub struct ReportArgs {
     /// The directory to write the page, charts and tables into.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// The arena (cage floor) as X0,Y0,X1,Y1 in world millimetres. Default: the arena the
+    /// replay found (`world.arena_mm` of the run's summary), else the synthetic 500 x 450 mm
+    /// cage centred on the origin.
+    #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = parse_arena, allow_hyphen_values = true)]
+    pub arena: Option<Arena>,
+    /// Walking: the slowest speed of a walking bout, mm/s.
+    #[arg(long, value_name = "MM_S", default_value_t = 50.0, value_parser = parse_speed)]
+    pub walk_min: f64,
+    /// Walking: the fastest speed of a walking bout (faster is running), mm/s.
+    #[arg(long, value_name = "MM_S", default_value_t = 200.0, value_parser = parse_speed)]
+    pub walk_max: f64,
+    /// Rearing: the head at least this high above the floor, mm.
+    #[arg(long, value_name = "MM", default_value_t = 40.0, value_parser = parse_mm)]
+    pub rearing: f64,
+    /// By the walls: the body's centre within this of a wall, mm.
+    #[arg(long, value_name = "MM", default_value_t = 60.0, value_parser = parse_mm)]
+    pub wall: f64,
     /// Print the summary as one JSON object.
     #[arg(long)]
     pub json: bool,
     /// Replace the output directory if it is not empty.
     #[arg(long)]
     pub force: bool,
+}
+
+fn parse_speed(s: &str) -> Result<f64, String> {
+    crate::app::parse_ranged(s, "a speed in mm/s", 0.0, 10_000.0)
+}
+
+fn parse_mm(s: &str) -> Result<f64, String> {
+    crate::app::parse_ranged(s, "a distance in millimetres", 0.0, 10_000.0)
+}
+
+/// `--arena X0,Y0,X1,Y1`: a rectangle with X0 < X1 and Y0 < Y1.
+fn parse_arena(s: &str) -> Result<Arena, String> {
+    let wrong = || format!("expected the arena as X0,Y0,X1,Y1 in millimetres with X0 < X1 and Y0 < Y1, got {s:?}");
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| wrong())?;
+    let [x0, y0, x1, y1] = v[..] else {
+        return Err(wrong());
+    };
+    if !(x0.is_finite() && y0.is_finite() && x1.is_finite() && y1.is_finite() && x0 < x1 && y0 < y1) {
+        return Err(wrong());
+    }
+    Ok(Arena {
+        x_min_mm: x0,
+        y_min_mm: y0,
+        x_max_mm: x1,
+        y_max_mm: y1,
+    })
+}
+
+/// What a report is made with besides the run: the thresholds, and the arena (`None`: the
+/// run's own, see [`ReportArgs::arena`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ReportOptions {
+    pub config: BehaviourConfig,
+    pub arena: Option<Arena>,
+}
+
+/// The arena a report used, and where it came from: `flag`, `recording` (the replay's
+/// `world.arena_mm`) or `default` (the synthetic cage).
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct ArenaUsed {
+    #[serde(flatten)]
+    pub arena: Arena,
+    pub from: &'static str,
+}
+
+/// The arena of `options`, else the run's summary's, else the synthetic cage.
+fn arena_of(run: &Path, options: &ReportOptions) -> ArenaUsed {
+    if let Some(arena) = options.arena {
+        return ArenaUsed { arena, from: "flag" };
+    }
+    let recorded = std::fs::read(run.join(crate::app::replay::SUMMARY_FILE))
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        .and_then(|v| {
+            let a = v.get("world")?.get("arena_mm")?;
+            let get = |k: &str| a.get(k).and_then(serde_json::Value::as_f64);
+            Some(Arena {
+                x_min_mm: get("x_min_mm")?,
+                y_min_mm: get("y_min_mm")?,
+                x_max_mm: get("x_max_mm")?,
+                y_max_mm: get("y_max_mm")?,
+            })
+        })
+        .filter(|a| a.size_mm().0 > 0.0 && a.size_mm().1 > 0.0);
+    match recorded {
+        Some(arena) => ArenaUsed {
+            arena,
+            from: "recording",
+        },
+        None => ArenaUsed {
+            arena: Arena::centred((CAGE_X_MM, CAGE_Y_MM)),
+            from: "default",
+        },
+    }
 }
 
 /// The analysis's input of one row of `poses.csv`.
@@ -153,7 +248,7 @@ fn html_escape(text: &str) -> String {
     text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
-fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig) -> String {
+fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig, arena: &ArenaUsed) -> String {
     let total: f64 = b.zone_s.iter().sum::<f64>().max(1e-9);
     let mut h = String::from(
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>mousepose report</title>\n<style>body{font-family:sans-serif;max-width:960px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 10px;text-align:right}th{background:#f3f3f3}img{max-width:100%;border:1px solid #eee}</style></head><body>\n",
@@ -183,7 +278,7 @@ fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig) -> String {
         b.walking.iter().map(|x| x.duration_s()).sum::<f64>(),
     );
     for (img, alt) in [
-        ("path.png", "path in the cage"),
+        ("path.png", "path in the arena"),
         ("speed.png", "speed over time"),
         ("distance.png", "distance over time"),
         ("zones.png", "time per zone"),
@@ -217,7 +312,7 @@ fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig) -> String {
         h,
         "<h2>How</h2><ul>\
          <li>Body centre: <code>mid_back</code>, averaged over {:.2} s; speed from it, distance its path.</li>\
-         <li>Centre: the central rectangle of half the cage's length and width; walls: within {:.0} mm of a wall ({:.0} x {:.0} mm cage).</li>\
+         <li>Centre: the central rectangle of half the arena's length and width; walls: within {:.0} mm of a wall (arena {:.0} x {:.0} mm from x {:.0}, y {:.0} mm, {}).</li>\
          <li>Rearing: the head at least {:.0} mm above the glass for {:.2} s or more.</li>\
          <li>Walking: speed between {:.0} and {:.0} mm/s for {:.1} s or more, not rearing.</li>\
          <li>Stance: the paw found on the glass by the bottom camera (source <code>paw</code>) and moving slower than {:.1} times the body plus {:.0} mm/s \
@@ -227,8 +322,15 @@ fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig) -> String {
          Phase: where in the left hind paw's stride each paw touches down (0.5: half a stride later).</li></ul>",
         config.smooth_s,
         config.wall_band_mm,
-        CAGE_X_MM,
-        CAGE_Y_MM,
+        arena.arena.size_mm().0,
+        arena.arena.size_mm().1,
+        arena.arena.x_min_mm,
+        arena.arena.y_min_mm,
+        match arena.from {
+            "flag" => "given by --arena",
+            "recording" => "the arena the replay found",
+            _ => "the synthetic cage: the run names no arena; give --arena for a real rig",
+        },
         config.rear_head_mm,
         config.min_rear_s,
         config.walk_min_mm_s,
@@ -248,6 +350,7 @@ fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig) -> String {
 struct Summary<'a> {
     run: &'a Path,
     config: &'a BehaviourConfig,
+    arena: ArenaUsed,
     duration_s: f64,
     distance_mm: f64,
     mean_speed_mm_s: Option<f64>,
@@ -269,6 +372,19 @@ struct Summary<'a> {
 /// # Errors
 /// The poses cannot be read (or there are none), or `out` cannot be written.
 pub fn report(run: &Path, out: &Path, force: bool) -> Result<Behaviour, Failure> {
+    report_with(run, out, force, &ReportOptions::default()).map(|(b, _)| b)
+}
+
+/// [`report`] with other thresholds or another arena; also says which arena it used.
+///
+/// # Errors
+/// The poses cannot be read (or there are none), or `out` cannot be written.
+pub fn report_with(
+    run: &Path,
+    out: &Path,
+    force: bool,
+    options: &ReportOptions,
+) -> Result<(Behaviour, ArenaUsed), Failure> {
     let rows = read_poses(&run.join(POSES_FILE)).map_err(Failure::usage)?;
     let Some(first) = rows.first() else {
         return Err(Failure::usage(anyhow::anyhow!(
@@ -278,8 +394,9 @@ pub fn report(run: &Path, out: &Path, force: bool) -> Result<Behaviour, Failure>
     };
     let t0 = first.depth.device_ns;
     let inputs: Vec<FrameInput> = rows.iter().map(|r| frame_input(t0, r)).collect();
-    let config = BehaviourConfig::default();
-    let b = analyse(&inputs, (CAGE_X_MM, CAGE_Y_MM), &config);
+    let config = options.config;
+    let arena = arena_of(run, options);
+    let b = analyse_in(&inputs, &arena.arena, &config);
     let staging = Staging::new(out, force).map_err(output_failure)?;
     let dir = staging.path();
     let t: Vec<f64> = b.frames.iter().map(|f| f.t_s).collect();
@@ -287,10 +404,16 @@ pub fn report(run: &Path, out: &Path, force: bool) -> Result<Behaviour, Failure>
         img.write_png(&dir.join(name))
             .with_context(|| format!("writing {name}"))
     };
-    let path: Vec<Option<(f64, f64)>> = inputs.iter().map(|i| i.centre.map(|c| (c.x, c.y))).collect();
+    // The chart draws its arena around the origin.
+    let middle = arena.arena.centre();
+    let path: Vec<Option<(f64, f64)>> = inputs
+        .iter()
+        .map(|i| i.centre.map(|c| (c.x - middle.x, c.y - middle.y)))
+        .collect();
+    let (length, width) = arena.arena.size_mm();
     write_png(
         "path.png",
-        path_chart("PATH IN THE CAGE", &path, (CAGE_X_MM / 2.0, CAGE_Y_MM / 2.0)),
+        path_chart("PATH IN THE ARENA", &path, (length / 2.0, width / 2.0)),
     )?;
     let speed: Vec<f64> = b.frames.iter().map(|f| nan(f.speed_mm_s)).collect();
     write_png(
@@ -357,17 +480,18 @@ pub fn report(run: &Path, out: &Path, force: bool) -> Result<Behaviour, Failure>
     crate::app::write_report_file(dir, "frames.csv", frames_csv(&b, &inputs).as_bytes())?;
     crate::app::write_report_file(dir, "strides.csv", strides_csv(&b).as_bytes())?;
     crate::app::write_report_file(dir, "bouts.csv", bouts_csv(&b).as_bytes())?;
-    let summary = summary(run, &config, &b);
+    let summary = summary(run, &config, arena, &b);
     crate::app::write_report_file(dir, "summary.json", &serde_json::to_vec_pretty(&summary)?)?;
-    crate::app::write_report_file(dir, "index.html", page(run, &b, &config).as_bytes())?;
+    crate::app::write_report_file(dir, "index.html", page(run, &b, &config, &arena).as_bytes())?;
     staging.commit().map_err(output_failure)?;
-    Ok(b)
+    Ok((b, arena))
 }
 
-fn summary<'a>(run: &'a Path, config: &'a BehaviourConfig, b: &Behaviour) -> Summary<'a> {
+fn summary<'a>(run: &'a Path, config: &'a BehaviourConfig, arena: ArenaUsed, b: &Behaviour) -> Summary<'a> {
     Summary {
         run,
         config,
+        arena,
         duration_s: b.duration_s,
         distance_mm: b.distance_mm,
         mean_speed_mm_s: b.mean_speed_mm_s,
@@ -387,10 +511,27 @@ fn summary<'a>(run: &'a Path, config: &'a BehaviourConfig, b: &Behaviour) -> Sum
 
 /// `mousepose report`.
 pub fn command(args: &ReportArgs) -> crate::app::Outcome {
-    let b = report(&args.run, &args.out, args.force).map_err(|f| f.context(format!("reporting on {:?}", args.run)))?;
+    if args.walk_min >= args.walk_max {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "--walk-min {} mm/s is not below --walk-max {} mm/s",
+            args.walk_min,
+            args.walk_max
+        )));
+    }
+    let options = ReportOptions {
+        config: BehaviourConfig {
+            walk_min_mm_s: args.walk_min,
+            walk_max_mm_s: args.walk_max,
+            rear_head_mm: args.rearing,
+            wall_band_mm: args.wall,
+            ..BehaviourConfig::default()
+        },
+        arena: args.arena,
+    };
+    let (b, arena) = report_with(&args.run, &args.out, args.force, &options)
+        .map_err(|f| f.context(format!("reporting on {:?}", args.run)))?;
     if args.json {
-        let config = BehaviourConfig::default();
-        return Ok(print_json(&summary(&args.run, &config, &b))?);
+        return Ok(print_json(&summary(&args.run, &options.config, arena, &b))?);
     }
     let stride = |k: usize| {
         b.paws[k]
@@ -398,7 +539,7 @@ pub fn command(args: &ReportArgs) -> crate::app::Outcome {
             .map_or_else(|| "-".to_owned(), |v| format!("{v:.1}"))
     };
     Ok(print(&format!(
-        "{:.1} s, {:.0} mm travelled, {} rearing and {} walking bouts, {} strides (stride length mm: {} {} {} {}); report in {:?}\n",
+        "{:.1} s, {:.0} mm travelled, {} rearing and {} walking bouts, {} strides (stride length mm: {} {} {} {}); {}; report in {:?}\n",
         b.duration_s,
         b.distance_mm,
         b.rearing.len(),
@@ -408,6 +549,13 @@ pub fn command(args: &ReportArgs) -> crate::app::Outcome {
         stride(1),
         stride(2),
         stride(3),
+        match arena.from {
+            "default" => "arena: the synthetic 500 x 450 mm cage (the run names none; give --arena)".to_owned(),
+            from => {
+                let (l, w) = arena.arena.size_mm();
+                format!("arena {l:.0} x {w:.0} mm ({from})")
+            }
+        },
         args.out.join("index.html")
     ))?)
 }

@@ -244,10 +244,50 @@ fn bouts(t: &[f64], flags: &[bool], min_s: f64, dt: f64) -> (Vec<Bout>, Vec<bool
     (out, kept)
 }
 
+/// The arena the mouse moves in: a rectangle of the floor, world millimetres.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Arena {
+    pub x_min_mm: f64,
+    pub y_min_mm: f64,
+    pub x_max_mm: f64,
+    pub y_max_mm: f64,
+}
+
+impl Arena {
+    /// A cage of inside size `size_mm` centred on the origin.
+    pub fn centred(size_mm: (f64, f64)) -> Self {
+        Self {
+            x_min_mm: -size_mm.0 / 2.0,
+            y_min_mm: -size_mm.1 / 2.0,
+            x_max_mm: size_mm.0 / 2.0,
+            y_max_mm: size_mm.1 / 2.0,
+        }
+    }
+
+    /// Its length and width, mm.
+    pub fn size_mm(&self) -> (f64, f64) {
+        (self.x_max_mm - self.x_min_mm, self.y_max_mm - self.y_min_mm)
+    }
+
+    pub fn centre(&self) -> Point2<f64> {
+        Point2::new(
+            (self.x_min_mm + self.x_max_mm) / 2.0,
+            (self.y_min_mm + self.y_max_mm) / 2.0,
+        )
+    }
+}
+
 /// The cage's zone of a centre (the cage centred on the origin, `cage_mm` its inside size).
 pub fn zone(p: Option<Point2<f64>>, cage_mm: (f64, f64), wall_band_mm: f64) -> Zone {
+    zone_in(p, &Arena::centred(cage_mm), wall_band_mm)
+}
+
+/// The zone of a centre in `arena`: the central rectangle of half its length and width, the
+/// band along its walls, or between.
+pub fn zone_in(p: Option<Point2<f64>>, arena: &Arena, wall_band_mm: f64) -> Zone {
     let Some(p) = p else { return Zone::Unknown };
-    let (hx, hy) = (cage_mm.0 / 2.0, cage_mm.1 / 2.0);
+    let p = p - arena.centre().coords;
+    let (hx, hy) = (arena.size_mm().0 / 2.0, arena.size_mm().1 / 2.0);
     if p.x.abs() <= hx / 2.0 && p.y.abs() <= hy / 2.0 {
         Zone::Centre
     } else if hx - p.x.abs() <= wall_band_mm || hy - p.y.abs() <= wall_band_mm {
@@ -260,6 +300,11 @@ pub fn zone(p: Option<Point2<f64>>, cage_mm: (f64, f64), wall_band_mm: f64) -> Z
 /// Analyses `frames` (in time order) in a cage of `cage_mm` inside size centred on the
 /// origin.
 pub fn analyse(frames: &[FrameInput], cage_mm: (f64, f64), config: &BehaviourConfig) -> Behaviour {
+    analyse_in(frames, &Arena::centred(cage_mm), config)
+}
+
+/// Analyses `frames` (in time order) in `arena`.
+pub fn analyse_in(frames: &[FrameInput], arena: &Arena, config: &BehaviourConfig) -> Behaviour {
     let n = frames.len();
     let t: Vec<f64> = frames.iter().map(|f| f.t_s).collect();
     let dt = if n > 1 {
@@ -421,7 +466,7 @@ pub fn analyse(frames: &[FrameInput], cage_mm: (f64, f64), config: &BehaviourCon
     let mut zone_s = [0.0; 4];
     let frames_out: Vec<FrameResult> = (0..n)
         .map(|i| {
-            let z = zone(centres[i], cage_mm, config.wall_band_mm);
+            let z = zone_in(centres[i], arena, config.wall_band_mm);
             let slot = match z {
                 Zone::Centre => 0,
                 Zone::Wall => 1,
@@ -523,6 +568,22 @@ mod tests {
         );
         assert!((b.base_of_support_hind_mm.unwrap() - 24.0).abs() < 1e-6);
         assert!((b.base_of_support_fore_mm.unwrap() - 20.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn zones_split_an_arena_away_from_the_origin() {
+        let arena = Arena {
+            x_min_mm: 100.0,
+            y_min_mm: -50.0,
+            x_max_mm: 400.0,
+            y_max_mm: 250.0,
+        };
+        assert_eq!(zone_in(Some(Point2::new(250.0, 100.0)), &arena, 40.0), Zone::Centre);
+        assert_eq!(zone_in(Some(Point2::new(0.0, 0.0)), &arena, 40.0), Zone::Wall);
+        assert_eq!(zone_in(Some(Point2::new(380.0, 100.0)), &arena, 40.0), Zone::Wall);
+        assert_eq!(zone_in(Some(Point2::new(330.0, 100.0)), &arena, 40.0), Zone::Between);
+        // The synthetic cage, as before.
+        assert_eq!(zone(Some(Point2::new(240.0, 0.0)), (500.0, 450.0), 60.0), Zone::Wall);
     }
 
     #[test]
