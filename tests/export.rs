@@ -299,8 +299,11 @@ import numpy as np
 from pynwb import NWBHDF5IO
 import ndx_pose
 from nwbinspector import inspect_nwbfile, Importance, load_config
-with NWBHDF5IO(sys.argv[1], "r") as io:
+import warnings
+warnings.simplefilter("always")
+with warnings.catch_warnings(record=True) as caught, NWBHDF5IO(sys.argv[1], "r") as io:
     f = io.read()
+    read_warnings = [str(w.message) for w in caught]
     pe = f.processing["behavior"]["PoseEstimation"]
     series = pe.pose_estimation_series
     first = next(iter(series.values()))
@@ -321,6 +324,9 @@ with NWBHDF5IO(sys.argv[1], "r") as io:
         "strain": f.subject.strain,
         "sex": f.subject.sex,
         "subject_description": f.subject.description,
+        "serials": {n: d.serial_number for n, d in f.devices.items()},
+        "models": {n: d.model.name if d.model else None for n, d in f.devices.items()},
+        "read_warnings": read_warnings,
         "snout_x0": float(series["snout"].data[0][0]),
     }
 # At nwbinspector's default threshold, and with DANDI's configuration (what `dandi validate`
@@ -362,6 +368,15 @@ print(json.dumps(out))
     assert_eq!(v["strain"], "C57BL/6J");
     assert_eq!(v["sex"], "F");
     assert_eq!(v["subject_description"], "group-housed, 12 h light cycle");
+    // The cameras' serial numbers and models in their own fields (no deprecated field that
+    // warns on read).
+    let meta = SessionReader::open(fixture()).unwrap().meta().clone();
+    for c in &meta.cameras {
+        let name = format!("{}_camera", c.role.name());
+        assert_eq!(v["serials"][&name], c.serial.as_str(), "{v}");
+        assert_eq!(v["models"][&name], c.model.as_str(), "{v}");
+    }
+    assert_eq!(v["read_warnings"], serde_json::json!([]), "{v}");
     // The first row's snout, as poses.csv has it.
     let csv = std::fs::read_to_string(run.join("poses.csv")).unwrap();
     let snout_x: f64 = csv.lines().nth(1).unwrap().split(',').nth(8).unwrap().parse().unwrap();

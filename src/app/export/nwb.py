@@ -60,8 +60,23 @@ def main(poses_csv, meta_json, out):
         weight=s.get("weight") or None,
         description=s.get("description") or None,
     )
+    # Each camera a Device with its serial number, linked to a DeviceModel (its model and
+    # maker), as NWB 2.9 has them (a Device's own `manufacturer` is deprecated).
+    models = {}
+    for d in meta["devices"]:
+        if d["model"] not in models:
+            models[d["model"]] = nwb.create_device_model(
+                name=d["model"],
+                manufacturer=d["manufacturer"],
+                description=f"camera model {d['model']}",
+            )
     devices = [
-        nwb.create_device(name=d["name"], description=d["description"], manufacturer=d["manufacturer"])
+        nwb.create_device(
+            name=d["name"],
+            description=d["description"],
+            serial_number=d.get("serial_number") or None,
+            model=models[d["model"]],
+        )
         for d in meta["devices"]
     ]
     skeleton = Skeleton(

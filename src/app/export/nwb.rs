@@ -244,7 +244,12 @@ fn parse_weight(s: &str) -> Result<String, String> {
 struct Device {
     name: String,
     description: String,
+    /// The camera's serial number (`None` when the driver gave none).
+    serial_number: Option<String>,
+    /// The camera's model (an NWB `DeviceModel`, shared by cameras of one model).
+    model: String,
     manufacturer: String,
+    firmware: String,
 }
 
 #[derive(Debug, Serialize)]
@@ -281,20 +286,22 @@ struct Meta<'a> {
 }
 
 fn device(c: &CameraMeta) -> Device {
+    let known = |v: &str| Some(v.trim().to_owned()).filter(|v| !v.is_empty() && v != "unknown");
     Device {
         name: format!("{}_camera", c.role.name()),
         description: format!(
-            "{} camera {} (serial {:?}, firmware {:?}), {}x{} {} at {} fps",
+            "{} camera, {}x{} {} at {} fps, firmware {:?}",
             c.role.name(),
-            c.model,
-            c.serial,
-            c.firmware,
             c.width,
             c.height,
             c.pixel_format,
-            c.fps
+            c.fps,
+            c.firmware
         ),
+        serial_number: known(&c.serial),
+        model: known(&c.model).unwrap_or_else(|| format!("unknown {} camera", c.role.name())),
         manufacturer: c.model.split_whitespace().next().unwrap_or("unknown").to_owned(),
+        firmware: c.firmware.clone(),
     }
 }
 
