@@ -132,11 +132,12 @@ fn moseq_export_is_lossless_and_replays_to_the_same_poses() {
     let b = std::fs::read_to_string(from_raw.join("poses.csv")).unwrap();
     assert_eq!(a.lines().count(), session_depth.len() + 1);
     assert!(a == b, "the exported depth replays to other poses");
-    // Depth-only: joints 1-12 from the depth image, the rest missing.
+    // Depth-only: joints 1-12 from the depth image (the tail tip only where the forest put
+    // it on the mouse, otherwise unknown), the rest missing.
     let row = a.lines().nth(15).unwrap();
     assert!(row.contains(",ok,"), "{row}");
-    assert_eq!(row.matches(",depth").count(), 12, "{row}");
-    assert_eq!(row.matches(",missing").count(), 12, "{row}");
+    let (depth, missing) = (row.matches(",depth").count(), row.matches(",missing").count());
+    assert!((depth, missing) == (12, 12) || (depth, missing) == (11, 13), "{row}");
 }
 
 #[test]
