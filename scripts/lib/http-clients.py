@@ -2,8 +2,9 @@
 
     python3 http-clients.py HOST:PORT CLIENTS SECONDS
 
-Each client, on a thread of its own, asks for /status every second, each picture about three
-times a second, /history and /events every two seconds; one more scrapes /metrics every second.
+Each client, on a thread of its own, asks for /status and each of the three pictures every
+second, /history every five seconds and /events every two; one more scrapes /metrics every
+second.
 They start once the daemon answers and stop SECONDS later. Prints requests, failures and the slowest answer.
 """
 import sys
@@ -65,7 +66,8 @@ while True:
             sys.exit(f"the daemon at {address} did not answer within 30 s")
         time.sleep(0.1)
 
-page = [("/status", 1.0), ("/live/depth.png", 0.33), ("/live/bottom.png", 0.33), ("/history", 2.0), ("/events", 2.0)]
+page = [("/status", 1.0), ("/live/depth.png", 1.0), ("/live/mouse.png", 1.0), ("/live/bottom.png", 1.0),
+        ("/history", 5.0), ("/events", 2.0)]
 threads = [threading.Thread(target=client, args=(page,)) for _ in range(clients)]
 threads.append(threading.Thread(target=client, args=([("/metrics", 1.0)],)))
 for t in threads:
