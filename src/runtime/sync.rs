@@ -588,13 +588,17 @@ mod tests {
 
     /// Feeds both streams in host arrival order and returns everything emitted.
     fn run(config: SyncConfig, d: &[(f64, Stamp)], c: &[(f64, Stamp)]) -> Vec<SyncOutput> {
+        run_on(&mut Synchronizer::new(config), d, c)
+    }
+
+    /// Pushes both streams into `sync` in the order their frames reach the host, then flushes.
+    fn run_on(sync: &mut Synchronizer, d: &[(f64, Stamp)], c: &[(f64, Stamp)]) -> Vec<SyncOutput> {
         let mut arrivals: Vec<(u64, bool, Stamp)> = d
             .iter()
             .map(|x| (x.1.host_ns, true, x.1))
             .chain(c.iter().map(|x| (x.1.host_ns, false, x.1)))
             .collect();
         arrivals.sort_by_key(|a| (a.0, !a.1));
-        let mut sync = Synchronizer::new(config);
         let mut out = Vec::new();
         for (_, is_depth, s) in arrivals {
             if is_depth {
@@ -811,21 +815,7 @@ mod tests {
             }
         }
         let mut sync = Synchronizer::new(config);
-        let mut arrivals: Vec<(u64, bool, Stamp)> = d
-            .iter()
-            .map(|x| (x.1.host_ns, true, x.1))
-            .chain(c.iter().map(|x| (x.1.host_ns, false, x.1)))
-            .collect();
-        arrivals.sort_by_key(|a| (a.0, !a.1));
-        let mut out = Vec::new();
-        for (_, is_depth, s) in arrivals {
-            if is_depth {
-                sync.push_depth(depth(s), &mut out);
-            } else {
-                sync.push_color(color(s), &mut out);
-            }
-        }
-        sync.flush(&mut out);
+        let out = run_on(&mut sync, &d, &c);
         (right_share(&out, &d, &c, period), sync.given_up())
     }
 

@@ -494,18 +494,30 @@ mod tests {
                     // The same paws listed in another order: the assignment must not care.
                     detections.reverse();
                 }
-                let mut fuser = Fuser::new(rig.color, FusionConfig::default());
-                let mut fused = pose.clone();
-                fuser.fuse(0, &mut fused, &detections);
-                for j in Joint::PAWS {
-                    assert_eq!(fused.joint(j).source, JointSource::Paw, "{j:?} at heading {heading}");
-                    assert!(
-                        error(&m, &fused, j) < 1.0,
-                        "{j:?} at heading {heading}: {}",
-                        error(&m, &fused, j)
-                    );
-                }
+                assert_each_paw_found(&rig, &m, &pose, &detections, heading);
             }
+        }
+    }
+
+    /// Fuses `detections` into `pose` in a fresh fuser and checks that each paw took its own
+    /// box, within 1 mm of the truth `m`.
+    fn assert_each_paw_found(
+        rig: &Rig,
+        m: &crate::synth::mouse::MouseInstance,
+        pose: &Pose,
+        detections: &[PawDetection],
+        heading: f64,
+    ) {
+        let mut fuser = Fuser::new(rig.color, FusionConfig::default());
+        let mut fused = pose.clone();
+        fuser.fuse(0, &mut fused, detections);
+        for j in Joint::PAWS {
+            assert_eq!(fused.joint(j).source, JointSource::Paw, "{j:?} at heading {heading}");
+            assert!(
+                error(m, &fused, j) < 1.0,
+                "{j:?} at heading {heading}: {}",
+                error(m, &fused, j)
+            );
         }
     }
 
@@ -653,17 +665,7 @@ mod tests {
             // The real paws beside the false boxes, in a fresh fuser: each leg takes its own.
             let mut all = paws.clone();
             all.extend(false_boxes);
-            let mut fuser = Fuser::new(rig.color, FusionConfig::default());
-            let mut fused = pose.clone();
-            fuser.fuse(0, &mut fused, &all);
-            for j in Joint::PAWS {
-                assert_eq!(fused.joint(j).source, JointSource::Paw, "{j:?} at heading {heading}");
-                assert!(
-                    error(&m, &fused, j) < 1.0,
-                    "{j:?} at heading {heading}: {}",
-                    error(&m, &fused, j)
-                );
-            }
+            assert_each_paw_found(&rig, &m, &pose, &all, heading);
         }
     }
 

@@ -78,6 +78,20 @@ pub fn lock(health: &SharedHealth) -> std::sync::MutexGuard<'_, CameraHealth> {
     health.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
+/// A camera (re)opened at `host_ns`: its event, metadata and state, and its opening as its
+/// last sign of life.
+fn mark_open(h: &mut CameraHealth, role: CameraRole, meta: CameraMeta, host_ns: u64) {
+    h.events.push(SessionEvent::CameraOpened {
+        host_ns,
+        role,
+        model: meta.model.clone(),
+        serial: meta.serial.clone(),
+    });
+    h.meta = Some(meta);
+    h.state = Some(CameraState::Streaming);
+    h.last_sign = Some((Instant::now(), host_ns));
+}
+
 /// Takes a camera for gone: state away, an outage from `since_ns` (its last sign of life), and
 /// the event for the session. A camera already away with its outage still open stays in that
 /// outage: a watchdog and the capture thread may both notice the same silence.
@@ -251,19 +265,7 @@ where
     /// The supervisor of a camera already opened and started by the caller (who needed its
     /// metadata first); `open` serves only the reopenings.
     pub fn opened(mut self, source: S, clock: &Clock) -> Self {
-        let host_ns = clock.now_ns();
-        let meta = source.meta();
-        let mut h = lock(&self.health);
-        h.events.push(SessionEvent::CameraOpened {
-            host_ns,
-            role: self.role,
-            model: meta.model.clone(),
-            serial: meta.serial.clone(),
-        });
-        h.meta = Some(meta);
-        h.state = Some(CameraState::Streaming);
-        h.last_sign = Some((Instant::now(), host_ns));
-        drop(h);
+        mark_open(&mut lock(&self.health), self.role, source.meta(), clock.now_ns());
         self.current = Some(source);
         self.last_frame = Instant::now();
         self
@@ -303,15 +305,7 @@ where
                 } else {
                     tracing::info!(camera = %self.role, model = %meta.model, serial = %meta.serial, "camera open");
                 }
-                h.events.push(SessionEvent::CameraOpened {
-                    host_ns,
-                    role: self.role,
-                    model: meta.model.clone(),
-                    serial: meta.serial.clone(),
-                });
-                h.meta = Some(meta);
-                h.state = Some(CameraState::Streaming);
-                h.last_sign = Some((now, host_ns));
+                mark_open(&mut h, self.role, meta, host_ns);
                 // The camera may count from 0 again: carry on from the last number given out.
                 self.seq_offset = u64::MAX;
                 self.current = Some(source);

@@ -113,6 +113,35 @@ fn plane_through(points: &[Vector3<f64>]) -> Option<FloorPlane> {
 
 /// The plane with `normal` through `point`, its normal turned towards the camera (the origin);
 /// `None` for a degenerate normal or a plane through the camera.
+/// The best plane a search found (by its score), fitted again three times to the points
+/// within `tolerance` of it while the fit still faces the camera.
+fn refined(
+    best: Option<(usize, FloorPlane)>,
+    points: &[Vector3<f64>],
+    tolerance: f64,
+    faces_camera: impl Fn(&FloorPlane) -> bool,
+) -> Result<FloorPlane, SegmentError> {
+    let Some((_, mut plane)) = best else {
+        return Err(SegmentError::Floor {
+            reason: "no plane facing the camera".to_owned(),
+        });
+    };
+    let mut support = Vec::with_capacity(points.len());
+    for _ in 0..3 {
+        support.clear();
+        support.extend(
+            points
+                .iter()
+                .filter(|p| (plane.normal.dot(p) + plane.offset_mm).abs() <= tolerance),
+        );
+        match plane_through(&support) {
+            Some(p) if faces_camera(&p) => plane = p,
+            _ => break,
+        }
+    }
+    Ok(plane)
+}
+
 fn oriented(normal: Vector3<f64>, point: Vector3<f64>) -> Option<FloorPlane> {
     let len = normal.norm();
     if !len.is_finite() || len <= 1e-9 {
@@ -204,24 +233,7 @@ pub(super) fn best_plane(
             best = Some((score, plane));
         }
     }
-    let Some((_, mut plane)) = best else {
-        return Err(SegmentError::Floor {
-            reason: "no plane facing the camera".to_owned(),
-        });
-    };
-    let mut support = Vec::with_capacity(points.len());
-    for _ in 0..3 {
-        support.clear();
-        support.extend(
-            points
-                .iter()
-                .filter(|p| (plane.normal.dot(p) + plane.offset_mm).abs() <= tolerance),
-        );
-        match plane_through(&support) {
-            Some(p) if faces_camera(&p) => plane = p,
-            _ => break,
-        }
-    }
+    let plane = refined(best, &points, tolerance, faces_camera)?;
     let count = inliers(&plane, &points);
     Ok((plane, count, points.len()))
 }
@@ -295,24 +307,7 @@ pub(super) fn best_plane_local(
             best = Some((score, plane));
         }
     }
-    let Some((_, mut plane)) = best else {
-        return Err(SegmentError::Floor {
-            reason: "no plane facing the camera".to_owned(),
-        });
-    };
-    let mut support = Vec::with_capacity(points.len());
-    for _ in 0..3 {
-        support.clear();
-        support.extend(
-            points
-                .iter()
-                .filter(|p| (plane.normal.dot(p) + plane.offset_mm).abs() <= tolerance),
-        );
-        match plane_through(&support) {
-            Some(p) if faces_camera(&p) => plane = p,
-            _ => break,
-        }
-    }
+    let plane = refined(best, &points, tolerance, faces_camera)?;
     Ok(plane)
 }
 
