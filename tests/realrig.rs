@@ -99,10 +99,7 @@ fn rows(out: &Path) -> Vec<(String, Option<f64>)> {
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
     let status = col("status");
-    let z_cols: Vec<usize> = BODY_BUT_TAIL_TIP
-        .iter()
-        .map(|j| col(&format!("{}_z", j.name())))
-        .collect();
+    let z_cols: Vec<usize> = body_but_tail_tip().map(|j| col(&format!("{}_z", j.name()))).collect();
     lines
         .map(|l| {
             let f: Vec<&str> = l.split(',').collect();
@@ -114,23 +111,13 @@ fn rows(out: &Path) -> Vec<(String, Option<f64>)> {
 }
 
 fn true_mean_z(m: &MouseInstance) -> f64 {
-    BODY_BUT_TAIL_TIP.iter().map(|&j| m.joint(j).z).sum::<f64>() / BODY_BUT_TAIL_TIP.len() as f64
+    body_but_tail_tip().map(|j| m.joint(j).z).sum::<f64>() / body_but_tail_tip().count() as f64
 }
 
 /// Joints 1-12 but the tail tip, which is unknown where no tail is seen.
-const BODY_BUT_TAIL_TIP: [Joint; 11] = [
-    Joint::Snout,
-    Joint::Head,
-    Joint::Neck,
-    Joint::Withers,
-    Joint::MidBack,
-    Joint::Rump,
-    Joint::TailBase,
-    Joint::LeftEar,
-    Joint::RightEar,
-    Joint::LeftHip,
-    Joint::RightHip,
-];
+fn body_but_tail_tip() -> impl Iterator<Item = Joint> {
+    Joint::MAIN_BODY.into_iter().filter(|&j| j != Joint::TailTip)
+}
 
 /// Checks the replay's camera height and the mouse's heights against the truth; returns the
 /// mean absolute error of the joints' mean height (mm).
