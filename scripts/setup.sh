@@ -14,6 +14,9 @@ packages=(
   libopencv-dev opencv-data
   # video export and import
   ffmpeg
+  # whole-process wall time and peak memory (/usr/bin/time -v), builds compared back to back
+  # (hyperfine): scripts/moseq2-check, scripts/replay-bench
+  time hyperfine
   # batches on a Slurm cluster: scripts/slurm-test starts a one-node cluster on localhost
   slurm-wlm munge
   # the tests render the report and the daemon's live page in a headless browser

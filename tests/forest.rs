@@ -801,3 +801,61 @@ fn a_tail_not_seen_gets_no_tail_tip_off_the_mouse() {
         "{seen_reported} of {seen_frames} tips reported with the tail in view"
     );
 }
+
+/// Issue 30: the body forest read straight into its run-time form (streamed, tree by tree,
+/// the votes kept sparse) and shared by clones (one per worker) estimates exactly what the
+/// estimator built from the loaded forest does, bit for bit.
+#[test]
+fn the_body_forest_loaded_for_run_time_and_its_clones_estimate_bit_for_bit_alike() {
+    use mousepose::core::geometry::Rig;
+    use mousepose::core::noise::{DepthNoise, NoiseModel};
+    use mousepose::synth::dataset::{DatasetSpec, render_sample};
+    use mousepose::synth::mouse::pose_library;
+    use mousepose::training::{MaskSource, segmented_image};
+    use mousepose::vision::forest::infer::{BodyEstimator, VoteSettings, sample_pixels};
+    use nalgebra::Vector3;
+    let rig = Rig::default_rig();
+    let path = repo_root().join("fixtures/models/body.forest");
+    let Model::Body(_, forest) = model::load(&path, Some(ModelKind::Body)).expect("bundled body model") else {
+        panic!("{} is not a body model", path.display());
+    };
+    let mut built = BodyEstimator::new(forest, VoteSettings::default());
+    let mut loaded = BodyEstimator::load(&path, VoteSettings::default()).expect("loads");
+    let mut clone = loaded.clone();
+    let spec = DatasetSpec {
+        count: 12,
+        seed: 0x3030,
+        noise: DepthNoise {
+            model: NoiseModel::StructuredLight,
+            gaussian_mm: 1.0,
+        },
+        bottom_views: false,
+        mice: mousepose::synth::Mice::Mixed,
+    };
+    let library = pose_library();
+    let mut segmenter = MaskSource::for_rig(&rig).unwrap().segmenter().unwrap();
+    let up = (rig.depth.world_from_camera.inverse().rotation * Vector3::z()).cast::<f32>();
+    let mut pixels = Vec::new();
+    let mut compared = 0;
+    for i in 0..spec.count {
+        let s = render_sample(&rig, &spec, &library, i);
+        let Some(image) = segmented_image(&mut segmenter, &s.top.depth, s.top.region).unwrap() else {
+            continue;
+        };
+        for budget in [200, 1200] {
+            sample_pixels(&image, budget, &mut pixels);
+            let a = built.estimate_oriented(&image, &pixels, &rig.depth.intrinsics, &up);
+            let b = loaded.estimate_oriented(&image, &pixels, &rig.depth.intrinsics, &up);
+            let c = clone.estimate_oriented(&image, &pixels, &rig.depth.intrinsics, &up);
+            // Debug prints each float's shortest exact form: equal text, equal bits.
+            assert_eq!(format!("{a:?}"), format!("{b:?}"), "sample {i}, {budget} pixels");
+            assert_eq!(
+                format!("{a:?}"),
+                format!("{c:?}"),
+                "sample {i}, {budget} pixels (clone)"
+            );
+            compared += 1;
+        }
+    }
+    assert!(compared >= 20, "{compared} estimates compared");
+}

@@ -360,24 +360,36 @@ pub fn replay_with(
     progress: impl Fn(u64, u64) + Sync,
 ) -> Result<ReplaySummary, ReplayError> {
     let recording = Recording::open(&options.session)?;
-    let models = Models::load(options.models.as_deref())?;
+    // The models load on a thread of their own while the empty cage is modelled from the
+    // recording (each a third to a half of a short replay's start-up); their errors come
+    // first, as when they were loaded first.
+    let (models, scene) = std::thread::scope(|scope| {
+        let models = scope.spawn(|| Models::load(options.models.as_deref()));
+        let scene = (|| {
+            let chosen = match &options.calibration {
+                Some(path) => RecordingRig {
+                    rig: recording.calibrated_rig(path)?,
+                    calibrated: true,
+                    intrinsics_from: "rig calibration".to_owned(),
+                },
+                None => recording.rig(options.intrinsics.as_deref())?,
+            };
+            let roi = match &options.roi {
+                Some(path) => {
+                    let (w, h) = recording.depth_size();
+                    Some(read_mask_png(path, w, h)?)
+                }
+                None => None,
+            };
+            let background = background_in(&recording, &chosen.rig, roi.as_deref())?;
+            Ok::<_, ReplayError>((chosen, background))
+        })();
+        let models = models.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        (models, scene)
+    });
+    let models = models?;
+    let (mut chosen, background) = scene?;
     let (body_model, paw_model) = (models.body_path(), models.paws_path());
-    let mut chosen = match &options.calibration {
-        Some(path) => RecordingRig {
-            rig: recording.calibrated_rig(path)?,
-            calibrated: true,
-            intrinsics_from: "rig calibration".to_owned(),
-        },
-        None => recording.rig(options.intrinsics.as_deref())?,
-    };
-    let roi = match &options.roi {
-        Some(path) => {
-            let (w, h) = recording.depth_size();
-            Some(read_mask_png(path, w, h)?)
-        }
-        None => None,
-    };
-    let background = background_in(&recording, &chosen.rig, roi.as_deref())?;
     let depth_size = (background.region().width, background.region().height);
     let floor = background.floor_plane();
     if !chosen.calibrated {

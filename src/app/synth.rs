@@ -1,4 +1,4 @@
-//! `mousepose synth dataset|session|chessboard`: rendered training data and sessions.
+//! `mousepose synth dataset|session|chessboard|moseq`: rendered training data, sessions and recordings.
 
 use crate::app::progress;
 use crate::app::{Outcome, output_failure};
@@ -7,6 +7,7 @@ use crate::core::frame::PixelFormat;
 use crate::core::noise::{DepthNoise, NoiseModel};
 use crate::io::output::Staging;
 use crate::synth::dataset::{DatasetSpec, write_dataset};
+use crate::synth::moseq::{MoseqSpec, moseq_camera, write_moseq};
 use crate::synth::session::{SessionSpec, write_session};
 use anyhow::Context as _;
 use clap::{Args, Subcommand};
@@ -20,6 +21,61 @@ pub enum SynthCommand {
     Session(SessionArgs),
     /// Rendered chessboard views of both cameras, for testing calibration end to end.
     Chessboard(crate::app::calibrate::ChessboardArgs),
+    /// A depth-only recording in MoSeq's layout (depth.dat, depth_ts.txt, metadata.json, and
+    /// the true camera as rig.yaml): a session's mouse under a real rig's camera.
+    Moseq(MoseqArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct MoseqArgs {
+    /// The recording directory to create.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Number of depth frames.
+    #[arg(long, value_name = "N", default_value_t = 900, value_parser = parse_images, allow_negative_numbers = true)]
+    frames: u64,
+    /// Frame rate (timestamps in depth_ts.txt).
+    #[arg(long, value_name = "FPS", default_value_t = 30.0, value_parser = parse_fps, allow_negative_numbers = true)]
+    fps: f64,
+    /// Seed of the behaviour sequence (the synthetic session's of the same seed) and the noise.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    /// Frame size, WIDTHxHEIGHT, one of the depth camera table's (nominal intrinsics).
+    #[arg(long, value_name = "WxH", default_value = "512x424", value_parser = parse_size)]
+    size: (u32, u32),
+    /// The camera's height above the floor (mm).
+    #[arg(long, value_name = "MM", default_value_t = 670.0, value_parser = parse_camera_height, allow_negative_numbers = true)]
+    camera_height_mm: f64,
+    /// The camera's tilt from looking straight down (degrees).
+    #[arg(long, value_name = "DEG", default_value_t = 0.0, value_parser = parse_tilt, allow_negative_numbers = true)]
+    tilt_deg: f64,
+    #[command(flatten)]
+    noise: NoiseArgs,
+    /// Depth camera noise model: none, structured-light or tof.
+    #[arg(long = "noise-model", value_name = "MODEL", default_value = "tof")]
+    noise_model: NoiseModel,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    force: bool,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("expected a frame size WIDTHxHEIGHT such as 512x424, got {s}");
+    let (w, h) = s.trim().split_once('x').ok_or_else(bad)?;
+    let w: u32 = w.trim().parse().map_err(|_| bad())?;
+    let h: u32 = h.trim().parse().map_err(|_| bad())?;
+    if w == 0 || h == 0 {
+        return Err(bad());
+    }
+    Ok((w, h))
+}
+
+fn parse_camera_height(s: &str) -> Result<f64, String> {
+    crate::app::parse_ranged(s, "a camera height in millimetres", 300.0, 2000.0)
+}
+
+fn parse_tilt(s: &str) -> Result<f64, String> {
+    crate::app::parse_ranged(s, "a tilt in degrees", 0.0, 30.0)
 }
 
 #[derive(Debug, Args)]
@@ -106,7 +162,34 @@ pub fn run(command: SynthCommand) -> Outcome {
         SynthCommand::Dataset(args) => synth_dataset(&args),
         SynthCommand::Session(args) => synth_session(&args),
         SynthCommand::Chessboard(args) => crate::app::calibrate::synth_chessboard(&args),
+        SynthCommand::Moseq(args) => synth_moseq(&args),
     }
+}
+
+fn synth_moseq(args: &MoseqArgs) -> Outcome {
+    let spec = MoseqSpec {
+        frames: args.frames,
+        fps: args.fps,
+        seed: args.seed,
+        noise: DepthNoise {
+            model: args.noise_model,
+            gaussian_mm: args.noise.noise_mm,
+        },
+        width: args.size.0,
+        height: args.size.1,
+        camera_height_mm: args.camera_height_mm,
+        tilt_deg: args.tilt_deg,
+    };
+    // A size the camera table lacks is the user's mistake: said before anything is written.
+    moseq_camera(&spec).map_err(crate::app::Failure::usage)?;
+    let staging = Staging::new(&args.out, args.force).map_err(output_failure)?;
+    let bar = progress::bar(spec.frames, "rendering");
+    write_moseq(staging.path(), &spec, |done, _| bar.set_position(done))
+        .with_context(|| format!("writing the MoSeq recording {:?}", args.out))?;
+    bar.finish_and_clear();
+    let out = staging.commit()?;
+    tracing::info!(message = "MoSeq recording written.", path = %out.display(), frames = spec.frames);
+    Ok(())
 }
 
 fn synth_dataset(args: &DatasetArgs) -> Outcome {

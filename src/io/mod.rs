@@ -21,10 +21,13 @@ use std::path::Path;
 /// is refused.
 pub fn read_bounded_bytes(path: &Path, max: u64) -> io::Result<Vec<u8>> {
     // Asked before opening: opening a FIFO waits for a writer.
-    if !std::fs::metadata(path)?.is_file() {
+    let meta = std::fs::metadata(path)?;
+    if !meta.is_file() {
         return Err(io::Error::new(io::ErrorKind::InvalidInput, "it is not a regular file"));
     }
-    let mut bytes = Vec::new();
+    // The file's size reserved at once (within the bound), so a large file is read without
+    // being copied as the buffer grows; a file that grows meanwhile still stops at the bound.
+    let mut bytes = Vec::with_capacity(usize::try_from(meta.len().min(max + 1)).unwrap_or(0));
     std::fs::File::open(path)?.take(max + 1).read_to_end(&mut bytes)?;
     if bytes.len() as u64 > max {
         return Err(io::Error::new(

@@ -2,7 +2,7 @@
 //! where the bundled ones are.
 
 use crate::vision::forest::infer::{BodyEstimator, VoteSettings};
-use crate::vision::forest::model::{self, Model, ModelError, ModelKind};
+use crate::vision::forest::model::ModelError;
 use crate::vision::paws::{PawDetector, PawError};
 use std::path::{Path, PathBuf};
 
@@ -101,18 +101,9 @@ impl Models {
 /// The file is missing, damaged, or not a body forest.
 pub fn load_body(models: &Path) -> Result<BodyEstimator, ModelsError> {
     let path = models.join(BODY_MODEL);
-    match model::load(&path, Some(ModelKind::Body)) {
-        Ok(Model::Body(_, forest)) => Ok(BodyEstimator::new(forest, VoteSettings::default())),
-        Ok(Model::Parts(..)) => Err(ModelsError::Body {
-            source: ModelError::WrongKind {
-                path: path.clone(),
-                found: "parts",
-                expected: "body",
-            },
-            path,
-        }),
-        Err(source) => Err(ModelsError::Body { path, source }),
-    }
+    // Straight into the run-time form: the bundled forest's 44 MB of decompressed trees and
+    // 100 MB of training form are never held (see `BodyEstimator::load`).
+    BodyEstimator::load(&path, VoteSettings::default()).map_err(|source| ModelsError::Body { path, source })
 }
 
 /// Loads the paw cascade of a models directory; `None` when the directory has none.

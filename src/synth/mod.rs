@@ -9,6 +9,7 @@ pub mod animate;
 pub mod body;
 pub mod chessboard;
 pub mod dataset;
+pub mod moseq;
 pub mod mouse;
 pub mod noise;
 pub mod preview;

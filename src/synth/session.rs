@@ -69,7 +69,7 @@ pub fn session_animator(seed: u64) -> Animator {
 
 /// The animated mouse of a seed and its carriage: the standard mice's build comes from the
 /// mouse's own random stream (as it always did), a varied mouse's from a stream of its own.
-fn session_mouse(seed: u64, mice: Mice) -> (Animator, Carriage) {
+pub(crate) fn session_mouse(seed: u64, mice: Mice) -> (Animator, Carriage) {
     let mut mouse_rng = item_rng(seed, STREAM_MOUSE, 0);
     let build = random_placement(&mut mouse_rng);
     match mice.of_item(seed) {

@@ -273,32 +273,104 @@ impl<'a> Reader<'a> {
         let b = self.take(4, what)?;
         Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
     }
+}
+
+/// Where the tree section's bytes come from: the decompressed section in memory, or the
+/// decompressor's stream (a body forest is 44 MB decompressed: never held whole that way).
+trait Source {
+    /// The next `n` bytes.
+    fn take(&mut self, n: usize, what: &str) -> Result<&[u8], String>;
+    /// How many bytes are left at most.
+    fn left(&self) -> usize;
+    /// Whether every byte was read.
+    fn at_end(&mut self) -> Result<bool, String>;
+
+    fn u32(&mut self, what: &str) -> Result<u32, String> {
+        let b = self.take(4, what)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
     fn f32(&mut self, what: &str) -> Result<f32, String> {
         Ok(f32::from_bits(self.u32(what)?))
     }
     fn count(&mut self, what: &str, item_bytes: usize) -> Result<usize, String> {
         let n = self.u32(what)? as usize;
-        if n.saturating_mul(item_bytes) > self.bytes.len() - self.at {
+        if n.saturating_mul(item_bytes) > self.left() {
             return Err(format!("its {what} ({n}) do not fit in the file"));
         }
         Ok(n)
     }
 }
 
-fn decode_trees<L>(
-    bytes: &[u8],
+impl Source for Reader<'_> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&[u8], String> {
+        Reader::take(self, n, what)
+    }
+    fn left(&self) -> usize {
+        self.bytes.len() - self.at
+    }
+    fn at_end(&mut self) -> Result<bool, String> {
+        Ok(self.at == self.bytes.len())
+    }
+}
+
+/// The tree section read from the decompressor as it goes, at most `limit` bytes (the size
+/// the zstd frame declares when it declares a plausible one, else [`MAX_TREES_BYTES`]).
+struct Stream<R> {
+    inner: R,
+    buf: Vec<u8>,
+    at: usize,
+    limit: usize,
+}
+
+impl<R: std::io::Read> Source for Stream<R> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&[u8], String> {
+        if n > self.limit - self.at {
+            return Err(format!("it ends inside the {what}"));
+        }
+        self.buf.resize(n, 0);
+        match self.inner.read_exact(&mut self.buf) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
+                return Err(format!("it ends inside the {what}"));
+            }
+            Err(e) => return Err(format!("its trees do not decompress: {e}")),
+        }
+        self.at += n;
+        Ok(&self.buf)
+    }
+    fn left(&self) -> usize {
+        self.limit - self.at
+    }
+    fn at_end(&mut self) -> Result<bool, String> {
+        let mut one = [0u8; 1];
+        loop {
+            match self.inner.read(&mut one) {
+                Ok(0) => return Ok(true),
+                Ok(_) => return Ok(false),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(format!("its trees do not decompress: {e}")),
+            }
+        }
+    }
+}
+
+/// Reads the trees, handing each to `convert` once read and checked (so a caller that keeps
+/// another form of them never holds every tree in this one).
+fn decode_trees<S: Source, L, T>(
+    r: &mut S,
     leaf_bytes: usize,
-    mut leaf: impl FnMut(&mut Reader<'_>) -> Result<L, String>,
-) -> Result<Forest<DepthFeature, L>, String> {
-    let mut r = Reader { bytes, at: 0 };
+    mut leaf: impl FnMut(&mut S) -> Result<L, String>,
+    mut convert: impl FnMut(Tree<DepthFeature, L>) -> T,
+) -> Result<Vec<T>, String> {
     let count = r.count("tree count", 8)?;
     if count == 0 {
         return Err("it has no trees".to_owned());
     }
-    let mut trees = Vec::with_capacity(count);
+    // Reserved up to a bound: a streamed section's counts are only checked against its limit.
+    let mut trees = Vec::with_capacity(count.min(1 << 10));
     for t in 0..count {
         let n_nodes = r.count("node count", 20)?;
-        let mut nodes = Vec::with_capacity(n_nodes);
+        let mut nodes = Vec::with_capacity(n_nodes.min(1 << 20));
         for _ in 0..n_nodes {
             let feature = [r.f32("node")?, r.f32("node")?];
             let threshold = r.f32("node")?;
@@ -315,9 +387,9 @@ fn decode_trees<L>(
             });
         }
         let n_leaves = r.count("leaf count", leaf_bytes)?;
-        let mut leaves = Vec::with_capacity(n_leaves);
+        let mut leaves = Vec::with_capacity(n_leaves.min(1 << 20));
         for _ in 0..n_leaves {
-            leaves.push(leaf(&mut r)?);
+            leaves.push(leaf(r)?);
         }
         if nodes.is_empty() {
             return Err(format!("tree {t} has no nodes"));
@@ -334,12 +406,24 @@ fn decode_trees<L>(
                 return Err(format!("tree {t} node {i} points outside the tree"));
             }
         }
-        trees.push(Tree { nodes, leaves });
+        trees.push(convert(Tree { nodes, leaves }));
     }
-    if r.at != bytes.len() {
+    if !r.at_end()? {
         return Err("it has bytes after its last tree".to_owned());
     }
-    Ok(Forest { trees })
+    Ok(trees)
+}
+
+/// The size the zstd frame of the tree section (`frame`: its first bytes at least)
+/// declares, when it declares one that is
+/// plausible: within [`MAX_TREES_BYTES`] and at most 8 times the compressed size (the bundled
+/// models' is 1.5), so a forged size reserves no more than that.
+fn declared_size(frame: &[u8], compressed_len: usize) -> Option<usize> {
+    zstd::zstd_safe::get_frame_content_size(frame)
+        .ok()
+        .flatten()
+        .and_then(|n| usize::try_from(n).ok())
+        .filter(|&n| n <= MAX_TREES_BYTES && n / 8 <= compressed_len)
 }
 
 /// The tree section, decompressed as a stream: memory grows with the trees actually there,
@@ -348,7 +432,9 @@ fn decode_trees<L>(
 fn decompress_trees(compressed: &[u8]) -> Result<Vec<u8>, String> {
     use std::io::Read as _;
     let unreadable = |e: std::io::Error| format!("its trees do not decompress: {e}");
-    let mut trees = Vec::new();
+    // The size the frame declares reserved at once, so the section is not copied as it
+    // grows; a claim not believed leaves memory growing with what is there.
+    let mut trees = Vec::with_capacity(declared_size(compressed, compressed.len()).unwrap_or(0));
     zstd::stream::read::Decoder::with_buffer(compressed)
         .map_err(unreadable)?
         .take(MAX_TREES_BYTES as u64 + 1)
@@ -373,19 +459,39 @@ pub fn load(path: &Path, expected: Option<ModelKind>) -> Result<Model, ModelErro
     decode(&bytes, path, expected)
 }
 
-/// Decodes model bytes read from `path` (used in messages).
-///
-/// # Errors
-/// As [`load`].
-pub fn decode(bytes: &[u8], path: &Path, expected: Option<ModelKind>) -> Result<Model, ModelError> {
+/// The header of a model file in `bytes`, checked (magic, version, checksum, kind, description,
+/// skeleton): the format version, the kind, the description and the compressed tree section.
+fn header<'b>(
+    bytes: &'b [u8],
+    path: &Path,
+    expected: Option<ModelKind>,
+) -> Result<(u32, ModelKind, ModelInfo, &'b [u8]), ModelError> {
     let corrupt = |reason: String| ModelError::Corrupt {
         path: path.to_owned(),
         reason,
     };
-    if bytes.len() < 8 || &bytes[..8] != MAGIC {
+    let version = magic_and_version(bytes, bytes.len(), path)?;
+    let (body, crc) = bytes.split_at(bytes.len() - 4);
+    if crc32fast::hash(body) != u32::from_le_bytes([crc[0], crc[1], crc[2], crc[3]]) {
+        return Err(corrupt(
+            "its checksum does not match (truncated or modified)".to_owned(),
+        ));
+    }
+    let (kind, info, start, len) = fields(body, body.len(), path, expected)?;
+    Ok((version, kind, info, &body[start..start + len]))
+}
+
+/// The magic and the format version at the start of a file of `total` bytes whose first
+/// bytes are `head`; a file too short to hold a checksum is refused.
+fn magic_and_version(head: &[u8], total: usize, path: &Path) -> Result<u32, ModelError> {
+    let corrupt = |reason: String| ModelError::Corrupt {
+        path: path.to_owned(),
+        reason,
+    };
+    if head.len() < 8 || &head[..8] != MAGIC {
         return Err(ModelError::Foreign { path: path.to_owned() });
     }
-    let mut r = Reader { bytes, at: 8 };
+    let mut r = Reader { bytes: head, at: 8 };
     let version = r.u32("header").map_err(corrupt)?;
     if version != FORMAT_VERSION && version != 1 {
         return Err(ModelError::Version {
@@ -393,16 +499,26 @@ pub fn decode(bytes: &[u8], path: &Path, expected: Option<ModelKind>) -> Result<
             version,
         });
     }
-    if bytes.len() < 24 {
+    if total < 24 {
         return Err(corrupt("it is truncated".to_owned()));
     }
-    let (body, crc) = bytes.split_at(bytes.len() - 4);
-    if crc32fast::hash(body) != u32::from_le_bytes([crc[0], crc[1], crc[2], crc[3]]) {
-        return Err(corrupt(
-            "its checksum does not match (truncated or modified)".to_owned(),
-        ));
-    }
-    let mut r = Reader { bytes: body, at: 12 };
+    Ok(version)
+}
+
+/// The fields after the version, read from `head` (the first bytes of the file's `body_len`
+/// bytes before its checksum): the kind, the description, and where the compressed tree
+/// section starts and how long it is (checked to lie within the body).
+fn fields(
+    head: &[u8],
+    body_len: usize,
+    path: &Path,
+    expected: Option<ModelKind>,
+) -> Result<(ModelKind, ModelInfo, usize, usize), ModelError> {
+    let corrupt = |reason: String| ModelError::Corrupt {
+        path: path.to_owned(),
+        reason,
+    };
+    let mut r = Reader { bytes: head, at: 12 };
     let code = r.u32("header").map_err(corrupt)?;
     let kind = ModelKind::from_code(code).ok_or_else(|| corrupt(format!("unknown model kind {code}")))?;
     if let Some(expected) = expected.filter(|&e| e != kind) {
@@ -427,50 +543,324 @@ pub fn decode(bytes: &[u8], path: &Path, expected: Option<ModelKind>) -> Result<
     let mut l = [0u8; 8];
     l.copy_from_slice(len_bytes);
     let len = usize::try_from(u64::from_le_bytes(l)).unwrap_or(usize::MAX);
-    let compressed = r.take(len, "trees").map_err(corrupt)?;
+    if r.at.checked_add(len).is_none_or(|end| end > body_len) {
+        return Err(corrupt("it ends inside the trees".to_owned()));
+    }
+    Ok((kind, info, r.at, len))
+}
+
+/// Decodes model bytes read from `path` (used in messages).
+///
+/// # Errors
+/// As [`load`].
+pub fn decode(bytes: &[u8], path: &Path, expected: Option<ModelKind>) -> Result<Model, ModelError> {
+    let corrupt = |reason: String| ModelError::Corrupt {
+        path: path.to_owned(),
+        reason,
+    };
+    let (version, kind, info, compressed) = header(bytes, path, expected)?;
     let trees = decompress_trees(compressed).map_err(corrupt)?;
+    let mut r = Reader { bytes: &trees, at: 0 };
     match kind {
         ModelKind::Body => {
-            let forest = decode_trees(&trees, 2, |r| {
-                let mut leaf = [JointVote::default(); BODY_JOINTS];
-                let m = r.take(2, "leaf")?;
-                let mask = u16::from_le_bytes([m[0], m[1]]);
-                if mask >> BODY_JOINTS != 0 {
-                    return Err(format!("a leaf votes for joints that do not exist (mask {mask:#06x})"));
-                }
-                for (j, v) in leaf.iter_mut().enumerate().filter(|(j, _)| mask & (1 << j) != 0) {
-                    *v = if version == 1 {
-                        JointVote {
-                            offset: [r.f32("leaf")?, r.f32("leaf")?, r.f32("leaf")?],
-                            weight: r.f32("leaf")?,
-                            spread: r.f32("leaf")?,
-                        }
-                    } else {
-                        let b = r.take(10, "leaf")?;
-                        let i = |k: usize| i16::from_le_bytes([b[k], b[k + 1]]);
-                        let u = |k: usize| u16::from_le_bytes([b[k], b[k + 1]]);
-                        JointVote {
-                            offset: [0, 2, 4].map(|k| f32::from(i(k)) * OFFSET_UNIT_MM),
-                            weight: f32::from(u(6)) / 65535.0,
-                            spread: f32::from(u(8)) * SPREAD_UNIT_MM2,
-                        }
-                    };
-                    if !(v.offset.iter().all(|c| c.is_finite()) && v.weight > 0.0 && v.weight <= 1.0 && v.spread >= 0.0)
-                    {
-                        return Err(format!("a leaf's vote for joint {} is not valid", j + 1));
-                    }
-                }
-                Ok(leaf)
-            })
-            .map_err(corrupt)?;
-            Ok(Model::Body(info, forest))
+            let trees = decode_trees(&mut r, 2, |r| body_leaf(r, version), |t| t).map_err(corrupt)?;
+            Ok(Model::Body(info, Forest { trees }))
         }
         ModelKind::Parts => {
-            let forest = decode_trees(&trees, PART_COUNT * 4, |r| {
-                (0..PART_COUNT).map(|_| r.f32("leaf")).collect()
-            })
+            let trees = decode_trees(
+                &mut r,
+                PART_COUNT * 4,
+                |r| (0..PART_COUNT).map(|_| r.f32("leaf")).collect(),
+                |t| t,
+            )
             .map_err(corrupt)?;
-            Ok(Model::Parts(info, forest))
+            Ok(Model::Parts(info, Forest { trees }))
+        }
+    }
+}
+
+/// A body forest's leaf: the mask of the joints it votes for, then each vote.
+fn body_leaf(r: &mut impl Source, version: u32) -> Result<JointLeaf, String> {
+    let mut leaf = [JointVote::default(); BODY_JOINTS];
+    let m = r.take(2, "leaf")?;
+    let mask = u16::from_le_bytes([m[0], m[1]]);
+    if mask >> BODY_JOINTS != 0 {
+        return Err(format!("a leaf votes for joints that do not exist (mask {mask:#06x})"));
+    }
+    for (j, v) in leaf.iter_mut().enumerate().filter(|(j, _)| mask & (1 << j) != 0) {
+        *v = if version == 1 {
+            JointVote {
+                offset: [r.f32("leaf")?, r.f32("leaf")?, r.f32("leaf")?],
+                weight: r.f32("leaf")?,
+                spread: r.f32("leaf")?,
+            }
+        } else {
+            let b = r.take(10, "leaf")?;
+            let i = |k: usize| i16::from_le_bytes([b[k], b[k + 1]]);
+            let u = |k: usize| u16::from_le_bytes([b[k], b[k + 1]]);
+            JointVote {
+                offset: [0, 2, 4].map(|k| f32::from(i(k)) * OFFSET_UNIT_MM),
+                weight: f32::from(u(6)) / 65535.0,
+                spread: f32::from(u(8)) * SPREAD_UNIT_MM2,
+            }
+        };
+        if !(v.offset.iter().all(|c| c.is_finite()) && v.weight > 0.0 && v.weight <= 1.0 && v.spread >= 0.0) {
+            return Err(format!("a leaf's vote for joint {} is not valid", j + 1));
+        }
+    }
+    Ok(leaf)
+}
+
+/// Loads a body forest file as [`load`] does, checking the same, but hands each tree to
+/// `convert` as soon as it is read and never holds the decompressed section (44 MB for the
+/// bundled forest) nor every tree in the training form: the run-time form is built tree by
+/// tree (see `BodyEstimator::load`).
+///
+/// # Errors
+/// As [`load`]; a file of another kind is [`ModelError::WrongKind`].
+pub fn load_body_trees<T>(
+    path: &Path,
+    convert: impl FnMut(Tree<DepthFeature, JointLeaf>) -> T,
+) -> Result<(ModelInfo, Vec<T>), ModelError> {
+    use std::io::{Read as _, Seek as _};
+    let io = |source| ModelError::Io {
+        path: path.to_owned(),
+        action: "read",
+        source,
+    };
+    let corrupt = |reason: String| ModelError::Corrupt {
+        path: path.to_owned(),
+        reason,
+    };
+    if !std::fs::metadata(path).map_err(io)?.is_file() {
+        return Err(io(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "it is not a regular file",
+        )));
+    }
+    // First pass: the checksum as the file streams by, and its first bytes (the header).
+    let mut file = std::fs::File::open(path).map_err(io)?;
+    let mut hasher = crc32fast::Hasher::new();
+    let (mut head, mut held, mut total) = (Vec::new(), Vec::with_capacity(8), 0usize);
+    let mut chunk = vec![0u8; 1 << 20];
+    loop {
+        let n = match file.read(&mut chunk) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(io(e)),
+        };
+        total += n;
+        if total as u64 > MAX_MODEL_BYTES {
+            return Err(io(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!("it is larger than {MAX_MODEL_BYTES} bytes"),
+            )));
+        }
+        let c = &chunk[..n];
+        if head.len() < HEAD_BYTES {
+            head.extend_from_slice(&c[..c.len().min(HEAD_BYTES - head.len())]);
+        }
+        // Every byte but the last four (the checksum) is hashed.
+        held.extend_from_slice(c);
+        let hashed = held.len().saturating_sub(4);
+        if hashed > 0 {
+            hasher.update(&held[..hashed]);
+            held.drain(..hashed);
+        }
+    }
+    drop(chunk);
+    let version = magic_and_version(&head, total, path)?;
+    if hasher.finalize() != u32::from_le_bytes([held[0], held[1], held[2], held[3]]) {
+        return Err(corrupt(
+            "its checksum does not match (truncated or modified)".to_owned(),
+        ));
+    }
+    let body_len = total - 4;
+    head.truncate(body_len);
+    let (_, info, start, len) = match fields(&head, body_len, path, Some(ModelKind::Body)) {
+        Ok(f) => f,
+        // A description longer than the bytes kept: read as a whole, as `load` does.
+        Err(ModelError::Corrupt { .. }) if head.len() < body_len => {
+            return match load(path, Some(ModelKind::Body))? {
+                Model::Body(info, forest) => Ok((info, forest.trees.into_iter().map(convert).collect())),
+                Model::Parts(..) => Err(corrupt("it changed while it was read".to_owned())),
+            };
+        }
+        Err(e) => return Err(e),
+    };
+    // Second pass: the tree section, decompressed and decoded as it streams.
+    file.seek(std::io::SeekFrom::Start(start as u64)).map_err(io)?;
+    let limit = head
+        .get(start..)
+        .and_then(|frame| declared_size(frame, len))
+        .unwrap_or(MAX_TREES_BYTES);
+    let unreadable = |e: std::io::Error| corrupt(format!("its trees do not decompress: {e}"));
+    let inner = zstd::stream::read::Decoder::new(file.take(len as u64)).map_err(unreadable)?;
+    let mut r = Stream {
+        inner: std::io::BufReader::with_capacity(1 << 16, inner),
+        buf: Vec::new(),
+        at: 0,
+        limit,
+    };
+    let trees = decode_trees(&mut r, 2, |r| body_leaf(r, version), convert).map_err(corrupt)?;
+    Ok((info, trees))
+}
+
+/// The first bytes of a model file [`load_body_trees`] keeps for its header (the description
+/// of the bundled forests is about 2 kB).
+const HEAD_BYTES: usize = 1 << 16;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bundled() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/models/body.forest")
+    }
+
+    /// A body model file with `raw` as its (decompressed) tree section, compressed by
+    /// `compress`, under the bundled forest's description.
+    fn with_section(raw: &[u8], compress: impl Fn(&[u8]) -> Vec<u8>) -> Vec<u8> {
+        let bytes = std::fs::read(bundled()).unwrap_or_default();
+        let (_, _, info, _) = header(&bytes, &bundled(), None).unwrap_or_else(|e| panic!("{e}"));
+        let description = serde_json::to_vec(&info).unwrap_or_default();
+        let compressed = compress(raw);
+        let mut out = Vec::new();
+        out.extend_from_slice(MAGIC);
+        put_u32(&mut out, FORMAT_VERSION);
+        put_u32(&mut out, ModelKind::Body.code());
+        put_u32(&mut out, description.len() as u32);
+        out.extend_from_slice(&description);
+        out.extend_from_slice(&(compressed.len() as u64).to_le_bytes());
+        out.extend_from_slice(&compressed);
+        let crc = crc32fast::hash(&out);
+        put_u32(&mut out, crc);
+        out
+    }
+
+    fn bulk(raw: &[u8]) -> Vec<u8> {
+        zstd::bulk::compress(raw, 3).unwrap_or_default()
+    }
+
+    /// A zstd frame that does not declare its size (a streaming encoder's).
+    fn streamed(raw: &[u8]) -> Vec<u8> {
+        use std::io::Write as _;
+        let mut e = zstd::stream::write::Encoder::new(Vec::new(), 3).unwrap_or_else(|e| panic!("{e}"));
+        e.write_all(raw).unwrap_or_else(|e| panic!("{e}"));
+        e.finish().unwrap_or_default()
+    }
+
+    /// Both readings of a file: in memory ([`load`]) and streamed ([`load_body_trees`]).
+    fn both(
+        bytes: &[u8],
+    ) -> (
+        Result<Vec<Tree<DepthFeature, JointLeaf>>, String>,
+        Result<Vec<Tree<DepthFeature, JointLeaf>>, String>,
+    ) {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.path().join("body.forest");
+        std::fs::write(&path, bytes).unwrap_or_else(|e| panic!("{e}"));
+        let loaded = match load(&path, Some(ModelKind::Body)) {
+            Ok(Model::Body(_, f)) => Ok(f.trees),
+            Ok(Model::Parts(..)) => Err("parts".to_owned()),
+            Err(e) => Err(e.to_string()),
+        };
+        let streamed = load_body_trees(&path, |t| t).map(|(_, t)| t).map_err(|e| e.to_string());
+        (loaded, streamed)
+    }
+
+    /// A tree section: `trees` trees of three nodes (a split and two leaves) with two leaves
+    /// voting for joints 1 and 3.
+    fn section(trees: u32) -> Vec<u8> {
+        let mut raw = Vec::new();
+        put_u32(&mut raw, trees);
+        for t in 0..trees {
+            put_u32(&mut raw, 3);
+            for (f, left, leaf) in [(t as f32, 1, NOT_LEAF), (0.0, 0, 0), (0.0, 0, 1)] {
+                put_f32(&mut raw, f);
+                put_f32(&mut raw, -f);
+                put_f32(&mut raw, 0.5);
+                put_u32(&mut raw, left);
+                put_u32(&mut raw, leaf);
+            }
+            put_u32(&mut raw, 2);
+            for k in 0..2u16 {
+                raw.extend_from_slice(&0b101u16.to_le_bytes());
+                for _ in 0..2 {
+                    for v in [10i16, -20, 30 + k as i16] {
+                        raw.extend_from_slice(&v.to_le_bytes());
+                    }
+                    raw.extend_from_slice(&40000u16.to_le_bytes());
+                    raw.extend_from_slice(&12u16.to_le_bytes());
+                }
+            }
+        }
+        raw
+    }
+
+    #[test]
+    fn the_bundled_body_forest_streams_to_the_trees_it_loads_to() {
+        let Ok(Model::Body(_, forest)) = load(&bundled(), Some(ModelKind::Body)) else {
+            panic!("the bundled body forest loads")
+        };
+        let (_, streamed) = load_body_trees(&bundled(), |t| t).unwrap_or_else(|e| panic!("{e}"));
+        assert!(streamed == forest.trees, "the streamed trees differ");
+    }
+
+    #[test]
+    fn streamed_and_in_memory_reading_agree_on_good_and_damaged_sections() {
+        let good = section(2);
+        for compress in [bulk as fn(&[u8]) -> Vec<u8>, streamed] {
+            let (a, b) = both(&with_section(&good, compress));
+            let a = a.unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(a.len(), 2);
+            assert!(Ok(a) == b, "streamed reading differs");
+        }
+        let mut trailing = good.clone();
+        trailing.push(0);
+        let mut too_many_nodes = good.clone();
+        too_many_nodes[4..8].copy_from_slice(&1_000_000u32.to_le_bytes());
+        let mut bad_mask = good.clone();
+        // The first leaf's mask, after the count, three nodes and the leaf count.
+        bad_mask[4 + 4 + 60 + 4] = 0xff;
+        bad_mask[4 + 4 + 60 + 5] = 0xff;
+        let cases: [(&str, Vec<u8>); 5] = [
+            ("bytes after its last tree", trailing),
+            ("ends inside the", good[..good.len() - 3].to_vec()),
+            ("do not fit", too_many_nodes),
+            ("no trees", section(0)),
+            ("do not exist", bad_mask),
+        ];
+        // Damage to the file itself: the same error either way.
+        let file = with_section(&good, bulk);
+        let mut damaged: Vec<Vec<u8>> = [0, 7, 8, 12, 20, 40, file.len() / 2, file.len() - 1]
+            .iter()
+            .map(|&cut| file[..cut].to_vec())
+            .collect();
+        for at in [9, 14, 30, file.len() / 2, file.len() - 2] {
+            let mut b = file.clone();
+            b[at] ^= 0x40;
+            damaged.push(b);
+        }
+        for b in damaged {
+            let (a, b) = both(&b);
+            assert!(a.is_err());
+            assert_eq!(a.err(), b.err());
+        }
+        let compressors: [(fn(&[u8]) -> Vec<u8>, bool); 2] = [(bulk, true), (streamed, false)];
+        for (expected, raw) in cases {
+            for (compress, declares_size) in compressors {
+                let (a, b) = both(&with_section(&raw, compress));
+                let a = a.err().unwrap_or_default();
+                assert!(a.contains(expected), "{expected}: {a}");
+                // Without a declared size the streamed reading only finds the end by reaching it.
+                if expected == "do not fit" && !declares_size {
+                    assert!(b.err().is_some_and(|e| e.contains("ends inside the node")));
+                } else {
+                    assert_eq!(Some(a), b.err());
+                }
+            }
         }
     }
 }

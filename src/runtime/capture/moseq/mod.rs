@@ -50,7 +50,7 @@ use crate::core::frame::{DepthFrame, Stamp};
 use crate::io::session::codec::FrameFormat;
 use crate::io::session::meta::{Backend, CameraMeta, CameraRole};
 use std::fs::File;
-use std::io::{self, BufReader};
+use std::io;
 use std::path::PathBuf;
 use std::sync::mpsc;
 use std::time::Duration;
@@ -429,7 +429,7 @@ impl FrameSource for MoseqDepth {
         self.next_index = 0;
         let reader = match self.kind {
             MoseqKind::Raw => File::open(&self.depth_path)
-                .map(|f| Reader::Raw(BufReader::with_capacity(1 << 20, f)))
+                .map(|f| Reader::Raw(f, Vec::new()))
                 .map_err(|source| {
                     self.error(MoseqError::Io {
                         path: self.depth_path.clone(),
@@ -447,12 +447,12 @@ impl FrameSource for MoseqDepth {
         let samples = self.frame_samples();
         let data = match self.reader.as_mut() {
             None => return Ok(None),
-            Some(Reader::Raw(file)) => {
+            Some(Reader::Raw(file, bytes)) => {
                 if index >= self.timestamps.len() {
                     return Ok(None);
                 }
-                let mut bytes = vec![0u8; samples * 2];
-                let read = read_full(file, &mut bytes);
+                bytes.resize(samples * 2, 0);
+                let read = read_full(file, bytes);
                 match read {
                     Ok(n) if n == bytes.len() => bytes
                         .chunks_exact(2)

@@ -4,7 +4,7 @@
 
 use super::{MoseqDepth, MoseqError};
 use std::fs::File;
-use std::io::{self, BufReader, Read};
+use std::io::{self, Read};
 use std::path::Path;
 use std::process::{Child, ChildStderr, Command, Stdio};
 use std::sync::mpsc;
@@ -168,7 +168,9 @@ pub(super) fn read_video_frame(
 /// What frames are read from while the source runs.
 #[derive(Debug)]
 pub(super) enum Reader {
-    Raw(BufReader<File>),
+    /// `depth.dat`, read a frame at a time into the buffer kept beside it (no buffered reader:
+    /// whole frames are larger than its buffer would be, and it would copy them once more).
+    Raw(File, Vec<u8>),
     Video(VideoDecoder),
 }
 
