@@ -78,13 +78,14 @@ pub struct Edges {
 
 impl Edges {
     /// Replay's: nothing is ever dropped, the reader waits for the pipeline. A replay's
-    /// reader is always ahead, so its edge stays full: 16 frames keep the synchroniser fed
-    /// (64 held about 28 MB of 512x424 depth frames, 120 MB of full-size frame pairs, for
+    /// reader is always ahead, so every edge stays full and each frame on one is memory held:
+    /// 4 frames an edge keep every stage fed (64 on the capture edge and 8 on the others
+    /// held 35 MB of 512x424 depth frames, about 150 MB of full-size frame pairs, for
     /// nothing: the order of the frames, hence the poses, does not depend on it).
     pub fn replay() -> Self {
         Self {
-            capture: EdgeConfig::block(16),
-            stage: EdgeConfig::block(8),
+            capture: EdgeConfig::block(4),
+            stage: EdgeConfig::block(4),
         }
     }
 }

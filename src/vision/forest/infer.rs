@@ -153,11 +153,11 @@ impl RunTrees {
     /// Converts `forest` tree by tree, each tree's training form dropped once converted.
     fn new(forest: Forest<DepthFeature, JointLeaf>) -> Self {
         Self {
-            trees: forest.trees.into_iter().map(Self::tree).collect(),
+            trees: forest.trees.into_iter().map(|tree| Self::tree(&tree)).collect(),
         }
     }
 
-    fn tree(tree: Tree<DepthFeature, JointLeaf>) -> (PackedTree<DepthFeature>, SparseLeaves) {
+    fn tree(tree: &Tree<DepthFeature, JointLeaf>) -> (PackedTree<DepthFeature>, SparseLeaves) {
         (tree.packed(), SparseLeaves::new(&tree.leaves))
     }
 }
@@ -211,7 +211,7 @@ impl BodyEstimator {
     /// # Errors
     /// As [`model::load`].
     pub fn load(path: &std::path::Path, settings: VoteSettings) -> Result<Self, model::ModelError> {
-        let (_, trees) = model::load_body_trees(path, RunTrees::tree)?;
+        let (_, trees) = model::load_body_trees(path, |tree| RunTrees::tree(&tree))?;
         Ok(Self::with_trees(RunTrees { trees }, settings))
     }
 
