@@ -15,7 +15,6 @@ use crate::core::geometry::{Camera, Rig, look_at};
 use crate::core::image::Region;
 use crate::core::noise::DepthNoise;
 use crate::core::rng::item_rng;
-use crate::runtime::capture::moseq::{DEPTH_DAT, DEPTH_TS, METADATA};
 use crate::vision::calibrate::RigCalibration;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
@@ -25,6 +24,12 @@ use std::path::Path;
 
 /// The true camera, beside the recording (`replay DIR --calibration DIR/rig.yaml`).
 pub const RIG_FILE: &str = "rig.yaml";
+/// MoSeq's file names, as `runtime::capture::moseq` reads them (named here again: the
+/// synthesis engine does not import the runtime; the unit test below reads the recording
+/// back with the runtime's reader).
+const DEPTH_DAT: &str = "depth.dat";
+const DEPTH_TS: &str = "depth_ts.txt";
+const METADATA: &str = "metadata.json";
 
 /// What to generate.
 #[derive(Clone, Copy, Debug, PartialEq)]
