@@ -361,7 +361,7 @@ pub fn replay_with(
 ) -> Result<ReplaySummary, ReplayError> {
     let recording = Recording::open(&options.session)?;
     // The models load on a thread of their own while the empty cage is modelled from the
-    // recording (each a third to a half of a short replay's start-up); their errors come
+    // recording (the two longest steps of a MoSeq recording's start-up); their errors come
     // first, as when they were loaded first.
     let (models, scene) = std::thread::scope(|scope| {
         let models = scope.spawn(|| Models::load(options.models.as_deref()));
