@@ -45,8 +45,8 @@ use std::time::{Duration, Instant};
 /// Where the frames come from.
 #[derive(Debug)]
 pub enum Sources<'a> {
-    /// The rig's cameras: for `record` the depth camera already started (so its metadata is
-    /// known) and the colour camera opened; for `run` both supervised.
+    /// The rig's cameras, both supervised (`capture::supervise`): for `record` opened (and the
+    /// depth camera started, so that its metadata is known) before the pipeline starts.
     Cameras {
         depth: Box<dyn FrameSource<Frame = DepthFrame>>,
         color: Option<Box<dyn FrameSource<Frame = ColorFrame>>>,

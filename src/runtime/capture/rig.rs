@@ -126,35 +126,3 @@ pub fn open_color(camera: &ColorCamera) -> Result<ColorSource, CaptureError> {
         .map(ColorSource::V4l2),
     }
 }
-
-/// A source already started by the caller: `start` does nothing more.
-#[derive(Debug)]
-pub struct Started<S>(pub S);
-
-impl<S: FrameSource> FrameSource for Started<S> {
-    type Frame = S::Frame;
-
-    fn meta(&self) -> CameraMeta {
-        self.0.meta()
-    }
-
-    fn start(&mut self, _clock: &Clock) -> Result<(), CaptureError> {
-        Ok(())
-    }
-
-    fn next_frame(&mut self, timeout: Duration) -> Result<Option<S::Frame>, CaptureError> {
-        self.0.next_frame(timeout)
-    }
-
-    fn finished(&self) -> bool {
-        self.0.finished()
-    }
-
-    fn losses(&self) -> Vec<(&'static str, u64)> {
-        self.0.losses()
-    }
-
-    fn stop(&mut self) -> Result<(), CaptureError> {
-        self.0.stop()
-    }
-}

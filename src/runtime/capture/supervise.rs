@@ -69,6 +69,21 @@ pub struct CameraHealth {
     pub events: Vec<SessionEvent>,
 }
 
+impl CameraHealth {
+    /// Starts an outage at `start_ns` after the frames delivered so far, with the tries to open
+    /// the camera made in it already.
+    fn begin_outage(&mut self, start_ns: u64, reason: String, attempts: u64) {
+        let frames_before = self.frames;
+        self.outages.push(Outage {
+            start_ns,
+            end_ns: None,
+            reason,
+            frames_before,
+            attempts,
+        });
+    }
+}
+
 /// A [`CameraHealth`] shared between a capture thread and its readers.
 pub type SharedHealth = Arc<Mutex<CameraHealth>>;
 
@@ -104,14 +119,7 @@ fn mark_away(h: &mut CameraHealth, role: CameraRole, reason: String, since_ns: u
             role,
             reason: reason.clone(),
         });
-        let frames_before = h.frames;
-        h.outages.push(Outage {
-            start_ns: since_ns,
-            end_ns: None,
-            reason: reason.clone(),
-            frames_before,
-            attempts: 0,
-        });
+        h.begin_outage(since_ns, reason.clone(), 0);
     }
     if !matches!(h.state, Some(CameraState::Away(_))) {
         h.state = Some(CameraState::Away(reason));
@@ -320,14 +328,7 @@ where
                 if h.state != Some(CameraState::Away(reason.clone())) {
                     tracing::warn!(camera = %self.role, retry_s = self.wait.as_secs_f64(), "cannot open the camera: {reason}");
                     if h.state == Some(CameraState::Opening) {
-                        let frames_before = h.frames;
-                        h.outages.push(Outage {
-                            start_ns: host_ns,
-                            end_ns: None,
-                            reason: reason.clone(),
-                            frames_before,
-                            attempts: 1,
-                        });
+                        h.begin_outage(host_ns, reason.clone(), 1);
                     }
                     h.state = Some(CameraState::Away(reason));
                 }

@@ -220,17 +220,23 @@ pub fn encode(model: &Model) -> Result<Vec<u8>, String> {
     };
     let description = serde_json::to_vec(info).map_err(|e| e.to_string())?;
     let compressed = zstd::bulk::compress(&trees, 9).map_err(|e| e.to_string())?;
+    Ok(framed(info.kind, &description, &compressed))
+}
+
+/// A model file: the magic, version and kind, the description, the compressed tree section,
+/// and the checksum of all before it.
+fn framed(kind: ModelKind, description: &[u8], compressed: &[u8]) -> Vec<u8> {
     let mut out = Vec::with_capacity(32 + description.len() + compressed.len());
     out.extend_from_slice(MAGIC);
     put_u32(&mut out, FORMAT_VERSION);
-    put_u32(&mut out, info.kind.code());
+    put_u32(&mut out, kind.code());
     put_u32(&mut out, description.len() as u32);
-    out.extend_from_slice(&description);
+    out.extend_from_slice(description);
     out.extend_from_slice(&(compressed.len() as u64).to_le_bytes());
-    out.extend_from_slice(&compressed);
+    out.extend_from_slice(compressed);
     let crc = crc32fast::hash(&out);
     put_u32(&mut out, crc);
-    Ok(out)
+    out
 }
 
 /// Writes a model file (through a temporary file renamed into place, so a crash never leaves
@@ -820,18 +826,7 @@ mod tests {
         let bytes = std::fs::read(bundled()).unwrap_or_default();
         let (_, _, info, _) = header(&bytes, &bundled(), None).unwrap_or_else(|e| panic!("{e}"));
         let description = serde_json::to_vec(&info).unwrap_or_default();
-        let compressed = compress(raw);
-        let mut out = Vec::new();
-        out.extend_from_slice(MAGIC);
-        put_u32(&mut out, FORMAT_VERSION);
-        put_u32(&mut out, ModelKind::Body.code());
-        put_u32(&mut out, description.len() as u32);
-        out.extend_from_slice(&description);
-        out.extend_from_slice(&(compressed.len() as u64).to_le_bytes());
-        out.extend_from_slice(&compressed);
-        let crc = crc32fast::hash(&out);
-        put_u32(&mut out, crc);
-        out
+        framed(ModelKind::Body, &description, &compress(raw))
     }
 
     fn bulk(raw: &[u8]) -> Vec<u8> {

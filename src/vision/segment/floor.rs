@@ -113,6 +113,13 @@ fn plane_through(points: &[Vector3<f64>]) -> Option<FloorPlane> {
 
 /// The plane with `normal` through `point`, its normal turned towards the camera (the origin);
 /// `None` for a degenerate normal or a plane through the camera.
+/// Keeps `plane` as a search's best when it scores more than the best so far.
+fn keep_better(best: &mut Option<(usize, FloorPlane)>, plane: FloorPlane, score: usize) {
+    if best.is_none_or(|(s, _)| score > s) {
+        *best = Some((score, plane));
+    }
+}
+
 /// The best plane a search found (by its score), fitted again three times to the points
 /// within `tolerance` of it while the fit still faces the camera.
 fn refined(
@@ -225,12 +232,8 @@ pub(super) fn best_plane(
         let Some(plane) = oriented((b - a).cross(&(c - a)), a) else {
             continue;
         };
-        if !faces_camera(&plane) {
-            continue;
-        }
-        let score = inliers(&plane, &scoring);
-        if best.is_none_or(|(s, _)| score > s) {
-            best = Some((score, plane));
+        if faces_camera(&plane) {
+            keep_better(&mut best, plane, inliers(&plane, &scoring));
         }
     }
     let plane = refined(best, &points, tolerance, faces_camera)?;
@@ -299,16 +302,11 @@ pub(super) fn best_plane_local(
         let Some(plane) = oriented((b - a).cross(&(c - a)), a) else {
             continue;
         };
-        if !faces_camera(&plane) {
-            continue;
-        }
-        let score = inliers(&plane, &scoring);
-        if best.is_none_or(|(s, _)| score > s) {
-            best = Some((score, plane));
+        if faces_camera(&plane) {
+            keep_better(&mut best, plane, inliers(&plane, &scoring));
         }
     }
-    let plane = refined(best, &points, tolerance, faces_camera)?;
-    Ok(plane)
+    refined(best, &points, tolerance, faces_camera)
 }
 
 #[cfg(test)]
