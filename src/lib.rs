@@ -11,10 +11,14 @@
 //!   sinks, the rig config, and the one topology builder every command uses.
 //! * Tooling beside them: [`synth`] (the synthesis engine), [`training`] (datasets to models
 //!   and their figures), [`experiment`] (the paper's running example).
-//! * [`app`]: the command line, one file per command; the only place clap and exit codes live.
+//! * [`engine`]: the work behind each command (replay, record, the daemon, batches, exports,
+//!   reports, benchmarks, calibration, training runs), an options struct in and a summary out.
+//! * [`app`]: the command line, one file per command: parses, dispatches to an engine, prints,
+//!   and maps failures to exit codes; the only place clap and exit codes live.
 
 pub mod app;
 pub mod core;
+pub mod engine;
 pub mod experiment;
 pub mod io;
 pub mod runtime;

@@ -9,7 +9,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// Each top-level module's rank: a module may import from lower ranks only (and from itself).
-const RANKS: [(&str, u32); 8] = [
+const RANKS: [(&str, u32); 9] = [
     ("core", 0),
     ("io", 1),
     ("vision", 2),
@@ -17,7 +17,8 @@ const RANKS: [(&str, u32); 8] = [
     ("synth", 3),
     ("training", 4),
     ("experiment", 4),
-    ("app", 5),
+    ("engine", 5),
+    ("app", 6),
 ];
 
 fn rank(layer: &str) -> Option<u32> {

@@ -15,7 +15,8 @@
 //! and gathers the summaries the same way.
 
 use crate::app::replay::{ReplayOptions, SUMMARY_FILE, replay_until};
-use crate::app::{Failure, Interrupt, print, print_json};
+use crate::app::{print, print_json};
+use crate::engine::{Failure, Interrupt};
 use anyhow::Context as _;
 use clap::Args;
 use serde::Serialize;
@@ -385,7 +386,7 @@ pub fn replay_many(sessions: &[PathBuf], out: &Path, options: &BatchOptions, jso
     let items = plan(&sessions, &out)?;
     let _lock = BatchLock::take(&out)?;
     let interrupt = Interrupt::install().context("installing the signal handlers")?;
-    let bar = crate::app::progress::bar(items.len() as u64, "sessions");
+    let bar = crate::engine::progress::bar(items.len() as u64, "sessions");
     let rows = run_local(&items, options, &interrupt, |name| {
         bar.set_message(name.to_owned());
         bar.inc(1);
@@ -628,11 +629,11 @@ fn run_slurm(
                 "a session path holds a tab or a line break"
             )));
         }
-        crate::app::write_report_file(&slurm_dir, "tasks.tsv", tasks.as_bytes())?;
+        crate::engine::write_report_file(&slurm_dir, "tasks.tsv", tasks.as_bytes())?;
         let program = std::env::current_exe().context("finding the mousepose program")?;
         let script = job_script(&program, &slurm_dir, todo.len(), options, slurm);
         let script_path = slurm_dir.join("job.sh");
-        crate::app::write_report_file(&slurm_dir, "job.sh", script.as_bytes())?;
+        crate::engine::write_report_file(&slurm_dir, "job.sh", script.as_bytes())?;
         let submitted = slurm_command("sbatch", &["--parsable", &script_path.to_string_lossy()])?;
         let id = submitted.trim().split(';').next().unwrap_or_default().to_owned();
         if id.is_empty() || !id.bytes().all(|b| b.is_ascii_digit()) {
@@ -641,7 +642,7 @@ fn run_slurm(
             )));
         }
         eprintln!("submitted job array {id} ({} tasks); waiting for it", todo.len());
-        let bar = crate::app::progress::bar(todo.len() as u64, "tasks");
+        let bar = crate::engine::progress::bar(todo.len() as u64, "tasks");
         let started = Instant::now();
         while job_queued(&id)? {
             bar.set_position(todo.iter().filter(|i| i.finished()).count() as u64);

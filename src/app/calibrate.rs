@@ -1,7 +1,8 @@
 //! `mousepose calibrate intrinsics|extrinsics` and `mousepose synth chessboard`: arguments
 //! and the commands themselves, kept here so the top-level CLI only delegates.
 
-use crate::app::{Exists, Failure, Outcome, output_failure, print};
+use crate::app::{Outcome, print};
+use crate::engine::{Exists, Failure, output_failure};
 use crate::io::output::Staging;
 use crate::synth::chessboard::{ChessboardSpec, write_chessboards};
 use crate::vision::calibrate::CalibrationError;
@@ -410,7 +411,7 @@ pub fn synth_chessboard(args: &ChessboardArgs) -> Outcome {
         color_binning: args.color_binning,
     };
     let rig = crate::core::geometry::Rig::default_rig().with_color_binning(args.color_binning);
-    let bar = crate::app::progress::bar(u64::from(args.views) * 2 + 2, "rendering");
+    let bar = crate::engine::progress::bar(u64::from(args.views) * 2 + 2, "rendering");
     write_chessboards(staging.path(), &rig, &spec, |done| bar.set_position(done))
         .with_context(|| format!("writing chessboard views to {:?}", args.out))?;
     bar.finish_and_clear();

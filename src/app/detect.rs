@@ -2,7 +2,8 @@
 //! for a lab checking what its own colour camera sees. Writes `detections.json` (per image its
 //! size and the paws' boxes with their scores) and, per image, a copy with the boxes drawn.
 
-use crate::app::{Failure, output_failure, print, print_json};
+use crate::app::{print, print_json};
+use crate::engine::{Failure, output_failure};
 use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
 use crate::core::geometry::Rig;
 use crate::core::image::RgbImage;

@@ -22,7 +22,7 @@ pub fn command(args: &DevicesArgs) -> crate::app::Outcome {
         .as_deref()
         .map(crate::runtime::config::Config::load)
         .transpose()
-        .map_err(crate::app::Failure::usage)?;
+        .map_err(crate::engine::Failure::usage)?;
     let found = crate::runtime::devices::list(config.as_ref());
     if args.json {
         return Ok(print_json(&serde_json::json!({ "backends": found }))?);

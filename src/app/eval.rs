@@ -1,8 +1,9 @@
 //! `mousepose eval body|parts|paws`: a model's figures on a held-back dataset, with reports.
 
-use crate::app::chart::{bar_chart, confusion_chart, line_chart};
+use crate::engine::chart::{bar_chart, confusion_chart, line_chart};
 use crate::app::train::ModelTarget;
-use crate::app::{print, print_json, report_dir, write_report_file};
+use crate::app::{print, print_json};
+use crate::engine::{report_dir, write_report_file};
 use crate::training;
 use crate::vision::forest::Forest;
 use crate::vision::forest::infer::{BodyEstimator, VoteSettings};

@@ -1,8 +1,9 @@
 //! `mousepose experiment gauss2d`: the paper's running example.
 
-use crate::app::chart::line_chart;
-use crate::app::progress;
-use crate::app::{print, print_json, report_dir, write_report_file};
+use crate::engine::chart::line_chart;
+use crate::engine::progress;
+use crate::app::{print, print_json};
+use crate::engine::{report_dir, write_report_file};
 use crate::experiment::gauss2d::{self, Setup};
 use crate::vision::forest::discriminative::{DiscriminativeParams, Scoring};
 use crate::vision::forest::{Forest, TrainParams};

@@ -5,13 +5,11 @@
 pub mod batch;
 pub mod bench;
 pub mod calibrate;
-pub mod chart;
 pub mod detect;
 pub mod devices;
 pub mod eval;
 pub mod experiment;
 pub mod export;
-pub mod progress;
 pub mod record;
 pub mod replay;
 pub mod report;
@@ -20,11 +18,10 @@ pub mod status;
 pub mod synth;
 pub mod train;
 
-use anyhow::Context as _;
+use crate::engine::Failure;
 use clap::{Parser, Subcommand};
 use serde::Serialize;
 use std::io::Write;
-use std::path::Path;
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
@@ -78,67 +75,13 @@ enum Command {
     Detect(detect::DetectCommand),
 }
 
-/// Why a command failed, and the exit code that means: 1 when what the user asked for cannot
-/// work (an argument, a config, a file in the way), 2 when the work itself failed. Each
-/// command says which of its errors are the user's; everything else is a failure of the work.
-#[derive(Debug)]
-pub struct Failure {
-    usage: bool,
-    error: anyhow::Error,
-}
-
-impl Failure {
-    /// An error in what the user asked for (exit code 1).
-    pub fn usage(error: impl Into<anyhow::Error>) -> Self {
-        Self {
-            usage: true,
-            error: error.into(),
-        }
-    }
-
-    /// `error`, a usage error when `usage` says so.
-    pub fn classed(usage: bool, error: impl Into<anyhow::Error>) -> Self {
-        Self {
-            usage,
-            error: error.into(),
-        }
-    }
-
-    /// The same failure, with what was being done in front of it.
-    #[must_use]
-    pub fn context(self, what: impl std::fmt::Display + Send + Sync + 'static) -> Self {
-        Self {
-            usage: self.usage,
-            error: self.error.context(what),
-        }
-    }
-
-    /// The process's exit code.
-    pub fn exit_code(&self) -> u8 {
-        if self.usage { 1 } else { 2 }
-    }
-}
-
-impl<E: Into<anyhow::Error>> From<E> for Failure {
-    /// A failure of the work (exit code 2).
-    fn from(error: E) -> Self {
-        Self::classed(false, error)
-    }
-}
-
 /// What a command returns.
 pub type Outcome = Result<(), Failure>;
 
-/// Refused to overwrite a file (exit code 1).
-#[derive(Debug, thiserror::Error)]
-#[error("{0:?} exists (use --force to replace it)")]
-pub struct Exists(pub std::path::PathBuf);
-
-/// A staged output that cannot be made: the user's when the directory is in the way.
-pub fn output_failure(e: crate::io::output::OutputError) -> Failure {
-    use crate::io::output::OutputError;
-    let usage = matches!(e, OutputError::NotEmpty(_) | OutputError::NotADirectory(_));
-    Failure::classed(usage, e)
+/// The exit code of a failed command: 1 when what the user asked for cannot work, 2 when the
+/// work itself failed.
+fn exit_code(failure: &Failure) -> u8 {
+    if failure.is_usage() { 1 } else { 2 }
 }
 
 pub(crate) fn parse_ranged<T>(s: &str, what: &str, lo: T, hi: T) -> Result<T, String>
@@ -282,8 +225,8 @@ pub fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(failure) => {
-            eprintln!("error: {:#}", failure.error);
-            ExitCode::from(failure.exit_code())
+            eprintln!("error: {:#}", failure.error());
+            ExitCode::from(exit_code(&failure))
         }
     }
 }
@@ -326,73 +269,6 @@ pub(crate) fn print(text: &str) -> anyhow::Result<()> {
 /// Stdout is closed.
 pub(crate) fn print_json(value: &impl Serialize) -> anyhow::Result<()> {
     print(&format!("{}\n", serde_json::to_string_pretty(value)?))
-}
-
-pub(crate) fn write_report_file(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
-    let path = dir.join(name);
-    std::fs::write(&path, bytes).with_context(|| format!("writing {path:?}"))
-}
-
-pub(crate) fn report_dir(dir: &Path) -> anyhow::Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating report directory {dir:?}"))
-}
-
-/// SIGINT and SIGTERM seen by an offline command (`replay`, a batch), so that it stops its
-/// work cleanly (removing what it had not finished) instead of dying mid-write.
-#[derive(Debug, Clone, Default)]
-pub struct Interrupt {
-    flag: std::sync::Arc<std::sync::atomic::AtomicBool>,
-    /// Whether the signals set `flag` (otherwise it is never set: library use and tests).
-    installed: bool,
-}
-
-impl Interrupt {
-    /// Catches SIGINT and SIGTERM from now on, for the life of the process.
-    ///
-    /// # Errors
-    /// The handlers cannot be installed.
-    pub fn install() -> std::io::Result<Self> {
-        let flag = std::sync::Arc::<std::sync::atomic::AtomicBool>::default();
-        for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-            signal_hook::flag::register(signal, std::sync::Arc::clone(&flag))?;
-        }
-        Ok(Self { flag, installed: true })
-    }
-
-    /// Whether a signal came.
-    pub fn requested(&self) -> bool {
-        self.flag.load(std::sync::atomic::Ordering::Acquire)
-    }
-
-    /// Sets `other` too when a signal comes (at once if one came already), until the guard
-    /// is dropped: a running pipeline's shutdown flag.
-    ///
-    /// # Errors
-    /// The handlers cannot be installed.
-    pub fn forward_to(&self, other: &std::sync::Arc<std::sync::atomic::AtomicBool>) -> std::io::Result<Forwarded> {
-        let mut ids = Vec::new();
-        if self.installed {
-            for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-                ids.push(signal_hook::flag::register(signal, std::sync::Arc::clone(other))?);
-            }
-            if self.requested() {
-                other.store(true, std::sync::atomic::Ordering::Release);
-            }
-        }
-        Ok(Forwarded(ids))
-    }
-}
-
-/// Signals forwarded by [`Interrupt::forward_to`]; dropped, they no longer are.
-#[derive(Debug)]
-pub struct Forwarded(Vec<signal_hook::SigId>);
-
-impl Drop for Forwarded {
-    fn drop(&mut self) {
-        for id in self.0.drain(..) {
-            signal_hook::low_level::unregister(id);
-        }
-    }
 }
 
 /// The command line's definition: every command, flag and its help (for tests and tools).

@@ -5,7 +5,8 @@
 //! system as it is written, so a recorder killed at any moment leaves a session that reads up
 //! to its last complete frame (without the `session_ended` event that marks it complete).
 
-use crate::app::{Failure, parse_seconds, print, print_json};
+use crate::app::{parse_seconds, print, print_json};
+use crate::engine::Failure;
 use crate::io::output::Staging;
 use crate::io::session::{
     CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionSummary, SessionWriter,

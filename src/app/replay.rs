@@ -6,7 +6,8 @@
 //! do not decode) are counted apart. `summary.json` holds those counts, the per-stage latency,
 //! the throughput and, for synthetic sessions, the error against the ground truth.
 
-use crate::app::{Failure, Interrupt, print, print_json};
+use crate::app::{print, print_json};
+use crate::engine::{Failure, Interrupt};
 use crate::core::frame::DepthFrame;
 use crate::core::geometry::Rig;
 use crate::core::image::RgbImage;
@@ -716,7 +717,7 @@ pub fn command(args: &ReplayArgs) -> crate::app::Outcome {
     };
     let interrupt = Interrupt::install().map_err(ReplayError::Signals)?;
     // Rows written against the recording's depth frames (about one row per frame).
-    let bar = crate::app::progress::bar(0, "replay");
+    let bar = crate::engine::progress::bar(0, "replay");
     let result = replay_with(&options, &interrupt, |rows, total| {
         bar.set_length(total.max(rows));
         bar.set_position(rows);

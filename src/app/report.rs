@@ -19,8 +19,9 @@
 //! head height `head`'s z, and a paw is in stance while the bottom camera found it on the glass
 //! (its source is `paw`).
 
-use crate::app::chart::{Series, bar_chart, path_chart, raster_chart, series_chart};
-use crate::app::{Failure, output_failure, print, print_json};
+use crate::engine::chart::{Series, bar_chart, path_chart, raster_chart, series_chart};
+use crate::app::{print, print_json};
+use crate::engine::{Failure, output_failure};
 use crate::core::geometry::{CAGE_X_MM, CAGE_Y_MM};
 use crate::core::pose::JointSource;
 use crate::core::skeleton::Joint;
@@ -477,12 +478,12 @@ pub fn report_with(
         ("duty factor %", [200, 80, 40], &duty100),
     ];
     write_png("gait.png", bar_chart("GAIT PER PAW (WALKING)", "", &paws, &series))?;
-    crate::app::write_report_file(dir, "frames.csv", frames_csv(&b, &inputs).as_bytes())?;
-    crate::app::write_report_file(dir, "strides.csv", strides_csv(&b).as_bytes())?;
-    crate::app::write_report_file(dir, "bouts.csv", bouts_csv(&b).as_bytes())?;
+    crate::engine::write_report_file(dir, "frames.csv", frames_csv(&b, &inputs).as_bytes())?;
+    crate::engine::write_report_file(dir, "strides.csv", strides_csv(&b).as_bytes())?;
+    crate::engine::write_report_file(dir, "bouts.csv", bouts_csv(&b).as_bytes())?;
     let summary = summary(run, &config, arena, &b);
-    crate::app::write_report_file(dir, "summary.json", &serde_json::to_vec_pretty(&summary)?)?;
-    crate::app::write_report_file(dir, "index.html", page(run, &b, &config, &arena).as_bytes())?;
+    crate::engine::write_report_file(dir, "summary.json", &serde_json::to_vec_pretty(&summary)?)?;
+    crate::engine::write_report_file(dir, "index.html", page(run, &b, &config, &arena).as_bytes())?;
     staging.commit().map_err(output_failure)?;
     Ok((b, arena))
 }

@@ -5,7 +5,8 @@
 //! when one cannot be opened, with STATUS= saying why), WATCHDOG=1 only while the pipeline
 //! makes progress, and STATUS= with the frame rate and counts every few seconds.
 
-use crate::app::{Failure, print, print_json};
+use crate::app::{print, print_json};
+use crate::engine::Failure;
 use crate::core::geometry::Rig;
 use crate::io::session::CameraRole;
 use crate::runtime::capture::rig::{ColorSource, open_color, open_depth};

@@ -1,7 +1,8 @@
 //! `mousepose status`: the running daemon's status in a terminal (for an operator on ssh), read
 //! from its HTTP server's `/status`.
 
-use crate::app::{Failure, print};
+use crate::app::print;
+use crate::engine::Failure;
 use crate::runtime::config::{Config, DEFAULT_HTTP_PORT};
 use crate::runtime::http::client::get;
 use anyhow::Context as _;

@@ -1,7 +1,8 @@
 //! `mousepose synth dataset|session|chessboard|moseq`: rendered training data, sessions and recordings.
 
-use crate::app::progress;
-use crate::app::{Outcome, output_failure};
+use crate::engine::progress;
+use crate::app::Outcome;
+use crate::engine::output_failure;
 use crate::app::{parse_binning, parse_fps, parse_images, parse_noise_mm, parse_seconds};
 use crate::core::frame::PixelFormat;
 use crate::core::noise::{DepthNoise, NoiseModel};
@@ -181,7 +182,7 @@ fn synth_moseq(args: &MoseqArgs) -> Outcome {
         tilt_deg: args.tilt_deg,
     };
     // A size the camera table lacks is the user's mistake: said before anything is written.
-    moseq_camera(&spec).map_err(crate::app::Failure::usage)?;
+    moseq_camera(&spec).map_err(crate::engine::Failure::usage)?;
     let staging = Staging::new(&args.out, args.force).map_err(output_failure)?;
     let bar = progress::bar(spec.frames, "rendering");
     write_moseq(staging.path(), &spec, |done, _| bar.set_position(done))

@@ -1,7 +1,8 @@
 //! `mousepose train body|parts|paws`: forests and the paw cascade from synthetic datasets.
 
-use crate::app::progress;
-use crate::app::{Exists, Failure, Outcome, parse_subset};
+use crate::engine::progress;
+use crate::app::{Outcome, parse_subset};
+use crate::engine::{Exists, Failure};
 use crate::training::{self, PixelParams, Target, TrainJob, TrainProgress};
 use crate::vision::forest::discriminative::{DiscriminativeParams, ErrorScope, Scoring};
 use crate::vision::forest::model::{self, Model, ModelKind};

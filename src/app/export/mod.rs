@@ -120,12 +120,12 @@ impl Run {
 }
 
 /// Refuses to replace an existing file unless `force`.
-fn check_file_out(path: &Path, force: bool) -> Result<(), crate::app::Failure> {
+fn check_file_out(path: &Path, force: bool) -> Result<(), crate::engine::Failure> {
     if path.is_dir() {
-        return Err(crate::app::Failure::usage(anyhow::anyhow!("{path:?} is a directory")));
+        return Err(crate::engine::Failure::usage(anyhow::anyhow!("{path:?} is a directory")));
     }
     if path.exists() && !force {
-        return Err(crate::app::Failure::usage(crate::app::Exists(path.to_owned())));
+        return Err(crate::engine::Failure::usage(crate::engine::Exists(path.to_owned())));
     }
     Ok(())
 }

@@ -13,7 +13,8 @@
 //! ```
 
 use crate::app::export::Run;
-use crate::app::{Failure, output_failure, print};
+use crate::app::print;
+use crate::engine::{Failure, output_failure};
 use crate::core::frame::PixelFormat;
 use crate::io::output::Staging;
 use crate::io::session::{CameraMeta, CameraRole, SessionReader};
@@ -184,7 +185,7 @@ pub fn export_moseq(
         )));
     }
     depth.finish()?;
-    crate::app::write_report_file(&dir, DEPTH_TS, depth_ts.as_bytes())?;
+    crate::engine::write_report_file(&dir, DEPTH_TS, depth_ts.as_bytes())?;
 
     // Colour: its own lossless video, in the camera's layout.
     let mut color_frames = 0;
@@ -233,7 +234,7 @@ pub fn export_moseq(
         if let Some((enc, ..)) = encoder {
             color_frames = enc.frames();
             enc.finish()?;
-            crate::app::write_report_file(&dir, COLOR_TS, color_ts.as_bytes())?;
+            crate::engine::write_report_file(&dir, COLOR_TS, color_ts.as_bytes())?;
         }
     }
 
@@ -267,8 +268,8 @@ pub fn export_moseq(
         depth_frames,
         color_frames,
     };
-    crate::app::write_report_file(&dir, METADATA, &serde_json::to_vec_pretty(&metadata)?)?;
-    crate::app::write_report_file(&dir, PROVENANCE_FILE, &serde_json::to_vec_pretty(&provenance)?)?;
+    crate::engine::write_report_file(&dir, METADATA, &serde_json::to_vec_pretty(&metadata)?)?;
+    crate::engine::write_report_file(&dir, PROVENANCE_FILE, &serde_json::to_vec_pretty(&provenance)?)?;
     if let Some(rig) = &meta.rig {
         RigCalibration::from_rig(rig)
             .save(&dir.join(RIG_FILE))
@@ -286,7 +287,7 @@ pub fn export_moseq(
 /// `mousepose export moseq`.
 pub fn command(args: &MoseqArgs) -> crate::app::Outcome {
     let run = Run::open(&args.session, None).map_err(Failure::usage)?;
-    let bar = crate::app::progress::bar(0, "moseq");
+    let bar = crate::engine::progress::bar(0, "moseq");
     let result = export_moseq(
         &run.session,
         &args.out,

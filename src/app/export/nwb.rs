@@ -10,7 +10,8 @@
 //! is written under a hidden name and renamed into place when the helper succeeds.
 
 use crate::app::export::{Run, check_file_out};
-use crate::app::{Failure, print};
+use crate::app::print;
+use crate::engine::Failure;
 use crate::core::skeleton::{BONES, Joint};
 use crate::io::session::{CameraMeta, SessionReader};
 use crate::runtime::sink::poses::POSES_FILE;

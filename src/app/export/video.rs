@@ -11,9 +11,10 @@
 //! has no colour frame) and is shown at its depth frame's device time from the first frame
 //! drawn: the file has variable frame rate timestamps, not a constant rate.
 
-use crate::app::chart::{draw_text, text_width};
+use crate::engine::chart::{draw_text, text_width};
 use crate::app::export::{Run, check_file_out};
-use crate::app::{Failure, print};
+use crate::app::print;
+use crate::engine::Failure;
 use crate::core::frame::{ColorFrame, DepthFrame};
 use crate::core::image::RgbImage;
 use crate::io::session::{CameraRole, SessionReader};
@@ -247,7 +248,7 @@ pub fn command(args: &VideoArgs) -> crate::app::Outcome {
         crf: args.crf,
         force: args.force,
     };
-    let bar = crate::app::progress::bar(0, "video");
+    let bar = crate::engine::progress::bar(0, "video");
     let result = export_video(&options, |done, total| {
         bar.set_length(total);
         bar.set_position(done);
