@@ -4,7 +4,7 @@
 
 use crate::util::{mousepose, repo_root};
 use mousepose::app::export::moseq::{COLOR_AVI, PROVENANCE_FILE, RIG_FILE, export_moseq};
-use mousepose::app::replay::{ReplayOptions, replay};
+use mousepose::engine::replay::{ReplayOptions, replay};
 use mousepose::io::session::SessionReader;
 use mousepose::runtime::capture::moseq::{
     DEPTH_DAT, DEPTH_TS, METADATA, MoseqConfig, MoseqDepth, metadata_resolution, parse_timestamps,

@@ -6,12 +6,12 @@
 #![allow(clippy::unwrap_used)] // the helpers below are test code too
 
 use crate::util::mousepose;
-use mousepose::app::replay::{ReplayOptions, ReplaySummary, replay};
 use mousepose::core::cameras::depth_camera;
 use mousepose::core::geometry::{Camera, Intrinsics, look_at};
 use mousepose::core::image::{Region, RgbImage};
 use mousepose::core::noise::{DepthNoise, NoiseModel};
 use mousepose::core::skeleton::Joint;
+use mousepose::engine::replay::{ReplayOptions, ReplaySummary, replay};
 use mousepose::synth::body::skin;
 use mousepose::synth::mouse::{MouseInstance, Placement, pose_library, pose_mouse};
 use mousepose::synth::render::Cage;

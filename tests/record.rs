@@ -4,7 +4,7 @@
 
 use crate::util::mousepose;
 use aravis_ext::FakeCameraConfig;
-use mousepose::app::record::record;
+use mousepose::engine::record::record;
 use mousepose::io::session::{Backend, CameraRole, SessionReader};
 use mousepose::runtime::config::Config;
 use mousepose::runtime::pipeline::Shutdown;

@@ -3,8 +3,8 @@
 #![allow(clippy::unwrap_used)] // the helpers below are test code too
 
 use crate::util::{mousepose, repo_root};
-use mousepose::app::replay::{ReplayOptions, ReplaySummary, replay};
 use mousepose::core::noise::{DepthNoise, NoiseModel};
+use mousepose::engine::replay::{ReplayOptions, ReplaySummary, replay};
 use mousepose::io::session::{SessionReader, SessionWriter};
 use mousepose::synth::session::{SessionSpec, write_session};
 use std::path::{Path, PathBuf};

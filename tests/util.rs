@@ -20,8 +20,8 @@ pub fn replay_options(
     session: &std::path::Path,
     out: &std::path::Path,
     workers: usize,
-) -> mousepose::app::replay::ReplayOptions {
-    mousepose::app::replay::ReplayOptions {
+) -> mousepose::engine::replay::ReplayOptions {
+    mousepose::engine::replay::ReplayOptions {
         session: session.to_owned(),
         out: out.to_owned(),
         models: Some(repo_root().join("fixtures/models")),

@@ -3,10 +3,10 @@
 //! size and the paws' boxes with their scores) and, per image, a copy with the boxes drawn.
 
 use crate::app::{print, print_json};
-use crate::engine::{Failure, output_failure};
 use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
 use crate::core::geometry::Rig;
 use crate::core::image::RgbImage;
+use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
 use crate::runtime::models::{PAWS_MODEL, default_models_dir};
 use crate::vision::paws::{PawDetection, PawDetector};

@@ -1,8 +1,8 @@
 //! `mousepose experiment gauss2d`: the paper's running example.
 
+use crate::app::{print, print_json};
 use crate::engine::chart::line_chart;
 use crate::engine::progress;
-use crate::app::{print, print_json};
 use crate::engine::{report_dir, write_report_file};
 use crate::experiment::gauss2d::{self, Setup};
 use crate::vision::forest::discriminative::{DiscriminativeParams, Scoring};

@@ -238,7 +238,6 @@ fn run(cli: Cli) -> Outcome {
         Command::Eval(args) => eval::run(&args),
         Command::Experiment(experiment::ExperimentCommand::Gauss2d(args)) => experiment::gauss2d(&args),
         Command::Bench(args) => bench::command(&args),
-        Command::Replay(args) if batch::is_batch(&args.sessions) => batch::replay_command(&args),
         Command::Replay(args) => replay::command(&args),
         Command::Record(args) => record::command(&args),
         Command::Run(args) => run::command(&args),
@@ -250,6 +249,19 @@ fn run(cli: Cli) -> Outcome {
         Command::Report(args) => report::command(&args),
         Command::Detect(detect::DetectCommand::Paws(args)) => detect::paws(&args),
     }
+}
+
+/// Prints a batch's table (or JSON); sessions that failed fail the command.
+///
+/// # Errors
+/// Stdout is closed, or sessions failed.
+pub(crate) fn show_batch(summary: &crate::engine::batch::BatchSummary, json: bool) -> Outcome {
+    if json {
+        print_json(&summary.rows)?;
+    } else {
+        print(&summary.text())?;
+    }
+    summary.failure().map_or(Ok(()), Err)
 }
 
 /// Writes `text` to stdout.

@@ -19,12 +19,12 @@
 //! head height `head`'s z, and a paw is in stance while the bottom camera found it on the glass
 //! (its source is `paw`).
 
-use crate::engine::chart::{Series, bar_chart, path_chart, raster_chart, series_chart};
 use crate::app::{print, print_json};
-use crate::engine::{Failure, output_failure};
 use crate::core::geometry::{CAGE_X_MM, CAGE_Y_MM};
 use crate::core::pose::JointSource;
 use crate::core::skeleton::Joint;
+use crate::engine::chart::{Series, bar_chart, path_chart, raster_chart, series_chart};
+use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
 use crate::runtime::sink::poses::{POSES_FILE, read_poses};
 use crate::runtime::stages::{PoseRecord, PoseStatus};
@@ -124,7 +124,7 @@ fn arena_of(run: &Path, options: &ReportOptions) -> ArenaUsed {
     if let Some(arena) = options.arena {
         return ArenaUsed { arena, from: "flag" };
     }
-    let recorded = std::fs::read(run.join(crate::app::replay::SUMMARY_FILE))
+    let recorded = std::fs::read(run.join(crate::engine::replay::SUMMARY_FILE))
         .ok()
         .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
         .and_then(|v| {

@@ -1,15 +1,11 @@
-//! `mousepose status`: the running daemon's status in a terminal (for an operator on ssh), read
-//! from its HTTP server's `/status`.
+//! `mousepose status`: the running daemon's status in a terminal; the work is
+//! [`crate::engine::status`].
 
-use crate::app::print;
-use crate::engine::Failure;
-use crate::runtime::config::{Config, DEFAULT_HTTP_PORT};
-use crate::runtime::http::client::get;
-use anyhow::Context as _;
+use crate::app::{Outcome, print};
+use crate::engine::status::{StatusOptions, status};
 use clap::Args;
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::time::Duration;
 
 #[derive(Debug, Args)]
 pub struct StatusArgs {
@@ -28,42 +24,11 @@ pub struct StatusArgs {
 }
 
 /// `mousepose status`.
-pub fn command(args: &StatusArgs) -> crate::app::Outcome {
-    let config = args
-        .config
-        .as_deref()
-        .map(Config::load)
-        .transpose()
-        .map_err(Failure::usage)?;
-    let http = config.map(|c| c.http);
-    let address = match (args.address, &http) {
-        (Some(a), _) => a,
-        (None, Some(h)) => h
-            .address
-            .context("the config says `[http] address = \"off\"`: the daemon serves no status")
-            .map_err(Failure::usage)?,
-        (None, None) => SocketAddr::from(([127, 0, 0, 1], DEFAULT_HTTP_PORT)),
-    };
-    let token = match &args.token_file {
-        Some(path) => Some(
-            crate::io::read_bounded(path, crate::runtime::config::MAX_TOKEN_BYTES)
-                .with_context(|| format!("cannot read the token file {path:?}"))
-                .map_err(Failure::usage)?
-                .trim()
-                .to_owned(),
-        ),
-        None => http.and_then(|h| h.token),
-    };
-    let path = if args.json { "/status" } else { "/status?format=text" };
-    let answer = get(address, path, token.as_deref(), Duration::from_secs(5))?;
-    match answer.status {
-        200 => Ok(print(&String::from_utf8_lossy(&answer.body))?),
-        401 => Err(Failure::usage(anyhow::anyhow!(
-            "the daemon at {address} asks for its bearer token: give --token-file (or --config)"
-        ))),
-        code => Err(Failure::from(anyhow::anyhow!(
-            "the daemon at {address} answered {code}: {}",
-            String::from_utf8_lossy(&answer.body).trim()
-        ))),
-    }
+pub fn command(args: &StatusArgs) -> Outcome {
+    Ok(print(&status(&StatusOptions {
+        address: args.address,
+        config: args.config.clone(),
+        token_file: args.token_file.clone(),
+        json: args.json,
+    })?)?)
 }

@@ -1,11 +1,11 @@
 //! `mousepose synth dataset|session|chessboard|moseq`: rendered training data, sessions and recordings.
 
-use crate::engine::progress;
 use crate::app::Outcome;
-use crate::engine::output_failure;
 use crate::app::{parse_binning, parse_fps, parse_images, parse_noise_mm, parse_seconds};
 use crate::core::frame::PixelFormat;
 use crate::core::noise::{DepthNoise, NoiseModel};
+use crate::engine::output_failure;
+use crate::engine::progress;
 use crate::io::output::Staging;
 use crate::synth::dataset::{DatasetSpec, write_dataset};
 use crate::synth::moseq::{MoseqSpec, moseq_camera, write_moseq};

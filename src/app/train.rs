@@ -1,7 +1,7 @@
 //! `mousepose train body|parts|paws`: forests and the paw cascade from synthetic datasets.
 
-use crate::engine::progress;
 use crate::app::{Outcome, parse_subset};
+use crate::engine::progress;
 use crate::engine::{Exists, Failure};
 use crate::training::{self, PixelParams, Target, TrainJob, TrainProgress};
 use crate::vision::forest::discriminative::{DiscriminativeParams, ErrorScope, Scoring};

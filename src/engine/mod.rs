@@ -3,8 +3,14 @@
 //! struct in and a summary out. They know no command line: `app` parses the arguments into
 //! the options, calls an engine, prints its summary and maps its [`Failure`] to an exit code.
 
+pub mod batch;
+pub mod bench;
 pub mod chart;
+pub mod daemon;
 pub mod progress;
+pub mod record;
+pub mod replay;
+pub mod status;
 
 use anyhow::Context as _;
 use std::path::Path;
@@ -149,4 +155,3 @@ impl Drop for Forwarded {
         }
     }
 }
-

@@ -8,7 +8,7 @@ pub mod moseq;
 pub mod nwb;
 pub mod video;
 
-use crate::app::replay::SUMMARY_FILE;
+use crate::engine::replay::SUMMARY_FILE;
 use crate::io::session::META_FILE;
 use clap::Subcommand;
 use std::path::{Path, PathBuf};
@@ -122,7 +122,9 @@ impl Run {
 /// Refuses to replace an existing file unless `force`.
 fn check_file_out(path: &Path, force: bool) -> Result<(), crate::engine::Failure> {
     if path.is_dir() {
-        return Err(crate::engine::Failure::usage(anyhow::anyhow!("{path:?} is a directory")));
+        return Err(crate::engine::Failure::usage(anyhow::anyhow!(
+            "{path:?} is a directory"
+        )));
     }
     if path.exists() && !force {
         return Err(crate::engine::Failure::usage(crate::engine::Exists(path.to_owned())));

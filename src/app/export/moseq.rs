@@ -14,8 +14,8 @@
 
 use crate::app::export::Run;
 use crate::app::print;
-use crate::engine::{Failure, output_failure};
 use crate::core::frame::PixelFormat;
+use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
 use crate::io::session::{CameraMeta, CameraRole, SessionReader};
 use crate::io::video::{Encoder, EncoderSpec};

@@ -11,8 +11,8 @@
 
 use crate::app::export::{Run, check_file_out};
 use crate::app::print;
-use crate::engine::Failure;
 use crate::core::skeleton::{BONES, Joint};
+use crate::engine::Failure;
 use crate::io::session::{CameraMeta, SessionReader};
 use crate::runtime::sink::poses::POSES_FILE;
 use anyhow::Context as _;
@@ -339,7 +339,7 @@ pub fn command(args: &NwbArgs) -> crate::app::Outcome {
     for w in &warnings {
         eprintln!("warning: {w}");
     }
-    let summary: serde_json::Value = std::fs::read(run.dir.join(crate::app::replay::SUMMARY_FILE))
+    let summary: serde_json::Value = std::fs::read(run.dir.join(crate::engine::replay::SUMMARY_FILE))
         .ok()
         .and_then(|b| serde_json::from_slice(&b).ok())
         .unwrap_or_default();

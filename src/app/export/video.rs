@@ -11,12 +11,12 @@
 //! has no colour frame) and is shown at its depth frame's device time from the first frame
 //! drawn: the file has variable frame rate timestamps, not a constant rate.
 
-use crate::engine::chart::{draw_text, text_width};
 use crate::app::export::{Run, check_file_out};
 use crate::app::print;
-use crate::engine::Failure;
 use crate::core::frame::{ColorFrame, DepthFrame};
 use crate::core::image::RgbImage;
+use crate::engine::Failure;
+use crate::engine::chart::{draw_text, text_width};
 use crate::io::session::{CameraRole, SessionReader};
 use crate::io::video::{Encoder, EncoderSpec};
 use crate::runtime::sink::poses::{POSES_FILE, read_poses};

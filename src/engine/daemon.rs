@@ -1,0 +1,359 @@
+//! The daemon (`mousepose run`). Opens the configured cameras, processes live, records, and
+//! keeps going through camera faults and a full disk until SIGTERM (or `--seconds`).
+//!
+//! Under systemd (`Type=notify`) it says READY=1 once the cameras were tried (running degraded
+//! when one cannot be opened, with STATUS= saying why), WATCHDOG=1 only while the pipeline
+//! makes progress, and STATUS= with the frame rate and counts every few seconds.
+
+use crate::core::geometry::Rig;
+use crate::engine::Failure;
+use crate::io::session::CameraRole;
+use crate::runtime::capture::rig::{ColorSource, open_color, open_depth};
+use crate::runtime::capture::supervise::{CameraState, SharedHealth, Supervised, lock};
+use crate::runtime::capture::{CaptureError, Clock, FrameSource};
+use crate::runtime::config::{Config, DepthCamera};
+use crate::runtime::http::HttpServer;
+use crate::runtime::models::Models;
+use crate::runtime::pipeline::Shutdown;
+use crate::runtime::recording::Recording;
+use crate::runtime::sink::chunks::{
+    ChunkPlan, ChunkPoses, ChunkRecorder, Chunks, DiskWatch, Live, RecorderGauges, chunk_meta,
+};
+use crate::runtime::stages::PoseStatus;
+use crate::runtime::stages::segment::{FloorSlot, SegmentStage};
+use crate::runtime::topology::{Edges, Epochs, Processing, Sources, Topology};
+use crate::runtime::watch::{RunInfo, RunReport, Watch, Watched};
+use crate::vision::calibrate::RigCalibration;
+use crate::vision::segment::{Segmenter, SegmenterConfig};
+use anyhow::Context as _;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+/// The rig: the configured calibration, the one a replayed session was made with, or the
+/// default rig with the depth intrinsics scaled to the configured depth mode.
+fn live_rig(config: &Config) -> anyhow::Result<Rig> {
+    if let Some(path) = &config.calibration {
+        return Ok(RigCalibration::load(path)
+            .with_context(|| format!("the calibration named by {:?}", config.path))?
+            .rig());
+    }
+    if let DepthCamera::Session { rig: Some(rig), .. } = &config.depth {
+        return Ok(**rig);
+    }
+    let mut rig = Rig::default_rig();
+    let (width, height, _) = config.depth.mode();
+    let i = &mut rig.depth.intrinsics;
+    let scale = f64::from(width) / f64::from(i.width);
+    (i.fx, i.fy, i.cx, i.cy) = (i.fx * scale, i.fy * scale, i.cx * scale, i.cy * scale);
+    (i.width, i.height) = (width, height);
+    Ok(rig)
+}
+
+/// Creates the run's directory, named by its start (UTC, sortable, without colons); a run
+/// started within the same second as the previous one (a restart) gets `-2`, `-3`...
+fn create_run_dir(output: &std::path::Path) -> anyhow::Result<PathBuf> {
+    std::fs::create_dir_all(output).with_context(|| format!("cannot create the output directory {output:?}"))?;
+    let name = crate::runtime::capture::clock::utc_now().replace([':', '-'], "");
+    for k in 1..=100 {
+        let dir = match k {
+            1 => output.join(&name),
+            k => output.join(format!("{name}-{k}")),
+        };
+        match std::fs::create_dir(&dir) {
+            Ok(()) => return Ok(dir),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+            Err(e) => return Err(e).with_context(|| format!("cannot create the run directory {dir:?}")),
+        }
+    }
+    anyhow::bail!("cannot create a run directory in {output:?}: 100 runs began within the second {name}")
+}
+
+fn notify(states: &[sd_notify::NotifyState<'_>]) {
+    if let Err(e) = sd_notify::notify(states) {
+        tracing::debug!("cannot notify systemd: {e}");
+    }
+}
+
+/// One line on the cameras and the poses, for STATUS= and the log.
+fn status_line(healths: &[(&str, SharedHealth)], live: &Live, fps: f64) -> String {
+    let cams: Vec<String> = healths
+        .iter()
+        .map(|(name, h)| match &lock(h).state {
+            Some(CameraState::Streaming) => format!("{name} streaming"),
+            Some(CameraState::Opening) => format!("{name} opening"),
+            Some(CameraState::Away(why)) => format!("{name} away ({why})"),
+            None => format!("{name} ?"),
+        })
+        .collect();
+    let degraded = if live
+        .latest
+        .as_ref()
+        .is_some_and(|p| p.status == PoseStatus::NoBackground)
+    {
+        ", degraded: no floor in the depth view yet"
+    } else {
+        ""
+    };
+    format!(
+        "{}; {fps:.1} poses/s, {} poses, chunk {}{degraded}",
+        cams.join(", "),
+        live.rows,
+        live.chunk
+    )
+}
+
+/// Segmentation against the configured background reference, or learning the background live.
+///
+/// # Errors
+/// The reference cannot be read, or is not of the depth camera's size.
+pub fn segment_stage(config: &Config, rig: &Rig) -> anyhow::Result<SegmentStage> {
+    Ok(match &config.background {
+        Some(dir) => SegmentStage::new(reference_background(dir, &config.depth, rig)?),
+        None => SegmentStage::learning(
+            SegmenterConfig::default(),
+            rig.depth.intrinsics,
+            rig.depth.world_from_camera,
+        ),
+    })
+}
+
+/// The segmenter with the empty cage of the reference session `dir`.
+fn reference_background(dir: &std::path::Path, depth: &DepthCamera, rig: &Rig) -> anyhow::Result<Segmenter> {
+    let what = || format!("the background reference {dir:?}");
+    let recording = Recording::open(dir).with_context(what)?;
+    let background = crate::engine::replay::background(&recording, rig).with_context(what)?;
+    let (width, height, _) = depth.mode();
+    let i = background.intrinsics();
+    if (i.width, i.height) != (width, height) {
+        anyhow::bail!(
+            "{} is {}x{} but the depth camera is configured for {width}x{height}",
+            what(),
+            i.width,
+            i.height
+        );
+    }
+    tracing::info!(reference = ?dir, "background from a reference recorded with the cage empty");
+    Ok(SegmenterConfig::default()
+        .build(background)
+        .with_context(what)?
+        .with_world(rig.depth.world_from_camera))
+}
+
+/// Runs the daemon until `stop` (a signal), `seconds`, or a failure of the pipeline itself.
+///
+/// # Errors
+/// The output directory cannot be made, or a pipeline component failed (the report is still
+/// logged).
+pub fn run(
+    config: &Config,
+    models: Models,
+    rig: Rig,
+    segment: SegmentStage,
+    seconds: Option<f64>,
+    stop: &Shutdown,
+) -> anyhow::Result<RunReport> {
+    let listener = config.http.address.map(HttpServer::bind).transpose()?;
+    let root = create_run_dir(&config.output_dir)?;
+    tracing::info!(dir = ?root, record = config.record, "run started");
+    let info = RunInfo {
+        version: env!("CARGO_PKG_VERSION"),
+        started_utc: crate::runtime::capture::clock::utc_now(),
+        config: config.path.clone(),
+        models: models.dir.clone(),
+        paw_model: models.paws.is_some(),
+        calibration: config.calibration.clone(),
+    };
+
+    let epochs = Epochs::default();
+    let depth_config = config.depth.clone();
+    let mut depth = Supervised::new(
+        CameraRole::Depth,
+        Box::new(move || open_depth(&depth_config)),
+        config.reconnect,
+        Arc::clone(&epochs[0]),
+    );
+    let mut color = config.color.clone().map(|color_config| {
+        let open = move || -> Result<ColorSource, CaptureError> { open_color(&color_config) };
+        Supervised::new(
+            CameraRole::Color,
+            Box::new(open),
+            config.reconnect,
+            Arc::clone(&epochs[1]),
+        )
+    });
+    // Both cameras are tried before the pipeline starts them, so that the first chunk's
+    // session holds both: a colour camera opening a moment after depth frames began to flow
+    // would end that chunk at once (a chunk holds the cameras open when it began).
+    let clock = Clock::Monotonic;
+    depth.start(&clock)?;
+    if let Some(color) = &mut color {
+        color.start(&clock)?;
+    }
+    // The cameras' states are taken from these, in this thread, whatever the capture threads
+    // are doing.
+    let mut stall_watches = vec![depth.stall_watch()];
+    stall_watches.extend(color.as_ref().map(Supervised::stall_watch));
+    let mut healths = vec![("depth", depth.health())];
+    healths.extend(color.as_ref().map(|c| ("color", c.health())));
+    let shared: Vec<SharedHealth> = healths.iter().map(|(_, h)| Arc::clone(h)).collect();
+
+    let notes = format!("recorded by `mousepose run` with rig config {:?}", config.path);
+    let latency = config.color.as_ref().map(|_| config.sync.color_latency_ns);
+    let chunks = Chunks::new(ChunkPlan {
+        root: root.clone(),
+        period: config.chunk,
+        record: config.record,
+        cameras: shared.clone(),
+        meta: chunk_meta(notes, config.calibration.as_ref().map(|_| rig), latency),
+        body_model: models.body_path(),
+        paw_model: models.paws_path(),
+    });
+    let live = Arc::new(Mutex::new(Live::default()));
+    let floor = FloorSlot::default();
+    let gauges = config.record.then(|| Arc::new(RecorderGauges::default()));
+    let recorder = gauges.as_ref().map(|gauges| {
+        let disk = DiskWatch::new(&root, config.min_free_bytes, config.min_free_share);
+        Box::new(ChunkRecorder::new(
+            Arc::clone(&chunks),
+            disk,
+            shared.clone(),
+            Arc::clone(gauges),
+        )) as Box<_>
+    });
+    let topology = Topology {
+        sources: Sources::Cameras {
+            depth: Box::new(depth),
+            color: color.map(|c| Box::new(c) as Box<dyn FrameSource<Frame = _>>),
+            epochs,
+        },
+        sync: config.sync,
+        edges: Edges {
+            capture: config.capture_edge,
+            stage: config.stage_edge,
+        },
+        processing: Some(Processing {
+            segment: segment.with_floor_slot(Arc::clone(&floor)),
+            body: models.body,
+            paws: models.paws,
+            rig,
+            workers: config.body_workers,
+            overlays: None,
+            poses: Box::new(ChunkPoses::new(Arc::clone(&chunks), Arc::clone(&live))),
+        }),
+        recorder,
+    };
+    let started = Instant::now();
+    let running = topology.start()?;
+    let shutdown = running.shutdown();
+    let watch = Arc::new(Watch::new(Watched {
+        dir: root,
+        info,
+        pipeline: running.watch(),
+        cameras: healths.clone(),
+        live: Arc::clone(&live),
+        chunks: Arc::clone(&chunks),
+        recorder: gauges,
+        floor,
+    }));
+    let server = match listener.map(|l| HttpServer::start(l, config.http.token.clone(), Arc::clone(&watch), rig)) {
+        Some(Err(e)) => {
+            shutdown.request();
+            drop(running.join());
+            return Err(e.into());
+        }
+        Some(Ok(server)) => Some(server),
+        None => None,
+    };
+
+    // Ready once every camera was tried (opened, or known to be away).
+    while !stop.requested() && healths.iter().any(|(_, h)| lock(h).state == Some(CameraState::Opening)) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let snapshot = || live.lock().unwrap_or_else(PoisonError::into_inner).clone();
+    let status = status_line(&healths, &snapshot(), 0.0);
+    notify(&[sd_notify::NotifyState::Ready, sd_notify::NotifyState::Status(&status)]);
+    tracing::info!("ready: {status}");
+
+    let limit = seconds.map(Duration::from_secs_f64);
+    let (mut last_rows, mut last_captured, mut last_tick) = (0u64, 0u64, Instant::now());
+    let mut last_status = Instant::now();
+    let mut last_line = String::new();
+    while !stop.requested() && !shutdown.requested() && limit.is_none_or(|l| started.elapsed() < l) {
+        std::thread::sleep(Duration::from_millis(100));
+        for watch in &stall_watches {
+            watch.check();
+        }
+        if last_tick.elapsed() < Duration::from_secs(1) {
+            continue;
+        }
+        let now = snapshot();
+        let captured = lock(&healths[0].1).frames;
+        let capture_alive = lock(&healths[0].1)
+            .alive
+            .is_some_and(|t| t.elapsed() < Duration::from_secs(5));
+        // Alive: poses came out, or no depth frame went in (camera away; the capture thread
+        // itself still comes by). Frames going in without poses coming out is a stuck stage:
+        // no ping, and systemd restarts the daemon.
+        if now.rows > last_rows || (captured == last_captured && capture_alive) {
+            notify(&[sd_notify::NotifyState::Watchdog]);
+        }
+        let fps = watch.sample().poses_per_s;
+        (last_rows, last_captured, last_tick) = (now.rows, captured, Instant::now());
+        if last_status.elapsed() >= Duration::from_secs(5) {
+            let line = status_line(&healths, &now, fps);
+            notify(&[sd_notify::NotifyState::Status(&line)]);
+            last_line = line;
+            last_status = Instant::now();
+        }
+    }
+    notify(&[sd_notify::NotifyState::Stopping]);
+    tracing::info!(last = %last_line, "stopping");
+    shutdown.request();
+    let finished = running.join();
+    if let Some(recorder) = finished.recorder {
+        if let Err(e) = recorder.finish() {
+            tracing::error!("cannot close the last chunk's session: {e}");
+        }
+    }
+    if let Some(server) = server {
+        server.stop();
+    }
+    finished.outcome?;
+    let report = watch.report();
+    tracing::info!(poses = report.poses, chunks = report.chunks, "run ended");
+    Ok(report)
+}
+
+/// What the daemon runs.
+#[derive(Clone, Debug)]
+pub struct DaemonOptions {
+    /// The rig configuration file.
+    pub config: PathBuf,
+    /// Stop after this many seconds (a daemon runs until SIGTERM).
+    pub seconds: Option<f64>,
+    /// A session recorded with the cage empty, as the background reference (instead of the
+    /// config's `[segment] background`).
+    pub background: Option<PathBuf>,
+}
+
+/// Loads the configuration, the models, the rig and the background, then runs the daemon
+/// until SIGINT, SIGTERM or `seconds`.
+///
+/// # Errors
+/// The configuration, models, rig or background cannot be used (the user's), or the run
+/// failed.
+pub fn daemon(options: &DaemonOptions) -> Result<RunReport, Failure> {
+    let mut config = Config::load(&options.config).map_err(Failure::usage)?;
+    if let Some(dir) = &options.background {
+        config.background = Some(dir.clone());
+    }
+    let models = Models::load(config.models_dir.as_deref()).map_err(Failure::usage)?;
+    let rig = live_rig(&config).map_err(Failure::usage)?;
+    let segment = segment_stage(&config, &rig).map_err(Failure::usage)?;
+    let stop = Shutdown::default();
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, stop.flag()).context("installing the signal handlers")?;
+    }
+    Ok(run(&config, models, rig, segment, options.seconds, &stop)?)
+}
