@@ -7,6 +7,7 @@ mod capture_aravis;
 mod capture_openni;
 mod capture_v4l2;
 mod cli;
+mod docs;
 mod export;
 mod forest;
 mod fuzz;

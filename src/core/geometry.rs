@@ -1,5 +1,5 @@
 //! Cameras and rigid transforms: pinhole intrinsics with Brown-Conrady distortion, camera
-//! poses in the world frame, and the default rig of DESIGN.md sec. 1.
+//! poses in the world frame, and the default rig (`Rig::default_rig`).
 //!
 //! Conventions: the world frame has its origin on the glass floor's top surface at the cage's
 //! centre, x along the 500 mm side, y along the 450 mm side, z up, millimetres. Camera frames
@@ -138,7 +138,7 @@ impl Rig {
     /// How far the colour camera's axis leans from the vertical.
     pub const COLOR_TILT_DEG: f64 = 10.0;
 
-    /// The rig of DESIGN.md: a Primesense-like depth camera (640x480, fx 570 px) 600 mm above
+    /// The default rig: a Primesense-like depth camera (640x480, fx 570 px) 600 mm above
     /// the floor looking straight down, and a 1280x1024 colour camera 600 mm below the glass,
     /// tilted 10 degrees and aimed at the cage's centre.
     pub fn default_rig() -> Self {

@@ -5,7 +5,7 @@ use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
-/// Where a joint's position came from (DESIGN.md sec. 3).
+/// Where a joint's position came from: each joint of a pose records it, beside its score.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum JointSource {

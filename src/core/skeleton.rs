@@ -1,4 +1,4 @@
-//! The mouse model of DESIGN.md sec. 3: 24 joints with the paper's numbering, the bones that
+//! The mouse model: 24 joints with the paper's numbering, the bones that
 //! join them, the limb chains, the six body-part labels, and the bone lengths of an adult mouse
 //! (about 100 mm from snout to tail base).
 //!

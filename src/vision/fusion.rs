@@ -1,5 +1,5 @@
 //! Step 3 of the paper: the body's joints from the top view, the paws found in the bottom view,
-//! and the limbs between them (DESIGN.md sec. 3-4).
+//! and the limbs between them (joints 1-12, 21-24 and 13-20 of `core::skeleton`).
 //!
 //! Each detected paw is the ray from the bottom camera through the detection's centre, met
 //! with the plane a resting paw's joint lies in (its sole's radius above the glass). Paws are

@@ -1,4 +1,4 @@
-//! Segmentation of the mouse in the top depth image (DESIGN.md sec. 4): a background model of
+//! Segmentation of the mouse in the top depth image: a background model of
 //! the empty cage, its arena and the floor plane fitted inside it, foreground inside the arena between a minimum and a maximum
 //! height above that floor (and nearer than the background by a margin, so walls and fixed
 //! objects never count), the largest connected component grown along its thin low parts (the
