@@ -192,6 +192,55 @@ fn modules_import_each_other_in_no_cycle() {
     }
 }
 
+/// The command line's shared helpers (printing, argument parsers): every command may use them.
+const APP_HELPERS: [&str; 2] = ["app::output", "app::parse"];
+
+#[test]
+fn no_command_file_imports_another() {
+    let src = repo_root().join("src");
+    let commands: BTreeSet<String> = std::fs::read_dir(src.join("app"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter_map(|p| unit_of(&src, &p))
+        .filter(|u| u != "app" && !APP_HELPERS.contains(&u.as_str()))
+        .collect();
+    let mut crossing = Vec::new();
+    for (unit, imports) in import_graph() {
+        if !commands.contains(&unit) {
+            continue;
+        }
+        crossing.extend(
+            imports
+                .iter()
+                .filter(|i| *i != &unit && commands.contains(*i))
+                .map(|i| format!("{unit} -> {i}")),
+        );
+    }
+    assert!(
+        crossing.is_empty(),
+        "command files importing each other (shared work belongs in src/engine/): {crossing:#?}"
+    );
+}
+
+#[test]
+fn engines_print_nothing_to_stdout() {
+    let src = repo_root().join("src");
+    let mut files = Vec::new();
+    rust_files(&src.join("engine"), &mut files);
+    let printing: Vec<String> = files
+        .iter()
+        .filter(|p| {
+            let code = product_code(p).replace("eprintln!", "").replace("eprint!", "");
+            code.contains("println!") || code.contains("print!(") || code.contains("stdout()")
+        })
+        .map(|p| p.display().to_string())
+        .collect();
+    assert!(
+        printing.is_empty(),
+        "engines return summaries and the command line prints them; these print: {printing:?}"
+    );
+}
+
 #[test]
 fn clap_lives_in_the_app_folder_only() {
     let src = repo_root().join("src");

@@ -1,7 +1,8 @@
 //! `mousepose batch`: many sessions here or as a Slurm job array; the work is
 //! [`crate::engine::batch`].
 
-use crate::app::{Outcome, show_batch};
+use crate::app::Outcome;
+use crate::app::output::show_batch;
 use crate::engine::batch::{BatchOptions, SlurmResources, batch};
 use clap::Args;
 use std::path::PathBuf;

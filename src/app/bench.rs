@@ -1,7 +1,8 @@
 //! `mousepose bench`: the speed of mousepose's parts on this machine; the work is
 //! [`crate::engine::bench`].
 
-use crate::app::{Outcome, print, print_json};
+use crate::app::Outcome;
+use crate::app::output::{print, print_json};
 use crate::engine::bench::run;
 
 #[derive(Debug, clap::Args)]

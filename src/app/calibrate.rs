@@ -1,7 +1,8 @@
 //! `mousepose calibrate intrinsics|extrinsics` and `mousepose synth chessboard`: arguments
 //! and the commands themselves, kept here so the top-level CLI only delegates.
 
-use crate::app::{Outcome, print};
+use crate::app::Outcome;
+use crate::app::output::print;
 use crate::engine::{Exists, Failure, output_failure};
 use crate::io::output::Staging;
 use crate::synth::chessboard::{ChessboardSpec, write_chessboards};
@@ -187,7 +188,7 @@ struct IntrinsicsJson<'a> {
 }
 
 fn parse_square_mm(s: &str) -> Result<f64, String> {
-    crate::app::parse_ranged(s, "a square side in millimetres", 0.5, 1000.0)
+    crate::app::parse::ranged(s, "a square side in millimetres", 0.5, 1000.0)
 }
 
 fn board(size: &str, square_mm: f64) -> Result<Board, Failure> {
@@ -418,7 +419,7 @@ pub fn synth_chessboard(args: &ChessboardArgs) -> Outcome {
     let out = staging.commit()?;
     tracing::info!(message = "Chessboard views written.", path = %out.display(), views = args.views);
     if args.json {
-        crate::app::print_json(&serde_json::json!({ "out": out, "views": args.views }))?;
+        crate::app::output::print_json(&serde_json::json!({ "out": out, "views": args.views }))?;
     }
     Ok(())
 }

@@ -2,7 +2,7 @@
 //! for a lab checking what its own colour camera sees. Writes `detections.json` (per image its
 //! size and the paws' boxes with their scores) and, per image, a copy with the boxes drawn.
 
-use crate::app::{print, print_json};
+use crate::app::output::{print, print_json};
 use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
 use crate::core::geometry::Rig;
 use crate::core::image::RgbImage;
@@ -57,7 +57,7 @@ fn default_px_per_mm() -> f64 {
 }
 
 fn parse_px_per_mm(s: &str) -> Result<f64, String> {
-    crate::app::parse_ranged(s, "pixels per millimetre", 0.05, 50.0)
+    crate::app::parse::ranged(s, "pixels per millimetre", 0.05, 50.0)
 }
 
 /// One image's detections.

@@ -1,6 +1,6 @@
 //! `mousepose devices`: the cameras each backend sees (GigE cameras only at configured addresses).
 
-use crate::app::{print, print_json};
+use crate::app::output::{print, print_json};
 use clap::Args;
 use std::fmt::Write as _;
 use std::path::PathBuf;

@@ -1,7 +1,7 @@
 //! `mousepose eval body|parts|paws`: a model's figures on a held-back dataset, with reports.
 
+use crate::app::output::{print, print_json};
 use crate::app::train::ModelTarget;
-use crate::app::{print, print_json};
 use crate::engine::chart::{bar_chart, confusion_chart, line_chart};
 use crate::engine::{report_dir, write_report_file};
 use crate::training;

@@ -1,6 +1,6 @@
 //! `mousepose experiment gauss2d`: the paper's running example.
 
-use crate::app::{print, print_json};
+use crate::app::output::{print, print_json};
 use crate::engine::chart::line_chart;
 use crate::engine::progress;
 use crate::engine::{report_dir, write_report_file};

@@ -1,6 +1,9 @@
-//! The application: argument parsing and one file per command. The only place that knows
-//! clap and exit codes: every command returns a [`Failure`] that says which code it means.
-//! `main.rs` only calls [`main`].
+//! The command line: one file per command, each with its arguments (clap) and a thin
+//! `command` that turns them into an engine's options, calls the engine (`crate::engine`),
+//! and prints its summary ([`output`]); flag values are checked by [`parse`]. This file holds
+//! the command table, the dispatch, logging, and the one mapping of an engine's [`Failure`]
+//! to an exit code. The only place that knows clap and exit codes; `main.rs` only calls
+//! [`main`]. No command file imports another (`tests/layers.rs`).
 
 pub mod batch;
 pub mod bench;
@@ -10,6 +13,8 @@ pub mod devices;
 pub mod eval;
 pub mod experiment;
 pub mod export;
+pub mod output;
+pub mod parse;
 pub mod record;
 pub mod replay;
 pub mod report;
@@ -20,8 +25,6 @@ pub mod train;
 
 use crate::engine::Failure;
 use clap::{Parser, Subcommand};
-use serde::Serialize;
-use std::io::Write;
 use std::process::ExitCode;
 
 #[derive(Debug, Parser)]
@@ -82,61 +85,6 @@ pub type Outcome = Result<(), Failure>;
 /// work itself failed.
 fn exit_code(failure: &Failure) -> u8 {
     if failure.is_usage() { 1 } else { 2 }
-}
-
-pub(crate) fn parse_ranged<T>(s: &str, what: &str, lo: T, hi: T) -> Result<T, String>
-where
-    T: std::str::FromStr + PartialOrd + std::fmt::Display + Copy,
-{
-    let v: T = s
-        .trim()
-        .parse()
-        .map_err(|_| format!("expected {what} from {lo} to {hi}, got {s:?}"))?;
-    // A value that compares with nothing (a float's `nan`) is outside the range too.
-    use std::cmp::Ordering::{Equal, Greater, Less};
-    let inside =
-        matches!(v.partial_cmp(&lo), Some(Greater | Equal)) && matches!(v.partial_cmp(&hi), Some(Less | Equal));
-    if !inside {
-        return Err(format!("expected {what} from {lo} to {hi}, got {s}"));
-    }
-    Ok(v)
-}
-
-pub(crate) fn parse_images(s: &str) -> Result<u64, String> {
-    parse_ranged(s, "a whole number of images", 1, 10_000_000)
-}
-
-pub(crate) fn parse_seconds(s: &str) -> Result<f64, String> {
-    let v = parse_ranged(s, "a number of seconds", 0.0, 86_400.0)?;
-    if v <= 0.0 {
-        return Err(format!("expected a number of seconds above 0, got {s}"));
-    }
-    Ok(v)
-}
-
-pub(crate) fn parse_subset(s: &str) -> Result<f64, String> {
-    let v = parse_ranged(s, "a fraction of the data set", 0.0, 1.0)?;
-    if v <= 0.0 {
-        return Err(format!("expected a fraction of the data set above 0, got {s}"));
-    }
-    Ok(v)
-}
-
-pub(crate) fn parse_fps(s: &str) -> Result<f64, String> {
-    parse_ranged(s, "a frame rate", 1.0, 1000.0)
-}
-
-pub(crate) fn parse_noise_mm(s: &str) -> Result<f64, String> {
-    parse_ranged(s, "a noise level in millimetres", 0.0, 100.0)
-}
-
-pub(crate) fn parse_binning(s: &str) -> Result<u32, String> {
-    match s.trim() {
-        "1" => Ok(1),
-        "2" => Ok(2),
-        "4" => Ok(4),
-        other => Err(format!("expected a binning factor of 1, 2 or 4, got {other:?}")),
-    }
 }
 
 /// The levels a `RUST_LOG` directive may name.
@@ -249,38 +197,6 @@ fn run(cli: Cli) -> Outcome {
         Command::Report(args) => report::command(&args),
         Command::Detect(detect::DetectCommand::Paws(args)) => detect::paws(&args),
     }
-}
-
-/// Prints a batch's table (or JSON); sessions that failed fail the command.
-///
-/// # Errors
-/// Stdout is closed, or sessions failed.
-pub(crate) fn show_batch(summary: &crate::engine::batch::BatchSummary, json: bool) -> Outcome {
-    if json {
-        print_json(&summary.rows)?;
-    } else {
-        print(&summary.text())?;
-    }
-    summary.failure().map_or(Ok(()), Err)
-}
-
-/// Writes `text` to stdout.
-///
-/// # Errors
-/// Stdout is closed.
-pub(crate) fn print(text: &str) -> anyhow::Result<()> {
-    let mut out = std::io::stdout().lock();
-    out.write_all(text.as_bytes())?;
-    out.flush()?;
-    Ok(())
-}
-
-/// Writes `value` to stdout as one pretty JSON object.
-///
-/// # Errors
-/// Stdout is closed.
-pub(crate) fn print_json(value: &impl Serialize) -> anyhow::Result<()> {
-    print(&format!("{}\n", serde_json::to_string_pretty(value)?))
 }
 
 /// The command line's definition: every command, flag and its help (for tests and tools).

@@ -1,6 +1,7 @@
 //! `mousepose record`: the rig's cameras to a session; the work is [`crate::engine::record`].
 
-use crate::app::{Outcome, print, print_json};
+use crate::app::Outcome;
+use crate::app::output::{print, print_json};
 use crate::engine::Failure;
 use crate::engine::record::{RecordOptions, RecordSummary, record_until_signal};
 use clap::Args;
@@ -16,7 +17,7 @@ pub struct RecordArgs {
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// Stop after this many seconds (otherwise at Ctrl-C or SIGTERM).
-    #[arg(long, value_name = "N", value_parser = crate::app::parse_seconds, allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", value_parser = crate::app::parse::seconds, allow_negative_numbers = true)]
     pub seconds: Option<f64>,
     /// Print the summary as one JSON object.
     #[arg(long)]

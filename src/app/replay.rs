@@ -2,7 +2,8 @@
 //! pipeline; the work is [`crate::engine::replay`]. Several sessions make a batch
 //! ([`crate::engine::batch`]).
 
-use crate::app::{Outcome, print, print_json, show_batch};
+use crate::app::Outcome;
+use crate::app::output::{print, print_json, show_batch};
 use crate::engine::batch::{BatchOptions, batch, is_batch};
 use crate::engine::progress;
 use crate::engine::replay::{PICTURE_FILE, ReplayError, ReplayOptions, ReplaySummary, replay_with};

@@ -19,7 +19,7 @@
 //! head height `head`'s z, and a paw is in stance while the bottom camera found it on the glass
 //! (its source is `paw`).
 
-use crate::app::{print, print_json};
+use crate::app::output::{print, print_json};
 use crate::core::geometry::{CAGE_X_MM, CAGE_Y_MM};
 use crate::core::pose::JointSource;
 use crate::core::skeleton::Joint;
@@ -73,11 +73,11 @@ pub struct ReportArgs {
 }
 
 fn parse_speed(s: &str) -> Result<f64, String> {
-    crate::app::parse_ranged(s, "a speed in mm/s", 0.0, 10_000.0)
+    crate::app::parse::ranged(s, "a speed in mm/s", 0.0, 10_000.0)
 }
 
 fn parse_mm(s: &str) -> Result<f64, String> {
-    crate::app::parse_ranged(s, "a distance in millimetres", 0.0, 10_000.0)
+    crate::app::parse::ranged(s, "a distance in millimetres", 0.0, 10_000.0)
 }
 
 /// `--arena X0,Y0,X1,Y1`: a rectangle with X0 < X1 and Y0 < Y1.

@@ -1,6 +1,7 @@
 //! `mousepose run`: the daemon; the work is [`crate::engine::daemon`].
 
-use crate::app::{Outcome, print, print_json};
+use crate::app::Outcome;
+use crate::app::output::{print, print_json};
 use crate::engine::daemon::{DaemonOptions, daemon};
 use clap::Args;
 use std::path::PathBuf;
@@ -11,7 +12,7 @@ pub struct RunArgs {
     #[arg(long, value_name = "FILE")]
     pub config: PathBuf,
     /// Stop after this many seconds (a daemon runs until SIGTERM).
-    #[arg(long, value_name = "N", value_parser = crate::app::parse_seconds, allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", value_parser = crate::app::parse::seconds, allow_negative_numbers = true)]
     pub seconds: Option<f64>,
     /// A session recorded with the cage empty, as the background reference (instead of the
     /// config's `[segment] background`, or of learning the background live).

@@ -1,7 +1,8 @@
 //! `mousepose status`: the running daemon's status in a terminal; the work is
 //! [`crate::engine::status`].
 
-use crate::app::{Outcome, print};
+use crate::app::Outcome;
+use crate::app::output::print;
 use crate::engine::status::{StatusOptions, status};
 use clap::Args;
 use std::net::SocketAddr;

@@ -1,7 +1,7 @@
 //! `mousepose synth dataset|session|chessboard|moseq`: rendered training data, sessions and recordings.
 
 use crate::app::Outcome;
-use crate::app::{parse_binning, parse_fps, parse_images, parse_noise_mm, parse_seconds};
+use crate::app::parse;
 use crate::core::frame::PixelFormat;
 use crate::core::noise::{DepthNoise, NoiseModel};
 use crate::engine::output_failure;
@@ -33,10 +33,10 @@ pub struct MoseqArgs {
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// Number of depth frames.
-    #[arg(long, value_name = "N", default_value_t = 900, value_parser = parse_images, allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", default_value_t = 900, value_parser = parse::images, allow_negative_numbers = true)]
     frames: u64,
     /// Frame rate (timestamps in depth_ts.txt).
-    #[arg(long, value_name = "FPS", default_value_t = 30.0, value_parser = parse_fps, allow_negative_numbers = true)]
+    #[arg(long, value_name = "FPS", default_value_t = 30.0, value_parser = parse::fps, allow_negative_numbers = true)]
     fps: f64,
     /// Seed of the behaviour sequence (the synthetic session's of the same seed) and the noise.
     #[arg(long, value_name = "S", default_value_t = 0)]
@@ -72,17 +72,17 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 }
 
 fn parse_camera_height(s: &str) -> Result<f64, String> {
-    crate::app::parse_ranged(s, "a camera height in millimetres", 300.0, 2000.0)
+    parse::ranged(s, "a camera height in millimetres", 300.0, 2000.0)
 }
 
 fn parse_tilt(s: &str) -> Result<f64, String> {
-    crate::app::parse_ranged(s, "a tilt in degrees", 0.0, 30.0)
+    parse::ranged(s, "a tilt in degrees", 0.0, 30.0)
 }
 
 #[derive(Debug, Args)]
 pub struct NoiseArgs {
     /// Gaussian depth noise, standard deviation in millimetres.
-    #[arg(long = "noise-mm", value_name = "SIGMA", default_value_t = 0.0, value_parser = parse_noise_mm, allow_negative_numbers = true)]
+    #[arg(long = "noise-mm", value_name = "SIGMA", default_value_t = 0.0, value_parser = parse::noise_mm, allow_negative_numbers = true)]
     noise_mm: f64,
 }
 
@@ -92,7 +92,7 @@ pub struct DatasetArgs {
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// Number of images.
-    #[arg(long, value_name = "N", value_parser = parse_images, allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", value_parser = parse::images, allow_negative_numbers = true)]
     images: u64,
     /// Seed of the random poses, placements and noise.
     #[arg(long, value_name = "S", default_value_t = 0)]
@@ -124,10 +124,10 @@ pub struct SessionArgs {
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// Length of the session.
-    #[arg(long, value_name = "N", value_parser = parse_seconds, allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", value_parser = parse::seconds, allow_negative_numbers = true)]
     seconds: f64,
     /// Frame rate of both cameras.
-    #[arg(long, value_name = "FPS", default_value_t = 30.0, value_parser = parse_fps, allow_negative_numbers = true)]
+    #[arg(long, value_name = "FPS", default_value_t = 30.0, value_parser = parse::fps, allow_negative_numbers = true)]
     fps: f64,
     /// Seed of the behaviour sequence, the clocks and the noise.
     #[arg(long, value_name = "S", default_value_t = 0)]
@@ -138,7 +138,7 @@ pub struct SessionArgs {
     #[arg(long = "noise-model", value_name = "MODEL", default_value = "structured-light")]
     noise_model: NoiseModel,
     /// Bin the colour camera's 1280x1024 sensor by this factor (1, 2 or 4).
-    #[arg(long, value_name = "K", default_value_t = 1, value_parser = parse_binning)]
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = parse::binning)]
     color_binning: u32,
     /// Depth camera only (the paper's single-depth-image mode).
     #[arg(long)]
@@ -213,7 +213,7 @@ fn synth_dataset(args: &DatasetArgs) -> Outcome {
     let out = staging.commit()?;
     tracing::info!(message = "Dataset written.", path = %out.display(), images = spec.count);
     if args.json {
-        crate::app::print_json(&serde_json::json!({ "out": out, "images": spec.count }))?;
+        crate::app::output::print_json(&serde_json::json!({ "out": out, "images": spec.count }))?;
     }
     Ok(())
 }
@@ -249,7 +249,7 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         preview = %out.join(crate::synth::session::PREVIEW_FILE).display(),
     );
     if args.json {
-        crate::app::print_json(&serde_json::json!({
+        crate::app::output::print_json(&serde_json::json!({
             "out": out,
             "depth_frames": summary.depth_frames,
             "color_frames": summary.color_frames,

@@ -1,6 +1,7 @@
 //! `mousepose train body|parts|paws`: forests and the paw cascade from synthetic datasets.
 
-use crate::app::{Outcome, parse_subset};
+use crate::app::Outcome;
+use crate::app::parse;
 use crate::engine::progress;
 use crate::engine::{Exists, Failure};
 use crate::training::{self, PixelParams, Target, TrainJob, TrainProgress};
@@ -61,7 +62,7 @@ pub struct TrainArgs {
     pub start_level: u32,
     /// Fraction of D_d each tree sees (D'_d); it should hold about as many pixels as D_t, or
     /// the shrink rule coarsens the trees.
-    #[arg(long, default_value_t = 0.5, value_parser = parse_subset, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.5, value_parser = parse::subset, allow_negative_numbers = true)]
     pub subset: f64,
     /// Draw each tree's D'_d with replacement (`--subset` x |D_d| draws; a bootstrap sample
     /// at 1) instead of keeping each pixel of D_d with probability `--subset`.
@@ -190,7 +191,7 @@ pub fn run(args: &TrainArgs) -> Outcome {
     };
     let changed: usize = passes.iter().map(|p| p.tests_changed).sum();
     if args.json {
-        crate::app::print_json(&serde_json::json!({
+        crate::app::output::print_json(&serde_json::json!({
             "out": args.out,
             "kind": match args.target {
                 ModelTarget::Body => "body",
@@ -290,7 +291,7 @@ fn train_paws(args: &TrainArgs) -> Result<()> {
     }
     let last = trained.stages.last();
     if args.json {
-        crate::app::print_json(&serde_json::json!({
+        crate::app::output::print_json(&serde_json::json!({
             "out": args.out,
             "kind": "paws",
             "stages": trained.cascade.stages.len(),

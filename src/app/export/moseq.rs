@@ -13,7 +13,7 @@
 //! ```
 
 use crate::app::export::Run;
-use crate::app::print;
+use crate::app::output::print;
 use crate::core::frame::PixelFormat;
 use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
@@ -302,7 +302,7 @@ pub fn command(args: &MoseqArgs) -> crate::app::Outcome {
     bar.finish_and_clear();
     let e = result.map_err(|f| f.context(format!("exporting {:?} for MoSeq", run.session)))?;
     if args.json {
-        return Ok(crate::app::print_json(&e)?);
+        return Ok(crate::app::output::print_json(&e)?);
     }
     let mut text = format!(
         "{} depth frames to {:?}, {} colour frames to {:?}",

@@ -10,7 +10,7 @@
 //! is written under a hidden name and renamed into place when the helper succeeds.
 
 use crate::app::export::{Run, check_file_out};
-use crate::app::print;
+use crate::app::output::print;
 use crate::core::skeleton::{BONES, Joint};
 use crate::engine::Failure;
 use crate::io::session::{CameraMeta, SessionReader};
@@ -434,7 +434,7 @@ pub fn command(args: &NwbArgs) -> crate::app::Outcome {
     result.map_err(|f| f.context(format!("exporting {:?} to NWB", args.run)))?;
     if args.json {
         let rows = std::fs::read_to_string(&poses).map_or(0, |t| t.lines().count().saturating_sub(1));
-        return Ok(crate::app::print_json(&serde_json::json!({
+        return Ok(crate::app::output::print_json(&serde_json::json!({
             "out": args.out,
             "rows": rows,
             "series": Joint::ALL.len(),

@@ -12,7 +12,7 @@
 //! drawn: the file has variable frame rate timestamps, not a constant rate.
 
 use crate::app::export::{Run, check_file_out};
-use crate::app::print;
+use crate::app::output::print;
 use crate::core::frame::{ColorFrame, DepthFrame};
 use crate::core::image::RgbImage;
 use crate::engine::Failure;
@@ -58,7 +58,7 @@ pub struct VideoArgs {
 }
 
 fn parse_offset(s: &str) -> Result<f64, String> {
-    crate::app::parse_ranged(s, "a number of seconds", 0.0, 1e7)
+    crate::app::parse::ranged(s, "a number of seconds", 0.0, 1e7)
 }
 
 /// What to draw.
@@ -262,7 +262,7 @@ pub fn command(args: &VideoArgs) -> crate::app::Outcome {
             #[serde(flatten)]
             video: VideoExport,
         }
-        return Ok(crate::app::print_json(&Written {
+        return Ok(crate::app::output::print_json(&Written {
             out: &args.out,
             video: v,
         })?);
