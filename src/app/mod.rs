@@ -129,7 +129,7 @@ fn init_logging() -> Result<(), String> {
     let value = std::env::var_os("RUST_LOG").map(|v| v.to_string_lossy().into_owned());
     let filter = log_filter(value.as_deref())?;
     // The last events also go to the daemon's live page.
-    let events = crate::runtime::watch::events::EventLayer(crate::runtime::watch::events::EventLog::global());
+    let events = crate::runtime::status::events::EventLayer(crate::runtime::status::events::EventLog::global());
     let registry = tracing_subscriber::registry().with(filter).with(events);
     if journald {
         // Under systemd: structured events straight to the journal (fields kept), falling

@@ -3,6 +3,7 @@
 //! a clock or a thread.
 
 pub mod cameras;
+pub mod draw;
 pub mod frame;
 pub mod geometry;
 pub mod image;

@@ -541,7 +541,7 @@ fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Erro
     std::fs::create_dir_all(&copy)?;
     let depth: Vec<_> = reader.depth_frames().collect::<Result<_, _>>()?;
     let color: Vec<_> = reader.color_frames().into_iter().flatten().collect::<Result<_, _>>()?;
-    let cpu0 = crate::runtime::capture::clock::thread_cpu_s();
+    let cpu0 = crate::runtime::usage::thread_cpu_s();
     let mut writer = SessionWriter::create(&copy, reader.meta())?;
     for (d, c) in depth.iter().zip(color.iter()) {
         writer.write_depth(d)?;
@@ -549,7 +549,7 @@ fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Erro
     }
     writer.finish()?;
     let record_cores =
-        (crate::runtime::capture::clock::thread_cpu_s() - cpu0) / (depth.len().min(color.len()) as f64 / spec.fps);
+        (crate::runtime::usage::thread_cpu_s() - cpu0) / (depth.len().min(color.len()) as f64 / spec.fps);
     Ok(PipelineBench {
         session_seconds: seconds,
         replay_pairs_per_s: fast[fast.len() / 2],

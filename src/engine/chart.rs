@@ -1,8 +1,8 @@
 //! Small charts for reports (bar, line, confusion matrix) drawn into [`RgbImage`]s, their text
-//! in the pictures' built-in 5x7 pixel font ([`crate::core::image::draw_text`]).
+//! in the pictures' built-in 5x7 pixel font ([`crate::core::draw::draw_text`]).
 
+pub use crate::core::draw::{draw_text, text_width};
 use crate::core::image::RgbImage;
-pub use crate::core::image::{draw_text, text_width};
 
 /// A data series: name, colour, values.
 pub type Series<'a> = (&'a str, [u8; 3], &'a [f64]);

@@ -16,7 +16,7 @@ use crate::runtime::capture::supervise::{SharedHealth, Supervised, lock, log_cam
 use crate::runtime::capture::{CaptureError, Captured, Clock, FrameSource};
 use crate::runtime::config::{ColorCamera, Config};
 use crate::runtime::pipeline::{PipelineError, Shutdown};
-use crate::runtime::sink::recorder::FrameRecorder;
+use crate::runtime::sink::session::FrameRecorder;
 use crate::runtime::topology::{Edges, Epochs, Sources, Topology, TopologyError};
 use crate::vision::calibrate::RigCalibration;
 use anyhow::Context as _;
@@ -188,7 +188,7 @@ pub fn record(
     let running = topology.start()?;
     let shutdown = running.shutdown();
     let start = Instant::now();
-    let cpu0 = crate::runtime::capture::clock::process_cpu_s();
+    let cpu0 = crate::runtime::usage::process_cpu_s();
     while !stop.requested() && !shutdown.requested() && limit.is_none_or(|l| start.elapsed() < l) {
         std::thread::sleep(Duration::from_millis(20));
         for watch in &stall_watches {
@@ -198,7 +198,7 @@ pub fn record(
     shutdown.request();
     let finished = running.join();
     let elapsed = start.elapsed().as_secs_f64();
-    let cpu = crate::runtime::capture::clock::process_cpu_s() - cpu0;
+    let cpu = crate::runtime::usage::process_cpu_s() - cpu0;
     let joined = finished.outcome;
     let cams = finished.cameras;
     let Some(mut writer) = finished.recorder else {

@@ -16,7 +16,7 @@ use crate::io::session::SessionSource;
 use crate::runtime::accounting::{CameraSummary, EdgeSummary};
 use crate::runtime::models::{Models, ModelsError};
 use crate::runtime::pipeline::{LatencySummary, PipelineError, StageReport};
-use crate::runtime::recording::{Recording, RecordingError, RecordingRig};
+use crate::runtime::playback::{Recording, RecordingError, RecordingRig};
 use crate::runtime::sink::poses::{POSES_FILE, PoseTally, PoseWriter};
 use crate::runtime::stages::PoseRecord;
 use crate::runtime::stages::segment::SegmentStage;

@@ -25,8 +25,8 @@ use crate::runtime::pipeline::{
     EdgeConfig, EdgeSender, EdgeStats, Histogram, LatencySummary, PipelineError, Runner, Sent, Shutdown, Sink,
     StageError, StageReport, StageStats, Tracked, edge,
 };
-use crate::runtime::recording::{Recording, RecordingError};
-use crate::runtime::sink::recorder::{FrameRecorder, write_frames};
+use crate::runtime::playback::{Recording, RecordingError};
+use crate::runtime::sink::session::{FrameRecorder, write_frames};
 use crate::runtime::stages::Fused;
 use crate::runtime::stages::body::{BodyStage, PIPELINE_VOTE_BUDGET};
 use crate::runtime::stages::fuse::FuseStage;

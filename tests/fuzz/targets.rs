@@ -26,7 +26,7 @@ use mousepose::vision::forest::depth::{BODY_JOINTS, DepthImage, JointLeaf, Joint
 use mousepose::vision::forest::infer::{BodyEstimator, Pixel, VoteSettings};
 use mousepose::vision::forest::model::{self, Model, ModelInfo, ModelKind};
 use mousepose::vision::forest::{Forest, NOT_LEAF, Node, Tree};
-use mousepose::vision::paws::cascade::{Cascade, CascadeParams, Stage, WeakTree};
+use mousepose::vision::paws::cascade::{BoostStage, Cascade, CascadeParams, WeakTree};
 use mousepose::vision::paws::detect::scan_like_opencv;
 use mousepose::vision::paws::grey::GreyImage;
 use mousepose::vision::paws::haar::{HaarFeature, HaarRect};
@@ -784,14 +784,14 @@ fn tiny_cascade() -> Cascade {
         height: 5,
         params: CascadeParams::default(),
         stages: vec![
-            Stage {
+            BoostStage {
                 threshold: -0.5,
                 weak: vec![
                     WeakTree::stump(0, 0.015, -1.0, 0.75),
                     WeakTree::stump(1, -0.3, 0.5, -0.25),
                 ],
             },
-            Stage {
+            BoostStage {
                 threshold: 0.1,
                 weak: vec![WeakTree::stump(1, 1e-7, 0.1, -0.1)],
             },

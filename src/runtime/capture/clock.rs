@@ -41,25 +41,8 @@ pub fn monotonic_ns() -> u64 {
     read_ns(rustix::time::ClockId::Monotonic)
 }
 
-/// CPU time the whole process has used, in seconds.
-pub fn process_cpu_s() -> f64 {
-    read_ns(rustix::time::ClockId::ProcessCPUTime) as f64 * 1e-9
-}
-
-/// The process's resident memory in bytes (`VmRSS` of `/proc/self/status`), when known.
-pub fn process_resident_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find_map(|l| l.strip_prefix("VmRSS:"))?;
-    let kb: u64 = line.trim().trim_end_matches("kB").trim().parse().ok()?;
-    Some(kb * 1024)
-}
-
-/// CPU time the calling thread has used, in seconds.
-pub fn thread_cpu_s() -> f64 {
-    read_ns(rustix::time::ClockId::ThreadCPUTime) as f64 * 1e-9
-}
-
-fn read_ns(id: rustix::time::ClockId) -> u64 {
+/// Nanoseconds of the kernel clock `id`.
+pub(crate) fn read_ns(id: rustix::time::ClockId) -> u64 {
     let t = rustix::time::clock_gettime(id);
     t.tv_sec as u64 * 1_000_000_000 + t.tv_nsec as u64
 }

@@ -4,11 +4,12 @@
 //! never a path, a message or a frame number. `docs/metrics.md` lists them.
 
 use crate::runtime::accounting::{CameraSummary, DROPPED_REASONS, LOST_REASONS, NOT_RECORDED_REASONS};
-use crate::runtime::capture::clock::{monotonic_ns, process_cpu_s, process_resident_bytes};
+use crate::runtime::capture::clock::monotonic_ns;
 use crate::runtime::capture::supervise::{CameraState, lock};
 use crate::runtime::pipeline::Histogram;
 use crate::runtime::stages::PoseStatus;
-use crate::runtime::watch::Watch;
+use crate::runtime::status::Watch;
+use crate::runtime::usage::{process_cpu_s, process_resident_bytes};
 use prometheus_client::collector::Collector;
 use prometheus_client::encoding::{DescriptorEncoder, EncodeCounterValue, EncodeMetric as _, NoLabelSet};
 use prometheus_client::metrics::MetricType;

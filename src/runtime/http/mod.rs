@@ -17,8 +17,8 @@ pub mod metrics;
 
 use crate::core::geometry::Rig;
 use crate::runtime::stages::overlay;
-use crate::runtime::watch::Watch;
-use crate::runtime::watch::events::EventLog;
+use crate::runtime::status::Watch;
+use crate::runtime::status::events::EventLog;
 use crate::vision::segment::FloorPlane;
 use axum::Router;
 use axum::body::Body;

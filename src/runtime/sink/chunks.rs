@@ -391,7 +391,7 @@ impl ChunkRecorder {
             return Ok(Some("write_error"));
         }
         let result = self.log_camera_events().and_then(|()| match &mut self.writer {
-            Some(w) => crate::runtime::sink::recorder::FrameRecorder::write(w, frame).map(|_| true),
+            Some(w) => crate::runtime::sink::session::FrameRecorder::write(w, frame).map(|_| true),
             None => Ok(false),
         });
         match result {
@@ -428,7 +428,7 @@ impl ChunkRecorder {
     }
 }
 
-impl crate::runtime::sink::recorder::FrameRecorder for ChunkRecorder {
+impl crate::runtime::sink::session::FrameRecorder for ChunkRecorder {
     fn write(&mut self, frame: &Captured) -> Result<Option<&'static str>, SessionError> {
         let outcome = self.write_frame(frame);
         self.update_gauges(matches!(outcome, Ok(Some(_))));

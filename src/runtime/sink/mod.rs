@@ -1,5 +1,6 @@
-//! Sinks: where the pipeline's results go: poses (`poses.csv`) and raw frames (the recorder).
+//! Sinks: where the pipeline's results go: poses (`poses.csv`), raw frames written to a
+//! session (`session`), and the daemon's chunks of both (`chunks`).
 
 pub mod chunks;
 pub mod poses;
-pub mod recorder;
+pub mod session;

@@ -2,9 +2,9 @@
 //! skeleton in the paper's colours (spine red, ears green, limbs blue), the bottom view around
 //! the mouse with the paws found there, and a side view of the skeleton in 3D.
 
+use crate::core::draw::draw_bones;
 use crate::core::frame::{ColorFrame, DepthFrame, PixelFormat};
 use crate::core::geometry::Rig;
-use crate::core::image::draw_bones;
 use crate::core::image::{Region, RgbImage};
 use crate::core::pose::JointSource;
 use crate::core::skeleton::{JOINT_COUNT, Joint};
@@ -87,7 +87,7 @@ pub fn depth_view(rig: &Rig, frame: &DepthFrame, record: &PoseRecord, floor: &Fl
         .pose
         .joints
         .map(|j| (j.source != JointSource::Missing).then_some(j.position_mm));
-    crate::core::image::draw_joints(&mut img, &rig.depth, &joints, (0.0, 0.0), f64::from(zoom));
+    crate::core::draw::draw_joints(&mut img, &rig.depth, &joints, (0.0, 0.0), f64::from(zoom));
     img
 }
 
@@ -182,7 +182,7 @@ fn top_panel(
         outline(&mut img, arena, frame.width, (x0, y0));
     }
     let mut img = img.upscale(zoom);
-    crate::core::image::draw_joints(
+    crate::core::draw::draw_joints(
         &mut img,
         &rig.depth,
         joints,

@@ -128,9 +128,9 @@ mod tests {
     /// Warnings caught while `f` runs.
     fn warnings(f: impl FnOnce()) -> Vec<String> {
         use tracing_subscriber::layer::SubscriberExt as _;
-        let log = Arc::new(crate::runtime::watch::events::EventLog::default());
+        let log = Arc::new(crate::runtime::status::events::EventLog::default());
         let subscriber =
-            tracing_subscriber::registry().with(crate::runtime::watch::events::EventLayer(Arc::clone(&log)));
+            tracing_subscriber::registry().with(crate::runtime::status::events::EventLayer(Arc::clone(&log)));
         tracing::subscriber::with_default(subscriber, f);
         log.recent().into_iter().map(|e| e.text).collect()
     }

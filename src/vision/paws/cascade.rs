@@ -42,12 +42,12 @@ pub const STAGE_EPS: f32 = 1e-5;
 /// One stage: the window passes when the sum of its weak trees' leaves reaches `threshold`
 /// (as stored in the file) less [`STAGE_EPS`], as OpenCV applies it.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Stage {
+pub struct BoostStage {
     pub threshold: f32,
     pub weak: Vec<WeakTree>,
 }
 
-impl Stage {
+impl BoostStage {
     /// The threshold a window's sum is compared with, in double precision.
     pub fn applied_threshold(&self) -> f64 {
         applied_threshold(self.threshold)
@@ -94,7 +94,7 @@ pub struct Cascade {
     pub width: u32,
     pub height: u32,
     pub params: CascadeParams,
-    pub stages: Vec<Stage>,
+    pub stages: Vec<BoostStage>,
     pub features: Vec<HaarFeature>,
 }
 

@@ -139,12 +139,12 @@ impl Compiled {
 
 /// Classifies windows of one cascade, with the stump fast path when every tree is a stump.
 #[derive(Clone, Debug)]
-struct Runner {
+struct CascadeScan {
     compiled: Compiled,
     stumps_only: bool,
 }
 
-impl Runner {
+impl CascadeScan {
     fn new(cascade: &Cascade) -> Self {
         Self {
             compiled: Compiled::default(),
@@ -172,7 +172,7 @@ pub fn scan_like_opencv(cascade: &Cascade, grey: &GreyImage, out: &mut Vec<(u32,
     }
     let mut ii = Integral::default();
     ii.compute(&grey.data, grey.width, grey.height);
-    let mut runner = Runner::new(cascade);
+    let mut runner = CascadeScan::new(cascade);
     runner.compiled.compile(cascade, ii.stride);
     let step = 2;
     // Corners x with x + w < width + 1.
@@ -217,7 +217,7 @@ struct Group {
 #[derive(Clone, Debug)]
 pub struct PawDetector {
     cascade: Cascade,
-    runner: Runner,
+    runner: CascadeScan,
     scales: Vec<f64>,
     step: usize,
     min_neighbors: usize,
@@ -250,7 +250,7 @@ impl PawDetector {
     /// [`DEFAULT_MIN_NEIGHBORS`].
     pub fn from_cascade(cascade: Cascade) -> Self {
         Self {
-            runner: Runner::new(&cascade),
+            runner: CascadeScan::new(&cascade),
             cascade,
             scales: DEFAULT_SCALES.to_vec(),
             step: 1,

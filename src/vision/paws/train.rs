@@ -10,7 +10,7 @@
 
 use super::PawError;
 use super::boost::{Binned, boost_stage};
-use super::cascade::{Cascade, CascadeParams, Stage, Verdict, WeakTree};
+use super::cascade::{BoostStage, Cascade, CascadeParams, Verdict, WeakTree};
 use super::detect::DEFAULT_SCALES;
 use super::grey::{GreyImage, ResampleScratch, resample};
 use super::haar::{basic_features, window_norm};
@@ -239,7 +239,7 @@ pub fn train(
             params.max_false_alarm,
             params.max_weak,
         );
-        cascade.stages.push(Stage {
+        cascade.stages.push(BoostStage {
             threshold: boosted.threshold,
             weak: boosted
                 .stumps

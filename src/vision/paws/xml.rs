@@ -10,7 +10,7 @@
 //! back bit for bit, here and in OpenCV.
 
 use super::PawError;
-use super::cascade::{Cascade, CascadeParams, Node, Stage, WeakTree};
+use super::cascade::{BoostStage, Cascade, CascadeParams, Node, WeakTree};
 use super::haar::{HaarFeature, HaarRect};
 use roxmltree::{Document, Node as XmlNode};
 use std::fmt::Write as _;
@@ -288,7 +288,7 @@ impl Parser<'_> {
                     )));
                 }
             }
-            stages.push(Stage { threshold, weak });
+            stages.push(BoostStage { threshold, weak });
         }
         if stages.len() != stage_num {
             return Err(self.bad(format!(
@@ -333,7 +333,7 @@ impl Parser<'_> {
                 weak.push(WeakTree::stump(features.len(), t, left, right));
                 features.push(feature);
             }
-            stages.push(Stage { threshold, weak });
+            stages.push(BoostStage { threshold, weak });
         }
         Ok(Cascade {
             width: u32::try_from(width).map_err(|_| self.bad(format!("window width {width}")))?,
@@ -503,14 +503,14 @@ mod tests {
             height: 5,
             params: CascadeParams::default(),
             stages: vec![
-                Stage {
+                BoostStage {
                     threshold: -0.123_456_79,
                     weak: vec![
                         WeakTree::stump(0, 0.015, -1.0, 0.75),
                         WeakTree::stump(1, -0.3, 0.5, -0.25),
                     ],
                 },
-                Stage {
+                BoostStage {
                     threshold: 0.1,
                     weak: vec![WeakTree::stump(1, 1e-7, 0.1, -0.1)],
                 },

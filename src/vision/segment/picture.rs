@@ -4,9 +4,10 @@
 //! picture the program draws (`frame.png`, overlays, the daemon's live view).
 
 use super::FloorPlane;
+use crate::core::draw::{draw_text, text_width};
 use crate::core::frame::DepthFrame;
 use crate::core::geometry::Intrinsics;
-use crate::core::image::{Region, RgbImage, colour_map, draw_text, text_width};
+use crate::core::image::{Region, RgbImage, colour_map};
 use nalgebra::Point2;
 
 /// Heights above the floor from 0 to this (mm) span the colour map: a mouse, standing or

@@ -10,13 +10,13 @@ pub mod events;
 
 use crate::core::frame::FramePair;
 use crate::runtime::accounting::{CameraSummary, EdgeSummary};
-use crate::runtime::capture::clock::{process_cpu_s, process_resident_bytes};
 use crate::runtime::capture::supervise::{CameraState, Outage, SharedHealth, lock};
 use crate::runtime::pipeline::{LatencySummary, StageReport, reports_of};
 use crate::runtime::sink::chunks::{Live, RecorderGauges};
 use crate::runtime::stages::segment::FloorSlot;
 use crate::runtime::stages::{PoseRecord, PoseStatus};
 use crate::runtime::topology::PipelineWatch;
+use crate::runtime::usage::{process_cpu_s, process_resident_bytes};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, VecDeque};
 use std::path::PathBuf;

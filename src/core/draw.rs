@@ -1,0 +1,146 @@
+//! Drawing on an [`RgbImage`]: a skeleton as a camera sees it, and text in a small bitmap
+//! font (for overlays, pictures, charts and the live page).
+
+use super::geometry::Camera;
+use super::image::RgbImage;
+use super::skeleton::{BONES, BoneKind};
+
+/// Colours of bones in drawings: the paper's spine red, ears green, limbs blue.
+pub fn bone_colour(kind: BoneKind) -> [u8; 3] {
+    match kind {
+        BoneKind::Spine => [230, 30, 30],
+        BoneKind::Ear => [30, 200, 30],
+        BoneKind::Limb => [40, 90, 255],
+    }
+}
+
+/// Draws the skeleton of `m` as seen by `camera` onto `img`, whose pixel (0, 0) is the
+/// camera's pixel `origin`, magnified `zoom` times.
+pub fn draw_skeleton(
+    img: &mut RgbImage,
+    camera: &Camera,
+    joints: &crate::core::pose::JointPositions,
+    origin: (f64, f64),
+    zoom: f64,
+) {
+    draw_joints(img, camera, &joints.map(Some), origin, zoom);
+}
+
+/// As [`draw_skeleton`], for joints that may be unknown (`None`): only bones with both ends
+/// known are drawn.
+pub fn draw_joints(
+    img: &mut RgbImage,
+    camera: &Camera,
+    joints: &[Option<nalgebra::Point3<f64>>; crate::core::skeleton::JOINT_COUNT],
+    origin: (f64, f64),
+    zoom: f64,
+) {
+    draw_bones(
+        img,
+        joints,
+        |p| {
+            camera
+                .project_world(p)
+                .map(|q| ((q.x - origin.0 + 0.5) * zoom, (q.y - origin.1 + 0.5) * zoom))
+        },
+        zoom.max(1.0),
+    );
+}
+
+/// Draws the bones whose ends are both known, through any projection `to_img` from the world
+/// to the picture's pixels (`None`: not drawable), lines `thickness` wide, joints as discs.
+pub fn draw_bones(
+    img: &mut RgbImage,
+    joints: &[Option<nalgebra::Point3<f64>>; crate::core::skeleton::JOINT_COUNT],
+    to_img: impl Fn(&nalgebra::Point3<f64>) -> Option<(f64, f64)>,
+    thickness: f64,
+) {
+    let at = |p: &Option<nalgebra::Point3<f64>>| p.as_ref().and_then(&to_img);
+    for (a, b, kind) in BONES {
+        if let (Some(pa), Some(pb)) = (at(&joints[a.index()]), at(&joints[b.index()])) {
+            img.line(pa, pb, bone_colour(kind), thickness);
+        }
+    }
+    for p in joints.iter().filter_map(at) {
+        img.disc(p, thickness * 0.9, [255, 255, 255]);
+    }
+}
+
+// A 5x7 pixel font, so pictures and charts need no font files.
+const GLYPHS: &[(char, [u8; 7])] = &[
+    ('0', [0x0E, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0E]),
+    ('1', [0x04, 0x0C, 0x04, 0x04, 0x04, 0x04, 0x0E]),
+    ('2', [0x0E, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1F]),
+    ('3', [0x1F, 0x02, 0x04, 0x02, 0x01, 0x11, 0x0E]),
+    ('4', [0x02, 0x06, 0x0A, 0x12, 0x1F, 0x02, 0x02]),
+    ('5', [0x1F, 0x10, 0x1E, 0x01, 0x01, 0x11, 0x0E]),
+    ('6', [0x06, 0x08, 0x10, 0x1E, 0x11, 0x11, 0x0E]),
+    ('7', [0x1F, 0x01, 0x02, 0x04, 0x08, 0x08, 0x08]),
+    ('8', [0x0E, 0x11, 0x11, 0x0E, 0x11, 0x11, 0x0E]),
+    ('9', [0x0E, 0x11, 0x11, 0x0F, 0x01, 0x02, 0x0C]),
+    ('A', [0x0E, 0x11, 0x11, 0x11, 0x1F, 0x11, 0x11]),
+    ('B', [0x1E, 0x11, 0x11, 0x1E, 0x11, 0x11, 0x1E]),
+    ('C', [0x0E, 0x11, 0x10, 0x10, 0x10, 0x11, 0x0E]),
+    ('D', [0x1C, 0x12, 0x11, 0x11, 0x11, 0x12, 0x1C]),
+    ('E', [0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x1F]),
+    ('F', [0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x10]),
+    ('G', [0x0E, 0x11, 0x10, 0x17, 0x11, 0x11, 0x0F]),
+    ('H', [0x11, 0x11, 0x11, 0x1F, 0x11, 0x11, 0x11]),
+    ('I', [0x0E, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0E]),
+    ('J', [0x07, 0x02, 0x02, 0x02, 0x02, 0x12, 0x0C]),
+    ('K', [0x11, 0x12, 0x14, 0x18, 0x14, 0x12, 0x11]),
+    ('L', [0x10, 0x10, 0x10, 0x10, 0x10, 0x10, 0x1F]),
+    ('M', [0x11, 0x1B, 0x15, 0x15, 0x11, 0x11, 0x11]),
+    ('N', [0x11, 0x11, 0x19, 0x15, 0x13, 0x11, 0x11]),
+    ('O', [0x0E, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E]),
+    ('P', [0x1E, 0x11, 0x11, 0x1E, 0x10, 0x10, 0x10]),
+    ('Q', [0x0E, 0x11, 0x11, 0x11, 0x15, 0x12, 0x0D]),
+    ('R', [0x1E, 0x11, 0x11, 0x1E, 0x14, 0x12, 0x11]),
+    ('S', [0x0F, 0x10, 0x10, 0x0E, 0x01, 0x01, 0x1E]),
+    ('T', [0x1F, 0x04, 0x04, 0x04, 0x04, 0x04, 0x04]),
+    ('U', [0x11, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E]),
+    ('V', [0x11, 0x11, 0x11, 0x11, 0x11, 0x0A, 0x04]),
+    ('W', [0x11, 0x11, 0x11, 0x15, 0x15, 0x15, 0x0A]),
+    ('X', [0x11, 0x11, 0x0A, 0x04, 0x0A, 0x11, 0x11]),
+    ('Y', [0x11, 0x11, 0x11, 0x0A, 0x04, 0x04, 0x04]),
+    ('Z', [0x1F, 0x01, 0x02, 0x04, 0x08, 0x10, 0x1F]),
+    ('.', [0, 0, 0, 0, 0, 0x0C, 0x0C]),
+    (',', [0, 0, 0, 0, 0x0C, 0x04, 0x08]),
+    ('-', [0, 0, 0, 0x1F, 0, 0, 0]),
+    ('_', [0, 0, 0, 0, 0, 0, 0x1F]),
+    (':', [0, 0x0C, 0x0C, 0, 0x0C, 0x0C, 0]),
+    ('%', [0x18, 0x19, 0x02, 0x04, 0x08, 0x13, 0x03]),
+    ('(', [0x02, 0x04, 0x08, 0x08, 0x08, 0x04, 0x02]),
+    (')', [0x08, 0x04, 0x02, 0x02, 0x02, 0x04, 0x08]),
+    ('/', [0, 0x01, 0x02, 0x04, 0x08, 0x10, 0]),
+    ('=', [0, 0, 0x1F, 0, 0x1F, 0, 0]),
+    ('+', [0, 0x04, 0x04, 0x1F, 0x04, 0x04, 0]),
+];
+
+/// Width in pixels of `text` at `scale`.
+pub fn text_width(text: &str, scale: u32) -> u32 {
+    text.chars().count() as u32 * 6 * scale
+}
+
+/// Draws `text` (upper-cased) with its top-left corner at `(x, y)`.
+pub fn draw_text(img: &mut RgbImage, x: i64, y: i64, text: &str, colour: [u8; 3], scale: u32) {
+    let s = i64::from(scale.max(1));
+    for (k, ch) in text.chars().enumerate() {
+        let up = ch.to_ascii_uppercase();
+        let Some((_, rows)) = GLYPHS.iter().find(|(c, _)| *c == up) else {
+            continue;
+        };
+        let gx = x + k as i64 * 6 * s;
+        for (row, bits) in rows.iter().enumerate() {
+            for col in 0..5 {
+                if bits & (0x10 >> col) != 0 {
+                    for dy in 0..s {
+                        for dx in 0..s {
+                            img.put(gx + col * s + dx, y + row as i64 * s + dy, colour);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
