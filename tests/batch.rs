@@ -20,13 +20,12 @@ fn copy_dir(from: &Path, to: &Path) {
 
 /// `(name, status)` of each line of `batch.csv`.
 fn table(out: &Path) -> Vec<(String, String)> {
-    std::fs::read_to_string(out.join("batch.csv"))
+    csv::Reader::from_path(out.join("batch.csv"))
         .unwrap()
-        .lines()
-        .skip(1)
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            (f[0].to_owned(), f[2].to_owned())
+        .records()
+        .map(|r| {
+            let r = r.unwrap();
+            (r[0].to_owned(), r[2].to_owned())
         })
         .collect()
 }

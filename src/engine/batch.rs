@@ -16,6 +16,7 @@
 
 use crate::engine::replay::{ReplayOptions, SUMMARY_FILE, replay_until};
 use crate::engine::{Failure, Interrupt};
+use crate::io::table::Fixed;
 use anyhow::Context as _;
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -283,32 +284,50 @@ fn opt<T: std::fmt::Display>(v: Option<T>) -> String {
     v.map(|v| v.to_string()).unwrap_or_default()
 }
 
-fn csv_field(text: &str) -> String {
-    if text.contains([',', '"', '\n']) {
-        format!("\"{}\"", text.replace('"', "\"\""))
-    } else {
-        text.to_owned()
-    }
+/// The columns of `batch.csv`.
+const BATCH_COLUMNS: [&str; 8] = [
+    "name",
+    "session",
+    "status",
+    "pairs",
+    "ok_poses",
+    "throughput_pairs_per_s",
+    "mean_error_mm",
+    "error",
+];
+
+/// One line of `batch.csv`: the row with its numbers rounded as the table has always shown them.
+#[derive(Serialize)]
+struct BatchLine<'a> {
+    name: &'a str,
+    session: std::borrow::Cow<'a, str>,
+    status: &'a str,
+    pairs: Option<u64>,
+    ok_poses: Option<u64>,
+    throughput_pairs_per_s: Option<Fixed<1>>,
+    mean_error_mm: Option<Fixed<3>>,
+    error: &'a str,
 }
 
 /// `batch.csv`: one line per session.
-pub fn table_csv(rows: &[BatchRow]) -> String {
-    let mut text = String::from("name,session,status,pairs,ok_poses,throughput_pairs_per_s,mean_error_mm,error\n");
-    for r in rows {
-        let _ = writeln!(
-            text,
-            "{},{},{},{},{},{},{},{}",
-            csv_field(&r.name),
-            csv_field(&r.session.to_string_lossy()),
-            r.status,
-            opt(r.pairs),
-            opt(r.ok_poses),
-            opt(r.throughput_pairs_per_s.map(|v| format!("{v:.1}"))),
-            opt(r.mean_error_mm.map(|v| format!("{v:.3}"))),
-            csv_field(r.error.as_deref().unwrap_or_default()),
-        );
-    }
-    text
+///
+/// # Errors
+/// Never in practice: every field is a scalar.
+pub fn table_csv(rows: &[BatchRow]) -> Result<Vec<u8>, csv::Error> {
+    let lines: Vec<BatchLine<'_>> = rows
+        .iter()
+        .map(|r| BatchLine {
+            name: &r.name,
+            session: r.session.to_string_lossy(),
+            status: r.status,
+            pairs: r.pairs,
+            ok_poses: r.ok_poses,
+            throughput_pairs_per_s: r.throughput_pairs_per_s.map(Fixed),
+            mean_error_mm: r.mean_error_mm.map(Fixed),
+            error: r.error.as_deref().unwrap_or_default(),
+        })
+        .collect();
+    crate::io::table::table(&BATCH_COLUMNS, &lines)
 }
 
 /// The table as the terminal shows it.
@@ -352,7 +371,7 @@ pub fn table_text(rows: &[BatchRow]) -> String {
 pub fn write_table(out: &Path, rows: &[BatchRow]) -> anyhow::Result<PathBuf> {
     let path = out.join(BATCH_FILE);
     let tmp = out.join(format!(".{BATCH_FILE}.partial-{}", std::process::id()));
-    std::fs::write(&tmp, table_csv(rows)).with_context(|| format!("writing {tmp:?}"))?;
+    std::fs::write(&tmp, table_csv(rows)?).with_context(|| format!("writing {tmp:?}"))?;
     std::fs::rename(&tmp, &path).with_context(|| format!("writing {path:?}"))?;
     Ok(path)
 }

@@ -6,6 +6,7 @@ pub mod mask;
 pub mod output;
 pub mod session;
 pub mod store;
+pub mod table;
 pub mod video;
 
 use std::io::{self, Read as _};

@@ -144,6 +144,12 @@ pub enum SessionError {
         #[source]
         source: serde_json::Error,
     },
+    #[error("{}: cannot encode a row", path.display())]
+    RowEncode {
+        path: PathBuf,
+        #[source]
+        source: csv::Error,
+    },
     #[error("{}: line {line}: {reason}", path.display())]
     Text { path: PathBuf, line: u64, reason: String },
     #[error("{}: line {line}: not UTF-8 text", path.display())]

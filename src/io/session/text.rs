@@ -42,7 +42,20 @@ impl LineWriter {
         let mut bytes = Vec::with_capacity(line.len() + 1);
         bytes.extend_from_slice(line.as_bytes());
         bytes.push(b'\n');
-        self.out.write_all(&bytes).map_err(io_error(&self.path, "write"))?;
+        self.write_bytes(&bytes)
+    }
+
+    /// Writes one CSV row (see [`crate::io::table`]) and flushes it to the operating system.
+    pub fn write_row(&mut self, row: &impl serde::Serialize) -> Result<()> {
+        let bytes = crate::io::table::line(row).map_err(|source| SessionError::RowEncode {
+            path: self.path.clone(),
+            source,
+        })?;
+        self.write_bytes(&bytes)
+    }
+
+    fn write_bytes(&mut self, bytes: &[u8]) -> Result<()> {
+        self.out.write_all(bytes).map_err(io_error(&self.path, "write"))?;
         self.out.flush().map_err(io_error(&self.path, "write"))?;
         self.lines += 1;
         Ok(())
@@ -86,52 +99,71 @@ pub(crate) fn read_lines(path: &Path) -> Result<Vec<(u64, String)>> {
         .collect())
 }
 
-/// A CSV file read back: its header checked, its rows split into fields.
+/// A CSV file read back (with the `csv` crate: quoted fields read whole): its header
+/// checked, its finished rows kept.
 pub(crate) struct Csv {
     path: PathBuf,
     columns: Vec<String>,
-    rows: Vec<(u64, String)>,
+    rows: Vec<(u64, csv::StringRecord)>,
 }
 
 impl Csv {
-    /// Reads a CSV file whose first line must be `header`.
+    /// Reads a CSV file whose first line must be `header`; a last row without its `\n` is
+    /// left out.
     pub fn read(path: &Path, header: &str) -> Result<Self> {
-        let mut rows = read_lines(path)?;
-        let found = if rows.is_empty() { None } else { Some(rows.remove(0).1) };
-        if found.as_deref() != Some(header) {
-            return Err(SessionError::Text {
-                path: path.to_path_buf(),
-                line: 1,
-                reason: format!("expected the header {header:?}"),
-            });
+        let bytes = crate::io::read_bounded_bytes(path, MAX_LINE_FILE_BYTES).map_err(io_error(path, "read"))?;
+        let finished = bytes.get(..bytes.iter().rposition(|&c| c == b'\n').map_or(0, |end| end + 1));
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .from_reader(finished.unwrap_or_default());
+        let text_error = |line: u64, reason: String| SessionError::Text {
+            path: path.to_path_buf(),
+            line,
+            reason,
+        };
+        let mut records = Vec::new();
+        for record in reader.records() {
+            let record = record.map_err(|e| {
+                let line = e.position().map_or(0, csv::Position::line);
+                match e.into_kind() {
+                    csv::ErrorKind::Utf8 { err, .. } => text_error(line, format!("not UTF-8 text ({err})")),
+                    kind => text_error(line, format!("{kind:?}")),
+                }
+            })?;
+            let line = record.position().map_or(0, csv::Position::line);
+            records.push((line, record));
         }
-        let columns = header.split(',').map(str::to_owned).collect();
+        let columns: Vec<String> = header.split(',').map(str::to_owned).collect();
+        let found = (!records.is_empty()).then(|| records.remove(0).1);
+        if found.is_none_or(|f| f.iter().ne(columns.iter().map(String::as_str))) {
+            return Err(text_error(1, format!("expected the header {header:?}")));
+        }
         Ok(Self {
             path: path.to_path_buf(),
             columns,
-            rows,
+            rows: records,
         })
     }
 
     /// Parses each row (blank lines skipped) with `parse`, which gets the row's fields.
     pub fn rows<T>(&self, mut parse: impl FnMut(&Row<'_>) -> Result<T>) -> Result<Vec<T>> {
         let mut out = Vec::with_capacity(self.rows.len());
-        for (line, text) in &self.rows {
-            if text.is_empty() {
+        for (line, record) in &self.rows {
+            if record.len() == 1 && record.get(0) == Some("") {
                 continue;
             }
-            let fields: Vec<&str> = text.split(',').collect();
-            if fields.len() != self.columns.len() {
+            if record.len() != self.columns.len() {
                 return Err(SessionError::Text {
                     path: self.path.clone(),
                     line: *line,
-                    reason: format!("{} fields, expected {}", fields.len(), self.columns.len()),
+                    reason: format!("{} fields, expected {}", record.len(), self.columns.len()),
                 });
             }
             out.push(parse(&Row {
                 csv: self,
                 line: *line,
-                fields,
+                record,
             })?);
         }
         Ok(out)
@@ -142,12 +174,12 @@ impl Csv {
 pub(crate) struct Row<'a> {
     csv: &'a Csv,
     line: u64,
-    fields: Vec<&'a str>,
+    record: &'a csv::StringRecord,
 }
 
 impl Row<'_> {
     fn field(&self, i: usize) -> &str {
-        self.fields.get(i).copied().unwrap_or_default()
+        self.record.get(i).unwrap_or_default()
     }
 
     fn invalid(&self, i: usize, source: Box<dyn std::error::Error + Send + Sync>) -> SessionError {

@@ -12,7 +12,7 @@ use super::{
 use crate::core::frame::{ColorFrame, DepthFrame, Stamp};
 use crate::core::pose::JointPositions;
 use crate::io::store::{self, RecordWriter};
-use std::fmt::Write as _;
+use crate::io::table::Exact;
 use std::fs::{self, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -75,8 +75,7 @@ impl StreamWriter {
         let offset = self.store.append(payload)?;
         self.store.flush()?;
         self.index.push((stamp.seq, offset));
-        self.timestamps
-            .write_line(&format!("{},{},{}", stamp.seq, stamp.device_ns, stamp.host_ns))
+        self.timestamps.write_row(&(stamp.seq, stamp.device_ns, stamp.host_ns))
     }
 
     fn write_index(&mut self) -> Result<()> {
@@ -369,12 +368,8 @@ impl SessionWriter {
     /// # Errors
     /// [`SessionError::Io`] when a truth file can not be created or written.
     pub fn write_truth(&mut self, depth_seq: u64, time_ns: u64, joints: &JointPositions) -> Result<()> {
-        let mut line = format!("{depth_seq},{time_ns}");
-        for p in joints {
-            // Writing into a String can not fail.
-            let _ = write!(line, ",{},{},{}", p.x, p.y, p.z);
-        }
-        self.truth()?.joints.write_line(&line)
+        let coordinates: Vec<Exact> = joints.iter().flat_map(|p| [p.x, p.y, p.z]).map(Exact).collect();
+        self.truth()?.joints.write_row(&(depth_seq, time_ns, coordinates))
     }
 
     /// Appends a depth frame's true colour partner (or none) to `truth/pairs.csv`.
@@ -382,11 +377,7 @@ impl SessionWriter {
     /// # Errors
     /// [`SessionError::Io`] when a truth file can not be created or written.
     pub fn write_truth_pair(&mut self, depth_seq: u64, color_seq: Option<u64>) -> Result<()> {
-        let line = match color_seq {
-            Some(c) => format!("{depth_seq},{c}"),
-            None => format!("{depth_seq},"),
-        };
-        self.truth()?.pairs.write_line(&line)
+        self.truth()?.pairs.write_row(&(depth_seq, color_seq))
     }
 
     /// Depth frames written so far.

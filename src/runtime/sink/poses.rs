@@ -11,14 +11,14 @@
 
 use crate::core::pose::{JointPositions, JointSource};
 use crate::core::skeleton::{JOINT_COUNT, Joint};
+use crate::io::table::Fixed;
 use crate::runtime::pipeline::{Sink, StageError};
 use crate::runtime::stages::{Fused, PoseRecord, PoseStatus};
 use crate::vision::orientation::{self, BodyJoints, Orientation};
 use nalgebra::Vector2;
 use std::collections::{BTreeMap, HashMap};
-use std::fmt::Write as _;
 use std::fs::File;
-use std::io::{BufWriter, Write};
+
 use std::path::Path;
 use std::sync::{Arc, Mutex, PoisonError};
 
@@ -31,21 +31,36 @@ pub const OVERLAYS_DIR: &str = "overlays";
 
 /// The header line of `poses.csv`.
 pub fn header() -> String {
-    format!("{},{ORIENTATION_COLUMN}", header_without_orientation())
+    columns(true).join(",")
 }
 
 /// The last column's name.
 const ORIENTATION_COLUMN: &str = "orientation_confidence";
 
-/// The header of files written before the orientation column was added.
-fn header_without_orientation() -> String {
-    let mut h = String::from("frame,depth_seq,color_seq,host_ns,depth_device_ns,color_device_ns,skew_ns,status");
+/// The columns of `poses.csv`; without `orientation`, those of files written before the
+/// orientation column was added.
+fn columns(orientation: bool) -> Vec<String> {
+    let mut columns: Vec<String> = [
+        "frame",
+        "depth_seq",
+        "color_seq",
+        "host_ns",
+        "depth_device_ns",
+        "color_device_ns",
+        "skew_ns",
+        "status",
+    ]
+    .map(str::to_owned)
+    .into();
     for joint in Joint::ALL {
         for col in ["x", "y", "z", "score", "source"] {
-            let _ = write!(h, ",{}_{col}", joint.name());
+            columns.push(format!("{}_{col}", joint.name()));
         }
     }
-    h
+    if orientation {
+        columns.push(ORIENTATION_COLUMN.to_owned());
+    }
+    columns
 }
 
 /// How often the head's end was wrong, against the truth: of the tracker's output, of each
@@ -146,24 +161,45 @@ impl PoseTally {
     }
 }
 
-/// A CSV cell that is empty for `None`.
-struct Blank(Option<u64>);
+/// One row of `poses.csv` as the csv crate writes it: numbers with the decimals they have
+/// always had, empty cells for what is unknown.
+struct PoseRow<'a> {
+    frame: u64,
+    record: &'a PoseRecord,
+}
 
-impl std::fmt::Display for Blank {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self.0 {
-            Some(v) => write!(f, "{v}"),
-            None => Ok(()),
+impl serde::Serialize for PoseRow<'_> {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeTuple as _;
+        let r = self.record;
+        let mut row = serializer.serialize_tuple(8 + 5 * JOINT_COUNT + 1)?;
+        row.serialize_element(&self.frame)?;
+        row.serialize_element(&r.depth.seq)?;
+        row.serialize_element(&r.color.map(|c| c.seq))?;
+        row.serialize_element(&r.depth.host_ns)?;
+        row.serialize_element(&r.depth.device_ns)?;
+        row.serialize_element(&r.color.map(|c| c.device_ns))?;
+        row.serialize_element(&r.skew_ns)?;
+        row.serialize_element(r.status.name())?;
+        for j in &r.pose.joints {
+            let known = (j.source != JointSource::Missing).then_some(j);
+            let p = known.map(|j| j.position_mm);
+            row.serialize_element(&p.map(|p| Fixed::<2>(p.x)))?;
+            row.serialize_element(&p.map(|p| Fixed::<2>(p.y)))?;
+            row.serialize_element(&p.map(|p| Fixed::<2>(p.z)))?;
+            row.serialize_element(&known.map(|j| Fixed::<3>(j.score)))?;
+            row.serialize_element(j.source.name())?;
         }
+        row.serialize_element(&r.orientation.as_ref().map(|o| Fixed::<3>(o.confidence)))?;
+        row.end()
     }
 }
 
 /// Writes `poses.csv` and keeps the tally.
 #[derive(Debug)]
 pub struct PoseWriter {
-    out: BufWriter<File>,
+    out: csv::Writer<File>,
     dir: std::path::PathBuf,
-    line: String,
     truth: HashMap<u64, JointPositions>,
     snapshot_row: u64,
     tally: Arc<Mutex<PoseTally>>,
@@ -177,12 +213,11 @@ impl PoseWriter {
     /// The file cannot be created or written.
     /// The tally keeps the first pose with a mouse from row `snapshot_row` on.
     pub fn create(dir: &Path, truth: HashMap<u64, JointPositions>, snapshot_row: u64) -> std::io::Result<Self> {
-        let mut out = BufWriter::new(File::create(dir.join(POSES_FILE))?);
-        writeln!(out, "{}", header())?;
+        let mut out = csv::Writer::from_writer(File::create(dir.join(POSES_FILE))?);
+        out.write_record(columns(true))?;
         Ok(Self {
             out,
             dir: dir.to_owned(),
-            line: String::new(),
             truth,
             snapshot_row,
             tally: Arc::default(),
@@ -215,52 +250,34 @@ impl Sink for PoseWriter {
             picture.write_png(&dir.join(format!("{:06}.png", r.depth.seq)))?;
         }
         let mut tally = self.tally.lock().unwrap_or_else(PoisonError::into_inner);
-        let line = &mut self.line;
-        line.clear();
-        let _ = write!(
-            line,
-            "{},{},{},{},{},{},{},{}",
-            tally.rows,
-            r.depth.seq,
-            Blank(r.color.map(|c| c.seq)),
-            r.depth.host_ns,
-            r.depth.device_ns,
-            Blank(r.color.map(|c| c.device_ns)),
-            r.skew_ns,
-            r.status.name()
-        );
+        self.out.serialize(PoseRow {
+            frame: tally.rows,
+            record: &r,
+        })?;
         let truth = self.truth.get(&r.depth.seq);
         for (k, j) in r.pose.joints.iter().enumerate() {
-            if j.source == JointSource::Missing {
-                let _ = write!(line, ",,,,,{}", j.source);
+            let Some(t) = truth
+                .and_then(|t| t.get(k))
+                .filter(|_| j.source != JointSource::Missing)
+            else {
                 continue;
-            }
-            let p = j.position_mm;
-            let _ = write!(line, ",{:.2},{:.2},{:.2},{:.3},{}", p.x, p.y, p.z, j.score, j.source);
-            if let Some(t) = truth.and_then(|t| t.get(k)) {
-                let e = (p - t).norm();
-                tally.error_sum_mm[k] += e;
-                tally.error_count[k] += 1;
-                if j.source == JointSource::Paw {
-                    tally.detected_paw_error.0 += e;
-                    tally.detected_paw_error.1 += 1;
-                }
+            };
+            let e = (j.position_mm - t).norm();
+            tally.error_sum_mm[k] += e;
+            tally.error_count[k] += 1;
+            if j.source == JointSource::Paw {
+                tally.detected_paw_error.0 += e;
+                tally.detected_paw_error.1 += 1;
             }
         }
-        line.push(',');
-        if let Some(o) = &r.orientation {
-            let _ = write!(line, "{:.3}", o.confidence);
-            if let Some(t) = truth {
-                let body: BodyJoints = std::array::from_fn(|k| r.pose.joints[k]);
-                if let Some(true_heading) =
-                    orientation::heading_between(&t[Joint::Neck.index()], &t[Joint::TailBase.index()])
-                {
-                    tally.orientation.count(true_heading, orientation::heading(&body), o);
-                }
+        if let (Some(o), Some(t)) = (&r.orientation, truth) {
+            let body: BodyJoints = std::array::from_fn(|k| r.pose.joints[k]);
+            if let Some(true_heading) =
+                orientation::heading_between(&t[Joint::Neck.index()], &t[Joint::TailBase.index()])
+            {
+                tally.orientation.count(true_heading, orientation::heading(&body), o);
             }
         }
-        line.push('\n');
-        self.out.write_all(line.as_bytes())?;
         tally.rows += 1;
         *tally.statuses.entry(r.status.name()).or_default() += 1;
         if !self.truth.is_empty() {
@@ -305,26 +322,39 @@ pub enum PosesReadError {
 /// # Errors
 /// The file cannot be read, its header is not this version's, or a row does not parse.
 pub fn read_poses(path: &Path) -> Result<Vec<PoseRecord>, PosesReadError> {
-    let text = std::fs::read_to_string(path).map_err(|source| PosesReadError::Io {
+    let bytes = std::fs::read(path).map_err(|source| PosesReadError::Io {
         path: path.to_owned(),
         source,
     })?;
-    let mut lines = text.lines();
-    let first = lines.next();
-    let orientation = if first == Some(header().as_str()) {
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .from_reader(bytes.as_slice());
+    let mut records = reader.records();
+    let header = records.next().and_then(Result::ok);
+    let is = |orientation: bool| {
+        header
+            .as_ref()
+            .is_some_and(|h| h.iter().eq(columns(orientation).iter()))
+    };
+    let orientation = if is(true) {
         true
-    } else if first == Some(header_without_orientation().as_str()) {
+    } else if is(false) {
         false
     } else {
         return Err(PosesReadError::Header { path: path.to_owned() });
     };
-    lines
-        .enumerate()
-        .filter(|(_, l)| !l.is_empty())
-        .map(|(i, line)| {
-            parse_row(line, orientation).map_err(|what| PosesReadError::Row {
+    records
+        .map(|record| {
+            let line = |e: &csv::Error| e.position().map_or(0, csv::Position::line);
+            let record = record.map_err(|e| PosesReadError::Row {
                 path: path.to_owned(),
-                line: i + 2,
+                line: line(&e) as usize,
+                what: e.to_string(),
+            })?;
+            parse_row(&record, orientation).map_err(|what| PosesReadError::Row {
+                path: path.to_owned(),
+                line: record.position().map_or(0, csv::Position::line) as usize,
                 what,
             })
         })
@@ -332,15 +362,14 @@ pub fn read_poses(path: &Path) -> Result<Vec<PoseRecord>, PosesReadError> {
 }
 
 /// One row of `poses.csv`; `orientation`: whether the file has the orientation column.
-fn parse_row(line: &str, orientation: bool) -> Result<PoseRecord, String> {
+fn parse_row(record: &csv::StringRecord, orientation: bool) -> Result<PoseRecord, String> {
     use crate::core::frame::Stamp;
     use crate::core::pose::{JointEstimate, Pose};
-    let fields: Vec<&str> = line.split(',').collect();
     let expected = 8 + 5 * JOINT_COUNT + usize::from(orientation);
-    if fields.len() != expected {
-        return Err(format!("{} columns, expected {expected}", fields.len()));
+    if record.len() != expected {
+        return Err(format!("{} columns, expected {expected}", record.len()));
     }
-    let field = |i: usize| fields.get(i).copied().unwrap_or_default();
+    let field = |i: usize| record.get(i).unwrap_or_default();
     let int = |i: usize| -> Result<Option<i64>, String> {
         let f = field(i);
         if f.is_empty() {
@@ -433,7 +462,7 @@ mod tests {
     fn files_with_and_without_the_orientation_column_read_back() {
         let dir = tempfile::tempdir().unwrap();
         let old = dir.path().join("old.csv");
-        std::fs::write(&old, format!("{}\n{}\n", header_without_orientation(), empty_row(3))).unwrap();
+        std::fs::write(&old, format!("{}\n{}\n", columns(false).join(","), empty_row(3))).unwrap();
         let rows = read_poses(&old).unwrap();
         assert_eq!(rows.len(), 1);
         assert_eq!(rows[0].depth.seq, 3);
