@@ -21,7 +21,7 @@ use super::{CaptureError, DeviceInfo, FrameSource};
 use crate::core::frame::{DepthFrame, Stamp};
 use crate::io::session::{Backend, CameraMeta, CameraRole, FrameFormat};
 use crate::runtime::capture::Clock;
-use openni2_sys as ni;
+use openni2 as ni;
 use std::path::Path;
 use std::time::Duration;
 

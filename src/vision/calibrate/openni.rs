@@ -6,7 +6,7 @@
 use super::storage::YamlWriter;
 use super::{CalibrationError, INTRINSICS_FORMAT_NAME, INTRINSICS_FORMAT_VERSION};
 use crate::core::geometry::Intrinsics;
-use openni2_sys as ni;
+use openni2 as ni;
 use std::path::Path;
 
 /// Errors reading intrinsics from OpenNI2.
