@@ -7,6 +7,13 @@
 //! pixel, bit for bit: the arithmetic is the portable path's, operation by operation (a
 //! multiply then an add, never fused; the same truncation to a pixel index; the same
 //! comparison), which the tests check on random trees and images.
+//!
+//! The AVX2 code reads nodes, pixels and depths without bounds checks, so what it reads is
+//! vouched for by types rather than by callers, and [`leaf_indices`] is sound whatever it is
+//! given: a [`Kernel::Avx2`] exists only where [`Kernel::detect`] found AVX2, a [`PackedTree`]
+//! only once its child indices were checked ([`super::Tree::check`]), [`PixelLanes`] keep their
+//! arrays one length, and an image whose depth array does not cover its region takes the
+//! portable path.
 #![allow(unsafe_code)]
 
 use super::PackedTree;
