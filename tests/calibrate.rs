@@ -392,12 +392,12 @@ fn openni_dummy_intrinsics() {
     let _guard = crate::capture_openni::serial();
     let tmp = tempfile::tempdir().expect("tmp");
     let out = tmp.path().join("depth.yaml");
-    let result = mousepose::vision::calibrate::openni::depth_intrinsics("Dummy");
+    let result = mousepose::runtime::capture::openni::depth_intrinsics("Dummy");
     match result {
         Ok(found) => {
             assert_eq!((found.intrinsics.width, found.intrinsics.height), (320, 240));
             assert!(found.intrinsics.fx > 0.0);
-            mousepose::vision::calibrate::openni::save(&found, &out).expect("saves");
+            mousepose::vision::calibrate::field_of_view::save(&found, &out).expect("saves");
             let back = load_intrinsics(&out).expect("loads");
             assert_eq!(back, found.intrinsics);
         }

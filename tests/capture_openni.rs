@@ -8,7 +8,7 @@ use mousepose::core::frame::DepthFrame;
 use mousepose::io::session::{Backend, CameraRole, FrameFormat};
 use mousepose::runtime::capture::openni::list_devices;
 use mousepose::runtime::capture::{CaptureError, Clock, FrameSource, OpenNiConfig, OpenNiDepth};
-use openni2_sys as ni;
+use openni2 as ni;
 use std::path::Path;
 use std::sync::{Mutex, MutexGuard, PoisonError};
 use std::time::Duration;

@@ -115,7 +115,7 @@ fn packed_traversal_reaches_the_leaves_of_root_to_leaf_descent() {
     let mut all: Vec<u32> = (0..2000).collect();
     let tree = train_tree(&space, &objective, &mut all, &params, 0, 0);
     assert!(tree.depth() > 4, "a tree deep enough to test: {}", tree.depth());
-    let packed = tree.packed();
+    let packed = tree.packed().expect("a walkable tree");
     let mut traversal = mousepose::vision::forest::Traversal::default();
     // Every point, including the 1,000 the tree never saw, twice to reuse the buffers.
     for _ in 0..2 {
@@ -593,7 +593,13 @@ fn eval_bundled(
     };
     let library = pose_library();
     let samples: Vec<_> = (0..count).map(|i| render_sample(rig, &spec, &library, i)).collect();
-    mousepose::training::eval_body(&BodyEstimator::new(forest, settings), &samples, rig, 0.0).expect("evaluates")
+    mousepose::training::eval_body(
+        &BodyEstimator::new(forest, settings).expect("a walkable forest"),
+        &samples,
+        rig,
+        0.0,
+    )
+    .expect("evaluates")
 }
 
 /// The default body model (trained with the camera 600 mm above the floor) under cameras
@@ -726,7 +732,7 @@ fn a_tail_not_seen_gets_no_tail_tip_off_the_mouse() {
     let Model::Body(_, forest) = model::load(&path, Some(ModelKind::Body)).expect("bundled body model") else {
         panic!("{} is not a body model", path.display());
     };
-    let mut estimator = BodyEstimator::new(forest, VoteSettings::default());
+    let mut estimator = BodyEstimator::new(forest, VoteSettings::default()).expect("a walkable forest");
     let spec = DatasetSpec {
         count: 40,
         seed: 0x7A27,
@@ -819,7 +825,7 @@ fn the_body_forest_loaded_for_run_time_and_its_clones_estimate_bit_for_bit_alike
     let Model::Body(_, forest) = model::load(&path, Some(ModelKind::Body)).expect("bundled body model") else {
         panic!("{} is not a body model", path.display());
     };
-    let mut built = BodyEstimator::new(forest, VoteSettings::default());
+    let mut built = BodyEstimator::new(forest, VoteSettings::default()).expect("a walkable forest");
     let mut loaded = BodyEstimator::load(&path, VoteSettings::default()).expect("loads");
     let mut clone = loaded.clone();
     let spec = DatasetSpec {

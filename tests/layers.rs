@@ -1,8 +1,10 @@
 //! The layers of `src/` (see `src/lib.rs` and docs/ARCHITECTURE.md): imports only point
-//! down, modules form no cycle, and clap lives in `src/app/` alone.
+//! down, modules form no cycle, and each external crate is used only in the layers its table
+//! row names (camera drivers in `src/runtime/` alone, clap in `src/app/` alone).
 //!
-//! Read from the source text: every `crate::layer::module` path outside a file's
-//! `#[cfg(test)]` module (unit tests may build their scenes with the synthesis engine).
+//! Read from the source text: every `crate::layer::module` path, and every path or `use` that
+//! starts with an external crate's name, outside a file's `#[cfg(test)]` module (unit tests may
+//! build their scenes with the synthesis engine).
 
 use crate::util::repo_root;
 use std::collections::{BTreeMap, BTreeSet};
@@ -241,6 +243,7 @@ fn engines_print_nothing_to_stdout() {
     );
 }
 
+/// clap anywhere in a file, unit tests included (the table below only reads product code).
 #[test]
 fn clap_lives_in_the_app_folder_only() {
     let src = repo_root().join("src");
@@ -272,4 +275,150 @@ fn unsafe_code_in_src_is_only_the_simd_kernel_module() {
         .map(|f| f.strip_prefix(&src).expect("under src/").display().to_string())
         .collect();
     assert_eq!(with_unsafe, ["vision/forest/simd.rs"]);
+}
+
+/// Every layer.
+const ALL: &[&str] = &[
+    "core",
+    "io",
+    "vision",
+    "runtime",
+    "synth",
+    "training",
+    "experiment",
+    "engine",
+    "app",
+];
+/// What the commands' code may use: the app and the engines it calls (`engine`, when there is
+/// one).
+const COMMANDS: &[&str] = &["engine", "app"];
+
+/// Which layers may use each dependency of the package (by its name in Rust code). Every
+/// dependency has a row, so a new one is placed deliberately.
+const EXTERNAL: &[(&str, &[&str])] = &[
+    // Camera drivers: the capture sources and the device listing of the runtime only.
+    ("openni2", &["runtime"]),
+    ("aravis_ext", &["runtime"]),
+    ("v4l", &["runtime"]),
+    // The daemon's HTTP server, metrics and frame-path channels: the runtime.
+    ("tokio", &["runtime"]),
+    ("axum", &["runtime"]),
+    ("prometheus_client", &["runtime"]),
+    ("crossbeam_channel", &["runtime", "engine", "app"]),
+    // Processes, signals, the service manager, logging set-up, progress bars, globs, one error
+    // type for everything: the commands (and the runtime's process statistics and log set-up).
+    ("rustix", &["runtime", "engine", "app"]),
+    ("tracing_subscriber", &["runtime", "engine", "app"]),
+    ("signal_hook", COMMANDS),
+    ("sd_notify", COMMANDS),
+    ("tracing_journald", COMMANDS),
+    ("indicatif", COMMANDS),
+    ("glob", COMMANDS),
+    ("anyhow", COMMANDS),
+    // The command line: the app alone.
+    ("clap", &["app"]),
+    // OpenCV: segmentation and calibration maths, and the commands that read images.
+    ("opencv", &["vision", "engine", "app"]),
+    // Data, maths, formats and logging: anywhere.
+    ("serde", ALL),
+    ("serde_json", ALL),
+    ("toml", ALL),
+    ("csv", ALL),
+    ("thiserror", ALL),
+    ("tracing", ALL),
+    ("nalgebra", ALL),
+    ("rand", ALL),
+    ("rand_chacha", ALL),
+    ("rand_distr", ALL),
+    ("rayon", ALL),
+    ("zstd", ALL),
+    ("png", ALL),
+    ("crc32fast", ALL),
+    ("roxmltree", ALL),
+    ("safe_arch", ALL),
+    ("wide", ALL),
+];
+
+/// The package's dependencies (not the dev-dependencies), by their names in Rust code.
+fn dependencies() -> BTreeSet<String> {
+    let text = std::fs::read_to_string(repo_root().join("Cargo.toml")).expect("Cargo.toml is readable");
+    let manifest: toml::Table = text.parse().expect("Cargo.toml parses");
+    let mut tables = vec![manifest.get("dependencies")];
+    if let Some(targets) = manifest.get("target").and_then(toml::Value::as_table) {
+        tables.extend(targets.values().map(|t| t.get("dependencies")));
+    }
+    tables
+        .into_iter()
+        .flatten()
+        .filter_map(toml::Value::as_table)
+        .flat_map(|t| t.keys())
+        .map(|k| k.replace('-', "_"))
+        .collect()
+}
+
+/// Whether `code` (comment lines left out) names the crate `name`: a path that starts with it
+/// (`name::`) or a `use name` (as in `use name as short;`), not a path through `crate::`,
+/// `super::` or `self::` that merely has a module of the same name.
+fn uses_crate(code: &str, name: &str) -> bool {
+    let ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    code.lines()
+        .map(str::trim_start)
+        .filter(|l| !l.starts_with("//"))
+        .any(|line| {
+            line.match_indices(name).any(|(at, _)| {
+                let before = &line[..at];
+                let after = &line[at + name.len()..];
+                let starts = !before.ends_with(|c: char| ident(c) || c == ':');
+                let ends = !after.starts_with(ident);
+                let used = after.starts_with("::") || before.split_whitespace().last() == Some("use");
+                starts && ends && used
+            })
+        })
+}
+
+#[test]
+fn crate_uses_are_found_in_paths_and_use_lines_only() {
+    assert!(uses_crate("use openni2 as ni;", "openni2"));
+    assert!(uses_crate("    let d = openni2::Device::open(uri)?;", "openni2"));
+    assert!(uses_crate("use opencv::{core, imgproc};", "opencv"));
+    assert!(uses_crate("fn f() -> Result<(), v4l::Error> {", "v4l"));
+    assert!(!uses_crate("use openni2_sys as ni;", "openni2"));
+    assert!(!uses_crate("use crate::runtime::capture::openni2::list;", "openni2"));
+    assert!(!uses_crate("pub mod openni2;", "openni2"));
+    assert!(!uses_crate("// openni2::Device::open opens it", "openni2"));
+    assert!(!uses_crate(
+        "let rand = 4; rand_chacha::ChaCha8Rng::seed_from_u64(rand)",
+        "rand"
+    ));
+}
+
+#[test]
+fn external_crates_are_used_only_in_their_layers() {
+    let deps = dependencies();
+    let unplaced: Vec<&String> = deps
+        .iter()
+        .filter(|d| !EXTERNAL.iter().any(|(name, _)| name == d))
+        .collect();
+    assert!(
+        unplaced.is_empty(),
+        "dependencies with no row in the table of tests/layers.rs: {unplaced:?}"
+    );
+    let src = repo_root().join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut misplaced = Vec::new();
+    for path in files {
+        let Some(unit) = unit_of(&src, &path) else { continue };
+        let code = product_code(&path);
+        for (name, layers) in EXTERNAL {
+            if !layers.contains(&layer(&unit)) && uses_crate(&code, name) {
+                let file = path.strip_prefix(&src).expect("under src/").display().to_string();
+                misplaced.push(format!("{file} uses {name}, allowed only in {layers:?}"));
+            }
+        }
+    }
+    assert!(
+        misplaced.is_empty(),
+        "external crates outside their layers: {misplaced:#?}"
+    );
 }

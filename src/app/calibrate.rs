@@ -199,9 +199,9 @@ fn intrinsics(args: &IntrinsicsArgs) -> Outcome {
     refuse_existing(&args.out, args.force)?;
     let board = board(&args.board, args.square_mm)?;
     if let Some(uri) = &args.openni {
-        let found = crate::vision::calibrate::openni::depth_intrinsics(uri)
+        let found = crate::runtime::capture::openni::depth_intrinsics(uri)
             .with_context(|| format!("reading OpenNI device {uri:?}"))?;
-        crate::vision::calibrate::openni::save(&found, &args.out).map_err(calibration_failure)?;
+        crate::vision::calibrate::field_of_view::save(&found, &args.out).map_err(calibration_failure)?;
         let json = IntrinsicsJson {
             out: args.out.display().to_string(),
             width: found.intrinsics.width,

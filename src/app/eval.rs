@@ -85,7 +85,7 @@ fn eval_body(
     samples: &[crate::synth::dataset::Sample],
     rig: &crate::core::geometry::Rig,
 ) -> Result<()> {
-    let estimator = BodyEstimator::new(forest.clone(), VoteSettings::default());
+    let estimator = BodyEstimator::new(forest.clone(), VoteSettings::default())?;
     let report = training::eval_body(&estimator, samples, rig, 0.0)?;
     // The paper's method alone: votes and mean-shift, without our step along the tail.
     let paper_only = BodyEstimator::new(
@@ -94,7 +94,7 @@ fn eval_body(
             follow_tail: false,
             ..VoteSettings::default()
         },
-    );
+    )?;
     let paper = training::eval_body(&paper_only, samples, rig, 0.0)?;
     let report = BodyFigures {
         paper_method: PaperMethod {
@@ -121,7 +121,7 @@ fn eval_body(
         let baseline = match &args.baseline {
             Some(path) => match model::load(path, Some(ModelKind::Body))? {
                 Model::Body(_, f) => Some(training::eval_body(
-                    &BodyEstimator::new(f, VoteSettings::default()),
+                    &BodyEstimator::new(f, VoteSettings::default())?,
                     samples,
                     rig,
                     0.0,

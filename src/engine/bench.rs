@@ -405,7 +405,7 @@ fn bench_forest(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: b
         })
         .collect();
     let trees = forest.trees.len();
-    let mut estimator = BodyEstimator::new(forest, VoteSettings::default());
+    let mut estimator = BodyEstimator::new(forest, VoteSettings::default()).ok()?;
     let all: Vec<Vec<Pixel>> = frames
         .iter()
         .map(|f| {

@@ -731,7 +731,8 @@ fn forest_run(input: &Input, dir: &Path) -> Outcome {
             forest.trees.iter().try_for_each(walkable)?;
             let trees = forest.trees.len();
             // The run-time traversal and voting, on a small image.
-            let mut estimator = BodyEstimator::new(forest, VoteSettings::default());
+            let mut estimator = BodyEstimator::new(forest, VoteSettings::default())
+                .map_err(|e| format!("a loaded forest refused at run time: {e}"))?;
             let region = Region {
                 x0: 0,
                 y0: 0,

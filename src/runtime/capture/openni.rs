@@ -21,7 +21,8 @@ use super::{CaptureError, DeviceInfo, FrameSource};
 use crate::core::frame::{DepthFrame, Stamp};
 use crate::io::session::{Backend, CameraMeta, CameraRole, FrameFormat};
 use crate::runtime::capture::Clock;
-use openni2_sys as ni;
+use crate::vision::calibrate::field_of_view::{FieldOfViewIntrinsics, from_field_of_view};
+use openni2 as ni;
 use std::path::Path;
 use std::time::Duration;
 
@@ -438,4 +439,59 @@ pub fn list_devices() -> Result<Vec<DeviceInfo>, CaptureError> {
             }
         })
         .collect())
+}
+
+/// Errors reading intrinsics from OpenNI2 ([`depth_intrinsics`]).
+#[derive(Debug, thiserror::Error)]
+pub enum OpenNiIntrinsicsError {
+    #[error("cannot open OpenNI2 device {uri:?}")]
+    Open {
+        uri: String,
+        #[source]
+        source: ni::Error,
+    },
+    #[error("OpenNI2 device {uri:?} does not report its depth stream's field of view")]
+    NoFieldOfView {
+        uri: String,
+        #[source]
+        source: ni::Error,
+    },
+    #[error("OpenNI2 device {uri:?} reports an impossible field of view ({hfov_rad} x {vfov_rad} rad)")]
+    BadFieldOfView { uri: String, hfov_rad: f32, vfov_rad: f32 },
+}
+
+/// The depth camera's intrinsics as OpenNI2 reports them (the `calibrate intrinsics --openni`
+/// path): opens the device at `uri` and reads its depth stream's mode and fields of view, which
+/// [`from_field_of_view`] turns into a pinhole camera.
+///
+/// # Errors
+/// The device cannot be opened, has no depth stream, or does not report a plausible field of view.
+pub fn depth_intrinsics(uri: &str) -> Result<FieldOfViewIntrinsics, OpenNiIntrinsicsError> {
+    let open = |source| OpenNiIntrinsicsError::Open {
+        uri: uri.to_owned(),
+        source,
+    };
+    ni::OpenNI::init().map_err(open)?;
+    let device = ni::Device::open(uri).map_err(open)?;
+    let stream = device.create_depth_stream().map_err(open)?;
+    let mode = stream.video_mode().map_err(open)?;
+    let (h, v) = stream
+        .field_of_view()
+        .map_err(|source| OpenNiIntrinsicsError::NoFieldOfView {
+            uri: uri.to_owned(),
+            source,
+        })?;
+    let plausible = |a: f32| a.is_finite() && a > 0.01 && a < 3.0;
+    if !plausible(h) || !plausible(v) {
+        return Err(OpenNiIntrinsicsError::BadFieldOfView {
+            uri: uri.to_owned(),
+            hfov_rad: h,
+            vfov_rad: v,
+        });
+    }
+    Ok(FieldOfViewIntrinsics {
+        intrinsics: from_field_of_view(mode.width, mode.height, f64::from(h), f64::from(v)),
+        hfov_deg: f64::from(h).to_degrees(),
+        vfov_deg: f64::from(v).to_degrees(),
+    })
 }

@@ -7,8 +7,8 @@
 
 pub mod board;
 pub mod extrinsics;
+pub mod field_of_view;
 pub mod intrinsics;
-pub mod openni;
 mod storage;
 
 pub use board::{Board, BoardError};
@@ -101,8 +101,6 @@ pub enum CalibrationError {
     Intrinsics(#[from] intrinsics::IntrinsicsError),
     #[error(transparent)]
     Extrinsics(#[from] extrinsics::ExtrinsicsError),
-    #[error(transparent)]
-    OpenNi(#[from] openni::OpenNiIntrinsicsError),
     #[error("OpenCV failed to {what}")]
     Solve {
         what: String,
@@ -117,7 +115,7 @@ impl CalibrationError {
     /// a device): the command line's exit codes 1 and 2.
     pub fn is_input_problem(&self) -> bool {
         match self {
-            Self::Io { .. } | Self::Solve { .. } | Self::OpenNi(_) => false,
+            Self::Io { .. } | Self::Solve { .. } => false,
             Self::OpenCv { action, .. } => *action == "parse",
             Self::Board(BoardError::OpenCv { .. }) => false,
             _ => true,

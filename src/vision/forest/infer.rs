@@ -17,7 +17,7 @@
 
 use super::depth::{BODY_JOINTS, DepthFeature, DepthImage, JointLeaf, JointVote};
 use super::simd::{self, Kernel, PixelLanes};
-use super::{Forest, PackedTree, Traversal, Tree, model};
+use super::{BadTree, Forest, PackedTree, Traversal, Tree, model};
 use crate::core::geometry::Intrinsics;
 use crate::core::skeleton::Joint;
 use crate::vision::orientation;
@@ -151,14 +151,17 @@ impl SparseLeaves {
 
 impl RunTrees {
     /// Converts `forest` tree by tree, each tree's training form dropped once converted.
-    fn new(forest: Forest<DepthFeature, JointLeaf>) -> Self {
-        Self {
-            trees: forest.trees.into_iter().map(|tree| Self::tree(&tree)).collect(),
-        }
+    fn new(forest: Forest<DepthFeature, JointLeaf>) -> Result<Self, BadTree> {
+        let trees = forest
+            .trees
+            .into_iter()
+            .map(|tree| Self::tree(&tree))
+            .collect::<Result<_, _>>()?;
+        Ok(Self { trees })
     }
 
-    fn tree(tree: &Tree<DepthFeature, JointLeaf>) -> (PackedTree<DepthFeature>, SparseLeaves) {
-        (tree.packed(), SparseLeaves::new(&tree.leaves))
+    fn tree(tree: &Tree<DepthFeature, JointLeaf>) -> Result<(PackedTree<DepthFeature>, SparseLeaves), BadTree> {
+        Ok((tree.packed()?, SparseLeaves::new(&tree.leaves)))
     }
 }
 
@@ -200,8 +203,13 @@ impl Router {
 }
 
 impl BodyEstimator {
-    pub fn new(forest: Forest<DepthFeature, JointLeaf>, settings: VoteSettings) -> Self {
-        Self::with_trees(RunTrees::new(forest), settings)
+    /// The estimator of `forest`.
+    ///
+    /// # Errors
+    /// A tree of `forest` that cannot be walked ([`Tree::check`]), as a tree put together by
+    /// hand may be (training never builds one).
+    pub fn new(forest: Forest<DepthFeature, JointLeaf>, settings: VoteSettings) -> Result<Self, BadTree> {
+        Ok(Self::with_trees(RunTrees::new(forest)?, settings))
     }
 
     /// The body forest of a model file, read straight into the form run time reads, tree by
@@ -212,6 +220,14 @@ impl BodyEstimator {
     /// As [`model::load`].
     pub fn load(path: &std::path::Path, settings: VoteSettings) -> Result<Self, model::ModelError> {
         let (_, trees) = model::load_body_trees(path, |tree| RunTrees::tree(&tree))?;
+        // The reader checks every tree as `packed` does, so this error is not expected.
+        let trees = trees
+            .into_iter()
+            .collect::<Result<_, _>>()
+            .map_err(|e| model::ModelError::Corrupt {
+                path: path.to_owned(),
+                reason: e.to_string(),
+            })?;
         Ok(Self::with_trees(RunTrees { trees }, settings))
     }
 
@@ -239,12 +255,10 @@ impl BodyEstimator {
         self.router.kernel
     }
 
-    /// Traverses with `kernel` from now on (benchmarks compare them; [`Kernel::Avx2`] only on a
-    /// processor that has it, or it is ignored).
+    /// Traverses with `kernel` from now on (benchmarks compare them; a [`Kernel::Avx2`] comes
+    /// only from [`Kernel::detect`] on a processor that has it).
     pub fn set_kernel(&mut self, kernel: Kernel) {
-        if kernel == Kernel::Portable || Kernel::detect() == kernel {
-            self.router.kernel = kernel;
-        }
+        self.router.kernel = kernel;
     }
 
     /// The leaf each pixel reaches in each tree, without voting (for benchmarks): `visit` gets

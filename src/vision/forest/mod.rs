@@ -12,8 +12,11 @@ pub mod depth;
 pub mod discriminative;
 pub mod infer;
 pub mod model;
+mod packed;
 pub mod simd;
 pub mod train;
+
+pub use packed::{PackedNode, PackedTree, Traversal};
 
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -38,30 +41,12 @@ impl<F> Node<F> {
     }
 }
 
-/// The buffers of [`PackedTree::leaf_indices`], kept between calls so traversal does not
-/// allocate.
-#[derive(Clone, Debug, Default)]
-pub struct Traversal {
-    /// Per sample: its node while on its way, its leaf index at the end.
-    at: Vec<u32>,
-    /// The samples not yet at a leaf.
-    moving: Vec<u32>,
-}
-
-impl Traversal {
-    /// The leaf index each sample reached in the last traversal.
-    pub fn leaves(&self) -> &[u32] {
-        &self.at
-    }
-}
-
-/// Asks the processor to bring `x` into its caches, without waiting for it.
-#[inline(always)]
-fn prefetch<T>(x: &T) {
-    #[cfg(all(target_arch = "x86_64", target_feature = "sse"))]
-    safe_arch::prefetch_t0(x);
-    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse")))]
-    let _ = x;
+/// A tree with a node whose child or leaf index points outside it ([`Tree::check`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("node {node} points outside the tree")]
+pub struct BadTree {
+    /// The node's index.
+    pub node: usize,
 }
 
 /// A binary tree in two flat arrays: nodes (root first) and leaf payloads.
@@ -91,23 +76,33 @@ impl<F: Copy, L> Tree<F, L> {
         &self.leaves[self.leaf_index(value)]
     }
 
+    /// Whether the tree can be walked: every split node's children lie after it and inside
+    /// the tree (so a walk always ends, inside it), every leaf's index inside the leaves and
+    /// below 2^31 (what [`PackedTree`] can hold). A tree that training builds always can; a
+    /// tree put together by hand or read from elsewhere may not.
+    ///
+    /// # Errors
+    /// The first node that points outside the tree.
+    pub fn check(&self) -> Result<(), BadTree> {
+        for (i, n) in self.nodes.iter().enumerate() {
+            let ok = if n.is_leaf() {
+                (n.leaf as usize) < self.leaves.len() && n.leaf < packed::PACKED_LEAF
+            } else {
+                (n.left as usize) > i && (n.left as usize) + 1 < self.nodes.len()
+            };
+            if !ok {
+                return Err(BadTree { node: i });
+            }
+        }
+        Ok(())
+    }
+
     /// The tree in the compact form that run-time traversal reads.
-    pub fn packed(&self) -> PackedTree<F> {
-        let nodes = self
-            .nodes
-            .iter()
-            .map(|n| PackedNode {
-                feature: n.feature,
-                threshold: n.threshold,
-                next: if n.is_leaf() {
-                    assert!(n.leaf < PACKED_LEAF, "too many leaves to pack");
-                    n.leaf | PACKED_LEAF
-                } else {
-                    n.left
-                },
-            })
-            .collect();
-        PackedTree { nodes }
+    ///
+    /// # Errors
+    /// As [`Self::check`]: a tree that cannot be walked is not packed.
+    pub fn packed(&self) -> Result<PackedTree<F>, BadTree> {
+        PackedTree::new(self)
     }
 
     /// Number of levels below the root of the deepest leaf.
@@ -152,82 +147,6 @@ impl<F: Copy, L> Tree<F, L> {
         }
         self.nodes = nodes;
         self.leaves = leaves;
-    }
-}
-
-/// Marks a [`PackedNode`] that is a leaf; the other bits are its leaf index.
-const PACKED_LEAF: u32 = 1 << 31;
-
-/// A node as traversal reads it: the child index and the leaf index share one word, so a
-/// node with a two-float feature fills 16 bytes and four share a cache line. `repr(C)`: the
-/// AVX2 traversal ([`simd`]) gathers the fields by their offsets.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[repr(C)]
-pub struct PackedNode<F> {
-    feature: F,
-    threshold: f32,
-    /// The left child's index, or the leaf index with [`PACKED_LEAF`] set.
-    next: u32,
-}
-
-/// A tree's split nodes and leaf indices in [`PackedNode`]s, same order as the tree's nodes;
-/// the leaf payloads stay in the [`Tree`].
-#[derive(Clone, Debug, PartialEq)]
-pub struct PackedTree<F> {
-    nodes: Vec<PackedNode<F>>,
-}
-
-impl<F> PackedTree<F> {
-    /// The leaf index one sample reaches (`value(feature)` is the feature's value for it).
-    #[inline]
-    pub fn leaf_index_of(&self, mut value: impl FnMut(&F) -> f32) -> u32 {
-        let mut i = 0usize;
-        loop {
-            let node = &self.nodes[i];
-            if node.next & PACKED_LEAF != 0 {
-                return node.next & !PACKED_LEAF;
-            }
-            i = (node.next + u32::from(value(&node.feature) <= node.threshold)) as usize;
-        }
-    }
-
-    /// The leaf index each of `count` samples reaches, in `scratch.leaves()` (`value(s,
-    /// feature)` is the feature's value for sample `s`). Level by level: every sample still
-    /// on its way takes one step down per pass, so the memory loads of many samples overlap
-    /// instead of waiting on one sample's chain of dependent loads, and one tree's nodes stay
-    /// in cache. Each sample's next node is asked into the cache as soon as it is known, a
-    /// whole pass before it is read.
-    pub fn leaf_indices(&self, count: usize, mut value: impl FnMut(usize, &F) -> f32, scratch: &mut Traversal) {
-        let Traversal { at, moving } = scratch;
-        at.clear();
-        moving.clear();
-        if self.nodes.is_empty() {
-            return;
-        }
-        // Node indices while on the way, leaf indices (flagged) on arrival.
-        at.resize(count, 0);
-        moving.extend(0..count as u32);
-        while !moving.is_empty() {
-            let mut kept = 0;
-            for k in 0..moving.len() {
-                let s = moving[k] as usize;
-                let node = &self.nodes[at[s] as usize];
-                let next = if node.next & PACKED_LEAF == 0 {
-                    let next = node.next + u32::from(value(s, &node.feature) <= node.threshold);
-                    // Wanted on the next pass, after every other moving sample's step.
-                    if let Some(n) = self.nodes.get(next as usize) {
-                        prefetch(n);
-                    }
-                    moving[kept] = s as u32;
-                    kept += 1;
-                    next
-                } else {
-                    node.next & !PACKED_LEAF
-                };
-                at[s] = next;
-            }
-            moving.truncate(kept);
-        }
     }
 }
 

@@ -21,7 +21,7 @@
 //! against the arrays, so a tree loaded is one that can be walked.
 
 use super::depth::{BODY_JOINTS, DepthFeature, JointLeaf, JointVote};
-use super::{Forest, NOT_LEAF, Node, Tree};
+use super::{Forest, Node, Tree};
 use crate::core::skeleton::PART_COUNT;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -428,17 +428,9 @@ fn decode_trees<S: Source, L, T>(
         }
         // Every split's children exist and lie after it (so walking always ends); every leaf
         // index exists.
-        for (i, n) in nodes.iter().enumerate() {
-            let ok = if n.leaf == NOT_LEAF {
-                (n.left as usize) > i && (n.left as usize) + 1 < nodes.len()
-            } else {
-                (n.leaf as usize) < leaves.len()
-            };
-            if !ok {
-                return Err(format!("tree {t} node {i} points outside the tree"));
-            }
-        }
-        trees.push(convert(Tree { nodes, leaves }));
+        let tree = Tree { nodes, leaves };
+        tree.check().map_err(|e| format!("tree {t} {e}"))?;
+        trees.push(convert(tree));
     }
     if !r.at_end()? {
         return Err("it has bytes after its last tree".to_owned());
@@ -815,6 +807,7 @@ const HEAD_BYTES: usize = 1 << 16;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::vision::forest::NOT_LEAF;
 
     fn bundled() -> PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/models/body.forest")

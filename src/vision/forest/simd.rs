@@ -7,39 +7,65 @@
 //! pixel, bit for bit: the arithmetic is the portable path's, operation by operation (a
 //! multiply then an add, never fused; the same truncation to a pixel index; the same
 //! comparison), which the tests check on random trees and images.
+//!
+//! The AVX2 code reads nodes, pixels and depths without bounds checks, so what it reads is
+//! vouched for by types rather than by callers, and [`leaf_indices`] is sound whatever it is
+//! given: a [`Kernel::Avx2`] exists only where [`Kernel::detect`] found AVX2, a [`PackedTree`]
+//! only once its child indices were checked ([`super::Tree::check`]), [`PixelLanes`] keep their
+//! arrays one length, and an image whose depth array does not cover its region takes the
+//! portable path.
 #![allow(unsafe_code)]
 
 use super::PackedTree;
 use super::depth::{DepthFeature, DepthImage};
 
-/// Which traversal code runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Which traversal code runs. Only [`Kernel::detect`] makes [`Kernel::Avx2`] (its
+/// [`Avx2Detected`] cannot be built anywhere else), so holding one means the processor was
+/// found to have AVX2.
+#[derive(Clone, Copy, PartialEq, Eq)]
 pub enum Kernel {
     /// Plain Rust, any processor.
     Portable,
     /// AVX2 gathers, eight pixels at a time (x86-64 processors that have it).
-    Avx2,
+    Avx2(Avx2Detected),
 }
+
+/// Proof that [`Kernel::detect`] found AVX2 on this processor: the field is private, so
+/// nothing outside this module makes one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Avx2Detected(());
 
 impl Kernel {
     /// The fastest kernel this processor runs.
     pub fn detect() -> Self {
         #[cfg(target_arch = "x86_64")]
         if is_x86_feature_detected!("avx2") {
-            return Kernel::Avx2;
+            return Kernel::Avx2(Avx2Detected(()));
         }
         Kernel::Portable
     }
 }
 
-/// Pixels to route, one array per coordinate (what vector loads want).
+/// `Portable` or `Avx2`, the variant's name alone (benchmarks print it).
+impl std::fmt::Debug for Kernel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Kernel::Portable => "Portable",
+            Kernel::Avx2(_) => "Avx2",
+        })
+    }
+}
+
+/// Pixels to route, one array per coordinate (what vector loads want). The four arrays
+/// always have the same length: they are private and [`Self::push`] grows them together,
+/// which the AVX2 loads rely on.
 #[derive(Clone, Debug, Default)]
 pub struct PixelLanes {
-    pub x: Vec<f32>,
-    pub y: Vec<f32>,
-    pub depth: Vec<f32>,
+    x: Vec<f32>,
+    y: Vec<f32>,
+    depth: Vec<f32>,
     /// `1 / depth`, which scales every probe offset.
-    pub inverse: Vec<f32>,
+    inverse: Vec<f32>,
 }
 
 impl PixelLanes {
@@ -74,6 +100,10 @@ impl PixelLanes {
 
 /// The leaf index each pixel of `lanes` reaches in `tree`, into `leaves` (resized to the
 /// number of pixels), with `kernel`; the portable path uses `scratch`.
+///
+/// An image whose depth array is shorter than its region (or whose region has more than
+/// `i32::MAX` pixels) takes the portable path whatever `kernel` says, which panics on a probe
+/// past the array's end rather than reading past it.
 pub fn leaf_indices(
     kernel: Kernel,
     tree: &PackedTree<DepthFeature>,
@@ -86,11 +116,15 @@ pub fn leaf_indices(
     leaves.clear();
     match kernel {
         #[cfg(target_arch = "x86_64")]
-        Kernel::Avx2 if !tree.nodes.is_empty() => {
+        Kernel::Avx2(_) if !tree.nodes().is_empty() && gatherable(image) => {
             leaves.resize(n, 0);
             let whole = n - n % 8;
-            // SAFETY: `Kernel::Avx2` is only made by `detect` when the processor has AVX2
-            // (or by tests that checked it), and the slices hold `whole` pixels.
+            // SAFETY: `Kernel::Avx2` holds an `Avx2Detected`, which only `Kernel::detect` makes
+            // after finding AVX2 on this processor. `leaves[..whole]` is no longer than `lanes`,
+            // whose four arrays have one length. `gatherable` checked that every pixel of the
+            // region has an index in `i32` and inside `image.depth`. `tree` is a `PackedTree`,
+            // which `PackedTree::new` only builds with every child index after its node and
+            // inside the tree, and it is not empty.
             unsafe { avx2::leaves(tree, image, lanes, &mut leaves[..whole]) };
             for (s, leaf) in leaves.iter_mut().enumerate().skip(whole) {
                 *leaf = tree.leaf_index_of(|u| lanes.feature(image, s, u));
@@ -103,10 +137,18 @@ pub fn leaf_indices(
     }
 }
 
+/// Whether the AVX2 gathers can read `image`: the region's pixel count fits in an `i32` (the
+/// gathers' indices) and `image.depth` holds them all.
+#[cfg(target_arch = "x86_64")]
+fn gatherable(image: &DepthImage) -> bool {
+    let pixels = u64::from(image.region.width) * u64::from(image.region.height);
+    pixels <= i32::MAX as u64 && pixels <= image.depth.len() as u64
+}
+
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::super::depth::{BACKGROUND_MM, DepthFeature, DepthImage};
-    use super::super::{PACKED_LEAF, PackedNode, PackedTree};
+    use super::super::packed::{PACKED_LEAF, PackedNode, PackedTree};
     use super::PixelLanes;
     use std::arch::x86_64::*;
 
@@ -143,8 +185,10 @@ mod avx2 {
     /// Routes the first `out.len()` pixels (a multiple of 8) down `tree`.
     ///
     /// # Safety
-    /// The processor must have AVX2; `lanes` must hold at least `out.len()` pixels and the
-    /// tree's child indices must point inside it (as every tree that is built or loaded does).
+    /// The processor must have AVX2; `lanes` must hold at least `out.len()` pixels; the
+    /// region of `image` must have at most `i32::MAX` pixels and `image.depth` at least that
+    /// many; `tree` must not be empty (its child indices point after their node and inside
+    /// it, as in every `PackedTree`).
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn leaves(
         tree: &PackedTree<DepthFeature>,
@@ -154,7 +198,7 @@ mod avx2 {
     ) {
         let region = image.region;
         let walk = Walk {
-            nodes: tree.nodes.as_ptr().cast::<f32>(),
+            nodes: tree.nodes().as_ptr().cast::<f32>(),
             depth: &image.depth,
             corner: (_mm256_set1_ps(region.x0 as f32), _mm256_set1_ps(region.y0 as f32)),
             size: (
@@ -182,7 +226,9 @@ mod avx2 {
             loop {
                 let mut moving = false;
                 for g in &mut groups {
-                    // SAFETY: the caller's promises, passed on.
+                    // SAFETY: AVX2 is the caller's promise. Every lane starts at the root (the
+                    // tree is not empty) and `step` only moves a lane to a child index read from
+                    // a split node, which a `PackedTree` keeps inside the tree.
                     moving |= unsafe { step(&walk, g) };
                 }
                 if !moving {
@@ -201,7 +247,8 @@ mod avx2 {
     ///
     /// # Safety
     /// AVX2; every lane's node index is inside the tree (the root, a child index read from a
-    /// split node, or a leaf it stays on).
+    /// split node, or a leaf it stays on); the region's pixel count within `i32` and `depth`
+    /// at least that long.
     #[inline]
     #[target_feature(enable = "avx2")]
     unsafe fn step(walk: &Walk<'_>, g: &mut Group) -> bool {
@@ -243,8 +290,10 @@ mod avx2 {
         );
         let read = _mm256_and_si256(_mm256_and_si256(inside, nonnegative), moving);
         let pixel = _mm256_add_epi32(_mm256_mullo_epi32(yi, walk.size.0), xi);
-        // SAFETY: only the lanes of `read` are loaded, whose pixel is inside the region, so
-        // inside `depth` (width * height floats).
+        // SAFETY: only the lanes of `read` are loaded, whose pixel is inside the region
+        // (`0 <= xi < width`, `0 <= yi < height`), so `yi * width + xi` is below
+        // `width * height`, which the caller keeps within `i32` (no overflow) and within
+        // `depth`'s length.
         let probed = unsafe {
             _mm256_mask_i32gather_ps::<4>(walk.background, walk.depth.as_ptr(), pixel, _mm256_castsi256_ps(read))
         };
@@ -260,7 +309,7 @@ mod avx2 {
 #[cfg(test)]
 mod tests {
     use super::super::depth::{BACKGROUND_MM, DepthImage};
-    use super::super::{NOT_LEAF, Node, Traversal, Tree};
+    use super::super::{BadTree, NOT_LEAF, Node, Traversal, Tree};
     use super::*;
     use crate::core::image::Region;
     use rand::{Rng, SeedableRng};
@@ -319,16 +368,17 @@ mod tests {
 
     #[test]
     fn avx2_and_portable_reach_the_same_leaves() {
-        if Kernel::detect() != Kernel::Avx2 {
+        let avx2 = Kernel::detect();
+        if avx2 == Kernel::Portable {
             eprintln!("skipped: this processor has no AVX2");
             return;
         }
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x51AD);
         let (mut scratch, mut lanes) = (Traversal::default(), PixelLanes::default());
-        let (mut portable, mut avx2) = (Vec::new(), Vec::new());
+        let (mut portable, mut fast) = (Vec::new(), Vec::new());
         for round in 0..200 {
             let depth = rng.gen_range(0..12);
-            let tree = random_tree(&mut rng, depth).packed();
+            let tree = random_tree(&mut rng, depth).packed().expect("a walkable tree");
             let image = random_image(&mut rng);
             lanes.clear();
             for _ in 0..rng.gen_range(0..100) {
@@ -339,8 +389,102 @@ mod tests {
                 lanes.push(x, y, rng.gen_range(530..610) as f32);
             }
             leaf_indices(Kernel::Portable, &tree, &image, &lanes, &mut scratch, &mut portable);
-            leaf_indices(Kernel::Avx2, &tree, &image, &lanes, &mut scratch, &mut avx2);
-            assert_eq!(portable, avx2, "round {round}");
+            leaf_indices(avx2, &tree, &image, &lanes, &mut scratch, &mut fast);
+            assert_eq!(portable, fast, "round {round}");
         }
+    }
+
+    /// The program of issue 28, which once crashed in safe code: a tree whose root points
+    /// 50,000,000 nodes away is refused when packed, so the kernels never see it.
+    #[test]
+    fn a_tree_pointing_outside_itself_is_refused_when_packed() {
+        let split = |left| Node {
+            feature: [0.0, 0.0],
+            threshold: 0.0,
+            left,
+            leaf: NOT_LEAF,
+        };
+        let leaf = |leaf| Node {
+            feature: [0.0, 0.0],
+            threshold: 0.0,
+            left: 0,
+            leaf,
+        };
+        let far = Tree {
+            nodes: vec![split(50_000_000), leaf(0), leaf(1)],
+            leaves: vec![(), ()],
+        };
+        let error = far.packed().expect_err("a root pointing outside the tree");
+        assert_eq!(error.to_string(), "node 0 points outside the tree");
+        // Every other way out of the tree: the last node's children, a child before its node
+        // (a walk that would never end), a leaf index past the leaves.
+        for (nodes, bad) in [
+            (vec![split(1), leaf(0), split(2)], 2),
+            (vec![split(1), split(0), leaf(0), leaf(1)], 1),
+            (vec![split(1), leaf(0), leaf(2)], 2),
+        ] {
+            let tree = Tree {
+                nodes,
+                leaves: vec![(), ()],
+            };
+            assert_eq!(tree.packed().map(|_| ()), Err(BadTree { node: bad }));
+        }
+        let fine = Tree {
+            nodes: vec![split(1), leaf(0), leaf(1)],
+            leaves: vec![(), ()],
+        };
+        let packed = fine.packed().expect("a walkable tree");
+        // The root sends a value of 1 left (to leaf 0) and a value of 0 right (to leaf 1).
+        assert_eq!(packed.leaf_index_of(|_| 1.0), 0);
+        assert_eq!(packed.leaf_index_of(|_| 0.0), 1);
+    }
+
+    /// An image whose depth array is shorter than its region is not read past its end by the
+    /// gathers: the detected kernel falls back to the portable path, whose probe panics.
+    #[test]
+    #[should_panic(expected = "index out of bounds")]
+    fn a_depth_image_shorter_than_its_region_is_not_read_past_its_end() {
+        let region = Region {
+            x0: 0,
+            y0: 0,
+            width: 1000,
+            height: 1000,
+        };
+        let image = DepthImage {
+            region,
+            depth: vec![500.0; 16],
+        };
+        // One split that probes each pixel itself, then two leaves.
+        let tree = Tree {
+            nodes: vec![
+                Node {
+                    feature: [0.0, 0.0],
+                    threshold: 0.0,
+                    left: 1,
+                    leaf: NOT_LEAF,
+                },
+                Node {
+                    feature: [0.0, 0.0],
+                    threshold: 0.0,
+                    left: 0,
+                    leaf: 0,
+                },
+                Node {
+                    feature: [0.0, 0.0],
+                    threshold: 0.0,
+                    left: 0,
+                    leaf: 1,
+                },
+            ],
+            leaves: vec![(), ()],
+        };
+        let tree = tree.packed().expect("a walkable tree");
+        let mut lanes = PixelLanes::default();
+        // Sixteen pixels far down the region, a million floats past the array.
+        for k in 0..16 {
+            lanes.push(500.5 + k as f32, 999.5, 500.0);
+        }
+        let (mut scratch, mut leaves) = (Traversal::default(), Vec::new());
+        leaf_indices(Kernel::detect(), &tree, &image, &lanes, &mut scratch, &mut leaves);
     }
 }

@@ -1,4 +1,6 @@
-//! A small safe layer over the OpenNI2 C API: what a depth source needs and no more.
+//! A small safe layer over the OpenNI2 C API (the `openni2-sys` bindings): what a depth source
+//! needs and no more. OpenNI2 is the driver layer of PrimeSense-family depth cameras (Asus
+//! Xtion, Kinect via freenect, Orbbec) and of `.oni` recordings.
 //!
 //! - [`OpenNI`]: the library, initialised once per process on first use and never shut down
 //!   (see [`OpenNI::init`] for why).
@@ -20,7 +22,7 @@
 //! a stream by a recorder) sits behind a mutex, so no two threads call into OpenNI2 with the
 //! same handle at once.
 
-use crate::ffi;
+use openni2_sys as ffi;
 use std::ffi::{CStr, CString, c_char, c_int, c_void};
 use std::fmt;
 use std::path::{Path, PathBuf};
