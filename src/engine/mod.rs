@@ -5,6 +5,11 @@
 
 pub mod chart;
 pub mod progress;
+/// Until `replay` moves here too: the name of its summary file.
+pub mod replay {
+    /// A replay's summary, in its output directory.
+    pub const SUMMARY_FILE: &str = "summary.json";
+}
 
 use anyhow::Context as _;
 use std::path::Path;
