@@ -130,6 +130,10 @@ pub(crate) fn parse_noise_mm(s: &str) -> Result<f64, String> {
     parse_ranged(s, "a noise level in millimetres", 0.0, 100.0)
 }
 
+pub(crate) fn parse_square_mm(s: &str) -> Result<f64, String> {
+    parse_ranged(s, "a square side in millimetres", 0.5, 1000.0)
+}
+
 pub(crate) fn parse_binning(s: &str) -> Result<u32, String> {
     match s.trim() {
         "1" => Ok(1),

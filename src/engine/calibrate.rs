@@ -1,7 +1,6 @@
-//! `mousepose calibrate intrinsics|extrinsics` and `mousepose synth chessboard`: arguments
-//! and the commands themselves, kept here so the top-level CLI only delegates.
+//! The calibration engines behind `mousepose calibrate intrinsics|extrinsics` and `mousepose
+//! synth chessboard`: options in, a summary out (its JSON, and the table the command prints).
 
-use crate::app::{Outcome, print};
 use crate::engine::{Exists, Failure, output_failure};
 use crate::io::output::Staging;
 use crate::synth::chessboard::{ChessboardSpec, write_chessboards};
@@ -9,125 +8,71 @@ use crate::vision::calibrate::CalibrationError;
 use crate::vision::calibrate::extrinsics::{self, ExtrinsicsView};
 use crate::vision::calibrate::{Board, calibrate_intrinsics, load_intrinsics};
 use anyhow::Context as _;
-use clap::{Args, Subcommand};
 use serde::Serialize;
 use std::fmt::Write as _;
 
 use std::path::{Path, PathBuf};
 
-/// Calibrate the cameras: intrinsics of each, then both posed against a board on the glass.
-#[derive(Debug, Subcommand)]
-pub enum CalibrateCommand {
-    /// One camera's intrinsics from chessboard views (or the depth camera's from OpenNI).
-    Intrinsics(IntrinsicsArgs),
-    /// Both cameras' poses from one board lying on the glass: the rig calibration.
-    Extrinsics(ExtrinsicsArgs),
-}
-
-#[derive(Debug, Args)]
-pub struct IntrinsicsArgs {
-    /// The chessboard views, a glob pattern (quote it): "views/*.png".
-    #[arg(
-        long,
-        value_name = "GLOB",
-        required_unless_present = "openni",
-        conflicts_with = "openni"
-    )]
+/// What `calibrate intrinsics` works on (see its `--help`).
+#[derive(Clone, Debug)]
+pub struct IntrinsicsOptions {
+    /// The chessboard views, a glob pattern (`None` with `openni`).
     pub images: Option<String>,
-    /// Read the depth camera's field of view from OpenNI instead (a URI; `Dummy` for the test device).
-    #[arg(long, value_name = "URI")]
+    /// Read the depth camera's field of view from this OpenNI device instead.
     pub openni: Option<String>,
     /// Inner corners of the board, COLSxROWS.
-    #[arg(long, default_value = "9x6")]
     pub board: String,
     /// The side of one square, millimetres.
-    #[arg(long = "square-mm", value_name = "S", value_parser = parse_square_mm, allow_negative_numbers = true, default_value_t = 20.0)]
     pub square_mm: f64,
-    /// The intrinsics file to write (OpenCV FileStorage YAML).
-    #[arg(long, value_name = "FILE")]
+    /// The intrinsics file to write.
     pub out: PathBuf,
-    /// Print one JSON object.
-    #[arg(long)]
-    pub json: bool,
     /// Replace the output file if it exists.
-    #[arg(long)]
     pub force: bool,
 }
 
-#[derive(Debug, Args)]
-pub struct ExtrinsicsArgs {
-    /// The depth camera's intrinsics file.
-    #[arg(long, value_name = "FILE")]
+/// What `calibrate extrinsics` works on (see its `--help`).
+#[derive(Clone, Debug)]
+pub struct ExtrinsicsOptions {
     pub depth_intrinsics: PathBuf,
-    /// The colour camera's intrinsics file.
-    #[arg(long, value_name = "FILE")]
     pub color_intrinsics: PathBuf,
-    /// The depth camera's IR image of the board lying on the glass.
-    #[arg(long, value_name = "IMG")]
     pub depth_image: PathBuf,
-    /// The colour camera's image of the same board, seen from below.
-    #[arg(long, value_name = "IMG")]
     pub color_image: PathBuf,
-    /// Inner corners of the board, COLSxROWS (one side odd, the other even).
-    #[arg(long, default_value = "9x6")]
+    /// Inner corners of the board, COLSxROWS.
     pub board: String,
-    /// The side of one square, millimetres, as printed (it sets the scale of the poses).
-    #[arg(long = "square-mm", value_name = "S", value_parser = parse_square_mm, allow_negative_numbers = true)]
+    /// The side of one square, millimetres.
     pub square_mm: f64,
-    /// The depth camera's serial, stored in the calibration.
-    #[arg(long, value_name = "SERIAL")]
     pub depth_serial: Option<String>,
-    /// The colour camera's serial, stored in the calibration.
-    #[arg(long, value_name = "SERIAL")]
     pub color_serial: Option<String>,
     /// The rig calibration file to write.
-    #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
     /// Write report.json, report.txt and the views with the board's axes into this directory.
-    #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
-    /// A known rig calibration (e.g. `truth.yaml` of `synth chessboard`): report each camera's
-    /// position and rotation error against it.
-    #[arg(long, value_name = "FILE")]
+    /// A known rig calibration to measure each camera's pose error against.
     pub truth: Option<PathBuf>,
-    /// Print one JSON object.
-    #[arg(long)]
-    pub json: bool,
     /// Replace the output file and report directory if they exist.
-    #[arg(long)]
     pub force: bool,
 }
 
-#[derive(Debug, Args)]
-pub struct ChessboardArgs {
+/// What `synth chessboard` renders (see its `--help`).
+#[derive(Clone, Debug)]
+pub struct ChessboardOptions {
     /// The directory to create.
-    #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// Inner corners of the board, COLSxROWS.
-    #[arg(long, default_value = "9x6")]
     pub board: String,
-    /// The side of one square, millimetres (40: a 400 x 280 mm board, which poses both cameras
-    /// within 0.3 mm; 20 mm squares give about 1 mm).
-    #[arg(long = "square-mm", value_name = "S", value_parser = parse_square_mm, allow_negative_numbers = true, default_value_t = 40.0)]
+    /// The side of one square, millimetres.
     pub square_mm: f64,
     /// Intrinsics views per camera.
-    #[arg(long, value_name = "N", default_value_t = 15, value_parser = clap::value_parser!(u32).range(1..=500))]
     pub views: u32,
     /// Seed of the board poses, lighting and noise.
-    #[arg(long, value_name = "S", default_value_t = 0)]
     pub seed: u64,
-    /// Bin the colour camera's 1280x1024 sensor by this factor (1, 2 or 4).
-    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4))]
+    /// The colour camera's binning (1, 2 or 4).
     pub color_binning: u32,
     /// Replace the output directory if it is not empty.
-    #[arg(long)]
     pub force: bool,
-    /// Print what was written as one JSON object (`out`, `views`).
-    #[arg(long)]
-    pub json: bool,
 }
 
-fn refuse_existing(path: &Path, force: bool) -> Outcome {
+fn refuse_existing(path: &Path, force: bool) -> Result<(), Failure> {
     if path.exists() && !force {
         return Err(Failure::usage(Exists(path.to_owned())));
     }
@@ -158,68 +103,44 @@ fn calibration_failure(e: CalibrationError) -> Failure {
     Failure::classed(e.is_input_problem(), e)
 }
 
-/// `mousepose calibrate ...`.
-///
-/// # Errors
-/// Whatever the command meets; the message names the file at fault.
-pub fn run(command: &CalibrateCommand) -> Outcome {
-    match command {
-        CalibrateCommand::Intrinsics(args) => intrinsics(args),
-        CalibrateCommand::Extrinsics(args) => extrinsics_command(args),
-    }
-}
-
-#[derive(Serialize)]
-struct IntrinsicsJson<'a> {
-    out: String,
-    width: u32,
-    height: u32,
-    fx: f64,
-    fy: f64,
-    cx: f64,
-    cy: f64,
-    distortion: [f64; 5],
-    rms: Option<f64>,
-    per_view_errors: &'a [f64],
-    views: &'a [String],
-    skipped: &'a [String],
-    source: &'static str,
-}
-
-fn parse_square_mm(s: &str) -> Result<f64, String> {
-    crate::app::parse_ranged(s, "a square side in millimetres", 0.5, 1000.0)
+/// What `calibrate intrinsics` found and wrote: its `--json`, and the text it prints.
+#[derive(Clone, Debug, Serialize)]
+pub struct IntrinsicsSummary {
+    pub out: String,
+    pub width: u32,
+    pub height: u32,
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    pub distortion: [f64; 5],
+    pub rms: Option<f64>,
+    pub per_view_errors: Vec<f64>,
+    pub views: Vec<String>,
+    pub skipped: Vec<String>,
+    pub source: &'static str,
+    /// The lines printed without `--json`.
+    #[serde(skip)]
+    pub text: String,
 }
 
 fn board(size: &str, square_mm: f64) -> Result<Board, Failure> {
     Board::parse(size, square_mm).map_err(Failure::usage)
 }
 
-fn intrinsics(args: &IntrinsicsArgs) -> Outcome {
-    refuse_existing(&args.out, args.force)?;
-    let board = board(&args.board, args.square_mm)?;
-    if let Some(uri) = &args.openni {
+/// `mousepose calibrate intrinsics`: one camera's intrinsics from chessboard views (or the
+/// depth camera's from OpenNI), written to `options.out`.
+///
+/// # Errors
+/// A file in the way, a bad board, views without a board (the user's), or a failure on the way.
+pub fn intrinsics(options: &IntrinsicsOptions) -> Result<IntrinsicsSummary, Failure> {
+    refuse_existing(&options.out, options.force)?;
+    let board = board(&options.board, options.square_mm)?;
+    if let Some(uri) = &options.openni {
         let found = crate::vision::calibrate::openni::depth_intrinsics(uri)
             .with_context(|| format!("reading OpenNI device {uri:?}"))?;
-        crate::vision::calibrate::openni::save(&found, &args.out).map_err(calibration_failure)?;
-        let json = IntrinsicsJson {
-            out: args.out.display().to_string(),
-            width: found.intrinsics.width,
-            height: found.intrinsics.height,
-            fx: found.intrinsics.fx,
-            fy: found.intrinsics.fy,
-            cx: found.intrinsics.cx,
-            cy: found.intrinsics.cy,
-            distortion: found.intrinsics.distortion,
-            rms: None,
-            per_view_errors: &[],
-            views: &[],
-            skipped: &[],
-            source: "openni",
-        };
-        if args.json {
-            return Ok(print(&format!("{}\n", serde_json::to_string_pretty(&json)?))?);
-        }
-        return Ok(print(&format!(
+        crate::vision::calibrate::openni::save(&found, &options.out).map_err(calibration_failure)?;
+        let text = format!(
             "{}x{} depth mode, field of view {:.2} x {:.2} degrees: fx {:.2} fy {:.2} cx {:.2} cy {:.2}; written to {:?}\n",
             found.intrinsics.width,
             found.intrinsics.height,
@@ -229,32 +150,30 @@ fn intrinsics(args: &IntrinsicsArgs) -> Outcome {
             found.intrinsics.fy,
             found.intrinsics.cx,
             found.intrinsics.cy,
-            args.out
-        ))?);
+            options.out
+        );
+        return Ok(IntrinsicsSummary {
+            out: options.out.display().to_string(),
+            width: found.intrinsics.width,
+            height: found.intrinsics.height,
+            fx: found.intrinsics.fx,
+            fy: found.intrinsics.fy,
+            cx: found.intrinsics.cx,
+            cy: found.intrinsics.cy,
+            distortion: found.intrinsics.distortion,
+            rms: None,
+            per_view_errors: Vec::new(),
+            views: Vec::new(),
+            skipped: Vec::new(),
+            source: "openni",
+            text,
+        });
     }
-    let pattern = args.images.as_deref().unwrap_or_default();
+    let pattern = options.images.as_deref().unwrap_or_default();
     let images = expand_glob(pattern)?;
     let result = calibrate_intrinsics(&images, &board).map_err(calibration_failure)?;
-    result.save(&args.out).map_err(calibration_failure)?;
+    result.save(&options.out).map_err(calibration_failure)?;
     let i = &result.intrinsics;
-    if args.json {
-        let json = IntrinsicsJson {
-            out: args.out.display().to_string(),
-            width: i.width,
-            height: i.height,
-            fx: i.fx,
-            fy: i.fy,
-            cx: i.cx,
-            cy: i.cy,
-            distortion: i.distortion,
-            rms: Some(result.rms_px),
-            per_view_errors: &result.per_view_errors_px,
-            views: &result.views,
-            skipped: &result.skipped,
-            source: "chessboard",
-        };
-        return Ok(print(&format!("{}\n", serde_json::to_string_pretty(&json)?))?);
-    }
     let mut t = String::new();
     let _ = writeln!(t, "{:<40} {:>10}", "view", "rms px");
     for (v, e) in result.views.iter().zip(&result.per_view_errors_px) {
@@ -274,35 +193,61 @@ fn intrinsics(args: &IntrinsicsArgs) -> Outcome {
         result.rms_px,
         result.views.len(),
         result.skipped.len(),
-        args.out
+        options.out
     );
-    Ok(print(&t)?)
+    Ok(IntrinsicsSummary {
+        out: options.out.display().to_string(),
+        width: i.width,
+        height: i.height,
+        fx: i.fx,
+        fy: i.fy,
+        cx: i.cx,
+        cy: i.cy,
+        distortion: i.distortion,
+        rms: Some(result.rms_px),
+        per_view_errors: result.per_view_errors_px.clone(),
+        views: result.views.clone(),
+        skipped: result.skipped.clone(),
+        source: "chessboard",
+        text: t,
+    })
 }
 
-#[derive(Serialize)]
-struct ExtrinsicsJson<'a> {
-    out: String,
-    depth: &'a extrinsics::CameraReport,
-    color: &'a extrinsics::CameraReport,
+/// What `calibrate extrinsics` found and wrote: its `--json` (and `report.json`), and the
+/// table of `report.txt`.
+#[derive(Clone, Debug, Serialize)]
+pub struct ExtrinsicsSummary {
+    pub out: String,
+    pub depth: extrinsics::CameraReport,
+    pub color: extrinsics::CameraReport,
     #[serde(skip_serializing_if = "Option::is_none")]
-    error_vs_truth: Option<std::collections::BTreeMap<&'static str, PoseError>>,
+    pub error_vs_truth: Option<std::collections::BTreeMap<&'static str, PoseError>>,
+    /// The table of both cameras' poses (`report.txt`).
+    #[serde(skip)]
+    pub table: String,
 }
 
 /// A camera's pose error against a known calibration.
 #[derive(Clone, Copy, Debug, Serialize)]
-struct PoseError {
-    position_mm: f64,
-    rotation_deg: f64,
+pub struct PoseError {
+    pub position_mm: f64,
+    pub rotation_deg: f64,
 }
 
-fn extrinsics_command(args: &ExtrinsicsArgs) -> Outcome {
-    refuse_existing(&args.out, args.force)?;
-    let board = board(&args.board, args.square_mm)?;
+/// `mousepose calibrate extrinsics`: both cameras' poses from one board on the glass, written
+/// to `options.out` (and a report into `options.report`).
+///
+/// # Errors
+/// A file in the way, a bad board or intrinsics file, a board not found (the user's), or a
+/// failure on the way.
+pub fn extrinsics(options: &ExtrinsicsOptions) -> Result<ExtrinsicsSummary, Failure> {
+    refuse_existing(&options.out, options.force)?;
+    let board = board(&options.board, options.square_mm)?;
     board.check_orientable().map_err(Failure::usage)?;
-    let staging = args
+    let staging = options
         .report
         .as_deref()
-        .map(|dir| Staging::new(dir, args.force))
+        .map(|dir| Staging::new(dir, options.force))
         .transpose()
         .map_err(output_failure)?;
     let view = |file: &Path, image: &Path, serial: &Option<String>| -> Result<ExtrinsicsView, Failure> {
@@ -313,10 +258,10 @@ fn extrinsics_command(args: &ExtrinsicsArgs) -> Outcome {
             serial: serial.clone(),
         })
     };
-    let depth = view(&args.depth_intrinsics, &args.depth_image, &args.depth_serial)?;
-    let color = view(&args.color_intrinsics, &args.color_image, &args.color_serial)?;
+    let depth = view(&options.depth_intrinsics, &options.depth_image, &options.depth_serial)?;
+    let color = view(&options.color_intrinsics, &options.color_image, &options.color_serial)?;
     let result = extrinsics::calibrate_extrinsics(&depth, &color, &board).map_err(calibration_failure)?;
-    result.calibration.save(&args.out).map_err(calibration_failure)?;
+    result.calibration.save(&options.out).map_err(calibration_failure)?;
     let mut table = String::new();
     let _ = writeln!(
         table,
@@ -334,7 +279,7 @@ fn extrinsics_command(args: &ExtrinsicsArgs) -> Outcome {
             r.reprojection_max_px
         );
     }
-    let error_vs_truth = match &args.truth {
+    let error_vs_truth = match &options.truth {
         Some(path) => {
             let truth = crate::vision::calibrate::RigCalibration::load(path).map_err(calibration_failure)?;
             let mut errors = std::collections::BTreeMap::new();
@@ -363,11 +308,12 @@ fn extrinsics_command(args: &ExtrinsicsArgs) -> Outcome {
         }
         None => None,
     };
-    let json = ExtrinsicsJson {
-        out: args.out.display().to_string(),
-        depth: &result.depth,
-        color: &result.color,
+    let mut json = ExtrinsicsSummary {
+        out: options.out.display().to_string(),
+        depth: result.depth.clone(),
+        color: result.color.clone(),
         error_vs_truth,
+        table: String::new(),
     };
     if let Some(staging) = staging {
         let dir = staging.path();
@@ -384,41 +330,47 @@ fn extrinsics_command(args: &ExtrinsicsArgs) -> Outcome {
         write("color-axes.png", &result.color_axes_png)?;
         staging.commit()?;
     }
-    if args.json {
-        return Ok(print(&format!("{}\n", serde_json::to_string_pretty(&json)?))?);
-    }
-    let _ = writeln!(table, "rig calibration written to {:?}", args.out);
-    Ok(print(&table)?)
+    json.table = table;
+    Ok(json)
+}
+
+/// What `synth chessboard` wrote.
+#[derive(Clone, Debug, Serialize)]
+pub struct ChessboardSummary {
+    /// The directory written.
+    pub out: PathBuf,
+    /// Intrinsics views per camera.
+    pub views: u32,
 }
 
 /// `mousepose synth chessboard`.
 ///
 /// # Errors
 /// A bad board, an output directory that may not be replaced, or a render that cannot be written.
-pub fn synth_chessboard(args: &ChessboardArgs) -> Outcome {
-    let board = board(&args.board, args.square_mm)?;
-    if ![1, 2, 4].contains(&args.color_binning) {
+pub fn synth_chessboard(options: &ChessboardOptions) -> Result<ChessboardSummary, Failure> {
+    let board = board(&options.board, options.square_mm)?;
+    if ![1, 2, 4].contains(&options.color_binning) {
         return Err(Failure::usage(anyhow::anyhow!(
             "expected a binning factor of 1, 2 or 4, got {}",
-            args.color_binning
+            options.color_binning
         )));
     }
-    let staging = Staging::new(&args.out, args.force).map_err(output_failure)?;
+    let staging = Staging::new(&options.out, options.force).map_err(output_failure)?;
     let spec = ChessboardSpec {
         board,
-        views: args.views,
-        seed: args.seed,
-        color_binning: args.color_binning,
+        views: options.views,
+        seed: options.seed,
+        color_binning: options.color_binning,
     };
-    let rig = crate::core::geometry::Rig::default_rig().with_color_binning(args.color_binning);
-    let bar = crate::engine::progress::bar(u64::from(args.views) * 2 + 2, "rendering");
+    let rig = crate::core::geometry::Rig::default_rig().with_color_binning(options.color_binning);
+    let bar = crate::engine::progress::bar(u64::from(options.views) * 2 + 2, "rendering");
     write_chessboards(staging.path(), &rig, &spec, |done| bar.set_position(done))
-        .with_context(|| format!("writing chessboard views to {:?}", args.out))?;
+        .with_context(|| format!("writing chessboard views to {:?}", options.out))?;
     bar.finish_and_clear();
     let out = staging.commit()?;
-    tracing::info!(message = "Chessboard views written.", path = %out.display(), views = args.views);
-    if args.json {
-        crate::app::print_json(&serde_json::json!({ "out": out, "views": args.views }))?;
-    }
-    Ok(())
+    tracing::info!(message = "Chessboard views written.", path = %out.display(), views = options.views);
+    Ok(ChessboardSummary {
+        out,
+        views: options.views,
+    })
 }

@@ -3,6 +3,7 @@
 //! struct in and a summary out. They know no command line: `app` parses the arguments into
 //! the options, calls an engine, prints its summary and maps its [`Failure`] to an exit code.
 
+pub mod calibrate;
 pub mod chart;
 pub mod progress;
 /// Until `replay` moves here too: the name of its summary file.
@@ -10,6 +11,7 @@ pub mod replay {
     /// A replay's summary, in its output directory.
     pub const SUMMARY_FILE: &str = "summary.json";
 }
+pub mod synth;
 
 use anyhow::Context as _;
 use std::path::Path;

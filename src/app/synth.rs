@@ -1,0 +1,287 @@
+//! `mousepose synth dataset|session|chessboard|moseq`: rendered training data, sessions and
+//! recordings. The arguments, handed to [`crate::engine::synth`] (and
+//! [`crate::engine::calibrate`] for chessboards).
+
+use crate::app::Outcome;
+use crate::app::{parse_binning, parse_fps, parse_images, parse_noise_mm, parse_seconds, parse_square_mm};
+use crate::core::frame::PixelFormat;
+use crate::core::noise::{DepthNoise, NoiseModel};
+use crate::engine::calibrate::{self, ChessboardOptions};
+use crate::engine::synth::{self as engine, DatasetOptions, MoseqOptions, SessionOptions};
+use crate::synth::dataset::DatasetSpec;
+use crate::synth::moseq::MoseqSpec;
+use crate::synth::session::SessionSpec;
+use clap::{Args, Subcommand};
+use std::path::PathBuf;
+
+#[derive(Debug, Subcommand)]
+pub enum SynthCommand {
+    /// A training or test set of independent rendered instants.
+    Dataset(DatasetArgs),
+    /// A continuous behaviour sequence written as a recorded session.
+    Session(SessionArgs),
+    /// Rendered chessboard views of both cameras, for testing calibration end to end.
+    Chessboard(ChessboardArgs),
+    /// A depth-only recording in MoSeq's layout (depth.dat, depth_ts.txt, metadata.json, and
+    /// the true camera as rig.yaml): a session's mouse under a real rig's camera.
+    Moseq(MoseqArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ChessboardArgs {
+    /// The directory to create.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Inner corners of the board, COLSxROWS.
+    #[arg(long, default_value = "9x6")]
+    pub board: String,
+    /// The side of one square, millimetres (40: a 400 x 280 mm board, which poses both cameras
+    /// within 0.3 mm; 20 mm squares give about 1 mm).
+    #[arg(long = "square-mm", value_name = "S", value_parser = parse_square_mm, allow_negative_numbers = true, default_value_t = 40.0)]
+    pub square_mm: f64,
+    /// Intrinsics views per camera.
+    #[arg(long, value_name = "N", default_value_t = 15, value_parser = clap::value_parser!(u32).range(1..=500))]
+    pub views: u32,
+    /// Seed of the board poses, lighting and noise.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    pub seed: u64,
+    /// Bin the colour camera's 1280x1024 sensor by this factor (1, 2 or 4).
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4))]
+    pub color_binning: u32,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    pub force: bool,
+    /// Print what was written as one JSON object (`out`, `views`).
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct MoseqArgs {
+    /// The recording directory to create.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Number of depth frames.
+    #[arg(long, value_name = "N", default_value_t = 900, value_parser = parse_images, allow_negative_numbers = true)]
+    frames: u64,
+    /// Frame rate (timestamps in depth_ts.txt).
+    #[arg(long, value_name = "FPS", default_value_t = 30.0, value_parser = parse_fps, allow_negative_numbers = true)]
+    fps: f64,
+    /// Seed of the behaviour sequence (the synthetic session's of the same seed) and the noise.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    /// Frame size, WIDTHxHEIGHT, one of the depth camera table's (nominal intrinsics).
+    #[arg(long, value_name = "WxH", default_value = "512x424", value_parser = parse_size)]
+    size: (u32, u32),
+    /// The camera's height above the floor (mm).
+    #[arg(long, value_name = "MM", default_value_t = 670.0, value_parser = parse_camera_height, allow_negative_numbers = true)]
+    camera_height_mm: f64,
+    /// The camera's tilt from looking straight down (degrees).
+    #[arg(long, value_name = "DEG", default_value_t = 0.0, value_parser = parse_tilt, allow_negative_numbers = true)]
+    tilt_deg: f64,
+    #[command(flatten)]
+    noise: NoiseArgs,
+    /// Depth camera noise model: none, structured-light or tof.
+    #[arg(long = "noise-model", value_name = "MODEL", default_value = "tof")]
+    noise_model: NoiseModel,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    force: bool,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("expected a frame size WIDTHxHEIGHT such as 512x424, got {s}");
+    let (w, h) = s.trim().split_once('x').ok_or_else(bad)?;
+    let w: u32 = w.trim().parse().map_err(|_| bad())?;
+    let h: u32 = h.trim().parse().map_err(|_| bad())?;
+    if w == 0 || h == 0 {
+        return Err(bad());
+    }
+    Ok((w, h))
+}
+
+fn parse_camera_height(s: &str) -> Result<f64, String> {
+    crate::app::parse_ranged(s, "a camera height in millimetres", 300.0, 2000.0)
+}
+
+fn parse_tilt(s: &str) -> Result<f64, String> {
+    crate::app::parse_ranged(s, "a tilt in degrees", 0.0, 30.0)
+}
+
+#[derive(Debug, Args)]
+pub struct NoiseArgs {
+    /// Gaussian depth noise, standard deviation in millimetres.
+    #[arg(long = "noise-mm", value_name = "SIGMA", default_value_t = 0.0, value_parser = parse_noise_mm, allow_negative_numbers = true)]
+    noise_mm: f64,
+}
+
+#[derive(Debug, Args)]
+pub struct DatasetArgs {
+    /// The dataset directory to create.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Number of images.
+    #[arg(long, value_name = "N", value_parser = parse_images, allow_negative_numbers = true)]
+    images: u64,
+    /// Seed of the random poses, placements and noise.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    #[command(flatten)]
+    noise: NoiseArgs,
+    /// Depth camera noise model: none, structured-light or tof.
+    #[arg(long = "noise-model", value_name = "MODEL", default_value = "none")]
+    noise_model: NoiseModel,
+    /// Leave out the bottom colour views (smaller and faster, for body and part training).
+    #[arg(long)]
+    no_bottom: bool,
+    /// Print what was written as one JSON object (`out`, `images`).
+    #[arg(long)]
+    json: bool,
+    /// standard: mice in the range the bundled forests were trained on; varied: sizes, body
+    /// shapes, backs and tails well outside it (see `synth session --mice`); mixed: every
+    /// other image varied.
+    #[arg(long, value_name = "KIND", default_value = "standard")]
+    mice: crate::synth::Mice,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    force: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct SessionArgs {
+    /// The session directory to create.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Length of the session.
+    #[arg(long, value_name = "N", value_parser = parse_seconds, allow_negative_numbers = true)]
+    seconds: f64,
+    /// Frame rate of both cameras.
+    #[arg(long, value_name = "FPS", default_value_t = 30.0, value_parser = parse_fps, allow_negative_numbers = true)]
+    fps: f64,
+    /// Seed of the behaviour sequence, the clocks and the noise.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    #[command(flatten)]
+    noise: NoiseArgs,
+    /// Depth camera noise model: none, structured-light or tof.
+    #[arg(long = "noise-model", value_name = "MODEL", default_value = "structured-light")]
+    noise_model: NoiseModel,
+    /// Bin the colour camera's 1280x1024 sensor by this factor (1, 2 or 4).
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = parse_binning)]
+    color_binning: u32,
+    /// Depth camera only (the paper's single-depth-image mode).
+    #[arg(long)]
+    no_color: bool,
+    /// Print what was written as one JSON object (`out`, `depth_frames`, `color_frames`,
+    /// `preview`).
+    #[arg(long)]
+    json: bool,
+    /// standard: mice like the ones the bundled forests were trained on; varied: sizes,
+    /// body shapes, backs and tails well outside that range (a stress test); mixed: varied
+    /// for odd seeds.
+    #[arg(long, value_name = "KIND", default_value = "standard")]
+    mice: crate::synth::Mice,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    force: bool,
+}
+
+/// `mousepose synth ...`.
+pub fn run(command: SynthCommand) -> Outcome {
+    match command {
+        SynthCommand::Dataset(args) => synth_dataset(&args),
+        SynthCommand::Session(args) => synth_session(&args),
+        SynthCommand::Chessboard(args) => synth_chessboard(&args),
+        SynthCommand::Moseq(args) => synth_moseq(&args),
+    }
+}
+
+fn synth_chessboard(args: &ChessboardArgs) -> Outcome {
+    let summary = calibrate::synth_chessboard(&ChessboardOptions {
+        out: args.out.clone(),
+        board: args.board.clone(),
+        square_mm: args.square_mm,
+        views: args.views,
+        seed: args.seed,
+        color_binning: args.color_binning,
+        force: args.force,
+    })?;
+    if args.json {
+        crate::app::print_json(&serde_json::json!({ "out": summary.out, "views": summary.views }))?;
+    }
+    Ok(())
+}
+
+fn synth_moseq(args: &MoseqArgs) -> Outcome {
+    let spec = MoseqSpec {
+        frames: args.frames,
+        fps: args.fps,
+        seed: args.seed,
+        noise: DepthNoise {
+            model: args.noise_model,
+            gaussian_mm: args.noise.noise_mm,
+        },
+        width: args.size.0,
+        height: args.size.1,
+        camera_height_mm: args.camera_height_mm,
+        tilt_deg: args.tilt_deg,
+    };
+    engine::synth_moseq(&MoseqOptions {
+        out: args.out.clone(),
+        spec,
+        force: args.force,
+    })?;
+    Ok(())
+}
+
+fn synth_dataset(args: &DatasetArgs) -> Outcome {
+    let spec = DatasetSpec {
+        count: args.images,
+        seed: args.seed,
+        noise: DepthNoise {
+            model: args.noise_model,
+            gaussian_mm: args.noise.noise_mm,
+        },
+        bottom_views: !args.no_bottom,
+        mice: args.mice,
+    };
+    let summary = engine::synth_dataset(&DatasetOptions {
+        out: args.out.clone(),
+        spec,
+        force: args.force,
+    })?;
+    if args.json {
+        crate::app::print_json(&serde_json::json!({ "out": summary.out, "images": summary.images }))?;
+    }
+    Ok(())
+}
+
+fn synth_session(args: &SessionArgs) -> Outcome {
+    let spec = SessionSpec {
+        seconds: args.seconds,
+        fps: args.fps,
+        seed: args.seed,
+        noise: DepthNoise {
+            model: args.noise_model,
+            gaussian_mm: args.noise.noise_mm,
+        },
+        color_binning: args.color_binning,
+        color_format: PixelFormat::BayerRg8,
+        color: !args.no_color,
+        mice: args.mice,
+    };
+    let summary = engine::synth_session(&SessionOptions {
+        out: args.out.clone(),
+        spec,
+        force: args.force,
+    })?;
+    if args.json {
+        crate::app::print_json(&serde_json::json!({
+            "out": summary.out,
+            "depth_frames": summary.depth_frames,
+            "color_frames": summary.color_frames,
+            "preview": summary.preview,
+        }))?;
+    }
+    Ok(())
+}
