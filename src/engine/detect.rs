@@ -1,63 +1,35 @@
-//! `mousepose detect paws IMAGE... --out DIR`: the paw cascade on single bottom-view images,
-//! for a lab checking what its own colour camera sees. Writes `detections.json` (per image its
+//! The engine of `mousepose detect paws IMAGE... --out DIR`: the paw cascade on single
+//! bottom-view images, for a lab checking what its own colour camera sees. Writes `detections.json` (per image its
 //! size and the paws' boxes with their scores) and, per image, a copy with the boxes drawn.
 
-use crate::app::{print, print_json};
-use crate::engine::{Failure, output_failure};
 use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
-use crate::core::geometry::Rig;
 use crate::core::image::RgbImage;
+use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
 use crate::runtime::models::{PAWS_MODEL, default_models_dir};
 use crate::vision::paws::{PawDetection, PawDetector};
 use anyhow::Context as _;
-use clap::{Args, Subcommand};
 use opencv::core::{Mat, MatTraitConst, MatTraitConstManual};
 use opencv::imgcodecs;
 use serde::Serialize;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// The file with every image's detections.
 pub const DETECTIONS_FILE: &str = "detections.json";
 
-#[derive(Debug, Subcommand)]
-pub enum DetectCommand {
-    /// Run the paw cascade on bottom-view images (PNG, JPEG, ...).
-    Paws(DetectPawsArgs),
-}
-
-#[derive(Debug, Args)]
-pub struct DetectPawsArgs {
+/// What `detect paws` works on (see its `--help`).
+#[derive(Clone, Debug)]
+pub struct DetectPawsOptions {
     /// The images, seen from below through the glass.
-    #[arg(value_name = "IMAGE", required = true)]
     pub images: Vec<PathBuf>,
     /// The directory to write detections.json and the pictures into.
-    #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
-    /// The paw cascade (OpenCV cascade XML); the bundled one by default.
-    #[arg(long, value_name = "FILE")]
+    /// The paw cascade; the bundled one when `None`.
     pub model: Option<PathBuf>,
-    /// How many image pixels a millimetre on the glass spans (the default rig's colour camera:
-    /// 2 at full resolution).
-    #[arg(long, value_name = "S", default_value_t = default_px_per_mm(), value_parser = parse_px_per_mm, allow_negative_numbers = true)]
+    /// How many image pixels a millimetre on the glass spans.
     pub px_per_mm: f64,
-    /// Print the detections as one JSON object.
-    #[arg(long)]
-    pub json: bool,
     /// Replace the output directory if it is not empty.
-    #[arg(long)]
     pub force: bool,
-}
-
-/// The default rig's colour camera: its focal length over its distance to the glass.
-fn default_px_per_mm() -> f64 {
-    let c = Rig::default_rig().color;
-    c.intrinsics.fx / c.centre().coords.norm()
-}
-
-fn parse_px_per_mm(s: &str) -> Result<f64, String> {
-    crate::app::parse_ranged(s, "pixels per millimetre", 0.05, 50.0)
 }
 
 /// One image's detections.
@@ -122,30 +94,30 @@ fn picture(frame: &ColorFrame, paws: &[PawDetection]) -> RgbImage {
     img
 }
 
-/// `mousepose detect paws`.
+/// `mousepose detect paws`: writes `detections.json` and the pictures, returns the detections.
 ///
 /// # Errors
-/// A missing or unreadable image or model, or an output directory in the way (exit code 1);
-/// a failure writing the output (2).
-pub fn paws(args: &DetectPawsArgs) -> crate::app::Outcome {
-    let model = match &args.model {
+/// A missing or unreadable image or model, or an output directory in the way (the user's);
+/// a failure writing the output.
+pub fn paws(options: &DetectPawsOptions) -> Result<Detections, Failure> {
+    let model = match &options.model {
         Some(path) => path.clone(),
         None => default_models_dir().map_err(Failure::usage)?.join(PAWS_MODEL),
     };
     let mut detector = PawDetector::load(&model)
         .map_err(Failure::usage)
         .map_err(|f| f.context(format!("loading the paw cascade {model:?}")))?;
-    let frames = args
+    let frames = options
         .images
         .iter()
         .map(|p| read_image(p))
         .collect::<anyhow::Result<Vec<_>>>()
         .map_err(Failure::usage)?;
-    let staging = Staging::new(&args.out, args.force).map_err(output_failure)?;
+    let staging = Staging::new(&options.out, options.force).map_err(output_failure)?;
     let mut found = Vec::new();
     let mut images = Vec::new();
-    for (k, (path, frame)) in args.images.iter().zip(&frames).enumerate() {
-        detector.detect(frame, (0, 0, frame.width, frame.height), args.px_per_mm, &mut found);
+    for (k, (path, frame)) in options.images.iter().zip(&frames).enumerate() {
+        detector.detect(frame, (0, 0, frame.width, frame.height), options.px_per_mm, &mut found);
         let stem = path.file_stem().map_or_else(|| "image".into(), |s| s.to_string_lossy());
         let name = format!("{k:03}-{stem}.png");
         let out = staging.path().join(&name);
@@ -162,20 +134,12 @@ pub fn paws(args: &DetectPawsArgs) -> crate::app::Outcome {
     }
     let detections = Detections {
         model,
-        px_per_mm: args.px_per_mm,
+        px_per_mm: options.px_per_mm,
         images,
     };
     let path = staging.path().join(DETECTIONS_FILE);
     let json = serde_json::to_vec_pretty(&detections).context("encoding the detections")?;
     std::fs::write(&path, json).with_context(|| format!("writing {path:?}"))?;
     staging.commit().map_err(output_failure)?;
-    if args.json {
-        return Ok(print_json(&detections)?);
-    }
-    let mut text = String::new();
-    for i in &detections.images {
-        let _ = writeln!(text, "{:?}: {} paws", i.image, i.paws.len());
-    }
-    let _ = writeln!(text, "boxes in {:?}", args.out.join(DETECTIONS_FILE));
-    Ok(print(&text)?)
+    Ok(detections)
 }

@@ -5,6 +5,7 @@
 
 pub mod calibrate;
 pub mod chart;
+pub mod detect;
 pub mod progress;
 /// Until `replay` moves here too: the name of its summary file.
 pub mod replay {
