@@ -1,69 +1,57 @@
-//! `mousepose experiment gauss2d`: the paper's running example.
+//! The engine of `mousepose experiment gauss2d`: the paper's running example.
 
 use crate::engine::chart::line_chart;
 use crate::engine::progress;
-use crate::app::{print, print_json};
-use crate::engine::{report_dir, write_report_file};
+use crate::engine::{Failure, report_dir, write_report_file};
 use crate::experiment::gauss2d::{self, Setup};
 use crate::vision::forest::discriminative::{DiscriminativeParams, Scoring};
 use crate::vision::forest::{Forest, TrainParams};
 use anyhow::Result;
-use clap::{Args, Subcommand};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-#[derive(Debug, Subcommand)]
-pub enum ExperimentCommand {
-    /// The paper's running example: 2D Gaussians, baseline vs discriminative training.
-    Gauss2d(Gauss2dArgs),
-}
-
-#[derive(Debug, Args)]
-pub struct Gauss2dArgs {
-    /// A tenth of the data and shorter sweeps (under a minute).
-    #[arg(long)]
+/// What `experiment gauss2d` runs (see its `--help`).
+#[derive(Clone, Debug)]
+pub struct Gauss2dOptions {
+    /// A tenth of the data and shorter sweeps.
     pub quick: bool,
     /// Seed of the Gaussians and all draws.
-    #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Write tables and PNG plots of the sweeps into this directory.
-    #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
-    /// Print one JSON object instead of tables.
-    #[arg(long)]
-    pub json: bool,
 }
 
 /// One point of a sweep.
 #[derive(Clone, Debug, Serialize)]
-struct SweepPoint {
-    value: f64,
-    baseline_accuracy: f64,
-    discriminative_accuracy: f64,
+pub struct SweepPoint {
+    pub value: f64,
+    pub baseline_accuracy: f64,
+    pub discriminative_accuracy: f64,
 }
 
 /// What `experiment gauss2d --json` prints.
 #[derive(Clone, Debug, Serialize)]
-struct Gauss2dReport {
-    setup: Setup,
-    bayes_accuracy: f64,
-    baseline_accuracy: f64,
-    union_baseline_accuracy: f64,
-    discriminative_gain_accuracy: f64,
-    discriminative_accuracy: f64,
+pub struct Gauss2dReport {
+    pub setup: Setup,
+    pub bayes_accuracy: f64,
+    pub baseline_accuracy: f64,
+    pub union_baseline_accuracy: f64,
+    pub discriminative_gain_accuracy: f64,
+    pub discriminative_accuracy: f64,
     /// Ours: the node's current test kept among the candidates, winning ties.
-    discriminative_keep_current_accuracy: f64,
-    paper: PaperFigures,
-    sweeps: std::collections::BTreeMap<String, Vec<SweepPoint>>,
+    pub discriminative_keep_current_accuracy: f64,
+    pub paper: PaperFigures,
+    pub sweeps: std::collections::BTreeMap<String, Vec<SweepPoint>>,
 }
 
+/// The paper's figures, beside ours.
 #[derive(Clone, Debug, Serialize)]
-struct PaperFigures {
-    baseline_accuracy: f64,
-    union_baseline_accuracy: f64,
-    discriminative_gain_accuracy: f64,
-    discriminative_accuracy: f64,
+pub struct PaperFigures {
+    pub baseline_accuracy: f64,
+    pub union_baseline_accuracy: f64,
+    pub discriminative_gain_accuracy: f64,
+    pub discriminative_accuracy: f64,
 }
 
 const PAPER: PaperFigures = PaperFigures {
@@ -73,14 +61,17 @@ const PAPER: PaperFigures = PaperFigures {
     discriminative_accuracy: 0.812,
 };
 
-/// `mousepose experiment gauss2d`.
-pub fn gauss2d(args: &Gauss2dArgs) -> crate::app::Outcome {
-    Ok(run_gauss2d(args)?)
+/// `mousepose experiment gauss2d`: the figures, and the tables and plots in `options.report`.
+///
+/// # Errors
+/// The report cannot be written.
+pub fn gauss2d(options: &Gauss2dOptions) -> Result<Gauss2dReport, Failure> {
+    Ok(run_gauss2d(options)?)
 }
 
-fn run_gauss2d(args: &Gauss2dArgs) -> Result<()> {
-    let setup = Setup::new(args.quick, args.seed);
-    let steps = if args.quick { 30 } else { 40 };
+fn run_gauss2d(options: &Gauss2dOptions) -> Result<Gauss2dReport> {
+    let setup = Setup::new(options.quick, options.seed);
+    let steps = if options.quick { 30 } else { 40 };
     let bar = progress::bar(steps, "gauss2d");
     let blobs = gauss2d::blobs(setup.seed);
     let d_t = gauss2d::sample(&blobs, setup.points, setup.seed, 0);
@@ -108,7 +99,7 @@ fn run_gauss2d(args: &Gauss2dArgs) -> Result<()> {
     let mut sweeps = std::collections::BTreeMap::new();
 
     // Forest size: trees are independent, so a k-tree forest is the first k of a larger one.
-    let sizes: Vec<usize> = if args.quick {
+    let sizes: Vec<usize> = if options.quick {
         vec![1, 3, 5, 9]
     } else {
         vec![1, 3, 5, 7, 9, 13, 17]
@@ -156,19 +147,19 @@ fn run_gauss2d(args: &Gauss2dArgs) -> Result<()> {
             .collect();
         sweeps.insert(name.to_owned(), points);
     };
-    let ms: &[f64] = if args.quick {
+    let ms: &[f64] = if options.quick {
         &[10.0, 50.0, 200.0, 640.0]
     } else {
         &[10.0, 20.0, 50.0, 100.0, 200.0, 320.0, 640.0]
     };
     sweep("m", ms, &|p, v| p.tests = v as usize);
-    let lns: &[f64] = if args.quick {
+    let lns: &[f64] = if options.quick {
         &[10.0, 60.0, 1000.0, 10000.0]
     } else {
         &[10.0, 30.0, 60.0, 250.0, 1000.0, 2500.0, 10000.0]
     };
     sweep("l_n", lns, &|p, v| p.min_leaf = v as usize);
-    let levels: &[f64] = if args.quick {
+    let levels: &[f64] = if options.quick {
         &[0.0, 4.0, 8.0, 12.0]
     } else {
         &[0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0]
@@ -176,7 +167,7 @@ fn run_gauss2d(args: &Gauss2dArgs) -> Result<()> {
     sweep("start_level", levels, &|p, v| p.start_level = v as u32);
     sweep("subset", &[0.25, 0.5, 1.0], &|p, v| p.subset = v);
     // Iterations: each pass refines the previous pass's forest with a fresh subset.
-    let iterations = if args.quick { 3 } else { 5 };
+    let iterations = if options.quick { 3 } else { 5 };
     let mut forest = base.clone();
     let mut points = vec![SweepPoint {
         value: 0.0,
@@ -215,7 +206,7 @@ fn run_gauss2d(args: &Gauss2dArgs) -> Result<()> {
         paper: PAPER,
         sweeps,
     };
-    if let Some(dir) = &args.report {
+    if let Some(dir) = &options.report {
         report_dir(dir)?;
         write_report_file(dir, "gauss2d.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
         write_report_file(dir, "gauss2d.txt", gauss2d_tables(&report).as_bytes())?;
@@ -238,13 +229,11 @@ fn run_gauss2d(args: &Gauss2dArgs) -> Result<()> {
             .write_png(&dir.join(format!("sweep_{name}.png")))?;
         }
     }
-    if args.json {
-        return print_json(&report);
-    }
-    print(&gauss2d_tables(&report))
+    Ok(report)
 }
 
-fn gauss2d_tables(r: &Gauss2dReport) -> String {
+/// The tables `experiment gauss2d` prints (and writes to `gauss2d.txt`).
+pub fn gauss2d_tables(r: &Gauss2dReport) -> String {
     let mut t = String::new();
     let _ = writeln!(
         t,

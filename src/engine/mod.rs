@@ -6,6 +6,7 @@
 pub mod calibrate;
 pub mod chart;
 pub mod detect;
+pub mod experiment;
 pub mod progress;
 /// Until `replay` moves here too: the name of its summary file.
 pub mod replay {
