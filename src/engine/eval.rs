@@ -1,55 +1,60 @@
-//! `mousepose eval body|parts|paws`: a model's figures on a held-back dataset, with reports.
+//! The engine of `mousepose eval body|parts|paws`: a model's figures on a held-back dataset,
+//! with reports.
 
 use crate::engine::chart::{bar_chart, confusion_chart, line_chart};
-use crate::app::train::ModelTarget;
-use crate::app::{print, print_json};
-use crate::engine::{report_dir, write_report_file};
+use crate::engine::train::ModelTarget;
+use crate::engine::{Failure, report_dir, write_report_file};
 use crate::training;
 use crate::vision::forest::Forest;
 use crate::vision::forest::infer::{BodyEstimator, VoteSettings};
 use crate::vision::forest::model::{self, Model, ModelKind};
 use anyhow::{Context, Result, bail};
-use clap::Args;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-#[derive(Debug, Args)]
-pub struct EvalArgs {
-    /// Which model.
-    #[arg(value_enum)]
+/// What `eval` evaluates, on what (see its `--help`).
+#[derive(Clone, Debug)]
+pub struct EvalOptions {
     pub target: ModelTarget,
     /// The model file.
-    #[arg(long, value_name = "FILE")]
     pub model: PathBuf,
     /// The held-back test dataset.
-    #[arg(long, value_name = "DIR")]
     pub data: PathBuf,
     /// Write tables and PNG charts into this directory.
-    #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
     /// A baseline model to compare against in the report (body).
-    #[arg(long, value_name = "FILE")]
     pub baseline: Option<PathBuf>,
-    /// Print one JSON object instead of a table.
-    #[arg(long)]
-    pub json: bool,
 }
 
-/// `mousepose eval body|parts|paws`.
-pub fn run(args: &EvalArgs) -> crate::app::Outcome {
-    Ok(eval(args)?)
+/// A model's figures: what `eval --json` prints; [`EvalSummary::text`] is its table.
+#[derive(Debug, serde::Serialize)]
+#[serde(untagged)]
+pub enum EvalSummary {
+    Body(BodyFigures),
+    Parts(training::PartsReport),
+    Paws(training::paws_eval::PawReport),
 }
 
-fn eval(args: &EvalArgs) -> Result<()> {
-    let kind = match args.target {
+/// `mousepose eval body|parts|paws`: the figures, and the tables and charts in
+/// `options.report`.
+///
+/// # Errors
+/// The model or dataset cannot be read, or the report cannot be written.
+pub fn eval(options: &EvalOptions) -> Result<EvalSummary, Failure> {
+    Ok(run(options)?)
+}
+
+fn run(options: &EvalOptions) -> Result<EvalSummary> {
+    let kind = match options.target {
         ModelTarget::Body => ModelKind::Body,
         ModelTarget::Parts => ModelKind::Parts,
-        ModelTarget::Paws => return eval_paws(args),
+        ModelTarget::Paws => return eval_paws(options),
     };
-    let model = model::load(&args.model, Some(kind))?;
-    let (ds, samples) = training::load(&args.data).with_context(|| format!("reading test dataset {:?}", args.data))?;
+    let model = model::load(&options.model, Some(kind))?;
+    let (ds, samples) =
+        training::load(&options.data).with_context(|| format!("reading test dataset {:?}", options.data))?;
     if samples.is_empty() {
-        bail!("test dataset {:?} has no images", args.data);
+        bail!("test dataset {:?} has no images", options.data);
     }
     let rig = ds.meta.rig.unwrap_or_else(crate::core::geometry::Rig::default_rig);
     if let Some(train_seed) = model.info().data.iter().find(|d| d.seed == ds.meta.seed) {
@@ -59,32 +64,32 @@ fn eval(args: &EvalArgs) -> Result<()> {
         );
     }
     match model {
-        Model::Body(_, forest) => eval_body(args, forest, &samples, &rig),
-        Model::Parts(_, forest) => eval_parts(args, &forest, &samples),
+        Model::Body(_, forest) => eval_body(options, forest, &samples, &rig),
+        Model::Parts(_, forest) => eval_parts(options, &forest, &samples),
     }
 }
 
 /// What `eval body` prints: our estimate's figures, and the paper's method's beside them.
-#[derive(serde::Serialize)]
-struct BodyFigures {
+#[derive(Debug, serde::Serialize)]
+pub struct BodyFigures {
     #[serde(flatten)]
-    report: training::BodyReport,
-    paper_method: PaperMethod,
+    pub report: training::BodyReport,
+    pub paper_method: PaperMethod,
 }
 
 /// The figures of the paper's method alone (votes and mean-shift, no step along the tail).
-#[derive(serde::Serialize)]
-struct PaperMethod {
-    mean_error_mm: f64,
-    per_joint_mm: std::collections::BTreeMap<String, f64>,
+#[derive(Debug, serde::Serialize)]
+pub struct PaperMethod {
+    pub mean_error_mm: f64,
+    pub per_joint_mm: std::collections::BTreeMap<String, f64>,
 }
 
 fn eval_body(
-    args: &EvalArgs,
+    options: &EvalOptions,
     forest: Forest<[f32; 2], crate::vision::forest::depth::JointLeaf>,
     samples: &[crate::synth::dataset::Sample],
     rig: &crate::core::geometry::Rig,
-) -> Result<()> {
+) -> Result<EvalSummary> {
     let estimator = BodyEstimator::new(forest.clone(), VoteSettings::default());
     let report = training::eval_body(&estimator, samples, rig, 0.0)?;
     // The paper's method alone: votes and mean-shift, without our step along the tail.
@@ -103,7 +108,7 @@ fn eval_body(
         },
         report,
     };
-    if let Some(dir) = &args.report {
+    if let Some(dir) = &options.report {
         report_dir(dir)?;
         // In the paper's joint order, not the map's alphabetical one.
         let in_order = |r: &training::BodyReport| -> Vec<f64> {
@@ -118,7 +123,7 @@ fn eval_body(
             .collect();
         let ours = in_order(&report.report);
         let mut series = Vec::new();
-        let baseline = match &args.baseline {
+        let baseline = match &options.baseline {
             Some(path) => match model::load(path, Some(ModelKind::Body))? {
                 Model::Body(_, f) => Some(training::eval_body(
                     &BodyEstimator::new(f, VoteSettings::default()),
@@ -171,9 +176,10 @@ fn eval_body(
         write_report_file(dir, "error_vs_noise.csv", noise_table.as_bytes())?;
         write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
-    if args.json {
-        return print_json(&report);
-    }
+    Ok(EvalSummary::Body(report))
+}
+
+fn body_text(report: &BodyFigures) -> String {
     let mut t = String::new();
     let _ = writeln!(t, "{:<16} {:>9} {:>13}", "joint", "error mm", "paper's mm");
     for (name, e) in &report.report.per_joint_mm {
@@ -191,16 +197,16 @@ fn eval_body(
          the step along the segmented tail",
         report.report.images, report.report.no_mouse
     );
-    print(&t)
+    t
 }
 
 fn eval_parts(
-    args: &EvalArgs,
+    options: &EvalOptions,
     forest: &Forest<[f32; 2], Vec<f32>>,
     samples: &[crate::synth::dataset::Sample],
-) -> Result<()> {
+) -> Result<EvalSummary> {
     let report = training::eval_parts(forest, samples);
-    if let Some(dir) = &args.report {
+    if let Some(dir) = &options.report {
         report_dir(dir)?;
         confusion_chart(
             "part labels: confusion (% of true class)",
@@ -223,9 +229,10 @@ fn eval_parts(
         write_report_file(dir, "confusion.csv", table.as_bytes())?;
         write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
-    if args.json {
-        return print_json(&report);
-    }
+    Ok(EvalSummary::Parts(report))
+}
+
+fn parts_text(report: &training::PartsReport) -> String {
     let mut t = String::new();
     let _ = writeln!(t, "{:<12} {:>9}", "class", "accuracy");
     for (name, a) in &report.per_class_accuracy {
@@ -233,17 +240,17 @@ fn eval_parts(
     }
     let _ = writeln!(t, "{:<12} {:>8.1}%", "mean", 100.0 * report.mean_class_accuracy);
     let _ = writeln!(t, "{:<12} {:>8.1}%", "all pixels", 100.0 * report.pixel_accuracy);
-    print(&t)
+    t
 }
 
 /// `mousepose eval paws`.
-fn eval_paws(args: &EvalArgs) -> Result<()> {
+fn eval_paws(options: &EvalOptions) -> Result<EvalSummary> {
     use crate::training::paws_eval as eval;
     use crate::vision::paws::PawDetector;
-    let detector = PawDetector::load(&args.model)?;
-    let report =
-        eval::evaluate(&detector, &args.data).with_context(|| format!("evaluating on test dataset {:?}", args.data))?;
-    if let Some(dir) = &args.report {
+    let detector = PawDetector::load(&options.model)?;
+    let report = eval::evaluate(&detector, &options.data)
+        .with_context(|| format!("evaluating on test dataset {:?}", options.data))?;
+    if let Some(dir) = &options.report {
         report_dir(dir)?;
         let mut points = report.curve.clone();
         points.sort_by(|a, b| a.recall.total_cmp(&b.recall).then(b.precision.total_cmp(&a.precision)));
@@ -271,9 +278,10 @@ fn eval_paws(args: &EvalArgs) -> Result<()> {
         write_report_file(dir, "precision_recall.csv", table.as_bytes())?;
         write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
-    if args.json {
-        return print_json(&report);
-    }
+    Ok(EvalSummary::Paws(report))
+}
+
+fn paws_text(report: &training::paws_eval::PawReport) -> String {
     let mut t = String::new();
     let _ = writeln!(t, "{:<28} {:>9}", "images", report.images);
     let _ = writeln!(t, "{:<28} {:>9}", "paws on the glass", report.contact_paws);
@@ -291,5 +299,16 @@ fn eval_paws(args: &EvalArgs) -> Result<()> {
         "{} true, {} false, {} of lifted or hidden paws (neither)",
         report.true_positives, report.false_positives, report.neutral
     );
-    print(&t)
+    t
+}
+
+impl EvalSummary {
+    /// The table `eval` prints without `--json`.
+    pub fn text(&self) -> String {
+        match self {
+            Self::Body(report) => body_text(report),
+            Self::Parts(report) => parts_text(report),
+            Self::Paws(report) => paws_text(report),
+        }
+    }
 }

@@ -6,6 +6,7 @@
 pub mod calibrate;
 pub mod chart;
 pub mod detect;
+pub mod eval;
 pub mod experiment;
 pub mod progress;
 /// Until `replay` moves here too: the name of its summary file.
@@ -14,6 +15,7 @@ pub mod replay {
     pub const SUMMARY_FILE: &str = "summary.json";
 }
 pub mod synth;
+pub mod train;
 
 use anyhow::Context as _;
 use std::path::Path;

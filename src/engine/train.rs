@@ -1,110 +1,80 @@
-//! `mousepose train body|parts|paws`: forests and the paw cascade from synthetic datasets.
+//! The engine of `mousepose train body|parts|paws`: forests and the paw cascade from
+//! synthetic datasets.
 
 use crate::engine::progress;
-use crate::app::{Outcome, parse_subset};
 use crate::engine::{Exists, Failure};
 use crate::training::{self, PixelParams, Target, TrainJob, TrainProgress};
 use crate::vision::forest::discriminative::{DiscriminativeParams, ErrorScope, Scoring};
 use crate::vision::forest::model::{self, Model, ModelKind};
 use crate::vision::forest::{Forest, TrainParams};
 use anyhow::{Context, Result};
-use clap::Args;
 use indicatif::ProgressBar;
 use std::path::PathBuf;
 
 /// What `train` and `eval` work on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ModelTarget {
     /// The body forest: joints 1-12 from the top depth image.
     Body,
     /// The part forest: six body-part labels per depth pixel.
     Parts,
-    /// The paw detector: a boosted cascade of Haar features on the bottom colour view,
-    /// stored as OpenCV cascade XML.
+    /// The paw detector: a boosted cascade of Haar features on the bottom colour view.
     Paws,
 }
 
-#[derive(Debug, Args)]
-pub struct TrainArgs {
-    /// Which model.
-    #[arg(value_enum)]
+/// What `train` trains, on what, and where it writes it (see its `--help`).
+#[derive(Clone, Debug)]
+pub struct TrainOptions {
     pub target: ModelTarget,
     /// The training dataset (D_t).
-    #[arg(long, value_name = "DIR")]
     pub data: PathBuf,
     /// The model file to write.
-    #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
-    /// Trees in the forest.
-    #[arg(long, default_value_t = 7, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub trees: u32,
-    /// Maximum tree depth (L).
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=40))]
     pub depth: u32,
-    /// Random tests per split node (m).
-    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=10_000))]
     pub tests: u32,
-    /// Fewest samples to split a node (l_n).
-    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(2..=1_000_000))]
     pub leaf: u32,
-    /// A second dataset (D_d) for the paper's discriminative training of the trained forest.
-    #[arg(long, value_name = "DIR")]
+    /// A second dataset (D_d) for discriminative training.
     pub discriminative: Option<PathBuf>,
-    /// Refine this trained baseline (trained on --data) instead of training one first.
-    #[arg(long, value_name = "FILE", requires = "discriminative")]
+    /// Refine this trained baseline instead of training one first.
     pub from: Option<PathBuf>,
-    /// Passes of discriminative training.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=20))]
     pub iterations: u32,
-    /// Tree level where discriminative training starts.
-    #[arg(long, default_value_t = 0)]
     pub start_level: u32,
-    /// Fraction of D_d each tree sees (D'_d); it should hold about as many pixels as D_t, or
-    /// the shrink rule coarsens the trees.
-    #[arg(long, default_value_t = 0.5, value_parser = parse_subset, allow_negative_numbers = true)]
     pub subset: f64,
-    /// Draw each tree's D'_d with replacement (`--subset` x |D_d| draws; a bootstrap sample
-    /// at 1) instead of keeping each pixel of D_d with probability `--subset`.
-    #[arg(long)]
     pub bootstrap: bool,
-    /// In discriminative training, keep what D_t taught the leaves that stay leaves instead
-    /// of refitting them to D'_d (the paper refits them).
-    #[arg(long)]
     pub keep_leaves: bool,
-    /// Refit the leaves (the default since the paper does; accepted for older scripts).
-    #[arg(long, hide = true, conflicts_with = "keep_leaves")]
-    pub refit_leaves: bool,
-    /// In discriminative training, put each node's current test among its candidates,
-    /// winning ties, so no node's error rises when its test is chosen (the paper draws
-    /// fresh tests only).
-    #[arg(long)]
     pub keep_current: bool,
-    /// Which joints a body pixel's error E counts in discriminative training: all of them,
-    /// as the paper defines E, or only those within the pixel's vote radius.
-    #[arg(long, default_value = "all-joints", value_name = "all-joints|near-joints")]
     pub error: ErrorScope,
-    /// Score each node's candidate tests on at most this many of its pixels, drawn at random
-    /// (all of them are still routed by the chosen test); 0 scores them on all. Makes large
-    /// test budgets such as the paper's 20,000 for part labels affordable.
-    #[arg(long, default_value_t = 0)]
     pub score_pixels: usize,
-    /// Mouse pixels drawn per training image.
-    #[arg(long, default_value_t = 150, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub pixels: u32,
-    /// Seed of the pixel draws and the random tests (paws: of the augmentation and the
-    /// negatives' draws).
-    #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Cascade stages at most (paws).
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=50))]
     pub stages: u32,
     /// Replace the model file if it exists.
-    #[arg(long)]
     pub force: bool,
-    /// Print what was written as one JSON object (`out`, `kind`, the model's size,
-    /// `training_seconds`).
-    #[arg(long)]
-    pub json: bool,
+}
+
+/// What `train` wrote.
+#[derive(Clone, Debug)]
+pub enum TrainSummary {
+    /// A forest: `kind` is `body` or `parts`.
+    Forest {
+        out: PathBuf,
+        kind: &'static str,
+        trees: usize,
+        nodes: usize,
+        leaves: usize,
+        training_seconds: f64,
+        discriminative_tests_changed: usize,
+    },
+    /// The paw cascade.
+    Paws {
+        out: PathBuf,
+        stages: usize,
+        weak: usize,
+        features: usize,
+        training_seconds: f64,
+    },
 }
 
 struct Bar(ProgressBar);
@@ -121,53 +91,56 @@ impl TrainProgress for Bar {
     }
 }
 
-/// `mousepose train body|parts|paws`.
-pub fn run(args: &TrainArgs) -> Outcome {
-    if args.out.exists() && !args.force {
-        return Err(Failure::usage(Exists(args.out.clone())));
+/// `mousepose train body|parts|paws`: trains the model and writes it to `options.out`.
+///
+/// # Errors
+/// A model file in the way (the user's), or a dataset or model that cannot be read or written.
+pub fn train(options: &TrainOptions) -> Result<TrainSummary, Failure> {
+    if options.out.exists() && !options.force {
+        return Err(Failure::usage(Exists(options.out.clone())));
     }
-    if args.target == ModelTarget::Paws {
-        return Ok(train_paws(args)?);
+    if options.target == ModelTarget::Paws {
+        return Ok(train_paws(options)?);
     }
     let params = TrainParams {
-        trees: args.trees as usize,
-        max_depth: args.depth,
-        tests: args.tests as usize,
-        min_leaf: args.leaf as usize,
-        seed: args.seed,
-        score_sample: args.score_pixels,
+        trees: options.trees as usize,
+        max_depth: options.depth,
+        tests: options.tests as usize,
+        min_leaf: options.leaf as usize,
+        seed: options.seed,
+        score_sample: options.score_pixels,
     };
     let job = TrainJob {
-        target: match args.target {
+        target: match options.target {
             ModelTarget::Body => Target::Body,
             ModelTarget::Parts | ModelTarget::Paws => Target::Parts,
         },
-        train: &args.data,
-        discriminative: args.discriminative.as_deref(),
+        train: &options.data,
+        discriminative: options.discriminative.as_deref(),
         params,
         disc: DiscriminativeParams {
             tests: params.tests,
             min_leaf: params.min_leaf,
-            start_level: args.start_level,
-            iterations: args.iterations as usize,
-            subset: args.subset,
-            bootstrap: args.bootstrap,
-            refit_leaves: !args.keep_leaves,
-            keep_current: args.keep_current,
-            error: args.error,
+            start_level: options.start_level,
+            iterations: options.iterations as usize,
+            subset: options.subset,
+            bootstrap: options.bootstrap,
+            refit_leaves: !options.keep_leaves,
+            keep_current: options.keep_current,
+            error: options.error,
             scoring: Scoring::SubtreeError,
             score_sample: params.score_sample,
             max_depth: params.max_depth,
-            seed: args.seed ^ 0xD15C,
+            seed: options.seed ^ 0xD15C,
         },
         pixels: PixelParams {
-            per_image: args.pixels as usize,
+            per_image: options.pixels as usize,
             thresholds: 12,
-            seed: args.seed,
+            seed: options.seed,
         },
-        from: match &args.from {
+        from: match &options.from {
             Some(path) => {
-                let kind = match args.target {
+                let kind = match options.target {
                     ModelTarget::Body => ModelKind::Body,
                     ModelTarget::Parts | ModelTarget::Paws => ModelKind::Parts,
                 };
@@ -179,33 +152,19 @@ pub fn run(args: &TrainArgs) -> Outcome {
     let bar = Bar(progress::bar(0, "loading"));
     let (model, passes) = training::train(&job, &bar).context("training")?;
     bar.0.finish_and_clear();
-    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+    if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
     }
-    model::save(&model, &args.out)?;
+    model::save(&model, &options.out)?;
     let info = model.info();
     let (trees, nodes, leaves) = match &model {
         Model::Body(_, f) => counts(f),
         Model::Parts(_, f) => counts(f),
     };
     let changed: usize = passes.iter().map(|p| p.tests_changed).sum();
-    if args.json {
-        crate::app::print_json(&serde_json::json!({
-            "out": args.out,
-            "kind": match args.target {
-                ModelTarget::Body => "body",
-                ModelTarget::Parts | ModelTarget::Paws => "parts",
-            },
-            "trees": trees,
-            "nodes": nodes,
-            "leaves": leaves,
-            "training_seconds": info.training_seconds,
-            "discriminative_tests_changed": changed,
-        }))?;
-    }
     tracing::info!(
         message = "Model written.",
-        path = %args.out.display(),
+        path = %options.out.display(),
         kind = info.kind.name(),
         trees,
         nodes,
@@ -213,7 +172,18 @@ pub fn run(args: &TrainArgs) -> Outcome {
         seconds = format!("{:.0}", info.training_seconds),
         discriminative_tests_changed = changed,
     );
-    Ok(())
+    Ok(TrainSummary::Forest {
+        out: options.out.clone(),
+        kind: match options.target {
+            ModelTarget::Body => "body",
+            ModelTarget::Parts | ModelTarget::Paws => "parts",
+        },
+        trees,
+        nodes,
+        leaves,
+        training_seconds: info.training_seconds,
+        discriminative_tests_changed: changed,
+    })
 }
 
 fn counts<F, L>(f: &Forest<F, L>) -> (usize, usize, usize) {
@@ -225,10 +195,10 @@ fn counts<F, L>(f: &Forest<F, L>) -> (usize, usize, usize) {
 }
 
 /// The training parameters `train paws` uses besides its arguments.
-fn paw_params(args: &TrainArgs) -> crate::vision::paws::train::TrainParams {
+fn paw_params(options: &TrainOptions) -> crate::vision::paws::train::TrainParams {
     crate::vision::paws::train::TrainParams {
-        stages: args.stages as usize,
-        seed: args.seed,
+        stages: options.stages as usize,
+        seed: options.seed,
         ..crate::vision::paws::train::TrainParams::default()
     }
 }
@@ -237,26 +207,26 @@ fn paw_params(args: &TrainArgs) -> crate::vision::paws::train::TrainParams {
 const PAW_AUGMENT: usize = 3;
 
 /// `mousepose train paws`.
-fn train_paws(args: &TrainArgs) -> Result<()> {
+fn train_paws(options: &TrainOptions) -> Result<TrainSummary> {
     use crate::training::paws_data as data;
     use crate::vision::paws::{WINDOW_PX, train, xml};
     let set = data::load(
-        &args.data,
+        &options.data,
         data::CutParams {
             width: WINDOW_PX as usize,
             height: WINDOW_PX as usize,
             augment: PAW_AUGMENT,
-            seed: args.seed,
+            seed: options.seed,
         },
     )
-    .with_context(|| format!("reading training dataset {:?}", args.data))?;
+    .with_context(|| format!("reading training dataset {:?}", options.data))?;
     tracing::info!(
         message = "Training windows cut.",
         paws = set.paws,
         positives = set.positive_count(),
         backgrounds = set.backgrounds.len(),
     );
-    let params = paw_params(args);
+    let params = paw_params(options);
     let bar = progress::bar(params.stages as u64, "stages");
     let started = std::time::Instant::now();
     let trained = train::train(&set, &params, &mut |r| {
@@ -276,10 +246,10 @@ fn train_paws(args: &TrainArgs) -> Result<()> {
     })
     .context("training the paw cascade")?;
     bar.finish_and_clear();
-    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+    if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
     }
-    xml::save(&trained.cascade, &args.out)?;
+    xml::save(&trained.cascade, &options.out)?;
     let weak: usize = trained.cascade.stages.iter().map(|s| s.weak.len()).sum();
     if let train::StopReason::NoNegatives { found, scanned } = &trained.stop {
         tracing::info!(
@@ -289,25 +259,22 @@ fn train_paws(args: &TrainArgs) -> Result<()> {
         );
     }
     let last = trained.stages.last();
-    if args.json {
-        crate::app::print_json(&serde_json::json!({
-            "out": args.out,
-            "kind": "paws",
-            "stages": trained.cascade.stages.len(),
-            "weak": weak,
-            "features": trained.cascade.features.len(),
-            "training_seconds": started.elapsed().as_secs_f64(),
-        }))?;
-    }
+    let training_seconds = started.elapsed().as_secs_f64();
     tracing::info!(
         message = "Paw cascade written.",
-        path = %args.out.display(),
+        path = %options.out.display(),
         stages = trained.cascade.stages.len(),
         weak,
         features = trained.cascade.features.len(),
         flat_positives = trained.flat_positives,
         last_acceptance = last.map_or(0.0, |r| r.windows_accepted as f64 / r.windows_scanned.max(1) as f64),
-        seconds = format!("{:.0}", started.elapsed().as_secs_f64()),
+        seconds = format!("{:.0}", training_seconds),
     );
-    Ok(())
+    Ok(TrainSummary::Paws {
+        out: options.out.clone(),
+        stages: trained.cascade.stages.len(),
+        weak,
+        features: trained.cascade.features.len(),
+        training_seconds,
+    })
 }
