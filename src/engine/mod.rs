@@ -14,6 +14,7 @@ pub mod replay {
     /// A replay's summary, in its output directory.
     pub const SUMMARY_FILE: &str = "summary.json";
 }
+pub mod report;
 pub mod synth;
 pub mod train;
 

@@ -1,5 +1,5 @@
-//! `mousepose report RUN --out DIR`: a run's behaviour and gait as a page of PNG charts and
-//! CSV tables that opens without a network:
+//! The engine of `mousepose report RUN --out DIR`: a run's behaviour and gait as a page of PNG
+//! charts and CSV tables that opens without a network:
 //!
 //! ```text
 //! DIR/index.html     the page: figures, tables, how each measure is taken
@@ -19,91 +19,26 @@
 //! head height `head`'s z, and a paw is in stance while the bottom camera found it on the glass
 //! (its source is `paw`).
 
-use crate::engine::chart::{Series, bar_chart, path_chart, raster_chart, series_chart};
-use crate::app::{print, print_json};
-use crate::engine::{Failure, output_failure};
 use crate::core::geometry::{CAGE_X_MM, CAGE_Y_MM};
 use crate::core::pose::JointSource;
 use crate::core::skeleton::Joint;
+use crate::engine::chart::{Series, bar_chart, path_chart, raster_chart, series_chart};
+use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
 use crate::runtime::sink::poses::{POSES_FILE, read_poses};
 use crate::runtime::stages::{PoseRecord, PoseStatus};
 use crate::vision::behaviour::{Arena, Behaviour, BehaviourConfig, FrameInput, PAW_NAMES, analyse_in};
 use anyhow::Context as _;
-use clap::Args;
 use nalgebra::{Point2, Vector2};
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// A paw placed from a detection is on the glass when it is at most this high, mm (fusion
 /// places a paw the leg cannot reach on the glass up its ray instead).
 const ON_GLASS_MM: f64 = 6.0;
 
-#[derive(Debug, Args)]
-pub struct ReportArgs {
-    /// The run: a replay's output directory (or a daemon's chunk), with its poses.csv.
-    #[arg(value_name = "RUN")]
-    pub run: PathBuf,
-    /// The directory to write the page, charts and tables into.
-    #[arg(long, value_name = "DIR")]
-    pub out: PathBuf,
-    /// The arena (cage floor) as X0,Y0,X1,Y1 in world millimetres. Default: the arena the
-    /// replay found (`world.arena_mm` of the run's summary), else the synthetic 500 x 450 mm
-    /// cage centred on the origin.
-    #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = parse_arena, allow_hyphen_values = true)]
-    pub arena: Option<Arena>,
-    /// Walking: the slowest speed of a walking bout, mm/s.
-    #[arg(long, value_name = "MM_S", default_value_t = 50.0, value_parser = parse_speed)]
-    pub walk_min: f64,
-    /// Walking: the fastest speed of a walking bout (faster is running), mm/s.
-    #[arg(long, value_name = "MM_S", default_value_t = 200.0, value_parser = parse_speed)]
-    pub walk_max: f64,
-    /// Rearing: the head at least this high above the floor, mm.
-    #[arg(long, value_name = "MM", default_value_t = 40.0, value_parser = parse_mm)]
-    pub rearing: f64,
-    /// By the walls: the body's centre within this of a wall, mm.
-    #[arg(long, value_name = "MM", default_value_t = 60.0, value_parser = parse_mm)]
-    pub wall: f64,
-    /// Print the summary as one JSON object.
-    #[arg(long)]
-    pub json: bool,
-    /// Replace the output directory if it is not empty.
-    #[arg(long)]
-    pub force: bool,
-}
-
-fn parse_speed(s: &str) -> Result<f64, String> {
-    crate::app::parse_ranged(s, "a speed in mm/s", 0.0, 10_000.0)
-}
-
-fn parse_mm(s: &str) -> Result<f64, String> {
-    crate::app::parse_ranged(s, "a distance in millimetres", 0.0, 10_000.0)
-}
-
-/// `--arena X0,Y0,X1,Y1`: a rectangle with X0 < X1 and Y0 < Y1.
-fn parse_arena(s: &str) -> Result<Arena, String> {
-    let wrong = || format!("expected the arena as X0,Y0,X1,Y1 in millimetres with X0 < X1 and Y0 < Y1, got {s:?}");
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| wrong())?;
-    let [x0, y0, x1, y1] = v[..] else {
-        return Err(wrong());
-    };
-    if !(x0.is_finite() && y0.is_finite() && x1.is_finite() && y1.is_finite() && x0 < x1 && y0 < y1) {
-        return Err(wrong());
-    }
-    Ok(Arena {
-        x_min_mm: x0,
-        y_min_mm: y0,
-        x_max_mm: x1,
-        y_max_mm: y1,
-    })
-}
-
 /// What a report is made with besides the run: the thresholds, and the arena (`None`: the
-/// run's own, see [`ReportArgs::arena`]).
+/// run's own: the replay's `world.arena_mm`, else the synthetic cage).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ReportOptions {
     pub config: BehaviourConfig,
@@ -124,7 +59,7 @@ fn arena_of(run: &Path, options: &ReportOptions) -> ArenaUsed {
     if let Some(arena) = options.arena {
         return ArenaUsed { arena, from: "flag" };
     }
-    let recorded = std::fs::read(run.join(crate::app::replay::SUMMARY_FILE))
+    let recorded = std::fs::read(run.join(crate::engine::replay::SUMMARY_FILE))
         .ok()
         .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
         .and_then(|v| {
@@ -346,9 +281,10 @@ fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig, arena: &ArenaUsed) 
     h
 }
 
-/// What the summary holds: the analysis without its per-frame rows.
+/// What the summary holds (`summary.json`, and `report --json`): the analysis without its
+/// per-frame rows.
 #[derive(Debug, serde::Serialize)]
-struct Summary<'a> {
+pub struct Summary<'a> {
     run: &'a Path,
     config: &'a BehaviourConfig,
     arena: ArenaUsed,
@@ -488,7 +424,8 @@ pub fn report_with(
     Ok((b, arena))
 }
 
-fn summary<'a>(run: &'a Path, config: &'a BehaviourConfig, arena: ArenaUsed, b: &Behaviour) -> Summary<'a> {
+/// The summary of `b`, the analysis of `run`.
+pub fn summary<'a>(run: &'a Path, config: &'a BehaviourConfig, arena: ArenaUsed, b: &Behaviour) -> Summary<'a> {
     Summary {
         run,
         config,
@@ -508,55 +445,4 @@ fn summary<'a>(run: &'a Path, config: &'a BehaviourConfig, arena: ArenaUsed, b: 
         base_of_support_fore_mm: b.base_of_support_fore_mm,
         base_of_support_hind_mm: b.base_of_support_hind_mm,
     }
-}
-
-/// `mousepose report`.
-pub fn command(args: &ReportArgs) -> crate::app::Outcome {
-    if args.walk_min >= args.walk_max {
-        return Err(Failure::usage(anyhow::anyhow!(
-            "--walk-min {} mm/s is not below --walk-max {} mm/s",
-            args.walk_min,
-            args.walk_max
-        )));
-    }
-    let options = ReportOptions {
-        config: BehaviourConfig {
-            walk_min_mm_s: args.walk_min,
-            walk_max_mm_s: args.walk_max,
-            rear_head_mm: args.rearing,
-            wall_band_mm: args.wall,
-            ..BehaviourConfig::default()
-        },
-        arena: args.arena,
-    };
-    let (b, arena) = report_with(&args.run, &args.out, args.force, &options)
-        .map_err(|f| f.context(format!("reporting on {:?}", args.run)))?;
-    if args.json {
-        return Ok(print_json(&summary(&args.run, &options.config, arena, &b))?);
-    }
-    let stride = |k: usize| {
-        b.paws[k]
-            .stride_length_mm
-            .map_or_else(|| "-".to_owned(), |v| format!("{v:.1}"))
-    };
-    Ok(print(&format!(
-        "{:.1} s, {:.0} mm travelled, {} rearing and {} walking bouts, {} strides (stride length mm: {} {} {} {}); {}; report in {:?}\n",
-        b.duration_s,
-        b.distance_mm,
-        b.rearing.len(),
-        b.walking.len(),
-        b.strides.len(),
-        stride(0),
-        stride(1),
-        stride(2),
-        stride(3),
-        match arena.from {
-            "default" => "arena: the synthetic 500 x 450 mm cage (the run names none; give --arena)".to_owned(),
-            from => {
-                let (l, w) = arena.arena.size_mm();
-                format!("arena {l:.0} x {w:.0} mm ({from})")
-            }
-        },
-        args.out.join("index.html")
-    ))?)
 }
