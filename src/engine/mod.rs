@@ -8,6 +8,7 @@ pub mod chart;
 pub mod detect;
 pub mod eval;
 pub mod experiment;
+pub mod export;
 pub mod progress;
 /// Until `replay` moves here too: the name of its summary file.
 pub mod replay {

@@ -1,4 +1,4 @@
-//! `mousepose export`: what researchers take away from a session or a run. `nwb` writes the
+//! The engines of `mousepose export`: what researchers take away from a session or a run. `nwb` writes the
 //! poses as NWB with ndx-pose (through pynwb); `moseq` writes a
 //! session in MoSeq's acquisition layout (lossless FFV1 depth, timestamps, metadata) and the
 //! colour camera as its own lossless video; `video` draws a run's poses over its frames into
@@ -8,32 +8,9 @@ pub mod moseq;
 pub mod nwb;
 pub mod video;
 
-use crate::app::replay::SUMMARY_FILE;
+use crate::engine::replay::SUMMARY_FILE;
 use crate::io::session::META_FILE;
-use clap::Subcommand;
 use std::path::{Path, PathBuf};
-
-#[derive(Debug, Subcommand)]
-pub enum ExportCommand {
-    /// A run's poses as NWB 2.x with ndx-pose (24 PoseEstimationSeries, the skeleton, the
-    /// cameras), written by pynwb.
-    Nwb(Box<nwb::NwbArgs>),
-    /// A session in MoSeq's layout: depth.avi (FFV1 16-bit), depth_ts.txt, metadata.json,
-    /// and the colour camera as color.avi (FFV1) with color_ts.txt.
-    Moseq(moseq::MoseqArgs),
-    /// A run's frames side by side (depth view, bottom view, side view) with the skeleton,
-    /// paws and frame counters drawn, as an H.264 MP4.
-    Video(video::VideoArgs),
-}
-
-/// `mousepose export`.
-pub fn run(command: &ExportCommand) -> crate::app::Outcome {
-    match command {
-        ExportCommand::Nwb(args) => nwb::command(args),
-        ExportCommand::Moseq(args) => moseq::command(args),
-        ExportCommand::Video(args) => video::command(args),
-    }
-}
 
 /// What a run's `summary.json` says about how it was made: a replay's names its session; a
 /// daemon's chunk's does not (the chunk is its session, when the daemon recorded).
@@ -122,7 +99,9 @@ impl Run {
 /// Refuses to replace an existing file unless `force`.
 fn check_file_out(path: &Path, force: bool) -> Result<(), crate::engine::Failure> {
     if path.is_dir() {
-        return Err(crate::engine::Failure::usage(anyhow::anyhow!("{path:?} is a directory")));
+        return Err(crate::engine::Failure::usage(anyhow::anyhow!(
+            "{path:?} is a directory"
+        )));
     }
     if path.exists() && !force {
         return Err(crate::engine::Failure::usage(crate::engine::Exists(path.to_owned())));

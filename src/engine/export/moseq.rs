@@ -1,4 +1,4 @@
-//! `mousepose export moseq SESSION --out DIR`: a session in the layout MoSeq's acquisition
+//! The engine of `mousepose export moseq SESSION --out DIR`: a session in the layout MoSeq's acquisition
 //! writes and moseq2-extract reads, which `replay` reads back too:
 //!
 //! ```text
@@ -12,17 +12,15 @@
 //!   rig.yaml        the session's calibration (for `replay DIR --calibration DIR/rig.yaml`)
 //! ```
 
-use crate::app::export::Run;
-use crate::app::print;
-use crate::engine::{Failure, output_failure};
 use crate::core::frame::PixelFormat;
+use crate::engine::export::Run;
+use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
 use crate::io::session::{CameraMeta, CameraRole, SessionReader};
 use crate::io::video::{Encoder, EncoderSpec};
 use crate::runtime::capture::moseq::{DEPTH_AVI, DEPTH_TS, METADATA};
 use crate::vision::calibrate::RigCalibration;
 use anyhow::Context as _;
-use clap::Args;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -37,27 +35,19 @@ pub const RIG_FILE: &str = "rig.yaml";
 /// file's values as an HDF5 dataset and fails on a nested object.
 pub const PROVENANCE_FILE: &str = "mousepose.json";
 
-#[derive(Debug, Args)]
-pub struct MoseqArgs {
+/// What `export moseq` exports, and where (see its `--help`).
+#[derive(Clone, Debug)]
+pub struct MoseqOptions {
     /// The session (or a run whose summary names it).
-    #[arg(value_name = "SESSION")]
     pub session: PathBuf,
     /// The directory to write.
-    #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// `SubjectName` in metadata.json (default: "unknown").
-    #[arg(long, value_name = "NAME")]
     pub subject: Option<String>,
     /// `SessionName` in metadata.json (default: the session directory's name).
-    #[arg(long, value_name = "NAME")]
     pub session_name: Option<String>,
     /// Replace the output directory if it is not empty.
-    #[arg(long)]
     pub force: bool,
-    /// Print what was written as one JSON object (`out`, `depth_frames`, `color_frames`,
-    /// `skipped_frames`).
-    #[arg(long)]
-    pub json: bool,
 }
 
 /// `metadata.json`: the keys MoSeq's acquisition writes (moseq2-extract reads the resolution,
@@ -284,38 +274,27 @@ pub fn export_moseq(
     })
 }
 
-/// `mousepose export moseq`.
-pub fn command(args: &MoseqArgs) -> crate::app::Outcome {
-    let run = Run::open(&args.session, None).map_err(Failure::usage)?;
+/// `mousepose export moseq`: finds the session of `options.session` and exports it, with a
+/// progress bar.
+///
+/// # Errors
+/// See [`export_moseq`]; a directory that is neither a session nor a run (the user's).
+pub fn moseq(options: &MoseqOptions) -> Result<MoseqExport, Failure> {
+    let run = Run::open(&options.session, None).map_err(Failure::usage)?;
     let bar = crate::engine::progress::bar(0, "moseq");
     let result = export_moseq(
         &run.session,
-        &args.out,
-        args.subject.as_deref(),
-        args.session_name.as_deref(),
-        args.force,
+        &options.out,
+        options.subject.as_deref(),
+        options.session_name.as_deref(),
+        options.force,
         |done, total| {
             bar.set_length(total);
             bar.set_position(done);
         },
     );
     bar.finish_and_clear();
-    let e = result.map_err(|f| f.context(format!("exporting {:?} for MoSeq", run.session)))?;
-    if args.json {
-        return Ok(crate::app::print_json(&e)?);
-    }
-    let mut text = format!(
-        "{} depth frames to {:?}, {} colour frames to {:?}",
-        e.depth_frames,
-        e.out.join(DEPTH_AVI),
-        e.color_frames,
-        e.out.join(COLOR_AVI)
-    );
-    if e.skipped_frames > 0 {
-        let _ = write!(text, "; {} damaged frames left out", e.skipped_frames);
-    }
-    text.push('\n');
-    Ok(print(&text)?)
+    result.map_err(|f| f.context(format!("exporting {:?} for MoSeq", run.session)))
 }
 
 #[cfg(test)]

@@ -1,4 +1,4 @@
-//! `mousepose export video RUN --out FILE.mp4`: every frame pair of a run drawn as `replay`
+//! The engine of `mousepose export video RUN --out FILE.mp4`: every frame pair of a run drawn as `replay`
 //! draws its pictures (the depth view with the skeleton, the bottom view with the paws, a side
 //! view; [`crate::runtime::stages::overlay`]) under a line of frame counters, encoded by
 //! ffmpeg with libx264.
@@ -11,55 +11,21 @@
 //! has no colour frame) and is shown at its depth frame's device time from the first frame
 //! drawn: the file has variable frame rate timestamps, not a constant rate.
 
-use crate::engine::chart::{draw_text, text_width};
-use crate::app::export::{Run, check_file_out};
-use crate::app::print;
-use crate::engine::Failure;
 use crate::core::frame::{ColorFrame, DepthFrame};
 use crate::core::image::RgbImage;
+use crate::engine::Failure;
+use crate::engine::chart::{draw_text, text_width};
+use crate::engine::export::{Run, check_file_out};
 use crate::io::session::{CameraRole, SessionReader};
 use crate::io::video::{Encoder, EncoderSpec};
 use crate::runtime::sink::poses::{POSES_FILE, read_poses};
 use crate::runtime::stages::PoseRecord;
 use crate::runtime::stages::overlay;
 use crate::vision::calibrate::RigCalibration;
-use clap::Args;
 use std::path::PathBuf;
 
 /// Height of the line of counters above the pictures, pixels.
 const COUNTER_BAR_PX: u32 = 24;
-
-#[derive(Debug, Args)]
-pub struct VideoArgs {
-    /// The run: a replay's output directory (or a daemon's chunk).
-    #[arg(value_name = "RUN")]
-    pub run: PathBuf,
-    /// The MP4 file to write.
-    #[arg(long, value_name = "FILE.mp4")]
-    pub out: PathBuf,
-    /// The session the run was made from, when its summary does not name it (or it moved).
-    #[arg(long, value_name = "DIR")]
-    pub session: Option<PathBuf>,
-    /// Start this many seconds after the first frame.
-    #[arg(long, value_name = "S", value_parser = parse_offset, allow_negative_numbers = true)]
-    pub from: Option<f64>,
-    /// End this many seconds after the first frame.
-    #[arg(long, value_name = "S", value_parser = parse_offset, allow_negative_numbers = true)]
-    pub to: Option<f64>,
-    /// H.264 quality, 0 (lossless) to 51 (worst); 23 is x264's default.
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(0..=51))]
-    pub crf: u32,
-    /// Replace the file if it exists.
-    #[arg(long)]
-    pub force: bool,
-    /// Print what was written as one JSON object (`out`, `frames`, `width`, `height`).
-    #[arg(long)]
-    pub json: bool,
-}
-
-fn parse_offset(s: &str) -> Result<f64, String> {
-    crate::app::parse_ranged(s, "a number of seconds", 0.0, 1e7)
-}
 
 /// What to draw.
 #[derive(Clone, Debug)]
@@ -237,50 +203,16 @@ pub fn export_video(options: &VideoOptions, mut progress: impl FnMut(u64, u64)) 
     })
 }
 
-/// `mousepose export video`.
-pub fn command(args: &VideoArgs) -> crate::app::Outcome {
-    let run = Run::open(&args.run, args.session.as_deref()).map_err(Failure::usage)?;
-    let options = VideoOptions {
-        run,
-        out: args.out.clone(),
-        from_s: args.from,
-        to_s: args.to,
-        crf: args.crf,
-        force: args.force,
-    };
+/// `mousepose export video`: [`export_video`] with a progress bar.
+///
+/// # Errors
+/// See [`export_video`].
+pub fn video(options: &VideoOptions) -> Result<VideoExport, Failure> {
     let bar = crate::engine::progress::bar(0, "video");
-    let result = export_video(&options, |done, total| {
+    let result = export_video(options, |done, total| {
         bar.set_length(total);
         bar.set_position(done);
     });
     bar.finish_and_clear();
-    let v = result.map_err(|f| f.context(format!("drawing the video of {:?}", args.run)))?;
-    if args.json {
-        #[derive(serde::Serialize)]
-        struct Written<'a> {
-            out: &'a std::path::Path,
-            #[serde(flatten)]
-            video: VideoExport,
-        }
-        return Ok(crate::app::print_json(&Written {
-            out: &args.out,
-            video: v,
-        })?);
-    }
-    let mut text = format!(
-        "{} frames of {}x{} over {:.3} s (the cameras' times) to {:?}",
-        v.frames,
-        v.width,
-        v.height,
-        v.duration_us as f64 / 1e6,
-        args.out
-    );
-    if v.rows_without_frames > 0 {
-        text.push_str(&format!(
-            "; {} rows without their depth frame in the session left out",
-            v.rows_without_frames
-        ));
-    }
-    text.push('\n');
-    Ok(print(&text)?)
+    result.map_err(|f| f.context(format!("drawing the video of {:?}", options.run.dir)))
 }
