@@ -1,6 +1,8 @@
 //! The application: argument parsing and one file per command. The only place that knows
 //! clap and exit codes: every command returns a [`Failure`] that says which code it means.
-//! `main.rs` only calls [`main`].
+//! A command's file holds its clap arguments and a thin `command`/`run` that builds the
+//! options of an engine of [`crate::engine`], calls it and prints its summary (text, or JSON
+//! with `--json`); no command file imports another. `main.rs` only calls [`main`].
 
 pub mod batch;
 pub mod bench;
