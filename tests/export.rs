@@ -3,7 +3,7 @@
 #![allow(clippy::unwrap_used)] // the helpers below are test code too
 
 use crate::util::{mousepose, repo_root};
-use mousepose::app::export::moseq::{COLOR_AVI, PROVENANCE_FILE, RIG_FILE, export_moseq};
+use mousepose::engine::export::moseq::{COLOR_AVI, PROVENANCE_FILE, RIG_FILE, export_moseq};
 use mousepose::engine::replay::{ReplayOptions, replay};
 use mousepose::io::session::SessionReader;
 use mousepose::runtime::capture::moseq::{
@@ -257,7 +257,7 @@ fn video_export_has_a_frame_per_pose_row_and_the_window_asked_for() {
 
 #[test]
 fn nwb_export_reads_back_with_24_series_and_passes_nwbinspector() {
-    let python = Path::new(mousepose::app::export::nwb::DEFAULT_PYTHON);
+    let python = Path::new(mousepose::engine::export::nwb::DEFAULT_PYTHON);
     assert!(python.is_file(), "{python:?} is missing: run scripts/setup.sh");
     let tmp = tempfile::tempdir().unwrap();
     let run = tmp.path().join("run");
@@ -466,7 +466,7 @@ fn a_daemon_chunk_exports_to_nwb_moseq_and_video() {
     assert_eq!(probe(&video).0 as usize, rows);
 
     // NWB: one sample per row, the models as scorer.
-    let python = Path::new(mousepose::app::export::nwb::DEFAULT_PYTHON);
+    let python = Path::new(mousepose::engine::export::nwb::DEFAULT_PYTHON);
     assert!(python.is_file(), "{python:?} is missing: run scripts/setup.sh");
     let nwb = tmp.path().join("chunk.nwb");
     let out = mousepose()
@@ -503,7 +503,7 @@ with NWBHDF5IO(sys.argv[1], "r") as io:
 
 #[test]
 fn nwb_export_without_an_age_warns_of_dandi_and_invents_none() {
-    let python = Path::new(mousepose::app::export::nwb::DEFAULT_PYTHON);
+    let python = Path::new(mousepose::engine::export::nwb::DEFAULT_PYTHON);
     assert!(python.is_file(), "{python:?} is missing: run scripts/setup.sh");
     let tmp = tempfile::tempdir().unwrap();
     let run = tmp.path().join("run");

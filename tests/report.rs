@@ -4,10 +4,10 @@
 #![allow(clippy::unwrap_used)] // the helpers below are test code too
 
 use crate::util::{mousepose, repo_root};
-use mousepose::app::report::{frame_input, report};
 use mousepose::core::noise::{DepthNoise, NoiseModel};
 use mousepose::core::skeleton::Joint;
 use mousepose::engine::replay::replay;
+use mousepose::engine::report::{frame_input, report};
 use mousepose::io::session::SessionReader;
 use mousepose::synth::mouse::Behaviour as Act;
 use mousepose::synth::session::{SessionSpec, session_animator, write_session};

@@ -78,6 +78,28 @@ enum Command {
     Detect(detect::DetectCommand),
 }
 
+/// What `train` and `eval` work on (the command line's [`crate::engine::train::ModelTarget`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModelTarget {
+    /// The body forest: joints 1-12 from the top depth image.
+    Body,
+    /// The part forest: six body-part labels per depth pixel.
+    Parts,
+    /// The paw detector: a boosted cascade of Haar features on the bottom colour view,
+    /// stored as OpenCV cascade XML.
+    Paws,
+}
+
+impl From<ModelTarget> for crate::engine::train::ModelTarget {
+    fn from(target: ModelTarget) -> Self {
+        match target {
+            ModelTarget::Body => Self::Body,
+            ModelTarget::Parts => Self::Parts,
+            ModelTarget::Paws => Self::Paws,
+        }
+    }
+}
+
 /// What a command returns.
 pub type Outcome = Result<(), Failure>;
 

@@ -53,6 +53,11 @@ pub fn noise_mm(s: &str) -> Result<f64, String> {
     ranged(s, "a noise level in millimetres", 0.0, 100.0)
 }
 
+/// The side of a chessboard square in millimetres.
+pub fn square_mm(s: &str) -> Result<f64, String> {
+    ranged(s, "a square side in millimetres", 0.5, 1000.0)
+}
+
 /// A binning factor: 1, 2 or 4.
 pub fn binning(s: &str) -> Result<u32, String> {
     match s.trim() {

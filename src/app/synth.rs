@@ -1,16 +1,16 @@
-//! `mousepose synth dataset|session|chessboard|moseq`: rendered training data, sessions and recordings.
+//! `mousepose synth dataset|session|chessboard|moseq`: rendered training data, sessions and
+//! recordings. The arguments, handed to [`crate::engine::synth`] (and
+//! [`crate::engine::calibrate`] for chessboards).
 
 use crate::app::Outcome;
 use crate::app::parse;
 use crate::core::frame::PixelFormat;
 use crate::core::noise::{DepthNoise, NoiseModel};
-use crate::engine::output_failure;
-use crate::engine::progress;
-use crate::io::output::Staging;
-use crate::synth::dataset::{DatasetSpec, write_dataset};
-use crate::synth::moseq::{MoseqSpec, moseq_camera, write_moseq};
-use crate::synth::session::{SessionSpec, write_session};
-use anyhow::Context as _;
+use crate::engine::calibrate::{self, ChessboardOptions};
+use crate::engine::synth::{self as engine, DatasetOptions, MoseqOptions, SessionOptions};
+use crate::synth::dataset::DatasetSpec;
+use crate::synth::moseq::MoseqSpec;
+use crate::synth::session::SessionSpec;
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 
@@ -21,10 +21,39 @@ pub enum SynthCommand {
     /// A continuous behaviour sequence written as a recorded session.
     Session(SessionArgs),
     /// Rendered chessboard views of both cameras, for testing calibration end to end.
-    Chessboard(crate::app::calibrate::ChessboardArgs),
+    Chessboard(ChessboardArgs),
     /// A depth-only recording in MoSeq's layout (depth.dat, depth_ts.txt, metadata.json, and
     /// the true camera as rig.yaml): a session's mouse under a real rig's camera.
     Moseq(MoseqArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ChessboardArgs {
+    /// The directory to create.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Inner corners of the board, COLSxROWS.
+    #[arg(long, default_value = "9x6")]
+    pub board: String,
+    /// The side of one square, millimetres (40: a 400 x 280 mm board, which poses both cameras
+    /// within 0.3 mm; 20 mm squares give about 1 mm).
+    #[arg(long = "square-mm", value_name = "S", value_parser = parse::square_mm, allow_negative_numbers = true, default_value_t = 40.0)]
+    pub square_mm: f64,
+    /// Intrinsics views per camera.
+    #[arg(long, value_name = "N", default_value_t = 15, value_parser = clap::value_parser!(u32).range(1..=500))]
+    pub views: u32,
+    /// Seed of the board poses, lighting and noise.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    pub seed: u64,
+    /// Bin the colour camera's 1280x1024 sensor by this factor (1, 2 or 4).
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4))]
+    pub color_binning: u32,
+    /// Replace the output directory if it is not empty.
+    #[arg(long)]
+    pub force: bool,
+    /// Print what was written as one JSON object (`out`, `views`).
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Args)]
@@ -162,9 +191,25 @@ pub fn run(command: SynthCommand) -> Outcome {
     match command {
         SynthCommand::Dataset(args) => synth_dataset(&args),
         SynthCommand::Session(args) => synth_session(&args),
-        SynthCommand::Chessboard(args) => crate::app::calibrate::synth_chessboard(&args),
+        SynthCommand::Chessboard(args) => synth_chessboard(&args),
         SynthCommand::Moseq(args) => synth_moseq(&args),
     }
+}
+
+fn synth_chessboard(args: &ChessboardArgs) -> Outcome {
+    let summary = calibrate::synth_chessboard(&ChessboardOptions {
+        out: args.out.clone(),
+        board: args.board.clone(),
+        square_mm: args.square_mm,
+        views: args.views,
+        seed: args.seed,
+        color_binning: args.color_binning,
+        force: args.force,
+    })?;
+    if args.json {
+        crate::app::output::print_json(&serde_json::json!({ "out": summary.out, "views": summary.views }))?;
+    }
+    Ok(())
 }
 
 fn synth_moseq(args: &MoseqArgs) -> Outcome {
@@ -181,20 +226,15 @@ fn synth_moseq(args: &MoseqArgs) -> Outcome {
         camera_height_mm: args.camera_height_mm,
         tilt_deg: args.tilt_deg,
     };
-    // A size the camera table lacks is the user's mistake: said before anything is written.
-    moseq_camera(&spec).map_err(crate::engine::Failure::usage)?;
-    let staging = Staging::new(&args.out, args.force).map_err(output_failure)?;
-    let bar = progress::bar(spec.frames, "rendering");
-    write_moseq(staging.path(), &spec, |done, _| bar.set_position(done))
-        .with_context(|| format!("writing the MoSeq recording {:?}", args.out))?;
-    bar.finish_and_clear();
-    let out = staging.commit()?;
-    tracing::info!(message = "MoSeq recording written.", path = %out.display(), frames = spec.frames);
+    engine::synth_moseq(&MoseqOptions {
+        out: args.out.clone(),
+        spec,
+        force: args.force,
+    })?;
     Ok(())
 }
 
 fn synth_dataset(args: &DatasetArgs) -> Outcome {
-    let staging = Staging::new(&args.out, args.force).map_err(output_failure)?;
     let spec = DatasetSpec {
         count: args.images,
         seed: args.seed,
@@ -205,21 +245,18 @@ fn synth_dataset(args: &DatasetArgs) -> Outcome {
         bottom_views: !args.no_bottom,
         mice: args.mice,
     };
-    let bar = progress::bar(spec.count, "rendering");
-    let rig = crate::core::geometry::Rig::default_rig();
-    write_dataset(staging.path(), &rig, &spec, |done| bar.set_position(done))
-        .with_context(|| format!("writing dataset {:?}", args.out))?;
-    bar.finish_and_clear();
-    let out = staging.commit()?;
-    tracing::info!(message = "Dataset written.", path = %out.display(), images = spec.count);
+    let summary = engine::synth_dataset(&DatasetOptions {
+        out: args.out.clone(),
+        spec,
+        force: args.force,
+    })?;
     if args.json {
-        crate::app::output::print_json(&serde_json::json!({ "out": out, "images": spec.count }))?;
+        crate::app::output::print_json(&serde_json::json!({ "out": summary.out, "images": summary.images }))?;
     }
     Ok(())
 }
 
 fn synth_session(args: &SessionArgs) -> Outcome {
-    let staging = Staging::new(&args.out, args.force).map_err(output_failure)?;
     let spec = SessionSpec {
         seconds: args.seconds,
         fps: args.fps,
@@ -233,27 +270,17 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         color: !args.no_color,
         mice: args.mice,
     };
-    let bar = progress::bar(0, "rendering");
-    let summary = write_session(staging.path(), &spec, |done, total| {
-        bar.set_length(total);
-        bar.set_position(done);
-    })
-    .with_context(|| format!("writing session {:?}", args.out))?;
-    bar.finish_and_clear();
-    let out = staging.commit()?;
-    tracing::info!(
-        message = "Session written.",
-        path = %out.display(),
-        depth_frames = summary.depth_frames,
-        color_frames = summary.color_frames,
-        preview = %out.join(crate::synth::session::PREVIEW_FILE).display(),
-    );
+    let summary = engine::synth_session(&SessionOptions {
+        out: args.out.clone(),
+        spec,
+        force: args.force,
+    })?;
     if args.json {
         crate::app::output::print_json(&serde_json::json!({
-            "out": out,
+            "out": summary.out,
             "depth_frames": summary.depth_frames,
             "color_frames": summary.color_frames,
-            "preview": out.join(crate::synth::session::PREVIEW_FILE),
+            "preview": summary.preview,
         }))?;
     }
     Ok(())

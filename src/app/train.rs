@@ -1,29 +1,12 @@
-//! `mousepose train body|parts|paws`: forests and the paw cascade from synthetic datasets.
+//! `mousepose train body|parts|paws`: the arguments, handed to [`crate::engine::train`], and
+//! what was written printed with `--json`.
 
-use crate::app::Outcome;
 use crate::app::parse;
-use crate::engine::progress;
-use crate::engine::{Exists, Failure};
-use crate::training::{self, PixelParams, Target, TrainJob, TrainProgress};
-use crate::vision::forest::discriminative::{DiscriminativeParams, ErrorScope, Scoring};
-use crate::vision::forest::model::{self, Model, ModelKind};
-use crate::vision::forest::{Forest, TrainParams};
-use anyhow::{Context, Result};
+use crate::app::{ModelTarget, Outcome};
+use crate::engine::train::{TrainOptions, TrainSummary};
+use crate::vision::forest::discriminative::ErrorScope;
 use clap::Args;
-use indicatif::ProgressBar;
 use std::path::PathBuf;
-
-/// What `train` and `eval` work on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum ModelTarget {
-    /// The body forest: joints 1-12 from the top depth image.
-    Body,
-    /// The part forest: six body-part labels per depth pixel.
-    Parts,
-    /// The paw detector: a boosted cascade of Haar features on the bottom colour view,
-    /// stored as OpenCV cascade XML.
-    Paws,
-}
 
 #[derive(Debug, Args)]
 pub struct TrainArgs {
@@ -108,207 +91,66 @@ pub struct TrainArgs {
     pub json: bool,
 }
 
-struct Bar(ProgressBar);
-
-impl TrainProgress for Bar {
-    fn stage(&self, what: &str, total: u64) {
-        self.0.set_message(what.to_owned());
-        self.0.set_length(total);
-        self.0.set_position(0);
-    }
-
-    fn tick(&self) {
-        self.0.inc(1);
-    }
-}
-
 /// `mousepose train body|parts|paws`.
 pub fn run(args: &TrainArgs) -> Outcome {
-    if args.out.exists() && !args.force {
-        return Err(Failure::usage(Exists(args.out.clone())));
-    }
-    if args.target == ModelTarget::Paws {
-        return Ok(train_paws(args)?);
-    }
-    let params = TrainParams {
-        trees: args.trees as usize,
-        max_depth: args.depth,
-        tests: args.tests as usize,
-        min_leaf: args.leaf as usize,
+    let summary = crate::engine::train::train(&TrainOptions {
+        target: args.target.into(),
+        data: args.data.clone(),
+        out: args.out.clone(),
+        trees: args.trees,
+        depth: args.depth,
+        tests: args.tests,
+        leaf: args.leaf,
+        discriminative: args.discriminative.clone(),
+        from: args.from.clone(),
+        iterations: args.iterations,
+        start_level: args.start_level,
+        subset: args.subset,
+        bootstrap: args.bootstrap,
+        keep_leaves: args.keep_leaves,
+        keep_current: args.keep_current,
+        error: args.error,
+        score_pixels: args.score_pixels,
+        pixels: args.pixels,
         seed: args.seed,
-        score_sample: args.score_pixels,
-    };
-    let job = TrainJob {
-        target: match args.target {
-            ModelTarget::Body => Target::Body,
-            ModelTarget::Parts | ModelTarget::Paws => Target::Parts,
-        },
-        train: &args.data,
-        discriminative: args.discriminative.as_deref(),
-        params,
-        disc: DiscriminativeParams {
-            tests: params.tests,
-            min_leaf: params.min_leaf,
-            start_level: args.start_level,
-            iterations: args.iterations as usize,
-            subset: args.subset,
-            bootstrap: args.bootstrap,
-            refit_leaves: !args.keep_leaves,
-            keep_current: args.keep_current,
-            error: args.error,
-            scoring: Scoring::SubtreeError,
-            score_sample: params.score_sample,
-            max_depth: params.max_depth,
-            seed: args.seed ^ 0xD15C,
-        },
-        pixels: PixelParams {
-            per_image: args.pixels as usize,
-            thresholds: 12,
-            seed: args.seed,
-        },
-        from: match &args.from {
-            Some(path) => {
-                let kind = match args.target {
-                    ModelTarget::Body => ModelKind::Body,
-                    ModelTarget::Parts | ModelTarget::Paws => ModelKind::Parts,
-                };
-                Some(model::load(path, Some(kind))?)
-            }
-            None => None,
-        },
-    };
-    let bar = Bar(progress::bar(0, "loading"));
-    let (model, passes) = training::train(&job, &bar).context("training")?;
-    bar.0.finish_and_clear();
-    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
+        stages: args.stages,
+        force: args.force,
+    })?;
+    if !args.json {
+        return Ok(());
     }
-    model::save(&model, &args.out)?;
-    let info = model.info();
-    let (trees, nodes, leaves) = match &model {
-        Model::Body(_, f) => counts(f),
-        Model::Parts(_, f) => counts(f),
-    };
-    let changed: usize = passes.iter().map(|p| p.tests_changed).sum();
-    if args.json {
-        crate::app::output::print_json(&serde_json::json!({
-            "out": args.out,
-            "kind": match args.target {
-                ModelTarget::Body => "body",
-                ModelTarget::Parts | ModelTarget::Paws => "parts",
-            },
+    let json = match summary {
+        TrainSummary::Forest {
+            out,
+            kind,
+            trees,
+            nodes,
+            leaves,
+            training_seconds,
+            discriminative_tests_changed,
+        } => serde_json::json!({
+            "out": out,
+            "kind": kind,
             "trees": trees,
             "nodes": nodes,
             "leaves": leaves,
-            "training_seconds": info.training_seconds,
-            "discriminative_tests_changed": changed,
-        }))?;
-    }
-    tracing::info!(
-        message = "Model written.",
-        path = %args.out.display(),
-        kind = info.kind.name(),
-        trees,
-        nodes,
-        leaves,
-        seconds = format!("{:.0}", info.training_seconds),
-        discriminative_tests_changed = changed,
-    );
-    Ok(())
-}
-
-fn counts<F, L>(f: &Forest<F, L>) -> (usize, usize, usize) {
-    (
-        f.trees.len(),
-        f.trees.iter().map(|t| t.nodes.len()).sum(),
-        f.trees.iter().map(|t| t.leaves.len()).sum(),
-    )
-}
-
-/// The training parameters `train paws` uses besides its arguments.
-fn paw_params(args: &TrainArgs) -> crate::vision::paws::train::TrainParams {
-    crate::vision::paws::train::TrainParams {
-        stages: args.stages as usize,
-        seed: args.seed,
-        ..crate::vision::paws::train::TrainParams::default()
-    }
-}
-
-/// Augmented copies of each paw window besides the plain one.
-const PAW_AUGMENT: usize = 3;
-
-/// `mousepose train paws`.
-fn train_paws(args: &TrainArgs) -> Result<()> {
-    use crate::training::paws_data as data;
-    use crate::vision::paws::{WINDOW_PX, train, xml};
-    let set = data::load(
-        &args.data,
-        data::CutParams {
-            width: WINDOW_PX as usize,
-            height: WINDOW_PX as usize,
-            augment: PAW_AUGMENT,
-            seed: args.seed,
-        },
-    )
-    .with_context(|| format!("reading training dataset {:?}", args.data))?;
-    tracing::info!(
-        message = "Training windows cut.",
-        paws = set.paws,
-        positives = set.positive_count(),
-        backgrounds = set.backgrounds.len(),
-    );
-    let params = paw_params(args);
-    let bar = progress::bar(params.stages as u64, "stages");
-    let started = std::time::Instant::now();
-    let trained = train::train(&set, &params, &mut |r| {
-        bar.inc(1);
-        bar.set_message(format!("fa {:.4}", r.false_alarm));
-        tracing::debug!(
-            message = "Stage trained.",
-            stage = r.stage,
-            positives = r.positives,
-            negatives = r.negatives,
-            weak = r.weak,
-            hit_rate = r.hit_rate,
-            false_alarm = r.false_alarm,
-            windows_scanned = r.windows_scanned,
-            windows_accepted = r.windows_accepted,
-        );
-    })
-    .context("training the paw cascade")?;
-    bar.finish_and_clear();
-    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
-    }
-    xml::save(&trained.cascade, &args.out)?;
-    let weak: usize = trained.cascade.stages.iter().map(|s| s.weak.len()).sum();
-    if let train::StopReason::NoNegatives { found, scanned } = &trained.stop {
-        tracing::info!(
-            message = "Training stopped early: the backgrounds no longer yield enough windows the cascade accepts.",
-            found,
-            scanned,
-        );
-    }
-    let last = trained.stages.last();
-    if args.json {
-        crate::app::output::print_json(&serde_json::json!({
-            "out": args.out,
+            "training_seconds": training_seconds,
+            "discriminative_tests_changed": discriminative_tests_changed,
+        }),
+        TrainSummary::Paws {
+            out,
+            stages,
+            weak,
+            features,
+            training_seconds,
+        } => serde_json::json!({
+            "out": out,
             "kind": "paws",
-            "stages": trained.cascade.stages.len(),
+            "stages": stages,
             "weak": weak,
-            "features": trained.cascade.features.len(),
-            "training_seconds": started.elapsed().as_secs_f64(),
-        }))?;
-    }
-    tracing::info!(
-        message = "Paw cascade written.",
-        path = %args.out.display(),
-        stages = trained.cascade.stages.len(),
-        weak,
-        features = trained.cascade.features.len(),
-        flat_positives = trained.flat_positives,
-        last_acceptance = last.map_or(0.0, |r| r.windows_accepted as f64 / r.windows_scanned.max(1) as f64),
-        seconds = format!("{:.0}", started.elapsed().as_secs_f64()),
-    );
-    Ok(())
+            "features": features,
+            "training_seconds": training_seconds,
+        }),
+    };
+    Ok(crate::app::output::print_json(&json)?)
 }

@@ -5,12 +5,20 @@
 
 pub mod batch;
 pub mod bench;
+pub mod calibrate;
 pub mod chart;
 pub mod daemon;
+pub mod detect;
+pub mod eval;
+pub mod experiment;
+pub mod export;
 pub mod progress;
 pub mod record;
 pub mod replay;
+pub mod report;
 pub mod status;
+pub mod synth;
+pub mod train;
 
 use anyhow::Context as _;
 use std::path::Path;

@@ -1,41 +1,12 @@
-//! `mousepose export moseq SESSION --out DIR`: a session in the layout MoSeq's acquisition
-//! writes and moseq2-extract reads, which `replay` reads back too:
-//!
-//! ```text
-//! DIR/
-//!   depth.avi       depth frames, FFV1 16-bit grey (gray16le), millimetres, lossless
-//!   depth_ts.txt    per depth frame: device time (ms), host time (ms)
-//!   metadata.json   SubjectName, SessionName, StartTime, DepthResolution, ... (MoSeq's keys)
-//!   mousepose.json  where the export came from: software version, session, cameras, counts
-//!   color.avi       the colour camera's frames, FFV1, lossless (Bayer mosaics as recorded)
-//!   color_ts.txt    per colour frame: device time (ms), host time (ms)
-//!   rig.yaml        the session's calibration (for `replay DIR --calibration DIR/rig.yaml`)
-//! ```
+//! `mousepose export moseq SESSION --out DIR`: the arguments, handed to
+//! [`crate::engine::export::moseq`], and what was written printed.
 
-use crate::app::export::Run;
 use crate::app::output::print;
-use crate::core::frame::PixelFormat;
-use crate::engine::{Failure, output_failure};
-use crate::io::output::Staging;
-use crate::io::session::{CameraMeta, CameraRole, SessionReader};
-use crate::io::video::{Encoder, EncoderSpec};
-use crate::runtime::capture::moseq::{DEPTH_AVI, DEPTH_TS, METADATA};
-use crate::vision::calibrate::RigCalibration;
-use anyhow::Context as _;
+use crate::engine::export::moseq::{COLOR_AVI, MoseqOptions};
+use crate::runtime::capture::moseq::DEPTH_AVI;
 use clap::Args;
-use serde::Serialize;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
-
-/// The colour camera's video.
-pub const COLOR_AVI: &str = "color.avi";
-/// The colour camera's timestamps.
-pub const COLOR_TS: &str = "color_ts.txt";
-/// The session's calibration.
-pub const RIG_FILE: &str = "rig.yaml";
-/// Where the export came from. Not in `metadata.json`: moseq2-extract stores each of that
-/// file's values as an HDF5 dataset and fails on a nested object.
-pub const PROVENANCE_FILE: &str = "mousepose.json";
+use std::path::PathBuf;
 
 #[derive(Debug, Args)]
 pub struct MoseqArgs {
@@ -60,247 +31,15 @@ pub struct MoseqArgs {
     pub json: bool,
 }
 
-/// `metadata.json`: the keys MoSeq's acquisition writes (moseq2-extract reads the resolution,
-/// byte order and data type, names its results after the subject and session, and copies
-/// every value into its results, so each must be a string, a number or a flat list).
-#[derive(Debug, Serialize)]
-#[serde(rename_all = "PascalCase")]
-struct Metadata {
-    subject_name: String,
-    session_name: String,
-    start_time: String,
-    depth_resolution: [u32; 2],
-    depth_data_type: &'static str,
-    is_little_endian: bool,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    color_resolution: Option<[u32; 2]>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    color_data_type: Option<&'static str>,
-    nidaq_channels: u32,
-    nidaq_sampling_rate: f64,
-}
-
-/// Where the export came from.
-#[derive(Debug, Serialize)]
-struct Provenance {
-    software_version: &'static str,
-    session: PathBuf,
-    depth_camera: CameraMeta,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    color_camera: Option<CameraMeta>,
-    /// The pixel layout stored in `color.avi` (a Bayer mosaic is stored as recorded, as grey).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    color_pixel_format: Option<&'static str>,
-    depth_frames: u64,
-    color_frames: u64,
-}
-
-/// What an export wrote.
-#[derive(Clone, Debug, Serialize)]
-pub struct MoseqExport {
-    pub out: PathBuf,
-    pub depth_frames: u64,
-    pub color_frames: u64,
-    /// Frames of the session that could not be read (damaged records), left out.
-    pub skipped_frames: u64,
-}
-
-/// A stamp in milliseconds, exact to the nanosecond.
-fn ms(ns: u64) -> String {
-    format!("{}.{:06}", ns / 1_000_000, ns % 1_000_000)
-}
-
-/// ffmpeg's name and the bytes per pixel of a colour format as stored (Bayer mosaics as grey).
-fn color_pix_fmt(format: PixelFormat) -> (&'static str, usize) {
-    match format {
-        PixelFormat::Rgb8 => ("rgb24", 3),
-        _ => ("gray", 1),
-    }
-}
-
-/// Writes the session at `session` into `out` in MoSeq's layout (see the module
-/// documentation); `progress` is called with the frames done and the total.
-///
-/// # Errors
-/// The session cannot be read, ffmpeg fails, or `out` cannot be written (nothing is left at
-/// `out` then).
-pub fn export_moseq(
-    session: &Path,
-    out: &Path,
-    subject: Option<&str>,
-    session_name: Option<&str>,
-    force: bool,
-    mut progress: impl FnMut(u64, u64),
-) -> Result<MoseqExport, Failure> {
-    let reader = SessionReader::open(session)
-        .map_err(|e| Failure::usage(e).context(format!("opening the session {session:?}")))?;
-    let meta = reader.meta().clone();
-    let depth_meta = meta
-        .camera(CameraRole::Depth)
-        .cloned()
-        .ok_or_else(|| Failure::usage(anyhow::anyhow!("the session {session:?} has no depth camera")))?;
-    let color_meta = meta.camera(CameraRole::Color).cloned();
-    let staging = Staging::new(out, force).map_err(output_failure)?;
-    let dir = staging.path().to_owned();
-    let total = (reader.depth_count() + reader.color_count()) as u64;
-    let mut done = 0u64;
-    let mut skipped = 0u64;
-    let fps = if depth_meta.fps > 0.0 { depth_meta.fps } else { 30.0 };
-
-    // Depth: 16-bit grey, as MoSeq's acquisition writes it.
-    let mut depth = Encoder::start(
-        EncoderSpec::ffv1(depth_meta.width, depth_meta.height, "gray16le", 2, fps),
-        &dir.join(DEPTH_AVI),
-    )?;
-    let mut depth_ts = String::new();
-    let mut bytes = Vec::new();
-    for frame in reader.depth_frames() {
-        done += 1;
-        progress(done, total);
-        let frame = match frame {
-            Ok(f) => f,
-            Err(e) => {
-                tracing::warn!(message = "Damaged depth frame left out.", error = %e);
-                skipped += 1;
-                continue;
-            }
-        };
-        if (frame.width, frame.height) != (depth_meta.width, depth_meta.height) {
-            tracing::warn!(
-                message = "Depth frame of another size than the camera's left out.",
-                seq = frame.stamp.seq
-            );
-            skipped += 1;
-            continue;
-        }
-        bytes.clear();
-        bytes.extend(frame.data.iter().flat_map(|d| d.to_le_bytes()));
-        depth.write(&bytes)?;
-        let _ = writeln!(depth_ts, "{} {}", ms(frame.stamp.device_ns), ms(frame.stamp.host_ns));
-    }
-    let depth_frames = depth.frames();
-    if depth_frames == 0 {
-        return Err(Failure::usage(anyhow::anyhow!(
-            "the session {session:?} has no readable depth frame"
-        )));
-    }
-    depth.finish()?;
-    crate::engine::write_report_file(&dir, DEPTH_TS, depth_ts.as_bytes())?;
-
-    // Colour: its own lossless video, in the camera's layout.
-    let mut color_frames = 0;
-    let mut color_pixel_format = None;
-    if let (Some(color_meta), Some(frames)) = (&color_meta, reader.color_frames()) {
-        let mut encoder: Option<(Encoder, PixelFormat, u32, u32)> = None;
-        let mut color_ts = String::new();
-        for frame in frames {
-            done += 1;
-            progress(done, total);
-            let frame = match frame {
-                Ok(f) => f,
-                Err(e) => {
-                    tracing::warn!(message = "Damaged colour frame left out.", error = %e);
-                    skipped += 1;
-                    continue;
-                }
-            };
-            let (enc, format, width, height) = match &mut encoder {
-                Some(e) => e,
-                None => {
-                    let (pix_fmt, bpp) = color_pix_fmt(frame.format);
-                    let spec = EncoderSpec::ffv1(
-                        frame.width,
-                        frame.height,
-                        pix_fmt,
-                        bpp,
-                        if color_meta.fps > 0.0 { color_meta.fps } else { fps },
-                    );
-                    color_pixel_format = Some(frame.format.name());
-                    let enc = Encoder::start(spec, &dir.join(COLOR_AVI))?;
-                    encoder.insert((enc, frame.format, frame.width, frame.height))
-                }
-            };
-            if frame.format != *format || (frame.width, frame.height) != (*width, *height) {
-                tracing::warn!(
-                    message = "Colour frame of another size or format left out.",
-                    seq = frame.stamp.seq
-                );
-                skipped += 1;
-                continue;
-            }
-            enc.write(&frame.data)?;
-            let _ = writeln!(color_ts, "{} {}", ms(frame.stamp.device_ns), ms(frame.stamp.host_ns));
-        }
-        if let Some((enc, ..)) = encoder {
-            color_frames = enc.frames();
-            enc.finish()?;
-            crate::engine::write_report_file(&dir, COLOR_TS, color_ts.as_bytes())?;
-        }
-    }
-
-    let session_name = session_name.map(str::to_owned).unwrap_or_else(|| {
-        session
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "session".to_owned())
-    });
-    let metadata = Metadata {
-        subject_name: subject.unwrap_or("unknown").to_owned(),
-        session_name,
-        start_time: meta.created.clone(),
-        depth_resolution: [depth_meta.width, depth_meta.height],
-        depth_data_type: "UInt16[]",
-        is_little_endian: true,
-        color_resolution: color_meta
-            .as_ref()
-            .filter(|_| color_frames > 0)
-            .map(|c| [c.width, c.height]),
-        color_data_type: (color_frames > 0).then_some("Byte[]"),
-        nidaq_channels: 0,
-        nidaq_sampling_rate: 0.0,
-    };
-    let provenance = Provenance {
-        software_version: env!("CARGO_PKG_VERSION"),
-        session: std::fs::canonicalize(session).unwrap_or_else(|_| session.to_owned()),
-        depth_camera: depth_meta,
-        color_camera: color_meta,
-        color_pixel_format,
-        depth_frames,
-        color_frames,
-    };
-    crate::engine::write_report_file(&dir, METADATA, &serde_json::to_vec_pretty(&metadata)?)?;
-    crate::engine::write_report_file(&dir, PROVENANCE_FILE, &serde_json::to_vec_pretty(&provenance)?)?;
-    if let Some(rig) = &meta.rig {
-        RigCalibration::from_rig(rig)
-            .save(&dir.join(RIG_FILE))
-            .context("writing the session's calibration")?;
-    }
-    staging.commit().map_err(output_failure)?;
-    Ok(MoseqExport {
-        out: out.to_owned(),
-        depth_frames,
-        color_frames,
-        skipped_frames: skipped,
-    })
-}
-
 /// `mousepose export moseq`.
 pub fn command(args: &MoseqArgs) -> crate::app::Outcome {
-    let run = Run::open(&args.session, None).map_err(Failure::usage)?;
-    let bar = crate::engine::progress::bar(0, "moseq");
-    let result = export_moseq(
-        &run.session,
-        &args.out,
-        args.subject.as_deref(),
-        args.session_name.as_deref(),
-        args.force,
-        |done, total| {
-            bar.set_length(total);
-            bar.set_position(done);
-        },
-    );
-    bar.finish_and_clear();
-    let e = result.map_err(|f| f.context(format!("exporting {:?} for MoSeq", run.session)))?;
+    let e = crate::engine::export::moseq::moseq(&MoseqOptions {
+        session: args.session.clone(),
+        out: args.out.clone(),
+        subject: args.subject.clone(),
+        session_name: args.session_name.clone(),
+        force: args.force,
+    })?;
     if args.json {
         return Ok(crate::app::output::print_json(&e)?);
     }
@@ -316,17 +55,4 @@ pub fn command(args: &MoseqArgs) -> crate::app::Outcome {
     }
     text.push('\n');
     Ok(print(&text)?)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn milliseconds_keep_every_nanosecond() {
-        assert_eq!(ms(0), "0.000000");
-        assert_eq!(ms(1_234_567_891), "1234.567891");
-        let back = crate::runtime::capture::moseq::ns_from_ms(&ms(987_654_321_012));
-        assert_eq!(back, Some(987_654_321_012));
-    }
 }

@@ -1,30 +1,11 @@
-//! `mousepose export nwb RUN --out FILE.nwb`: a run's poses as NWB 2.x with the ndx-pose
-//! extension (a `PoseEstimation` of 24 `PoseEstimationSeries`, one per joint, with the
-//! skeleton's edges, the cameras as devices, the software version and models), written by
-//! the ecosystem's own library: `pynwb` and `ndx-pose` in the Python environment that
-//! `scripts/nwb-env` makes (`/opt/mousepose/venv`, or `--python`/`$MOUSEPOSE_PYTHON`; the
-//! package installs the script as `/usr/share/mousepose/nwb-env`, `scripts/setup.sh` runs it).
-//!
-//! mousepose writes the metadata as JSON beside a copy of the helper script (`nwb.py`, built
-//! into the binary) in a temporary directory and runs it on the run's `poses.csv`; the file
-//! is written under a hidden name and renamed into place when the helper succeeds.
+//! `mousepose export nwb RUN --out FILE.nwb`: the arguments (the subject's fields checked as
+//! nwbinspector checks them), handed to [`crate::engine::export::nwb`], and what was written
+//! printed.
 
-use crate::app::export::{Run, check_file_out};
 use crate::app::output::print;
-use crate::core::skeleton::{BONES, Joint};
-use crate::engine::Failure;
-use crate::io::session::{CameraMeta, SessionReader};
-use crate::runtime::sink::poses::POSES_FILE;
-use anyhow::Context as _;
+use crate::engine::export::nwb::NwbOptions;
 use clap::Args;
-use serde::Serialize;
 use std::path::PathBuf;
-use std::process::Command;
-
-/// The helper, run with the environment's Python.
-const HELPER: &str = include_str!("nwb.py");
-/// Where `scripts/nwb-env` puts the Python environment with pynwb and ndx-pose.
-pub const DEFAULT_PYTHON: &str = "/opt/mousepose/venv/bin/python3";
 
 #[derive(Debug, Args)]
 pub struct NwbArgs {
@@ -241,205 +222,35 @@ fn parse_weight(s: &str) -> Result<String, String> {
     }
 }
 
-#[derive(Debug, Serialize)]
-struct Device {
-    name: String,
-    description: String,
-    /// The camera's serial number (`None` when the driver gave none).
-    serial_number: Option<String>,
-    /// The camera's model (an NWB `DeviceModel`, shared by cameras of one model).
-    model: String,
-    manufacturer: String,
-    firmware: String,
-}
-
-#[derive(Debug, Serialize)]
-struct Subject<'a> {
-    subject_id: &'a str,
-    species: &'a str,
-    sex: &'a str,
-    age: Option<&'a str>,
-    /// RFC 3339, midnight UTC of the date given.
-    date_of_birth: Option<String>,
-    strain: Option<&'a str>,
-    genotype: Option<&'a str>,
-    weight: Option<&'a str>,
-    description: Option<&'a str>,
-}
-
-/// What the helper reads.
-#[derive(Debug, Serialize)]
-struct Meta<'a> {
-    session_description: &'a str,
-    identifier: String,
-    session_start_time: String,
-    experimenter: &'a [String],
-    lab: Option<&'a str>,
-    institution: Option<&'a str>,
-    source_script: String,
-    subject: Subject<'a>,
-    devices: Vec<Device>,
-    joints: Vec<&'static str>,
-    edges: Vec<[usize; 2]>,
-    description: String,
-    scorer: String,
-    software_version: &'static str,
-}
-
-fn device(c: &CameraMeta) -> Device {
-    let known = |v: &str| Some(v.trim().to_owned()).filter(|v| !v.is_empty() && v != "unknown");
-    Device {
-        name: format!("{}_camera", c.role.name()),
-        description: format!(
-            "{} camera, {}x{} {} at {} fps, firmware {:?}",
-            c.role.name(),
-            c.width,
-            c.height,
-            c.pixel_format,
-            c.fps,
-            c.firmware
-        ),
-        serial_number: known(&c.serial),
-        model: known(&c.model).unwrap_or_else(|| format!("unknown {} camera", c.role.name())),
-        manufacturer: c.model.split_whitespace().next().unwrap_or("unknown").to_owned(),
-        firmware: c.firmware.clone(),
-    }
-}
-
 /// `mousepose export nwb`.
 pub fn command(args: &NwbArgs) -> crate::app::Outcome {
-    let run = Run::open(&args.run, args.session.as_deref()).map_err(Failure::usage)?;
-    let poses = run.dir.join(POSES_FILE);
-    if !poses.is_file() {
-        return Err(Failure::usage(anyhow::anyhow!(
-            "the run {:?} has no {POSES_FILE}",
-            run.dir
-        )));
-    }
-    check_file_out(&args.out, args.force)?;
-    let reader = SessionReader::open(&run.session)
-        .map_err(|e| Failure::usage(e).context(format!("opening the session {:?}", run.session)))?;
-    let session_meta = reader.meta();
-    if let Some(born) = &args.date_of_birth {
-        // Both are written as ISO 8601, so their dates compare as text.
-        if session_meta.created.get(..10).is_some_and(|day| day < born.as_str()) {
-            return Err(Failure::usage(anyhow::anyhow!(
-                "the date of birth {born} is after the session's start ({})",
-                session_meta.created
-            )));
-        }
-    }
-    let mut warnings = Vec::new();
-    if args.age.is_none() && args.date_of_birth.is_none() {
-        warnings.push(
-            "no --age or --date-of-birth: the file is written, but DANDI refuses it (nwbinspector's check_subject_age is critical) until the subject has one"
-                .to_owned(),
-        );
-    }
-    for w in &warnings {
-        eprintln!("warning: {w}");
-    }
-    let summary: serde_json::Value = std::fs::read(run.dir.join(crate::engine::replay::SUMMARY_FILE))
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok())
-        .unwrap_or_default();
-    let model = |key: &str| {
-        summary
-            .get(key)
-            .and_then(|v| v.as_str())
-            .unwrap_or("unknown")
-            .to_owned()
-    };
-    let session_name = run
-        .session
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let meta = Meta {
-        session_description: &args.session_description,
-        identifier: format!("mousepose-{session_name}-{}", session_meta.created),
-        session_start_time: session_meta.created.clone(),
-        experimenter: &args.experimenter,
-        lab: args.lab.as_deref(),
-        institution: args.institution.as_deref(),
-        source_script: format!(
-            "mousepose {} replay of {:?} ({})",
-            env!("CARGO_PKG_VERSION"),
-            run.session,
-            run.dir.display()
-        ),
-        subject: Subject {
-            subject_id: &args.subject_id,
-            species: &args.species,
-            sex: &args.sex,
-            age: args.age.as_deref(),
-            date_of_birth: args.date_of_birth.as_ref().map(|d| format!("{d}T00:00:00+00:00")),
-            strain: args.strain.as_deref(),
-            genotype: args.genotype.as_deref(),
-            weight: args.weight.as_deref(),
-            description: args.subject_description.as_deref(),
-        },
-        devices: session_meta.cameras.iter().map(device).collect(),
-        joints: Joint::ALL.iter().map(|j| j.name()).collect(),
-        edges: BONES.iter().map(|(a, b, _)| [a.index(), b.index()]).collect(),
-        description: "24 joints of the mouse in 3D: 1-12 from the top depth image (regression forest), \
-                      21-24 from the bottom colour image (paw cascade), 13-20 by inverse kinematics"
-            .to_owned(),
-        scorer: format!("body model {}; paw model {}", model("body_model"), model("paw_model")),
-        software_version: env!("CARGO_PKG_VERSION"),
-    };
-    let python = args
-        .python
-        .clone()
-        .or_else(|| std::env::var_os("MOUSEPOSE_PYTHON").map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from(DEFAULT_PYTHON));
-    let work = std::env::temp_dir().join(format!("mousepose-nwb-{}", std::process::id()));
-    std::fs::create_dir_all(&work).with_context(|| format!("creating {work:?}"))?;
-    let result = (|| -> Result<(), Failure> {
-        std::fs::write(work.join("nwb.py"), HELPER).context("writing the NWB helper")?;
-        std::fs::write(work.join("meta.json"), serde_json::to_vec_pretty(&meta)?).context("writing the metadata")?;
-        let name = args
-            .out
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "out.nwb".to_owned());
-        let partial = args
-            .out
-            .with_file_name(format!(".{name}.partial-{}", std::process::id()));
-        let output = Command::new(&python)
-            .arg(work.join("nwb.py"))
-            .arg(&poses)
-            .arg(work.join("meta.json"))
-            .arg(&partial)
-            .output()
-            .map_err(|e| {
-                Failure::usage(anyhow::Error::from(e).context(format!(
-                    "cannot run {python:?} (make it with 'sudo /usr/share/mousepose/nwb-env' where the package is installed, scripts/setup.sh in a checkout, or give a Python with pynwb and ndx-pose by --python)"
-                )))
-            })?;
-        if !output.status.success() {
-            let _ = std::fs::remove_file(&partial);
-            let stderr = String::from_utf8_lossy(&output.stderr);
-            let last = stderr
-                .lines()
-                .rev()
-                .find(|l| !l.trim().is_empty())
-                .unwrap_or("no message");
-            return Err(Failure::from(anyhow::anyhow!("the NWB helper failed: {last}")));
-        }
-        std::fs::rename(&partial, &args.out).with_context(|| format!("writing {:?}", args.out))?;
-        Ok(())
-    })();
-    let _ = std::fs::remove_dir_all(&work);
-    result.map_err(|f| f.context(format!("exporting {:?} to NWB", args.run)))?;
+    let written = crate::engine::export::nwb::nwb(&NwbOptions {
+        run: args.run.clone(),
+        out: args.out.clone(),
+        session: args.session.clone(),
+        subject_id: args.subject_id.clone(),
+        species: args.species.clone(),
+        sex: args.sex.clone(),
+        age: args.age.clone(),
+        date_of_birth: args.date_of_birth.clone(),
+        strain: args.strain.clone(),
+        genotype: args.genotype.clone(),
+        weight: args.weight.clone(),
+        subject_description: args.subject_description.clone(),
+        session_description: args.session_description.clone(),
+        experimenter: args.experimenter.clone(),
+        lab: args.lab.clone(),
+        institution: args.institution.clone(),
+        python: args.python.clone(),
+        force: args.force,
+    })?;
     if args.json {
-        let rows = std::fs::read_to_string(&poses).map_or(0, |t| t.lines().count().saturating_sub(1));
         return Ok(crate::app::output::print_json(&serde_json::json!({
-            "out": args.out,
-            "rows": rows,
-            "series": Joint::ALL.len(),
-            "subject_id": args.subject_id,
-            "warnings": warnings,
+            "out": written.out,
+            "rows": written.rows,
+            "series": written.series,
+            "subject_id": written.subject_id,
+            "warnings": written.warnings,
         }))?);
     }
     Ok(print(&format!("{:?}: 24 joints, NWB with ndx-pose\n", args.out))?)

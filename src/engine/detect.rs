@@ -1,0 +1,145 @@
+//! The engine of `mousepose detect paws IMAGE... --out DIR`: the paw cascade on single
+//! bottom-view images, for a lab checking what its own colour camera sees. Writes `detections.json` (per image its
+//! size and the paws' boxes with their scores) and, per image, a copy with the boxes drawn.
+
+use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
+use crate::core::image::RgbImage;
+use crate::engine::{Failure, output_failure};
+use crate::io::output::Staging;
+use crate::runtime::models::{PAWS_MODEL, default_models_dir};
+use crate::vision::paws::{PawDetection, PawDetector};
+use anyhow::Context as _;
+use opencv::core::{Mat, MatTraitConst, MatTraitConstManual};
+use opencv::imgcodecs;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// The file with every image's detections.
+pub const DETECTIONS_FILE: &str = "detections.json";
+
+/// What `detect paws` works on (see its `--help`).
+#[derive(Clone, Debug)]
+pub struct DetectPawsOptions {
+    /// The images, seen from below through the glass.
+    pub images: Vec<PathBuf>,
+    /// The directory to write detections.json and the pictures into.
+    pub out: PathBuf,
+    /// The paw cascade; the bundled one when `None`.
+    pub model: Option<PathBuf>,
+    /// How many image pixels a millimetre on the glass spans.
+    pub px_per_mm: f64,
+    /// Replace the output directory if it is not empty.
+    pub force: bool,
+}
+
+/// One image's detections.
+#[derive(Clone, Debug, Serialize)]
+pub struct ImageDetections {
+    pub image: PathBuf,
+    pub width: u32,
+    pub height: u32,
+    /// The picture with the boxes, in the output directory.
+    pub picture: String,
+    pub paws: Vec<PawDetection>,
+}
+
+/// `detections.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct Detections {
+    pub model: PathBuf,
+    pub px_per_mm: f64,
+    pub images: Vec<ImageDetections>,
+}
+
+/// Reads an image file as an RGB colour frame.
+fn read_image(path: &Path) -> anyhow::Result<ColorFrame> {
+    let unreadable = || format!("{path:?} is not an image OpenCV can read");
+    if !path.is_file() {
+        anyhow::bail!("{path:?} does not exist or is not a file");
+    }
+    let bgr: Mat = imgcodecs::imread(path, imgcodecs::IMREAD_COLOR).with_context(unreadable)?;
+    if bgr.empty() {
+        anyhow::bail!(unreadable());
+    }
+    let (width, height) = (
+        u32::try_from(bgr.cols()).with_context(unreadable)?,
+        u32::try_from(bgr.rows()).with_context(unreadable)?,
+    );
+    let bytes = bgr.data_bytes().with_context(unreadable)?;
+    let data: Vec<u8> = bytes.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect();
+    Ok(ColorFrame {
+        stamp: Stamp::default(),
+        width,
+        height,
+        format: PixelFormat::Rgb8,
+        data,
+    })
+}
+
+/// The image with the boxes drawn in yellow.
+fn picture(frame: &ColorFrame, paws: &[PawDetection]) -> RgbImage {
+    let mut img = RgbImage {
+        width: frame.width,
+        height: frame.height,
+        data: frame.data.clone(),
+    };
+    for d in paws {
+        img.rect(
+            (f64::from(d.x0), f64::from(d.y0)),
+            (f64::from(d.x1), f64::from(d.y1)),
+            [255, 220, 40],
+            2.0,
+        );
+    }
+    img
+}
+
+/// `mousepose detect paws`: writes `detections.json` and the pictures, returns the detections.
+///
+/// # Errors
+/// A missing or unreadable image or model, or an output directory in the way (the user's);
+/// a failure writing the output.
+pub fn paws(options: &DetectPawsOptions) -> Result<Detections, Failure> {
+    let model = match &options.model {
+        Some(path) => path.clone(),
+        None => default_models_dir().map_err(Failure::usage)?.join(PAWS_MODEL),
+    };
+    let mut detector = PawDetector::load(&model)
+        .map_err(Failure::usage)
+        .map_err(|f| f.context(format!("loading the paw cascade {model:?}")))?;
+    let frames = options
+        .images
+        .iter()
+        .map(|p| read_image(p))
+        .collect::<anyhow::Result<Vec<_>>>()
+        .map_err(Failure::usage)?;
+    let staging = Staging::new(&options.out, options.force).map_err(output_failure)?;
+    let mut found = Vec::new();
+    let mut images = Vec::new();
+    for (k, (path, frame)) in options.images.iter().zip(&frames).enumerate() {
+        detector.detect(frame, (0, 0, frame.width, frame.height), options.px_per_mm, &mut found);
+        let stem = path.file_stem().map_or_else(|| "image".into(), |s| s.to_string_lossy());
+        let name = format!("{k:03}-{stem}.png");
+        let out = staging.path().join(&name);
+        picture(frame, &found)
+            .write_png(&out)
+            .with_context(|| format!("writing {out:?}"))?;
+        images.push(ImageDetections {
+            image: path.clone(),
+            width: frame.width,
+            height: frame.height,
+            picture: name,
+            paws: found.clone(),
+        });
+    }
+    let detections = Detections {
+        model,
+        px_per_mm: options.px_per_mm,
+        images,
+    };
+    let path = staging.path().join(DETECTIONS_FILE);
+    let json = serde_json::to_vec_pretty(&detections).context("encoding the detections")?;
+    std::fs::write(&path, json).with_context(|| format!("writing {path:?}"))?;
+    staging.commit().map_err(output_failure)?;
+    Ok(detections)
+}

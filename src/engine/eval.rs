@@ -1,0 +1,314 @@
+//! The engine of `mousepose eval body|parts|paws`: a model's figures on a held-back dataset,
+//! with reports.
+
+use crate::engine::chart::{bar_chart, confusion_chart, line_chart};
+use crate::engine::train::ModelTarget;
+use crate::engine::{Failure, report_dir, write_report_file};
+use crate::training;
+use crate::vision::forest::Forest;
+use crate::vision::forest::infer::{BodyEstimator, VoteSettings};
+use crate::vision::forest::model::{self, Model, ModelKind};
+use anyhow::{Context, Result, bail};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+/// What `eval` evaluates, on what (see its `--help`).
+#[derive(Clone, Debug)]
+pub struct EvalOptions {
+    pub target: ModelTarget,
+    /// The model file.
+    pub model: PathBuf,
+    /// The held-back test dataset.
+    pub data: PathBuf,
+    /// Write tables and PNG charts into this directory.
+    pub report: Option<PathBuf>,
+    /// A baseline model to compare against in the report (body).
+    pub baseline: Option<PathBuf>,
+}
+
+/// A model's figures: what `eval --json` prints; [`EvalSummary::text`] is its table.
+#[derive(Debug, serde::Serialize)]
+#[serde(untagged)]
+pub enum EvalSummary {
+    Body(BodyFigures),
+    Parts(training::PartsReport),
+    Paws(training::paws_eval::PawReport),
+}
+
+/// `mousepose eval body|parts|paws`: the figures, and the tables and charts in
+/// `options.report`.
+///
+/// # Errors
+/// The model or dataset cannot be read, or the report cannot be written.
+pub fn eval(options: &EvalOptions) -> Result<EvalSummary, Failure> {
+    Ok(run(options)?)
+}
+
+fn run(options: &EvalOptions) -> Result<EvalSummary> {
+    let kind = match options.target {
+        ModelTarget::Body => ModelKind::Body,
+        ModelTarget::Parts => ModelKind::Parts,
+        ModelTarget::Paws => return eval_paws(options),
+    };
+    let model = model::load(&options.model, Some(kind))?;
+    let (ds, samples) =
+        training::load(&options.data).with_context(|| format!("reading test dataset {:?}", options.data))?;
+    if samples.is_empty() {
+        bail!("test dataset {:?} has no images", options.data);
+    }
+    let rig = ds.meta.rig.unwrap_or_else(crate::core::geometry::Rig::default_rig);
+    if let Some(train_seed) = model.info().data.iter().find(|d| d.seed == ds.meta.seed) {
+        tracing::warn!(
+            message = "The test dataset has the seed of a training dataset; its figures are not held-back figures.",
+            seed = train_seed.seed,
+        );
+    }
+    match model {
+        Model::Body(_, forest) => eval_body(options, forest, &samples, &rig),
+        Model::Parts(_, forest) => eval_parts(options, &forest, &samples),
+    }
+}
+
+/// What `eval body` prints: our estimate's figures, and the paper's method's beside them.
+#[derive(Debug, serde::Serialize)]
+pub struct BodyFigures {
+    #[serde(flatten)]
+    pub report: training::BodyReport,
+    pub paper_method: PaperMethod,
+}
+
+/// The figures of the paper's method alone (votes and mean-shift, no step along the tail).
+#[derive(Debug, serde::Serialize)]
+pub struct PaperMethod {
+    pub mean_error_mm: f64,
+    pub per_joint_mm: std::collections::BTreeMap<String, f64>,
+}
+
+fn eval_body(
+    options: &EvalOptions,
+    forest: Forest<[f32; 2], crate::vision::forest::depth::JointLeaf>,
+    samples: &[crate::synth::dataset::Sample],
+    rig: &crate::core::geometry::Rig,
+) -> Result<EvalSummary> {
+    let estimator = BodyEstimator::new(forest.clone(), VoteSettings::default())?;
+    let report = training::eval_body(&estimator, samples, rig, 0.0)?;
+    // The paper's method alone: votes and mean-shift, without our step along the tail.
+    let paper_only = BodyEstimator::new(
+        forest,
+        VoteSettings {
+            follow_tail: false,
+            ..VoteSettings::default()
+        },
+    )?;
+    let paper = training::eval_body(&paper_only, samples, rig, 0.0)?;
+    let report = BodyFigures {
+        paper_method: PaperMethod {
+            mean_error_mm: paper.mean_error_mm,
+            per_joint_mm: paper.per_joint_mm,
+        },
+        report,
+    };
+    if let Some(dir) = &options.report {
+        report_dir(dir)?;
+        // In the paper's joint order, not the map's alphabetical one.
+        let in_order = |r: &training::BodyReport| -> Vec<f64> {
+            crate::core::skeleton::Joint::MAIN_BODY
+                .iter()
+                .map(|j| r.per_joint_mm.get(j.name()).copied().unwrap_or(f64::NAN))
+                .collect()
+        };
+        let names: Vec<String> = crate::core::skeleton::Joint::MAIN_BODY
+            .iter()
+            .map(|j| j.name().to_owned())
+            .collect();
+        let ours = in_order(&report.report);
+        let mut series = Vec::new();
+        let baseline = match &options.baseline {
+            Some(path) => match model::load(path, Some(ModelKind::Body))? {
+                Model::Body(_, f) => Some(training::eval_body(
+                    &BodyEstimator::new(f, VoteSettings::default())?,
+                    samples,
+                    rig,
+                    0.0,
+                )?),
+                Model::Parts(..) => None,
+            },
+            None => None,
+        };
+        let base_values: Vec<f64> = baseline.as_ref().map(in_order).unwrap_or_default();
+        if baseline.is_some() {
+            series.push(("baseline", [120, 120, 120], base_values.as_slice()));
+        }
+        series.push(("this model", [40, 90, 220], ours.as_slice()));
+        let chart = bar_chart("joint error per joint (mm)", "mm", &names, &series);
+        chart.write_png(&dir.join("joint_error.png"))?;
+        // Error against added Gaussian noise.
+        let sigmas = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0];
+        let noisy: Vec<f64> = sigmas
+            .iter()
+            .map(|&s| training::eval_body(&estimator, samples, rig, s).map(|r| r.mean_error_mm))
+            .collect::<Result<_, _>>()?;
+        line_chart(
+            "mean joint error vs depth noise",
+            "noise sigma (mm)",
+            "mm",
+            &sigmas,
+            &[("mean error", [200, 40, 40], &noisy)],
+        )
+        .write_png(&dir.join("error_vs_noise.png"))?;
+        let mut table = String::from("joint,error_mm");
+        if baseline.is_some() {
+            table.push_str(",baseline_mm");
+        }
+        table.push('\n');
+        for (k, name) in names.iter().enumerate() {
+            let _ = write!(table, "{name},{:.3}", ours[k]);
+            if let Some(b) = base_values.get(k) {
+                let _ = write!(table, ",{b:.3}");
+            }
+            table.push('\n');
+        }
+        write_report_file(dir, "joint_error.csv", table.as_bytes())?;
+        let mut noise_table = String::from("noise_mm,mean_error_mm\n");
+        for (s, e) in sigmas.iter().zip(&noisy) {
+            let _ = writeln!(noise_table, "{s},{e:.3}");
+        }
+        write_report_file(dir, "error_vs_noise.csv", noise_table.as_bytes())?;
+        write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    Ok(EvalSummary::Body(report))
+}
+
+fn body_text(report: &BodyFigures) -> String {
+    let mut t = String::new();
+    let _ = writeln!(t, "{:<16} {:>9} {:>13}", "joint", "error mm", "paper's mm");
+    for (name, e) in &report.report.per_joint_mm {
+        let paper = report.paper_method.per_joint_mm.get(name).copied().unwrap_or(f64::NAN);
+        let _ = writeln!(t, "{name:<16} {e:>9.2} {paper:>13.2}");
+    }
+    let _ = writeln!(
+        t,
+        "{:<16} {:>9.2} {:>13.2}",
+        "mean (1-12)", report.report.mean_error_mm, report.paper_method.mean_error_mm
+    );
+    let _ = writeln!(
+        t,
+        "{} images, {} without a mouse found; \"paper's\": votes and mean-shift alone, without \
+         the step along the segmented tail",
+        report.report.images, report.report.no_mouse
+    );
+    t
+}
+
+fn eval_parts(
+    options: &EvalOptions,
+    forest: &Forest<[f32; 2], Vec<f32>>,
+    samples: &[crate::synth::dataset::Sample],
+) -> Result<EvalSummary> {
+    let report = training::eval_parts(forest, samples);
+    if let Some(dir) = &options.report {
+        report_dir(dir)?;
+        confusion_chart(
+            "part labels: confusion (% of true class)",
+            &report.classes,
+            &report.confusion,
+        )
+        .write_png(&dir.join("confusion.png"))?;
+        let mut table = String::from("truth\\predicted");
+        for c in &report.classes {
+            let _ = write!(table, ",{c}");
+        }
+        table.push('\n');
+        for (c, row) in report.classes.iter().zip(&report.confusion) {
+            let _ = write!(table, "{c}");
+            for v in row {
+                let _ = write!(table, ",{v}");
+            }
+            table.push('\n');
+        }
+        write_report_file(dir, "confusion.csv", table.as_bytes())?;
+        write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    Ok(EvalSummary::Parts(report))
+}
+
+fn parts_text(report: &training::PartsReport) -> String {
+    let mut t = String::new();
+    let _ = writeln!(t, "{:<12} {:>9}", "class", "accuracy");
+    for (name, a) in &report.per_class_accuracy {
+        let _ = writeln!(t, "{name:<12} {:>8.1}%", 100.0 * a);
+    }
+    let _ = writeln!(t, "{:<12} {:>8.1}%", "mean", 100.0 * report.mean_class_accuracy);
+    let _ = writeln!(t, "{:<12} {:>8.1}%", "all pixels", 100.0 * report.pixel_accuracy);
+    t
+}
+
+/// `mousepose eval paws`.
+fn eval_paws(options: &EvalOptions) -> Result<EvalSummary> {
+    use crate::training::paws_eval as eval;
+    use crate::vision::paws::PawDetector;
+    let detector = PawDetector::load(&options.model)?;
+    let report = eval::evaluate(&detector, &options.data)
+        .with_context(|| format!("evaluating on test dataset {:?}", options.data))?;
+    if let Some(dir) = &options.report {
+        report_dir(dir)?;
+        let mut points = report.curve.clone();
+        points.sort_by(|a, b| a.recall.total_cmp(&b.recall).then(b.precision.total_cmp(&a.precision)));
+        let stride = points.len().div_ceil(10).max(1);
+        let picked: Vec<_> = points
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| i % stride == 0 || i + 1 == points.len())
+            .map(|(_, p)| *p)
+            .collect();
+        let recall: Vec<f64> = picked.iter().map(|p| (p.recall * 1000.0).round() / 1000.0).collect();
+        let precision: Vec<f64> = picked.iter().map(|p| p.precision).collect();
+        line_chart(
+            "paws on the glass: precision vs recall (minimum score varied)",
+            "recall",
+            "precision",
+            &recall,
+            &[("precision", [40, 90, 220], &precision)],
+        )
+        .write_png(&dir.join("precision_recall.png"))?;
+        let mut table = String::from("min_score,precision,recall\n");
+        for p in &report.curve {
+            let _ = writeln!(table, "{:.4},{:.4},{:.4}", p.min_score, p.precision, p.recall);
+        }
+        write_report_file(dir, "precision_recall.csv", table.as_bytes())?;
+        write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    Ok(EvalSummary::Paws(report))
+}
+
+fn paws_text(report: &training::paws_eval::PawReport) -> String {
+    let mut t = String::new();
+    let _ = writeln!(t, "{:<28} {:>9}", "images", report.images);
+    let _ = writeln!(t, "{:<28} {:>9}", "paws on the glass", report.contact_paws);
+    let _ = writeln!(t, "{:<28} {:>9}", "detections", report.detections);
+    let _ = writeln!(t, "{:<28} {:>9.3}", "precision", report.precision);
+    let _ = writeln!(t, "{:<28} {:>9.3}", "recall (paws on the glass)", report.recall);
+    let _ = writeln!(t, "{:<28} {:>9.3}", "F1", report.f1);
+    let _ = writeln!(
+        t,
+        "{:<28} {:>9.2}",
+        "mean centre error (px)", report.mean_centre_error_px
+    );
+    let _ = writeln!(
+        t,
+        "{} true, {} false, {} of lifted or hidden paws (neither)",
+        report.true_positives, report.false_positives, report.neutral
+    );
+    t
+}
+
+impl EvalSummary {
+    /// The table `eval` prints without `--json`.
+    pub fn text(&self) -> String {
+        match self {
+            Self::Body(report) => body_text(report),
+            Self::Parts(report) => parts_text(report),
+            Self::Paws(report) => paws_text(report),
+        }
+    }
+}

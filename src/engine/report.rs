@@ -1,0 +1,448 @@
+//! The engine of `mousepose report RUN --out DIR`: a run's behaviour and gait as a page of PNG
+//! charts and CSV tables that opens without a network:
+//!
+//! ```text
+//! DIR/index.html     the page: figures, tables, how each measure is taken
+//! DIR/path.png       the body's path in the arena (blue at the start, red at the end)
+//! DIR/speed.png      speed over time; distance.png: distance travelled
+//! DIR/zones.png      time in the centre, between, and by the walls
+//! DIR/rearing.png    head height over time, with the rearing threshold
+//! DIR/stance.png     stance of each paw over time (a gait diagram), walking bouts marked
+//! DIR/gait.png       stride length, cadence and duty factor per paw
+//! DIR/frames.csv     per frame: time, centre, speed, distance, zone, rearing, walking, stance
+//! DIR/strides.csv    per stride: paw, start, period, length, cadence, duty factor
+//! DIR/bouts.csv      walking and rearing bouts
+//! DIR/summary.json   every measure of the page
+//! ```
+//!
+//! The measures come from [`crate::vision::behaviour`]: the body's centre is `mid_back`, the
+//! head height `head`'s z, and a paw is in stance while the bottom camera found it on the glass
+//! (its source is `paw`).
+
+use crate::core::geometry::{CAGE_X_MM, CAGE_Y_MM};
+use crate::core::pose::JointSource;
+use crate::core::skeleton::Joint;
+use crate::engine::chart::{Series, bar_chart, path_chart, raster_chart, series_chart};
+use crate::engine::{Failure, output_failure};
+use crate::io::output::Staging;
+use crate::runtime::sink::poses::{POSES_FILE, read_poses};
+use crate::runtime::stages::{PoseRecord, PoseStatus};
+use crate::vision::behaviour::{Arena, Behaviour, BehaviourConfig, FrameInput, PAW_NAMES, analyse_in};
+use anyhow::Context as _;
+use nalgebra::{Point2, Vector2};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// A paw placed from a detection is on the glass when it is at most this high, mm (fusion
+/// places a paw the leg cannot reach on the glass up its ray instead).
+const ON_GLASS_MM: f64 = 6.0;
+
+/// What a report is made with besides the run: the thresholds, and the arena (`None`: the
+/// run's own: the replay's `world.arena_mm`, else the synthetic cage).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ReportOptions {
+    pub config: BehaviourConfig,
+    pub arena: Option<Arena>,
+}
+
+/// The arena a report used, and where it came from: `flag`, `recording` (the replay's
+/// `world.arena_mm`) or `default` (the synthetic cage).
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct ArenaUsed {
+    #[serde(flatten)]
+    pub arena: Arena,
+    pub from: &'static str,
+}
+
+/// The arena of `options`, else the run's summary's, else the synthetic cage.
+fn arena_of(run: &Path, options: &ReportOptions) -> ArenaUsed {
+    if let Some(arena) = options.arena {
+        return ArenaUsed { arena, from: "flag" };
+    }
+    let recorded = std::fs::read(run.join(crate::engine::replay::SUMMARY_FILE))
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        .and_then(|v| {
+            let a = v.get("world")?.get("arena_mm")?;
+            let get = |k: &str| a.get(k).and_then(serde_json::Value::as_f64);
+            Some(Arena {
+                x_min_mm: get("x_min_mm")?,
+                y_min_mm: get("y_min_mm")?,
+                x_max_mm: get("x_max_mm")?,
+                y_max_mm: get("y_max_mm")?,
+            })
+        })
+        .filter(|a| a.size_mm().0 > 0.0 && a.size_mm().1 > 0.0);
+    match recorded {
+        Some(arena) => ArenaUsed {
+            arena,
+            from: "recording",
+        },
+        None => ArenaUsed {
+            arena: Arena::centred((CAGE_X_MM, CAGE_Y_MM)),
+            from: "default",
+        },
+    }
+}
+
+/// The analysis's input of one row of `poses.csv`.
+pub fn frame_input(t0_ns: u64, r: &PoseRecord) -> FrameInput {
+    let t_s = r.depth.device_ns.saturating_sub(t0_ns) as f64 / 1e9;
+    let seen = |j: Joint| {
+        let e = r.pose.joint(j);
+        (r.status == PoseStatus::Ok && e.source != JointSource::Missing).then_some(e)
+    };
+    let xy = |j: Joint| seen(j).map(|e| Point2::new(e.position_mm.x, e.position_mm.y));
+    let axis = match (xy(Joint::Neck), xy(Joint::TailBase)) {
+        (Some(n), Some(t)) => Some(n - t),
+        _ => None,
+    };
+    let paws = [
+        Joint::LeftForePaw,
+        Joint::RightForePaw,
+        Joint::LeftHindPaw,
+        Joint::RightHindPaw,
+    ]
+    .map(|j| {
+        seen(j)
+            .filter(|e| e.source == JointSource::Paw && e.position_mm.z <= ON_GLASS_MM)
+            .map(|e| Point2::new(e.position_mm.x, e.position_mm.y))
+    });
+    FrameInput {
+        t_s,
+        centre: xy(Joint::MidBack),
+        axis: axis.filter(|a: &Vector2<f64>| a.norm() > 1e-6),
+        head_z_mm: seen(Joint::Head).map(|e| e.position_mm.z),
+        paws,
+    }
+}
+
+fn opt(v: Option<f64>, decimals: usize) -> String {
+    v.map(|v| format!("{v:.decimals$}")).unwrap_or_default()
+}
+
+fn nan(v: Option<f64>) -> f64 {
+    v.unwrap_or(f64::NAN)
+}
+
+fn frames_csv(b: &Behaviour, inputs: &[FrameInput]) -> String {
+    let mut s = String::from("t_s,x_mm,y_mm,speed_mm_s,distance_mm,zone,head_z_mm,rearing,walking");
+    for p in PAW_NAMES {
+        let _ = write!(s, ",{p}_stance");
+    }
+    s.push('\n');
+    for (f, i) in b.frames.iter().zip(inputs) {
+        let _ = write!(
+            s,
+            "{:.4},{},{},{},{:.1},{},{},{},{}",
+            f.t_s,
+            opt(i.centre.map(|c| c.x), 2),
+            opt(i.centre.map(|c| c.y), 2),
+            opt(f.speed_mm_s, 1),
+            f.distance_mm,
+            f.zone.name(),
+            opt(i.head_z_mm, 2),
+            u8::from(f.rearing),
+            u8::from(f.walking)
+        );
+        for st in f.stance {
+            let _ = write!(s, ",{}", u8::from(st));
+        }
+        s.push('\n');
+    }
+    s
+}
+
+fn strides_csv(b: &Behaviour) -> String {
+    let mut s = String::from("paw,start_s,period_s,length_mm,cadence_hz,duty_factor\n");
+    for st in &b.strides {
+        let _ = writeln!(
+            s,
+            "{},{:.4},{:.4},{:.2},{:.3},{:.3}",
+            PAW_NAMES[st.paw],
+            st.start_s,
+            st.period_s,
+            st.length_mm,
+            1.0 / st.period_s,
+            st.duty_factor
+        );
+    }
+    s
+}
+
+fn bouts_csv(b: &Behaviour) -> String {
+    let mut s = String::from("kind,start_s,end_s,duration_s\n");
+    for (kind, bouts) in [("walking", &b.walking), ("rearing", &b.rearing)] {
+        for x in bouts {
+            let _ = writeln!(s, "{kind},{:.4},{:.4},{:.4}", x.start_s, x.end_s, x.duration_s());
+        }
+    }
+    s
+}
+
+fn html_escape(text: &str) -> String {
+    text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig, arena: &ArenaUsed) -> String {
+    let total: f64 = b.zone_s.iter().sum::<f64>().max(1e-9);
+    let mut h = String::from(
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>mousepose report</title>\n<style>body{font-family:sans-serif;max-width:960px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 10px;text-align:right}th{background:#f3f3f3}img{max-width:100%;border:1px solid #eee}</style></head><body>\n",
+    );
+    let _ = writeln!(
+        h,
+        "<h1>Behaviour and gait</h1><p>Run: <code>{}</code></p>",
+        html_escape(&run.display().to_string())
+    );
+    let _ = writeln!(
+        h,
+        "<table><tr><th>duration</th><th>distance</th><th>mean speed</th><th>in the centre</th><th>by the walls</th><th>between</th><th>mouse not found</th><th>rearing bouts</th><th>walking bouts</th></tr>\
+         <tr><td>{:.1} s</td><td>{:.0} mm</td><td>{} mm/s</td><td>{:.1} s ({:.0} %)</td><td>{:.1} s ({:.0} %)</td><td>{:.1} s ({:.0} %)</td><td>{:.1} s</td><td>{} ({:.1} s)</td><td>{} ({:.1} s)</td></tr></table>",
+        b.duration_s,
+        b.distance_mm,
+        opt(b.mean_speed_mm_s, 0),
+        b.zone_s[0],
+        100.0 * b.zone_s[0] / total,
+        b.zone_s[1],
+        100.0 * b.zone_s[1] / total,
+        b.zone_s[2],
+        100.0 * b.zone_s[2] / total,
+        b.zone_s[3],
+        b.rearing.len(),
+        b.rearing.iter().map(|x| x.duration_s()).sum::<f64>(),
+        b.walking.len(),
+        b.walking.iter().map(|x| x.duration_s()).sum::<f64>(),
+    );
+    for (img, alt) in [
+        ("path.png", "path in the arena"),
+        ("speed.png", "speed over time"),
+        ("distance.png", "distance over time"),
+        ("zones.png", "time per zone"),
+        ("rearing.png", "head height and rearing"),
+    ] {
+        let _ = writeln!(h, "<p><img src=\"{img}\" alt=\"{alt}\"></p>");
+    }
+    h.push_str("<h2>Gait (walking bouts only)</h2>\n<table><tr><th>paw</th><th>strides</th><th>stride length</th><th>cadence</th><th>duty factor</th><th>phase to left hind</th></tr>\n");
+    for (k, p) in b.paws.iter().enumerate() {
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{} mm</td><td>{} Hz</td><td>{}</td><td>{}</td></tr>",
+            PAW_NAMES[k].replace('_', " "),
+            p.strides,
+            opt(p.stride_length_mm, 1),
+            opt(p.cadence_hz, 2),
+            opt(p.duty_factor, 2),
+            opt(b.phase_to_left_hind[k], 2)
+        );
+    }
+    let _ = writeln!(
+        h,
+        "</table><p>Base of support: fore {} mm, hind {} mm.</p>",
+        opt(b.base_of_support_fore_mm, 1),
+        opt(b.base_of_support_hind_mm, 1)
+    );
+    for (img, alt) in [("stance.png", "stance of each paw"), ("gait.png", "gait per paw")] {
+        let _ = writeln!(h, "<p><img src=\"{img}\" alt=\"{alt}\"></p>");
+    }
+    let _ = writeln!(
+        h,
+        "<h2>How</h2><ul>\
+         <li>Body centre: <code>mid_back</code>, averaged over {:.2} s; speed from it, distance its path.</li>\
+         <li>Centre: the central rectangle of half the arena's length and width; walls: within {:.0} mm of a wall (arena {:.0} x {:.0} mm from x {:.0}, y {:.0} mm, {}).</li>\
+         <li>Rearing: the head at least {:.0} mm above the glass for {:.2} s or more.</li>\
+         <li>Walking: speed between {:.0} and {:.0} mm/s for {:.1} s or more, not rearing.</li>\
+         <li>Stance: the paw found on the glass by the bottom camera (source <code>paw</code>) and moving slower than {:.1} times the body plus {:.0} mm/s \
+         (planted, a paw stays put; in swing it overtakes the body); one-frame gaps and blips are smoothed over. \
+         A stride runs from a touchdown to the paw's next one in the same walking bout ({:.2}-{:.1} s); its length is the distance between the two footprints, \
+         its duty factor the stance time over the period. Base of support: the distance across the body axis between the left and right paws both in stance. \
+         Phase: where in the left hind paw's stride each paw touches down (0.5: half a stride later).</li></ul>",
+        config.smooth_s,
+        config.wall_band_mm,
+        arena.arena.size_mm().0,
+        arena.arena.size_mm().1,
+        arena.arena.x_min_mm,
+        arena.arena.y_min_mm,
+        match arena.from {
+            "flag" => "given by --arena",
+            "recording" => "the arena the replay found",
+            _ => "the synthetic cage: the run names no arena; give --arena for a real rig",
+        },
+        config.rear_head_mm,
+        config.min_rear_s,
+        config.walk_min_mm_s,
+        config.walk_max_mm_s,
+        config.min_walk_s,
+        config.stance_speed_factor,
+        config.stance_margin_mm_s,
+        config.min_stride_s,
+        config.max_stride_s
+    );
+    h.push_str("<p>Tables: <a href=\"frames.csv\">frames.csv</a>, <a href=\"strides.csv\">strides.csv</a>, <a href=\"bouts.csv\">bouts.csv</a>, <a href=\"summary.json\">summary.json</a>.</p>\n</body></html>\n");
+    h
+}
+
+/// What the summary holds (`summary.json`, and `report --json`): the analysis without its
+/// per-frame rows.
+#[derive(Debug, serde::Serialize)]
+pub struct Summary<'a> {
+    run: &'a Path,
+    config: &'a BehaviourConfig,
+    arena: ArenaUsed,
+    duration_s: f64,
+    distance_mm: f64,
+    mean_speed_mm_s: Option<f64>,
+    centre_s: f64,
+    wall_s: f64,
+    between_s: f64,
+    unknown_s: f64,
+    rearing_bouts: usize,
+    walking_bouts: usize,
+    strides: usize,
+    paws: std::collections::BTreeMap<&'static str, crate::vision::behaviour::PawGait>,
+    phase_to_left_hind: std::collections::BTreeMap<&'static str, Option<f64>>,
+    base_of_support_fore_mm: Option<f64>,
+    base_of_support_hind_mm: Option<f64>,
+}
+
+/// Reads `run/poses.csv`, analyses it and writes the report into `out`.
+///
+/// # Errors
+/// The poses cannot be read (or there are none), or `out` cannot be written.
+pub fn report(run: &Path, out: &Path, force: bool) -> Result<Behaviour, Failure> {
+    report_with(run, out, force, &ReportOptions::default()).map(|(b, _)| b)
+}
+
+/// [`report`] with other thresholds or another arena; also says which arena it used.
+///
+/// # Errors
+/// The poses cannot be read (or there are none), or `out` cannot be written.
+pub fn report_with(
+    run: &Path,
+    out: &Path,
+    force: bool,
+    options: &ReportOptions,
+) -> Result<(Behaviour, ArenaUsed), Failure> {
+    let rows = read_poses(&run.join(POSES_FILE)).map_err(Failure::usage)?;
+    let Some(first) = rows.first() else {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "{:?} has no rows",
+            run.join(POSES_FILE)
+        )));
+    };
+    let t0 = first.depth.device_ns;
+    let inputs: Vec<FrameInput> = rows.iter().map(|r| frame_input(t0, r)).collect();
+    let config = options.config;
+    let arena = arena_of(run, options);
+    let b = analyse_in(&inputs, &arena.arena, &config);
+    let staging = Staging::new(out, force).map_err(output_failure)?;
+    let dir = staging.path();
+    let t: Vec<f64> = b.frames.iter().map(|f| f.t_s).collect();
+    let write_png = |name: &str, img: crate::core::image::RgbImage| -> anyhow::Result<()> {
+        img.write_png(&dir.join(name))
+            .with_context(|| format!("writing {name}"))
+    };
+    // The chart draws its arena around the origin.
+    let middle = arena.arena.centre();
+    let path: Vec<Option<(f64, f64)>> = inputs
+        .iter()
+        .map(|i| i.centre.map(|c| (c.x - middle.x, c.y - middle.y)))
+        .collect();
+    let (length, width) = arena.arena.size_mm();
+    write_png(
+        "path.png",
+        path_chart("PATH IN THE ARENA", &path, (length / 2.0, width / 2.0)),
+    )?;
+    let speed: Vec<f64> = b.frames.iter().map(|f| nan(f.speed_mm_s)).collect();
+    write_png(
+        "speed.png",
+        series_chart(
+            "SPEED",
+            "TIME (S)",
+            "MM/S",
+            &t,
+            &[("speed", [40, 90, 200], &speed)],
+            &[config.walk_min_mm_s, config.walk_max_mm_s],
+        ),
+    )?;
+    let distance: Vec<f64> = b.frames.iter().map(|f| f.distance_mm).collect();
+    write_png(
+        "distance.png",
+        series_chart(
+            "DISTANCE TRAVELLED",
+            "TIME (S)",
+            "MM",
+            &t,
+            &[("distance", [40, 140, 80], &distance)],
+            &[],
+        ),
+    )?;
+    let zones = ["centre", "wall", "between", "not found"].map(str::to_owned);
+    write_png(
+        "zones.png",
+        bar_chart("TIME PER ZONE", "S", &zones, &[("time", [40, 90, 200], &b.zone_s)]),
+    )?;
+    let head: Vec<f64> = inputs.iter().map(|i| nan(i.head_z_mm)).collect();
+    write_png(
+        "rearing.png",
+        series_chart(
+            "HEAD HEIGHT (REARING ABOVE THE LINE)",
+            "TIME (S)",
+            "MM",
+            &t,
+            &[("head", [200, 80, 40], &head)],
+            &[config.rear_head_mm],
+        ),
+    )?;
+    let mut rows_raster: Vec<(&str, Vec<bool>)> = PAW_NAMES
+        .iter()
+        .enumerate()
+        .map(|(k, name)| (*name, b.frames.iter().map(|f| f.stance[k]).collect()))
+        .collect();
+    rows_raster.push(("walking", b.frames.iter().map(|f| f.walking).collect()));
+    rows_raster.push(("rearing", b.frames.iter().map(|f| f.rearing).collect()));
+    write_png(
+        "stance.png",
+        raster_chart("STANCE PER PAW", "TIME (S)", &t, &rows_raster),
+    )?;
+    let paws: Vec<String> = PAW_NAMES.iter().map(|p| p.replace('_', " ")).collect();
+    let length: Vec<f64> = b.paws.iter().map(|p| p.stride_length_mm.unwrap_or(0.0)).collect();
+    let cadence10: Vec<f64> = b.paws.iter().map(|p| 10.0 * p.cadence_hz.unwrap_or(0.0)).collect();
+    let duty100: Vec<f64> = b.paws.iter().map(|p| 100.0 * p.duty_factor.unwrap_or(0.0)).collect();
+    let series: [Series<'_>; 3] = [
+        ("stride length mm", [40, 90, 200], &length),
+        ("cadence x10 hz", [40, 140, 80], &cadence10),
+        ("duty factor %", [200, 80, 40], &duty100),
+    ];
+    write_png("gait.png", bar_chart("GAIT PER PAW (WALKING)", "", &paws, &series))?;
+    crate::engine::write_report_file(dir, "frames.csv", frames_csv(&b, &inputs).as_bytes())?;
+    crate::engine::write_report_file(dir, "strides.csv", strides_csv(&b).as_bytes())?;
+    crate::engine::write_report_file(dir, "bouts.csv", bouts_csv(&b).as_bytes())?;
+    let summary = summary(run, &config, arena, &b);
+    crate::engine::write_report_file(dir, "summary.json", &serde_json::to_vec_pretty(&summary)?)?;
+    crate::engine::write_report_file(dir, "index.html", page(run, &b, &config, &arena).as_bytes())?;
+    staging.commit().map_err(output_failure)?;
+    Ok((b, arena))
+}
+
+/// The summary of `b`, the analysis of `run`.
+pub fn summary<'a>(run: &'a Path, config: &'a BehaviourConfig, arena: ArenaUsed, b: &Behaviour) -> Summary<'a> {
+    Summary {
+        run,
+        config,
+        arena,
+        duration_s: b.duration_s,
+        distance_mm: b.distance_mm,
+        mean_speed_mm_s: b.mean_speed_mm_s,
+        centre_s: b.zone_s[0],
+        wall_s: b.zone_s[1],
+        between_s: b.zone_s[2],
+        unknown_s: b.zone_s[3],
+        rearing_bouts: b.rearing.len(),
+        walking_bouts: b.walking.len(),
+        strides: b.strides.len(),
+        paws: PAW_NAMES.iter().copied().zip(b.paws).collect(),
+        phase_to_left_hind: PAW_NAMES.iter().copied().zip(b.phase_to_left_hind).collect(),
+        base_of_support_fore_mm: b.base_of_support_fore_mm,
+        base_of_support_hind_mm: b.base_of_support_hind_mm,
+    }
+}

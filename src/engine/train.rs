@@ -1,0 +1,280 @@
+//! The engine of `mousepose train body|parts|paws`: forests and the paw cascade from
+//! synthetic datasets.
+
+use crate::engine::progress;
+use crate::engine::{Exists, Failure};
+use crate::training::{self, PixelParams, Target, TrainJob, TrainProgress};
+use crate::vision::forest::discriminative::{DiscriminativeParams, ErrorScope, Scoring};
+use crate::vision::forest::model::{self, Model, ModelKind};
+use crate::vision::forest::{Forest, TrainParams};
+use anyhow::{Context, Result};
+use indicatif::ProgressBar;
+use std::path::PathBuf;
+
+/// What `train` and `eval` work on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModelTarget {
+    /// The body forest: joints 1-12 from the top depth image.
+    Body,
+    /// The part forest: six body-part labels per depth pixel.
+    Parts,
+    /// The paw detector: a boosted cascade of Haar features on the bottom colour view.
+    Paws,
+}
+
+/// What `train` trains, on what, and where it writes it (see its `--help`).
+#[derive(Clone, Debug)]
+pub struct TrainOptions {
+    pub target: ModelTarget,
+    /// The training dataset (D_t).
+    pub data: PathBuf,
+    /// The model file to write.
+    pub out: PathBuf,
+    pub trees: u32,
+    pub depth: u32,
+    pub tests: u32,
+    pub leaf: u32,
+    /// A second dataset (D_d) for discriminative training.
+    pub discriminative: Option<PathBuf>,
+    /// Refine this trained baseline instead of training one first.
+    pub from: Option<PathBuf>,
+    pub iterations: u32,
+    pub start_level: u32,
+    pub subset: f64,
+    pub bootstrap: bool,
+    pub keep_leaves: bool,
+    pub keep_current: bool,
+    pub error: ErrorScope,
+    pub score_pixels: usize,
+    pub pixels: u32,
+    pub seed: u64,
+    /// Cascade stages at most (paws).
+    pub stages: u32,
+    /// Replace the model file if it exists.
+    pub force: bool,
+}
+
+/// What `train` wrote.
+#[derive(Clone, Debug)]
+pub enum TrainSummary {
+    /// A forest: `kind` is `body` or `parts`.
+    Forest {
+        out: PathBuf,
+        kind: &'static str,
+        trees: usize,
+        nodes: usize,
+        leaves: usize,
+        training_seconds: f64,
+        discriminative_tests_changed: usize,
+    },
+    /// The paw cascade.
+    Paws {
+        out: PathBuf,
+        stages: usize,
+        weak: usize,
+        features: usize,
+        training_seconds: f64,
+    },
+}
+
+struct Bar(ProgressBar);
+
+impl TrainProgress for Bar {
+    fn stage(&self, what: &str, total: u64) {
+        self.0.set_message(what.to_owned());
+        self.0.set_length(total);
+        self.0.set_position(0);
+    }
+
+    fn tick(&self) {
+        self.0.inc(1);
+    }
+}
+
+/// `mousepose train body|parts|paws`: trains the model and writes it to `options.out`.
+///
+/// # Errors
+/// A model file in the way (the user's), or a dataset or model that cannot be read or written.
+pub fn train(options: &TrainOptions) -> Result<TrainSummary, Failure> {
+    if options.out.exists() && !options.force {
+        return Err(Failure::usage(Exists(options.out.clone())));
+    }
+    if options.target == ModelTarget::Paws {
+        return Ok(train_paws(options)?);
+    }
+    let params = TrainParams {
+        trees: options.trees as usize,
+        max_depth: options.depth,
+        tests: options.tests as usize,
+        min_leaf: options.leaf as usize,
+        seed: options.seed,
+        score_sample: options.score_pixels,
+    };
+    let job = TrainJob {
+        target: match options.target {
+            ModelTarget::Body => Target::Body,
+            ModelTarget::Parts | ModelTarget::Paws => Target::Parts,
+        },
+        train: &options.data,
+        discriminative: options.discriminative.as_deref(),
+        params,
+        disc: DiscriminativeParams {
+            tests: params.tests,
+            min_leaf: params.min_leaf,
+            start_level: options.start_level,
+            iterations: options.iterations as usize,
+            subset: options.subset,
+            bootstrap: options.bootstrap,
+            refit_leaves: !options.keep_leaves,
+            keep_current: options.keep_current,
+            error: options.error,
+            scoring: Scoring::SubtreeError,
+            score_sample: params.score_sample,
+            max_depth: params.max_depth,
+            seed: options.seed ^ 0xD15C,
+        },
+        pixels: PixelParams {
+            per_image: options.pixels as usize,
+            thresholds: 12,
+            seed: options.seed,
+        },
+        from: match &options.from {
+            Some(path) => {
+                let kind = match options.target {
+                    ModelTarget::Body => ModelKind::Body,
+                    ModelTarget::Parts | ModelTarget::Paws => ModelKind::Parts,
+                };
+                Some(model::load(path, Some(kind))?)
+            }
+            None => None,
+        },
+    };
+    let bar = Bar(progress::bar(0, "loading"));
+    let (model, passes) = training::train(&job, &bar).context("training")?;
+    bar.0.finish_and_clear();
+    if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
+    }
+    model::save(&model, &options.out)?;
+    let info = model.info();
+    let (trees, nodes, leaves) = match &model {
+        Model::Body(_, f) => counts(f),
+        Model::Parts(_, f) => counts(f),
+    };
+    let changed: usize = passes.iter().map(|p| p.tests_changed).sum();
+    tracing::info!(
+        message = "Model written.",
+        path = %options.out.display(),
+        kind = info.kind.name(),
+        trees,
+        nodes,
+        leaves,
+        seconds = format!("{:.0}", info.training_seconds),
+        discriminative_tests_changed = changed,
+    );
+    Ok(TrainSummary::Forest {
+        out: options.out.clone(),
+        kind: match options.target {
+            ModelTarget::Body => "body",
+            ModelTarget::Parts | ModelTarget::Paws => "parts",
+        },
+        trees,
+        nodes,
+        leaves,
+        training_seconds: info.training_seconds,
+        discriminative_tests_changed: changed,
+    })
+}
+
+fn counts<F, L>(f: &Forest<F, L>) -> (usize, usize, usize) {
+    (
+        f.trees.len(),
+        f.trees.iter().map(|t| t.nodes.len()).sum(),
+        f.trees.iter().map(|t| t.leaves.len()).sum(),
+    )
+}
+
+/// The training parameters `train paws` uses besides its arguments.
+fn paw_params(options: &TrainOptions) -> crate::vision::paws::train::TrainParams {
+    crate::vision::paws::train::TrainParams {
+        stages: options.stages as usize,
+        seed: options.seed,
+        ..crate::vision::paws::train::TrainParams::default()
+    }
+}
+
+/// Augmented copies of each paw window besides the plain one.
+const PAW_AUGMENT: usize = 3;
+
+/// `mousepose train paws`.
+fn train_paws(options: &TrainOptions) -> Result<TrainSummary> {
+    use crate::training::paws_data as data;
+    use crate::vision::paws::{WINDOW_PX, train, xml};
+    let set = data::load(
+        &options.data,
+        data::CutParams {
+            width: WINDOW_PX as usize,
+            height: WINDOW_PX as usize,
+            augment: PAW_AUGMENT,
+            seed: options.seed,
+        },
+    )
+    .with_context(|| format!("reading training dataset {:?}", options.data))?;
+    tracing::info!(
+        message = "Training windows cut.",
+        paws = set.paws,
+        positives = set.positive_count(),
+        backgrounds = set.backgrounds.len(),
+    );
+    let params = paw_params(options);
+    let bar = progress::bar(params.stages as u64, "stages");
+    let started = std::time::Instant::now();
+    let trained = train::train(&set, &params, &mut |r| {
+        bar.inc(1);
+        bar.set_message(format!("fa {:.4}", r.false_alarm));
+        tracing::debug!(
+            message = "Stage trained.",
+            stage = r.stage,
+            positives = r.positives,
+            negatives = r.negatives,
+            weak = r.weak,
+            hit_rate = r.hit_rate,
+            false_alarm = r.false_alarm,
+            windows_scanned = r.windows_scanned,
+            windows_accepted = r.windows_accepted,
+        );
+    })
+    .context("training the paw cascade")?;
+    bar.finish_and_clear();
+    if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
+    }
+    xml::save(&trained.cascade, &options.out)?;
+    let weak: usize = trained.cascade.stages.iter().map(|s| s.weak.len()).sum();
+    if let train::StopReason::NoNegatives { found, scanned } = &trained.stop {
+        tracing::info!(
+            message = "Training stopped early: the backgrounds no longer yield enough windows the cascade accepts.",
+            found,
+            scanned,
+        );
+    }
+    let last = trained.stages.last();
+    let training_seconds = started.elapsed().as_secs_f64();
+    tracing::info!(
+        message = "Paw cascade written.",
+        path = %options.out.display(),
+        stages = trained.cascade.stages.len(),
+        weak,
+        features = trained.cascade.features.len(),
+        flat_positives = trained.flat_positives,
+        last_acceptance = last.map_or(0.0, |r| r.windows_accepted as f64 / r.windows_scanned.max(1) as f64),
+        seconds = format!("{:.0}", training_seconds),
+    );
+    Ok(TrainSummary::Paws {
+        out: options.out.clone(),
+        stages: trained.cascade.stages.len(),
+        weak,
+        features: trained.cascade.features.len(),
+        training_seconds,
+    })
+}
