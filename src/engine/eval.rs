@@ -4,6 +4,7 @@
 use crate::engine::chart::{bar_chart, confusion_chart, line_chart};
 use crate::engine::train::ModelTarget;
 use crate::engine::{Failure, report_dir, write_report_file};
+use crate::io::table::{Exact, Fixed, table};
 use crate::training;
 use crate::vision::forest::Forest;
 use crate::vision::forest::infer::{BodyEstimator, VoteSettings};
@@ -156,24 +157,23 @@ fn eval_body(
             &[("mean error", [200, 40, 40], &noisy)],
         )
         .write_png(&dir.join("error_vs_noise.png"))?;
-        let mut table = String::from("joint,error_mm");
-        if baseline.is_some() {
-            table.push_str(",baseline_mm");
-        }
-        table.push('\n');
-        for (k, name) in names.iter().enumerate() {
-            let _ = write!(table, "{name},{:.3}", ours[k]);
-            if let Some(b) = base_values.get(k) {
-                let _ = write!(table, ",{b:.3}");
-            }
-            table.push('\n');
-        }
-        write_report_file(dir, "joint_error.csv", table.as_bytes())?;
-        let mut noise_table = String::from("noise_mm,mean_error_mm\n");
-        for (s, e) in sigmas.iter().zip(&noisy) {
-            let _ = writeln!(noise_table, "{s},{e:.3}");
-        }
-        write_report_file(dir, "error_vs_noise.csv", noise_table.as_bytes())?;
+        // A row per joint: its error, and the baseline's when there is one.
+        let rows: Vec<Vec<String>> = names
+            .iter()
+            .enumerate()
+            .map(|(k, name)| {
+                let errors = std::iter::once(ours[k]).chain(base_values.get(k).copied());
+                std::iter::once(name.clone()).chain(errors.map(|e| format!("{e:.3}"))).collect()
+            })
+            .collect();
+        let columns: &[&str] = if baseline.is_some() {
+            &["joint", "error_mm", "baseline_mm"]
+        } else {
+            &["joint", "error_mm"]
+        };
+        write_report_file(dir, "joint_error.csv", &table(columns, &rows)?)?;
+        let rows: Vec<(Exact, Fixed<3>)> = sigmas.iter().zip(&noisy).map(|(&s, &e)| (Exact(s), Fixed(e))).collect();
+        write_report_file(dir, "error_vs_noise.csv", &table(&["noise_mm", "mean_error_mm"], &rows)?)?;
         write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(EvalSummary::Body(report))
@@ -214,19 +214,16 @@ fn eval_parts(
             &report.confusion,
         )
         .write_png(&dir.join("confusion.png"))?;
-        let mut table = String::from("truth\\predicted");
-        for c in &report.classes {
-            let _ = write!(table, ",{c}");
-        }
-        table.push('\n');
-        for (c, row) in report.classes.iter().zip(&report.confusion) {
-            let _ = write!(table, "{c}");
-            for v in row {
-                let _ = write!(table, ",{v}");
-            }
-            table.push('\n');
-        }
-        write_report_file(dir, "confusion.csv", table.as_bytes())?;
+        let columns: Vec<&str> = std::iter::once("truth\\predicted")
+            .chain(report.classes.iter().map(String::as_str))
+            .collect();
+        let rows: Vec<(&str, &[u64])> = report
+            .classes
+            .iter()
+            .zip(&report.confusion)
+            .map(|(c, row)| (c.as_str(), row.as_slice()))
+            .collect();
+        write_report_file(dir, "confusion.csv", &table(&columns, &rows)?)?;
         write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(EvalSummary::Parts(report))
@@ -271,11 +268,12 @@ fn eval_paws(options: &EvalOptions) -> Result<EvalSummary> {
             &[("precision", [40, 90, 220], &precision)],
         )
         .write_png(&dir.join("precision_recall.png"))?;
-        let mut table = String::from("min_score,precision,recall\n");
-        for p in &report.curve {
-            let _ = writeln!(table, "{:.4},{:.4},{:.4}", p.min_score, p.precision, p.recall);
-        }
-        write_report_file(dir, "precision_recall.csv", table.as_bytes())?;
+        let rows: Vec<[Fixed<4>; 3]> = report
+            .curve
+            .iter()
+            .map(|p| [Fixed(p.min_score), Fixed(p.precision), Fixed(p.recall)])
+            .collect();
+        write_report_file(dir, "precision_recall.csv", &table(&["min_score", "precision", "recall"], &rows)?)?;
         write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(EvalSummary::Paws(report))

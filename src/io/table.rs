@@ -42,19 +42,14 @@ pub fn line(row: &impl Serialize) -> Result<Vec<u8>, csv::Error> {
     writer.into_inner().map_err(|e| csv::Error::from(e.into_error()))
 }
 
-/// A whole table: the header (the struct's field names, in order), then one line per row.
-/// `columns` names the header when `rows` is empty (a struct's names are known only from a
-/// row).
+/// A whole table: the header `columns`, then one line per row (a struct, tuple or sequence
+/// of as many fields).
 ///
 /// # Errors
 /// A field is not a scalar.
 pub fn table<T: Serialize>(columns: &[&str], rows: &[T]) -> Result<Vec<u8>, csv::Error> {
-    let mut writer = csv::WriterBuilder::new()
-        .has_headers(!rows.is_empty())
-        .from_writer(Vec::new());
-    if rows.is_empty() {
-        writer.write_record(columns)?;
-    }
+    let mut writer = csv::WriterBuilder::new().has_headers(false).from_writer(Vec::new());
+    writer.write_record(columns)?;
     for row in rows {
         writer.serialize(row)?;
     }
