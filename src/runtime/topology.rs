@@ -103,7 +103,7 @@ pub struct Processing {
     /// The body forest and the paw cascade.
     pub models: Models,
     pub rig: Rig,
-    /// Workers of the body and paw stages; 0: one per core.
+    /// Workers of each stage declared `map_parallel` (body, paws); 0: one per core.
     pub workers: usize,
     /// Draw every n-th frame (by depth sequence number) into the pose writer's `overlays/`.
     pub overlays: Option<u64>,
