@@ -96,3 +96,47 @@ impl FlatMap for SyncStage {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::frame::{DepthFrame, Stamp};
+
+    fn depth(seq: u64) -> Captured {
+        let ns = seq * 33_000_000;
+        let stamp = Stamp {
+            seq,
+            device_ns: ns,
+            host_ns: ns,
+        };
+        Captured::Depth(Arc::new(DepthFrame::empty(stamp, 1, 1)))
+    }
+
+    #[test]
+    fn a_reopened_camera_is_learnt_again_and_every_frame_is_counted() {
+        let acct = Arc::new(Accounting::default());
+        let epochs = Epochs::default();
+        let config = SyncConfig {
+            color: false,
+            ..SyncConfig::default()
+        };
+        let mut stage = SyncStage::new(config, Arc::clone(&acct), epochs.clone());
+        let mut out = Vec::new();
+        for seq in 0..3 {
+            stage.process(depth(seq), &mut out).unwrap();
+        }
+        // The counter starting again without a reopen: a frame out of order.
+        stage.process(depth(0), &mut out).unwrap();
+        assert_eq!(out.len(), 3);
+        // Reopened: the camera's counter and clock start again, and its frames go on.
+        epochs[0].fetch_add(1, Ordering::Release);
+        stage.process(depth(0), &mut out).unwrap();
+        stage.process(depth(1), &mut out).unwrap();
+        stage.finish(&mut out).unwrap();
+        let seqs: Vec<u64> = out.iter().map(|p| p.depth.stamp.seq).collect();
+        assert_eq!(seqs, [0, 1, 2, 0, 1]);
+        assert_eq!(acct.depth.unpaired.load(Ordering::Relaxed), 5);
+        let dropped = acct.depth.dropped.lock().unwrap().clone();
+        assert_eq!(dropped.values().sum::<u64>(), 1, "{dropped:?}");
+    }
+}
