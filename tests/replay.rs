@@ -236,6 +236,37 @@ fn replay_is_deterministic_whatever_the_worker_count() {
     );
 }
 
+/// The stages' and edges' names are read by the daemon's `/status` and `/metrics`, the summaries
+/// and whoever scrapes them: the declared chain keeps them, and every pair goes through every
+/// stage once.
+#[test]
+fn the_pipeline_keeps_its_stage_and_edge_names_and_every_pair_passes_every_stage() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = replay(&options(&fixture(), &tmp.path().join("o"), 2)).unwrap();
+    let edges: Vec<&str> = s.edges.keys().map(String::as_str).collect();
+    assert_eq!(
+        edges,
+        [
+            "body->paws",
+            "capture",
+            "fuse->poses",
+            "paws->fuse",
+            "segment->body",
+            "sync->segment"
+        ]
+    );
+    let stages: Vec<&str> = s.stages.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(stages, ["segment", "body", "paws", "fuse", "poses"]);
+    assert!(s.pairs > 0);
+    for stage in &s.stages {
+        assert_eq!((stage.items_in, stage.items_out), (s.pairs, s.pairs), "{}", stage.name);
+    }
+    for (name, edge) in &s.edges {
+        assert_eq!(edge.dropped_full, 0, "{name}");
+    }
+    assert_accounted(&s);
+}
+
 #[test]
 fn drifting_jittery_clocks_with_drops_pair_exactly_as_the_truth() {
     let tmp = tempfile::tempdir().unwrap();

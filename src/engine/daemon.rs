@@ -234,8 +234,7 @@ pub fn run(
         },
         processing: Some(Processing {
             segment: segment.with_floor_slot(Arc::clone(&floor)),
-            body: models.body,
-            paws: models.paws,
+            models,
             rig,
             workers: config.body_workers,
             overlays: None,

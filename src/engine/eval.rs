@@ -163,7 +163,9 @@ fn eval_body(
             .enumerate()
             .map(|(k, name)| {
                 let errors = std::iter::once(ours[k]).chain(base_values.get(k).copied());
-                std::iter::once(name.clone()).chain(errors.map(|e| format!("{e:.3}"))).collect()
+                std::iter::once(name.clone())
+                    .chain(errors.map(|e| format!("{e:.3}")))
+                    .collect()
             })
             .collect();
         let columns: &[&str] = if baseline.is_some() {
@@ -173,7 +175,11 @@ fn eval_body(
         };
         write_report_file(dir, "joint_error.csv", &table(columns, &rows)?)?;
         let rows: Vec<(Exact, Fixed<3>)> = sigmas.iter().zip(&noisy).map(|(&s, &e)| (Exact(s), Fixed(e))).collect();
-        write_report_file(dir, "error_vs_noise.csv", &table(&["noise_mm", "mean_error_mm"], &rows)?)?;
+        write_report_file(
+            dir,
+            "error_vs_noise.csv",
+            &table(&["noise_mm", "mean_error_mm"], &rows)?,
+        )?;
         write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(EvalSummary::Body(report))
@@ -273,7 +279,11 @@ fn eval_paws(options: &EvalOptions) -> Result<EvalSummary> {
             .iter()
             .map(|p| [Fixed(p.min_score), Fixed(p.precision), Fixed(p.recall)])
             .collect();
-        write_report_file(dir, "precision_recall.csv", &table(&["min_score", "precision", "recall"], &rows)?)?;
+        write_report_file(
+            dir,
+            "precision_recall.csv",
+            &table(&["min_score", "precision", "recall"], &rows)?,
+        )?;
         write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(EvalSummary::Paws(report))

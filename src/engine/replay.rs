@@ -204,7 +204,7 @@ pub struct ReplaySummary {
     pub stages: Vec<StageReport>,
     /// From a pair leaving the synchroniser to its row written.
     pub end_to_end_latency: LatencySummary,
-    pub edges: BTreeMap<&'static str, EdgeSummary>,
+    pub edges: BTreeMap<String, EdgeSummary>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pairing: Option<PairingCheck>,
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
@@ -452,8 +452,7 @@ pub fn replay_with(
         edges: Edges::replay(),
         processing: Some(Processing {
             segment: SegmentStage::new(segmenter),
-            body: models.body,
-            paws: models.paws,
+            models,
             rig,
             workers: options.workers,
             overlays: options.overlays,

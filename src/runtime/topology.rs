@@ -1,5 +1,6 @@
-//! The one builder of the pipeline's threads and edges: `record`, `replay`, `bench` and `run`
-//! describe what they want as a [`Topology`] and [`Topology::start`] wires it.
+//! The one builder of the pipeline's threads and edges: `record`, `replay`, `run` (the daemon)
+//! and `bench` (through replay) describe what they want as a [`Topology`] and
+//! [`Topology::start`] wires it.
 //!
 //! ```text
 //!  sources: the rig's cameras ("cap-depth", "cap-color")   capture edge: bounded; cameras
@@ -11,6 +12,11 @@
 //!      ─Posed─▶ "paws-N" ─Posed─▶ "fuse" (in index order) ─Fused─▶ "poses" (poses.csv)  [processing]
 //! ```
 //!
+//! The processing branch is declared in [`declare_processing`], one line per stage: each
+//! stage says what it takes, gives and is called (`pipeline::Map`), and the chain builder
+//! (`pipeline::Chain`) makes the edges between them and names them after the two stages
+//! (`segment->body`). A new stage is a file in `stages/` and a line there.
+//!
 //! Every frame is accounted for in [`Accounting`]: the capture threads count what the sources
 //! deliver and the gaps in their frame counters, the edges what they drop, the sync thread
 //! what it pairs, leaves unpaired or rejects.
@@ -21,9 +27,10 @@ use crate::io::session::CameraRole;
 use crate::runtime::accounting::{Accounting, CameraSummary, EdgeSummary, bump};
 use crate::runtime::capture::session::SessionPlayer;
 use crate::runtime::capture::{Captured, Clock, FrameSource, SeqGaps, Stamped};
+use crate::runtime::models::Models;
 use crate::runtime::pipeline::{
-    EdgeConfig, EdgeSender, EdgeStats, Histogram, LatencySummary, PipelineError, Runner, Sent, Shutdown, Sink,
-    StageError, StageReport, StageStats, Tracked, edge,
+    Chain, EdgeConfig, EdgeSender, Histogram, LatencySummary, NamedEdge, PipelineError, Runner, Sent, Shutdown, Sink,
+    StageError, StageReport, StageStats, edge,
 };
 use crate::runtime::playback::{Recording, RecordingError};
 use crate::runtime::sink::session::{FrameRecorder, write_frames};
@@ -32,14 +39,14 @@ use crate::runtime::stages::body::{BodyStage, PIPELINE_VOTE_BUDGET};
 use crate::runtime::stages::fuse::FuseStage;
 use crate::runtime::stages::paws::PawStage;
 use crate::runtime::stages::segment::SegmentStage;
-use crate::runtime::sync::{Role, SyncConfig, SyncOutput, Synchronizer};
-use crate::vision::forest::infer::BodyEstimator;
+pub use crate::runtime::stages::sync::Epochs;
+use crate::runtime::stages::sync::SyncStage;
+use crate::runtime::sync::SyncConfig;
 use crate::vision::fusion::{Fuser, FusionConfig};
-use crate::vision::paws::PawDetector;
 use crossbeam_channel::Receiver;
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// Where the frames come from.
@@ -64,9 +71,6 @@ pub enum Sources<'a> {
     },
 }
 
-/// Reopen counters of the two cameras (depth, colour); see [`Sources::Cameras`].
-pub type Epochs = [Arc<AtomicU64>; 2];
-
 /// The sizes and policies of the edges.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Edges {
@@ -90,15 +94,16 @@ impl Edges {
     }
 }
 
-/// The processing branch: segmentation, the body forest, the paw cascade, fusion, poses.
+/// The processing branch: segmentation, the body forest, the paw cascade, fusion, poses
+/// (see [`declare_processing`]).
 #[derive(Debug)]
 pub struct Processing {
     /// Segmentation with a known background, or one learnt live.
     pub segment: SegmentStage,
-    pub body: BodyEstimator,
-    pub paws: Option<PawDetector>,
+    /// The body forest and the paw cascade.
+    pub models: Models,
     pub rig: Rig,
-    /// Workers of the body and paw stages; 0: one per core.
+    /// Workers of each stage declared `map_parallel` (body, paws); 0: one per core.
     pub workers: usize,
     /// Draw every n-th frame (by depth sequence number) into the pose writer's `overlays/`.
     pub overlays: Option<u64>,
@@ -144,7 +149,7 @@ pub struct PipelineWatch {
     /// Whether the run processes frames, and whether it records them.
     branches: (bool, bool),
     started: Instant,
-    edges: Vec<(&'static str, EdgeConfig, Arc<EdgeStats>)>,
+    edges: Vec<NamedEdge>,
     end_to_end: Arc<Histogram>,
     stages: Vec<(String, Arc<StageStats>)>,
 }
@@ -162,10 +167,10 @@ impl PipelineWatch {
     }
 
     /// Each edge's capacity, queue depth and drops.
-    pub fn edges(&self) -> BTreeMap<&'static str, EdgeSummary> {
+    pub fn edges(&self) -> BTreeMap<String, EdgeSummary> {
         self.edges
             .iter()
-            .map(|(name, config, stats)| (*name, EdgeSummary::of(*config, stats)))
+            .map(|(name, config, stats)| (name.clone(), EdgeSummary::of(*config, stats)))
             .collect()
     }
 
@@ -193,7 +198,7 @@ pub struct Finished {
     pub cameras: BTreeMap<&'static str, CameraSummary>,
     /// From a pair leaving the synchroniser to its row written.
     pub end_to_end_latency: LatencySummary,
-    pub edges: BTreeMap<&'static str, EdgeSummary>,
+    pub edges: BTreeMap<String, EdgeSummary>,
     pub elapsed_s: f64,
     /// The recorder, handed back to be finished.
     pub recorder: Option<Box<dyn FrameRecorder>>,
@@ -229,14 +234,14 @@ impl Topology<'_> {
         let mut processing_input = None;
         if processing.is_some() {
             let (tx, rx, stats) = edge::<Captured>(edges.capture);
-            edge_stats.push(("capture", edges.capture, stats));
+            edge_stats.push(("capture".to_owned(), edges.capture, stats));
             outputs.push((tx, false));
             processing_input = Some(rx);
         }
         let mut recorder_branch = None;
         if let Some(writer) = recorder {
             let (tx, rx, stats) = edge::<Captured>(edges.capture);
-            edge_stats.push(("recorder", edges.capture, stats));
+            edge_stats.push(("recorder".to_owned(), edges.capture, stats));
             outputs.push((tx, true));
             recorder_branch = Some((writer, rx));
         }
@@ -318,51 +323,10 @@ impl Topology<'_> {
                 .map_err(threads)?;
         }
 
-        if let (Some(p), Some(cap_rx)) = (processing, processing_input) {
-            let workers = match p.workers {
-                0 => std::thread::available_parallelism().map_or(1, usize::from),
-                n => n,
-            };
-            let stage = edges.stage;
-            let (pair_tx, pair_rx, pair_stats) = edge(stage);
-            let (seg_tx, seg_rx, seg_stats) = edge(stage);
-            let (body_tx, body_rx, body_stats) = edge(stage);
-            let (paws_tx, paws_rx, paws_stats) = edge(stage);
-            let (pose_tx, pose_rx, pose_stats) = edge(stage);
-            edge_stats.extend([
-                ("sync->segment", stage, pair_stats),
-                ("segment->body", stage, seg_stats),
-                ("body->paws", stage, body_stats),
-                ("paws->fuse", stage, paws_stats),
-                ("fuse->poses", stage, pose_stats),
-            ]);
-            let acct_sync = Arc::clone(&acct);
-            runner
-                .spawn("sync", move || run_sync(sync, &cap_rx, &pair_tx, &acct_sync, &epochs))
-                .map_err(threads)?;
-            runner
-                .stage("segment", vec![p.segment], &pair_rx, &seg_tx)
-                .map_err(threads)?;
-            drop((pair_rx, seg_tx));
-            let body = BodyStage::new(p.body, p.rig.depth, PIPELINE_VOTE_BUDGET);
-            runner
-                .stage("body", vec![body; workers], &seg_rx, &body_tx)
-                .map_err(threads)?;
-            drop((seg_rx, body_tx));
-            let paw_stage = PawStage::new(p.paws, p.rig.color);
-            runner
-                .stage("paws", vec![paw_stage; workers], &body_rx, &paws_tx)
-                .map_err(threads)?;
-            drop((body_rx, paws_tx));
-            let fuser = Fuser::new(p.rig.color, FusionConfig::default());
-            let fuse = FuseStage::new(fuser, p.rig, p.overlays);
-            runner
-                .stage_in_order("fuse", fuse, &paws_rx, &pose_tx)
-                .map_err(threads)?;
-            drop((paws_rx, pose_tx));
-            runner
-                .sink("poses", p.poses, pose_rx, Arc::clone(&end_to_end))
-                .map_err(threads)?;
+        if let (Some(p), Some(frames)) = (processing, processing_input) {
+            let sync = SyncStage::new(sync, Arc::clone(&acct), epochs);
+            let chain = Chain::head(&mut runner, edges.stage, p.workers(), sync, frames);
+            edge_stats.extend(declare_processing(chain, p, Arc::clone(&end_to_end)).map_err(threads)?);
         }
         let watch = PipelineWatch {
             acct,
@@ -379,6 +343,42 @@ impl Topology<'_> {
             recorder: recorder_done,
         })
     }
+}
+
+impl Processing {
+    /// Workers of each parallel stage.
+    fn workers(&self) -> usize {
+        match self.workers {
+            0 => std::thread::available_parallelism().map_or(1, usize::from),
+            n => n,
+        }
+    }
+}
+
+/// The processing stages, in order, after the synchroniser at the head of `chain`: one line
+/// per stage. `map` runs a stage on one thread in index order (a stage with memory from frame
+/// to frame), `map_parallel` on the chain's workers; each stage's `In` must be the `Out` of the
+/// one before it, and the builder names the edge between them after both.
+fn declare_processing(
+    chain: Chain<'_, FramePair>,
+    p: Processing,
+    end_to_end: Arc<Histogram>,
+) -> std::io::Result<Vec<NamedEdge>> {
+    let Processing {
+        segment,
+        models,
+        rig,
+        overlays,
+        poses,
+        ..
+    } = p;
+    let fuser = Fuser::new(rig.color, FusionConfig::default());
+    chain
+        .map(segment)?
+        .map_parallel(BodyStage::new(models.body, rig.depth, PIPELINE_VOTE_BUDGET))?
+        .map_parallel(PawStage::new(models.paws, rig.color))?
+        .map(FuseStage::new(fuser, rig, overlays))?
+        .sink("poses", poses, end_to_end)
 }
 
 impl Running {
@@ -512,71 +512,6 @@ fn run_source<S: FrameSource>(
     if let Err(e) = source.stop() {
         tracing::warn!(camera = %own_role, "the camera did not stop cleanly: {}", crate::core::error_chain(&e));
     }
-    Ok(())
-}
-
-/// The body of the sync thread: pairs what arrives on `rx` and sends the pairs on, numbered.
-fn run_sync(
-    config: SyncConfig,
-    rx: &Receiver<Captured>,
-    tx: &EdgeSender<Tracked<FramePair>>,
-    acct: &Accounting,
-    epochs: &Epochs,
-) -> Result<(), StageError> {
-    let mut sync = Synchronizer::new(config);
-    let mut seen_epochs = [0u64; 2];
-    let mut out = Vec::new();
-    let mut index = 0u64;
-    let mut emit = |out: &mut Vec<SyncOutput>| -> bool {
-        for o in out.drain(..) {
-            match o {
-                SyncOutput::Pair(pair) => {
-                    if pair.color.is_some() {
-                        acct.depth.paired.fetch_add(1, Ordering::Relaxed);
-                        acct.color.paired.fetch_add(1, Ordering::Relaxed);
-                    } else {
-                        acct.depth.unpaired.fetch_add(1, Ordering::Relaxed);
-                    }
-                    if tx.send(Tracked::new(index, pair)) == Sent::Closed {
-                        return false;
-                    }
-                    index += 1;
-                }
-                SyncOutput::UnpairedColor(_) => {
-                    acct.color.unpaired.fetch_add(1, Ordering::Relaxed);
-                }
-                SyncOutput::Rejected { role, reason, .. } => {
-                    let counters = match role {
-                        Role::Depth => &acct.depth,
-                        Role::Color => &acct.color,
-                    };
-                    bump(&counters.dropped, reason.name(), 1);
-                }
-            }
-        }
-        true
-    };
-    for captured in rx.iter() {
-        let (slot, role) = match &captured {
-            Captured::Depth(_) => (0, Role::Depth),
-            Captured::Color(_) => (1, Role::Color),
-        };
-        // A camera reopened since its last frame: its clock and counter start again.
-        let epoch = epochs[slot].load(Ordering::Acquire);
-        if epoch != seen_epochs[slot] {
-            seen_epochs[slot] = epoch;
-            sync.restart(role);
-        }
-        match captured {
-            Captured::Depth(f) => sync.push_depth(f, &mut out),
-            Captured::Color(f) => sync.push_color(f, &mut out),
-        }
-        if !emit(&mut out) {
-            return Ok(());
-        }
-    }
-    sync.flush(&mut out);
-    emit(&mut out);
     Ok(())
 }
 

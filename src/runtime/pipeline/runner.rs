@@ -1,13 +1,15 @@
 //! The runner: starts one named thread per source, stage worker and sink, joins them in
 //! order, and reports which one failed.
 //!
-//! Stages and sinks are plain objects ([`Stage`], [`Sink`]); the runner owns the channels,
-//! the timing and the counters. Items travel wrapped in [`Tracked`], which carries the pair's
-//! index and the instant it entered the pipeline, so the sink can measure end-to-end latency
-//! and restore order behind a stage with several workers.
+//! Stages and sinks are plain objects ([`Map`], [`FlatMap`], [`Sink`]); the runner owns the
+//! channels, the timing and the counters. Items travel wrapped in [`Tracked`], which carries
+//! the pair's index and the instant it entered the pipeline, so the sink can measure end-to-end
+//! latency and restore order behind a stage with several workers. [`super::Chain`] declares a
+//! chain of stages on a runner.
 
 use super::edge::{EdgeSender, Sent};
 use super::metrics::{Histogram, LatencySummary};
+use super::stage::{FlatMap, Map, Sink, StageError, Tracked};
 use crossbeam_channel::Receiver;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -15,62 +17,6 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::Instant;
-
-/// Why a stage, sink or source failed: the component's own error, kept as the cause.
-pub type StageError = Box<dyn std::error::Error + Send + Sync>;
-
-/// A processing step: a function from each input to exactly one output (a frame without a
-/// result is an output with a status), so that the sink can restore the order of the items
-/// behind a stage with several workers.
-pub trait Stage: Send + 'static {
-    type In: Send + 'static;
-    type Out: Send + 'static;
-    /// Pushes the output for `input`. The runner refuses any other number of outputs.
-    ///
-    /// # Errors
-    /// A failure that must stop the run (a bad frame is an output with a status, not an error).
-    fn process(&mut self, input: Self::In, out: &mut Vec<Self::Out>) -> Result<(), StageError>;
-}
-
-/// The end of the pipeline: writes what reaches it.
-pub trait Sink: Send + std::fmt::Debug + 'static {
-    type In: Send + 'static;
-    /// # Errors
-    /// The item cannot be written.
-    fn write(&mut self, item: Self::In) -> Result<(), StageError>;
-    /// # Errors
-    /// What was written cannot be made durable.
-    fn flush(&mut self) -> Result<(), StageError>;
-}
-
-/// A sink chosen at run time (one file, or chunk after chunk).
-impl<K: Sink + ?Sized> Sink for Box<K> {
-    type In = K::In;
-    fn write(&mut self, item: Self::In) -> Result<(), StageError> {
-        (**self).write(item)
-    }
-    fn flush(&mut self) -> Result<(), StageError> {
-        (**self).flush()
-    }
-}
-
-/// An item with its place in the run and the instant it entered the pipeline.
-#[derive(Debug)]
-pub struct Tracked<T> {
-    pub index: u64,
-    pub entered: Instant,
-    pub item: T,
-}
-
-impl<T> Tracked<T> {
-    pub fn new(index: u64, item: T) -> Self {
-        Self {
-            index,
-            entered: Instant::now(),
-            item,
-        }
-    }
-}
 
 /// Counters of one stage (all its workers) or sink.
 #[derive(Debug, Default)]
@@ -164,19 +110,18 @@ impl Runner {
         Ok(())
     }
 
-    /// Starts a stage with one thread per worker (`name-0`, `name-1`, ... when several), all
-    /// reading `input` and sending to `output`.
+    /// Starts a stage with one thread per worker (`NAME-0`, `NAME-1`, ... when several), all
+    /// reading `input` and sending to `output`, each taking the items as they come.
     ///
     /// # Errors
     /// A thread cannot be created.
-    pub fn stage<S: Stage>(
+    pub fn map<S: Map>(
         &mut self,
-        name: &str,
         workers: Vec<S>,
         input: &Receiver<Tracked<S::In>>,
         output: &EdgeSender<Tracked<S::Out>>,
     ) -> std::io::Result<Arc<StageStats>> {
-        self.start_stage(name, workers, input, output, false)
+        self.start_map(workers, input, output, false)
     }
 
     /// Starts a stage with one worker that sees its items in index order (items that arrive
@@ -185,19 +130,17 @@ impl Runner {
     ///
     /// # Errors
     /// The thread cannot be created.
-    pub fn stage_in_order<S: Stage>(
+    pub fn map_in_order<S: Map>(
         &mut self,
-        name: &str,
         stage: S,
         input: &Receiver<Tracked<S::In>>,
         output: &EdgeSender<Tracked<S::Out>>,
     ) -> std::io::Result<Arc<StageStats>> {
-        self.start_stage(name, vec![stage], input, output, true)
+        self.start_map(vec![stage], input, output, true)
     }
 
-    fn start_stage<S: Stage>(
+    fn start_map<S: Map>(
         &mut self,
-        name: &str,
         workers: Vec<S>,
         input: &Receiver<Tracked<S::In>>,
         output: &EdgeSender<Tracked<S::Out>>,
@@ -207,14 +150,13 @@ impl Runner {
         let several = workers.len() > 1;
         for (k, mut stage) in workers.into_iter().enumerate() {
             let thread = if several {
-                format!("{name}-{k}")
+                format!("{}-{k}", S::NAME)
             } else {
-                name.to_owned()
+                S::NAME.to_owned()
             };
             let (rx, tx, stats) = (input.clone(), output.clone(), Arc::clone(&stats));
             let failed = self.failed.clone();
             self.spawn(&thread, move || {
-                let mut out = Vec::new();
                 let mut order = Reorder::default();
                 let mut ready = Vec::new();
                 for tracked in rx.iter() {
@@ -228,32 +170,64 @@ impl Runner {
                     } else {
                         ready.push(tracked);
                     }
-                    for tracked in ready.drain(..) {
+                    for Tracked { index, entered, item } in ready.drain(..) {
                         let start = Instant::now();
-                        let (index, entered) = (tracked.index, tracked.entered);
-                        stage.process(tracked.item, &mut out)?;
+                        let item = stage.process(item)?;
                         stats.latency.record(start.elapsed());
-                        if out.len() != 1 {
-                            return Err(format!("emitted {} outputs for one input instead of one", out.len()).into());
-                        }
-                        for item in out.drain(..) {
-                            stats.items_out.fetch_add(1, Ordering::Relaxed);
-                            if tx.send(Tracked { index, entered, item }) == Sent::Closed {
-                                // Downstream stopped (it failed and says so): stop quietly.
-                                return Ok(());
-                            }
+                        stats.items_out.fetch_add(1, Ordering::Relaxed);
+                        if tx.send(Tracked { index, entered, item }) == Sent::Closed {
+                            // Downstream stopped (it failed and says so): stop quietly.
+                            return Ok(());
                         }
                     }
                 }
                 order.finish()
             })?;
         }
-        self.stages.push((name.to_owned(), Arc::clone(&stats)));
+        self.stages.push((S::NAME.to_owned(), Arc::clone(&stats)));
         Ok(stats)
     }
 
+    /// Starts a [`FlatMap`] on one thread named after it, reading `input` and sending what it
+    /// emits to `output`, numbered from 0 and marked as entering the pipeline there. Its work
+    /// is not a stage's in the reports: the synchroniser's shows in the frames' accounting
+    /// (paired, unpaired, rejected).
+    ///
+    /// # Errors
+    /// The thread cannot be created.
+    pub fn flat_map<S: FlatMap>(
+        &mut self,
+        mut stage: S,
+        input: Receiver<S::In>,
+        output: EdgeSender<Tracked<S::Out>>,
+    ) -> std::io::Result<()> {
+        self.spawn(S::NAME, move || {
+            let mut out = Vec::new();
+            let mut index = 0u64;
+            let mut send = |out: &mut Vec<S::Out>| -> bool {
+                for item in out.drain(..) {
+                    if output.send(Tracked::new(index, item)) == Sent::Closed {
+                        return false;
+                    }
+                    index += 1;
+                }
+                true
+            };
+            for item in input.iter() {
+                stage.process(item, &mut out)?;
+                if !send(&mut out) {
+                    // Downstream stopped (it failed and says so): stop quietly.
+                    return Ok(());
+                }
+            }
+            stage.finish(&mut out)?;
+            send(&mut out);
+            Ok(())
+        })
+    }
+
     /// Starts a sink thread. Items are written in index order (indices start at 0 and have no
-    /// gaps: every stage emits one output per input; items from workers that ran ahead wait);
+    /// gaps: a [`Map`] emits one output per input; items from workers that ran ahead wait);
     /// `end_to_end` gets each item's time from entering the pipeline to written.
     ///
     /// # Errors
@@ -294,6 +268,11 @@ impl Runner {
         })?;
         self.stages.push((name.to_owned(), Arc::clone(&stats)));
         Ok(stats)
+    }
+
+    /// The names of the threads started so far, in start order.
+    pub fn thread_names(&self) -> Vec<&str> {
+        self.threads.iter().map(|(name, _)| name.as_str()).collect()
     }
 
     /// Per stage and sink, its live counters.
@@ -414,15 +393,15 @@ mod tests {
         fail_on: Option<u32>,
     }
 
-    impl Stage for Double {
+    impl Map for Double {
         type In = u32;
         type Out = u32;
-        fn process(&mut self, input: u32, out: &mut Vec<u32>) -> Result<(), StageError> {
+        const NAME: &'static str = "double";
+        fn process(&mut self, input: u32) -> Result<u32, StageError> {
             if Some(input) == self.fail_on {
                 return Err(format!("cannot double {input}").into());
             }
-            out.push(input * 2);
-            Ok(())
+            Ok(input * 2)
         }
     }
 
@@ -456,7 +435,7 @@ mod tests {
             })
             .unwrap();
         let stages = (0..workers).map(|_| Double { fail_on }).collect();
-        runner.stage("double", stages, &src_rx, &out_tx).unwrap();
+        runner.map(stages, &src_rx, &out_tx).unwrap();
         drop((src_rx, out_tx));
         runner
             .sink("collect", Collect(Arc::clone(&got)), out_rx, Arc::default())
@@ -479,13 +458,13 @@ mod tests {
     /// Passes its input on and remembers the order it saw it in.
     struct Witness(Arc<std::sync::Mutex<Vec<u32>>>);
 
-    impl Stage for Witness {
+    impl Map for Witness {
         type In = u32;
         type Out = u32;
-        fn process(&mut self, input: u32, out: &mut Vec<u32>) -> Result<(), StageError> {
+        const NAME: &'static str = "witness";
+        fn process(&mut self, input: u32) -> Result<u32, StageError> {
             self.0.lock().map_err(|_| "poisoned")?.push(input);
-            out.push(input);
-            Ok(())
+            Ok(input)
         }
     }
 
@@ -507,9 +486,9 @@ mod tests {
             })
             .unwrap();
         let workers = (0..3).map(|_| Double { fail_on: None }).collect();
-        runner.stage("double", workers, &src_rx, &mid_tx).unwrap();
+        runner.map(workers, &src_rx, &mid_tx).unwrap();
         runner
-            .stage_in_order("witness", Witness(Arc::clone(&seen)), &mid_rx, &out_tx)
+            .map_in_order(Witness(Arc::clone(&seen)), &mid_rx, &out_tx)
             .unwrap();
         drop((src_rx, mid_tx, mid_rx, out_tx));
         runner
@@ -531,13 +510,13 @@ mod tests {
     /// Doubles its input and panics on one.
     struct PanicsOn(u32);
 
-    impl Stage for PanicsOn {
+    impl Map for PanicsOn {
         type In = u32;
         type Out = u32;
-        fn process(&mut self, input: u32, out: &mut Vec<u32>) -> Result<(), StageError> {
+        const NAME: &'static str = "double";
+        fn process(&mut self, input: u32) -> Result<u32, StageError> {
             assert_ne!(input, self.0, "a bug in a stage");
-            out.push(input * 2);
-            Ok(())
+            Ok(input * 2)
         }
     }
 
@@ -566,9 +545,7 @@ mod tests {
                 Ok(())
             })
             .unwrap();
-        runner
-            .stage("double", vec![PanicsOn(50), PanicsOn(50)], &src_rx, &out_tx)
-            .unwrap();
+        runner.map(vec![PanicsOn(50), PanicsOn(50)], &src_rx, &out_tx).unwrap();
         drop((src_rx, out_tx));
         runner
             .sink("collect", Collect(Arc::clone(&got)), out_rx, Arc::default())

@@ -4,7 +4,7 @@ use super::{PoseRecord, PoseStatus, Posed, Segmented};
 use crate::core::geometry::Camera;
 use crate::core::pose::{JointEstimate, JointSource, Pose};
 use crate::core::skeleton::Joint;
-use crate::runtime::pipeline::{Stage, StageError};
+use crate::runtime::pipeline::{Map, StageError};
 use crate::vision::forest::depth::{BODY_JOINTS, DepthImage};
 use crate::vision::forest::infer::{BodyEstimator, JointGuess, Oriented, Pixel, sample_pixels};
 use crate::vision::orientation::{self, BodyJoints, Headings, TrackerConfig};
@@ -67,11 +67,12 @@ impl BodyStage {
     }
 }
 
-impl Stage for BodyStage {
+impl Map for BodyStage {
     type In = Segmented;
     type Out = Posed;
+    const NAME: &'static str = "body";
 
-    fn process(&mut self, input: Segmented, out: &mut Vec<Posed>) -> Result<(), StageError> {
+    fn process(&mut self, input: Segmented) -> Result<Posed, StageError> {
         let Segmented {
             pair,
             mouse,
@@ -118,7 +119,6 @@ impl Stage for BodyStage {
                 record.status = PoseStatus::Ok;
             }
         }
-        out.push(Posed { pair, record });
-        Ok(())
+        Ok(Posed { pair, record })
     }
 }

@@ -6,7 +6,7 @@
 use super::{Fused, PoseStatus, Posed};
 use crate::core::geometry::Rig;
 use crate::core::skeleton::Joint;
-use crate::runtime::pipeline::{Stage, StageError};
+use crate::runtime::pipeline::{Map, StageError};
 use crate::runtime::stages::overlay;
 use crate::vision::fusion::Fuser;
 use crate::vision::orientation::{self, Orientation, Tracker, TrackerConfig};
@@ -32,11 +32,12 @@ impl FuseStage {
     }
 }
 
-impl Stage for FuseStage {
+impl Map for FuseStage {
     type In = Posed;
     type Out = Fused;
+    const NAME: &'static str = "fuse";
 
-    fn process(&mut self, input: Posed, out: &mut Vec<Fused>) -> Result<(), StageError> {
+    fn process(&mut self, input: Posed) -> Result<Fused, StageError> {
         let Posed { pair, mut record } = input;
         if let Some(headings) = record.headings.take() {
             let decision = self.tracker.update(record.depth.device_ns, &headings);
@@ -57,11 +58,10 @@ impl Stage for FuseStage {
             .overlay_every
             .filter(|n| record.depth.seq % n == 0)
             .map(|_| overlay::draw(&self.rig, &pair.depth, pair.color.as_deref(), &record));
-        out.push(Fused {
+        Ok(Fused {
             record,
             frames: pair,
             overlay,
-        });
-        Ok(())
+        })
     }
 }

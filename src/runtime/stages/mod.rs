@@ -1,11 +1,15 @@
-//! The processing stages of the pipeline, one per file. Each is a plain object with a
-//! `process` function the runner calls on its own thread and a unit test can call directly.
+//! The processing stages of the pipeline, one per file, and the items that travel between
+//! them. Each is a plain object with a `process` function the runner calls on its own thread
+//! and a unit test can call directly, and declares what it takes, what it gives and its name
+//! (`pipeline::Map`: one output per input; the synchroniser, a `pipeline::FlatMap`). The order
+//! of the stages is declared in `topology::declare_processing`.
 
 pub mod body;
 pub mod fuse;
 pub mod overlay;
 pub mod paws;
 pub mod segment;
+pub mod sync;
 
 use crate::core::frame::FramePair;
 use crate::core::pose::Pose;

@@ -5,7 +5,7 @@ use super::{PoseStatus, Posed};
 use crate::core::geometry::Camera;
 use crate::core::pose::{JointSource, Pose};
 use crate::core::skeleton::Joint;
-use crate::runtime::pipeline::{Stage, StageError};
+use crate::runtime::pipeline::{Map, StageError};
 use crate::vision::paws::PawDetector;
 use nalgebra::Point3;
 use std::sync::Arc;
@@ -84,11 +84,12 @@ pub fn footprint(pose: &Pose, camera: &Camera, margin_mm: f64) -> Option<((u32, 
     (depth > 0.0).then(|| (roi, i.fx / depth))
 }
 
-impl Stage for PawStage {
+impl Map for PawStage {
     type In = Posed;
     type Out = Posed;
+    const NAME: &'static str = "paws";
 
-    fn process(&mut self, mut input: Posed, out: &mut Vec<Posed>) -> Result<(), StageError> {
+    fn process(&mut self, mut input: Posed) -> Result<Posed, StageError> {
         let Posed { pair, record } = &mut input;
         if let (Some(detector), Some(color), PoseStatus::Ok) = (&mut self.detector, &pair.color, record.status) {
             let i = &self.color.intrinsics;
@@ -105,15 +106,13 @@ impl Stage for PawStage {
                         i.height
                     );
                 }
-                out.push(input);
-                return Ok(());
+                return Ok(input);
             }
             if let Some((roi, px_per_mm)) = footprint(&record.pose, &self.color, FOOTPRINT_MARGIN_MM) {
                 detector.detect(color, roi, px_per_mm, &mut record.paws);
             }
         }
-        out.push(input);
-        Ok(())
+        Ok(input)
     }
 }
 
@@ -166,7 +165,7 @@ mod tests {
                     headings: None,
                     orientation: None,
                 };
-                w.process(Posed { pair, record }, &mut Vec::new()).unwrap();
+                w.process(Posed { pair, record }).unwrap();
             }
         });
         assert_eq!(

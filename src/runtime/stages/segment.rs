@@ -14,7 +14,7 @@ use super::Segmented;
 use crate::core::frame::{DepthFrame, FramePair};
 use crate::core::geometry::Intrinsics;
 use crate::core::image::Region;
-use crate::runtime::pipeline::{Stage, StageError};
+use crate::runtime::pipeline::{Map, StageError};
 use crate::vision::segment::{Background, FloorPlane, SegmentError, Segmenter, SegmenterConfig};
 use nalgebra::Isometry3;
 use std::sync::{Arc, Mutex, PoisonError};
@@ -139,11 +139,12 @@ impl Learner {
     }
 }
 
-impl Stage for SegmentStage {
+impl Map for SegmentStage {
     type In = FramePair;
     type Out = Segmented;
+    const NAME: &'static str = "segment";
 
-    fn process(&mut self, pair: FramePair, out: &mut Vec<Segmented>) -> Result<(), StageError> {
+    fn process(&mut self, pair: FramePair) -> Result<Segmented, StageError> {
         if let Some(learner) = &mut self.learner {
             if learner.observe(&pair.depth, self.segmenter.is_some()) {
                 match learner.build() {
@@ -165,35 +166,32 @@ impl Stage for SegmentStage {
             }
         }
         let Some(segmenter) = &mut self.segmenter else {
-            out.push(Segmented {
+            return Ok(Segmented {
                 pair,
                 mouse: None,
                 background: false,
             });
-            return Ok(());
         };
         let mouse = match segmenter.segment(&pair.depth) {
             Ok(m) => m,
             // A live camera that came back in another mode: the learner starts again.
             Err(SegmentError::FrameSize { .. }) if self.learner.is_some() => {
                 self.segmenter = None;
-                out.push(Segmented {
+                return Ok(Segmented {
                     pair,
                     mouse: None,
                     background: false,
                 });
-                return Ok(());
             }
             Err(e) => return Err(e.into()),
         };
         if mouse.is_none() {
             segmenter.update_background(&pair.depth, false)?;
         }
-        out.push(Segmented {
+        Ok(Segmented {
             pair,
             mouse,
             background: true,
-        });
-        Ok(())
+        })
     }
 }

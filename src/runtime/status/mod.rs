@@ -76,7 +76,7 @@ pub struct RunReport {
     pub degraded: bool,
     pub cameras: BTreeMap<&'static str, RunCamera>,
     pub stages: Vec<StageReport>,
-    pub edges: BTreeMap<&'static str, EdgeSummary>,
+    pub edges: BTreeMap<String, EdgeSummary>,
     /// From a pair leaving the synchroniser to its row handed to the operating system.
     pub end_to_end_latency: LatencySummary,
     /// CPU time the process used per second (1.0 = one core busy).
