@@ -1,6 +1,6 @@
 //! File formats: the append-only record store, session directories (what `record` and `run`
 //! write and `replay` reads), output directories staged and renamed into place, videos
-//! encoded by ffmpeg, and masks drawn as PNG images.
+//! encoded by ffmpeg, masks drawn as PNG images, and CSV tables (`table`).
 
 pub mod mask;
 pub mod output;
