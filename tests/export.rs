@@ -851,3 +851,36 @@ print(json.dumps(out))
     assert!(String::from_utf8_lossy(&missing.stderr).contains("not a file"));
     assert!(!tmp.path().join("b.nwb").exists());
 }
+
+#[test]
+fn moseq_export_says_how_far_moseqs_millimetres_are_from_the_cameras() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out_dir = tmp.path().join("m");
+    let out = mousepose()
+        .args(["export", "moseq", "--json"])
+        .arg(fixture())
+        .arg("--out")
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // moseq2-extract's convert_pxs_to_mm: a 512 x 424 frame over a 70.6 x 60 degree field of
+    // view, the angles taken in radians as they are.
+    let moseq_fx = 512.0 / (2.0 * 35.3f64.to_radians());
+    let moseq_fy = 424.0 / (2.0 * 30.0f64.to_radians());
+    let rig = SessionReader::open(fixture()).unwrap().meta().rig.unwrap();
+    let (fx, fy) = (rig.depth.intrinsics.fx, rig.depth.intrinsics.fy);
+    let said: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let provenance: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join(PROVENANCE_FILE)).unwrap()).unwrap();
+    for mm in [&said["millimetres"], &provenance["millimetres"]] {
+        assert!((mm["scale_x"].as_f64().unwrap() - moseq_fx / fx).abs() < 1e-9, "{mm}");
+        assert!((mm["scale_y"].as_f64().unwrap() - moseq_fy / fy).abs() < 1e-9, "{mm}");
+        assert_eq!(mm["fx"], fx);
+        assert_eq!(mm["intrinsics_from"], "rig calibration");
+    }
+    // The fixture's camera (570 px) is far from moseq2's assumption: the operator is told.
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("warning") && err.contains("Kinect v2"), "{err}");
+    assert!(err.contains(&format!("{:.4}", moseq_fx / fx)), "{err}");
+}

@@ -14,8 +14,8 @@
 
 use crate::app::export::Run;
 use crate::app::print;
-use crate::engine::{Failure, output_failure};
 use crate::core::frame::PixelFormat;
+use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
 use crate::io::session::{CameraMeta, CameraRole, SessionReader};
 use crate::io::video::{Encoder, EncoderSpec};
@@ -55,7 +55,7 @@ pub struct MoseqArgs {
     #[arg(long)]
     pub force: bool,
     /// Print what was written as one JSON object (`out`, `depth_frames`, `color_frames`,
-    /// `skipped_frames`).
+    /// `skipped_frames`, `millimetres`).
     #[arg(long)]
     pub json: bool,
 }
@@ -93,6 +93,65 @@ struct Provenance {
     color_pixel_format: Option<&'static str>,
     depth_frames: u64,
     color_frames: u64,
+    /// The depth camera's intrinsics and how moseq2-extract's millimetres differ from them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    millimetres: Option<MoseqMillimetres>,
+}
+
+/// moseq2-extract turns pixels into millimetres as if every depth camera were a Kinect v2 at
+/// 512 x 424 (`convert_pxs_to_mm` with its defaults: a focal length of
+/// `512 / (2 · 35.3°)` by `424 / (2 · 30°)` pixels, angles in radians, and the principal point
+/// at (256, 212)); its `*_mm` scalars of another camera are off by the ratio of the two focal
+/// lengths, and nothing in its config or `metadata.json` changes that.
+pub const MOSEQ_FOCAL_PX: (f64, f64) = (
+    512.0 / (2.0 * 0.616_101_226_206_915),
+    424.0 / (2.0 * 0.523_598_775_598_298_9),
+);
+
+/// What a MoSeq export knows of the depth camera's millimetres.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MoseqMillimetres {
+    /// Where the intrinsics come from: `rig calibration` or a camera of the table, nominal.
+    pub intrinsics_from: String,
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    /// Multiply moseq2-extract's millimetres along the image's x (y) by this to get true
+    /// millimetres: its focal length over the camera's.
+    pub scale_x: f64,
+    pub scale_y: f64,
+}
+
+impl MoseqMillimetres {
+    pub fn new(intrinsics: &crate::core::geometry::Intrinsics, from: String) -> Self {
+        Self {
+            intrinsics_from: from,
+            fx: intrinsics.fx,
+            fy: intrinsics.fy,
+            cx: intrinsics.cx,
+            cy: intrinsics.cy,
+            scale_x: MOSEQ_FOCAL_PX.0 / intrinsics.fx,
+            scale_y: MOSEQ_FOCAL_PX.1 / intrinsics.fy,
+        }
+    }
+
+    /// The warning to print when moseq2-extract's millimetres are more than 2 % off.
+    pub fn warning(&self) -> Option<String> {
+        let off = |s: f64| (s - 1.0).abs() > 0.02;
+        (off(self.scale_x) || off(self.scale_y)).then(|| {
+            format!(
+                "moseq2-extract's millimetre scalars (centroid_*_mm, velocity_*_mm, length_mm, width_mm, area_mm) assume a Kinect v2's field of view: for this camera (fx {:.1}, fy {:.1} px, {}) they come out {:.2} x (along x) and {:.2} x (along y) the true values; multiply them by {:.4} and {:.4} (both are in {PROVENANCE_FILE}), or use the *_px scalars with these intrinsics",
+                self.fx,
+                self.fy,
+                self.intrinsics_from,
+                1.0 / self.scale_x,
+                1.0 / self.scale_y,
+                self.scale_x,
+                self.scale_y
+            )
+        })
+    }
 }
 
 /// What an export wrote.
@@ -103,6 +162,9 @@ pub struct MoseqExport {
     pub color_frames: u64,
     /// Frames of the session that could not be read (damaged records), left out.
     pub skipped_frames: u64,
+    /// How moseq2-extract's millimetres differ from this camera's (`None` when the depth
+    /// camera's intrinsics are unknown).
+    pub millimetres: Option<MoseqMillimetres>,
 }
 
 /// A stamp in milliseconds, exact to the nanosecond.
@@ -259,6 +321,18 @@ pub fn export_moseq(
         nidaq_channels: 0,
         nidaq_sampling_rate: 0.0,
     };
+    // The depth camera's intrinsics: the session's calibration, else the camera table's.
+    let millimetres = match &meta.rig {
+        Some(rig) => Some(MoseqMillimetres::new(
+            &rig.depth.intrinsics,
+            "rig calibration".to_owned(),
+        )),
+        None => {
+            crate::core::cameras::depth_camera(Some(depth_meta.model.as_str()), depth_meta.width, depth_meta.height)
+                .ok()
+                .map(|m| MoseqMillimetres::new(&m.intrinsics(), format!("{}, nominal", m.label())))
+        }
+    };
     let provenance = Provenance {
         software_version: env!("CARGO_PKG_VERSION"),
         session: std::fs::canonicalize(session).unwrap_or_else(|_| session.to_owned()),
@@ -267,6 +341,7 @@ pub fn export_moseq(
         color_pixel_format,
         depth_frames,
         color_frames,
+        millimetres: millimetres.clone(),
     };
     crate::engine::write_report_file(&dir, METADATA, &serde_json::to_vec_pretty(&metadata)?)?;
     crate::engine::write_report_file(&dir, PROVENANCE_FILE, &serde_json::to_vec_pretty(&provenance)?)?;
@@ -281,6 +356,7 @@ pub fn export_moseq(
         depth_frames,
         color_frames,
         skipped_frames: skipped,
+        millimetres,
     })
 }
 
@@ -301,6 +377,16 @@ pub fn command(args: &MoseqArgs) -> crate::app::Outcome {
     );
     bar.finish_and_clear();
     let e = result.map_err(|f| f.context(format!("exporting {:?} for MoSeq", run.session)))?;
+    match e.millimetres.as_ref() {
+        Some(mm) => {
+            if let Some(w) = mm.warning() {
+                eprintln!("warning: {w}");
+            }
+        }
+        None => eprintln!(
+            "warning: the depth camera's intrinsics are unknown (no rig calibration, a camera the table does not know): moseq2-extract's millimetre scalars assume a Kinect v2's field of view and may be off"
+        ),
+    }
     if args.json {
         return Ok(crate::app::print_json(&e)?);
     }
