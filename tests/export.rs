@@ -884,3 +884,60 @@ fn moseq_export_says_how_far_moseqs_millimetres_are_from_the_cameras() {
     assert!(err.contains("warning") && err.contains("Kinect v2"), "{err}");
     assert!(err.contains(&format!("{:.4}", moseq_fx / fx)), "{err}");
 }
+
+#[test]
+fn a_replay_of_a_short_moseq_export_starts_no_ffmpeg_per_background_frame() {
+    let tmp = tempfile::tempdir().unwrap();
+    let moseq = tmp.path().join("moseq");
+    export_moseq(&fixture(), &moseq, None, None, false, |_, _| {}).unwrap();
+    // An ffmpeg first on the search path that notes each run, then runs the real one.
+    let path = std::env::var_os("PATH").unwrap();
+    let real = std::env::split_paths(&path)
+        .map(|d| d.join("ffmpeg"))
+        .find(|p| p.is_file())
+        .unwrap();
+    let bin = tmp.path().join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    let log = tmp.path().join("ffmpeg.log");
+    let wrapper = bin.join("ffmpeg");
+    std::fs::write(
+        &wrapper,
+        format!(
+            "#!/bin/sh\necho \"$*\" >> '{}'\nexec '{}' \"$@\"\n",
+            log.display(),
+            real.display()
+        ),
+    )
+    .unwrap();
+    let mut perms = std::fs::metadata(&wrapper).unwrap().permissions();
+    std::os::unix::fs::PermissionsExt::set_mode(&mut perms, 0o755);
+    std::fs::set_permissions(&wrapper, perms).unwrap();
+    let mut dirs = vec![bin.clone()];
+    dirs.extend(std::env::split_paths(&path));
+    let out = mousepose()
+        .env("PATH", std::env::join_paths(dirs).unwrap())
+        .env("MOUSEPOSE_MODELS", repo_root().join("fixtures/models"))
+        .arg("replay")
+        .arg(&moseq)
+        .arg("--calibration")
+        .arg(moseq.join(RIG_FILE))
+        .arg("--out")
+        .arg(tmp.path().join("run"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let runs = std::fs::read_to_string(&log).unwrap();
+    // The 29 frames: one ffmpeg samples the background, one decodes the frames for the
+    // replay, one draws frame.png (it was one per background frame, 31 in all).
+    assert!(
+        runs.lines().count() <= 3,
+        "{} ffmpeg runs:\n{runs}",
+        runs.lines().count()
+    );
+    let rows = std::fs::read_to_string(tmp.path().join("run/poses.csv"))
+        .unwrap()
+        .lines()
+        .count()
+        - 1;
+    assert_eq!(rows, SessionReader::open(fixture()).unwrap().depth_count());
+}
