@@ -104,8 +104,8 @@ struct Provenance {
 /// at (256, 212)); its `*_mm` scalars of another camera are off by the ratio of the two focal
 /// lengths, and nothing in its config or `metadata.json` changes that.
 pub const MOSEQ_FOCAL_PX: (f64, f64) = (
-    512.0 / (2.0 * 0.616_101_226_206_915),
-    424.0 / (2.0 * 0.523_598_775_598_298_9),
+    512.0 / (2.0 * 35.3 * std::f64::consts::PI / 180.0),
+    424.0 / (2.0 * std::f64::consts::FRAC_PI_6),
 );
 
 /// What a MoSeq export knows of the depth camera's millimetres.
