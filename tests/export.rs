@@ -645,3 +645,299 @@ fn video_frames_keep_the_cameras_times_and_their_panels_stay_in_place() {
         assert!((s - t).abs() < 0.001, "frame {k} shown at {s} s, taken at {t} s");
     }
 }
+
+#[test]
+fn nwb_export_keeps_the_calibration_the_videos_and_how_each_pose_was_made() {
+    let python = Path::new(mousepose::engine::export::nwb::DEFAULT_PYTHON);
+    assert!(python.is_file(), "{python:?} is missing: run scripts/setup.sh");
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    replay_to(&fixture(), &run, None);
+    // The videos: the session's depth as MoSeq's depth.avi, and the run drawn.
+    let moseq = tmp.path().join("moseq");
+    export_moseq(&fixture(), &moseq, None, None, false, |_, _| {}).unwrap();
+    let labeled = tmp.path().join("labeled.mp4");
+    let drawn = mousepose()
+        .args(["export", "video"])
+        .arg(&run)
+        .arg("--out")
+        .arg(&labeled)
+        .output()
+        .unwrap();
+    assert!(drawn.status.success(), "{}", String::from_utf8_lossy(&drawn.stderr));
+    let nwb = tmp.path().join("out/run.nwb");
+    std::fs::create_dir(tmp.path().join("out")).unwrap();
+    let out = mousepose()
+        .args(["export", "nwb"])
+        .arg(&run)
+        .arg("--out")
+        .arg(&nwb)
+        .args(["--subject-id", "m1", "--age", "P84D", "--source-video"])
+        .arg(moseq.join("depth.avi"))
+        .arg("--labeled-video")
+        .arg(&labeled)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let check = r#"
+import json, sys
+import numpy as np
+from pynwb import NWBHDF5IO
+import ndx_pose
+from nwbinspector import inspect_nwbfile, Importance, load_config
+import warnings
+warnings.simplefilter("always")
+with warnings.catch_warnings(record=True) as caught, NWBHDF5IO(sys.argv[1], "r") as io:
+    f = io.read()
+    read_warnings = [str(w.message) for w in caught]
+    pe = f.processing["behavior"]["PoseEstimation"]
+    frames = f.processing["behavior"]["PoseFrames"].to_dataframe()
+    cameras = {n: {"type": type(d).__name__,
+                   "K": np.asarray(d.intrinsic_matrix).tolist(),
+                   "R": np.asarray(d.rotation_matrix).tolist(),
+                   "t": np.asarray(d.translation_vector).tolist(),
+                   "dist": np.asarray(d.distortion_coefficients).tolist(),
+                   "serial": d.serial_number} for n, d in f.devices.items()}
+    def video(v):
+        if v is None:
+            return None
+        out = {"file": [str(x) for x in v.external_file[:]], "dimension": [int(x) for x in v.dimension[:]]}
+        if v.timestamps is not None:
+            out["frames"] = len(v.timestamps)
+            out["first_s"] = float(v.timestamps[0])
+            out["last_s"] = float(v.timestamps[-1])
+        else:
+            out["rate"] = v.rate
+        return out
+    out = {
+        "cameras": cameras,
+        "device": pe.device.name,
+        "source_video": video(pe.source_video),
+        "labeled_video": video(pe.labeled_video),
+        "status": frames["status"].tolist(),
+        "orientation_confidence": [None if np.isnan(x) else float(x) for x in frames["orientation_confidence"]],
+        "joint_source": [list(map(str, s)) for s in frames["joint_source"]],
+        "color_seq": [int(x) for x in frames["color_seq"]],
+        "read_warnings": read_warnings,
+    }
+serious = lambda ms: [f"{m.importance.name} {m.check_function_name}: {m.message}" for m in ms
+                      if m.importance.value >= Importance.BEST_PRACTICE_VIOLATION.value]
+out["critical"] = serious(inspect_nwbfile(nwbfile_path=sys.argv[1]))
+out["dandi"] = serious(inspect_nwbfile(nwbfile_path=sys.argv[1], config=load_config("dandi")))
+print(json.dumps(out))
+"#;
+    let read = Command::new(python).args(["-c", check]).arg(&nwb).output().unwrap();
+    assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&read.stdout).unwrap();
+    assert_eq!(v["critical"], serde_json::json!([]), "{v}");
+    assert_eq!(v["dandi"], serde_json::json!([]), "{v}");
+    assert_eq!(v["read_warnings"], serde_json::json!([]), "{v}");
+
+    // The rig calibration, as OpenCV has a camera: p_camera = R p_world + t, mm.
+    let meta = SessionReader::open(fixture()).unwrap().meta().clone();
+    let rig = meta.rig.unwrap();
+    for (name, cam) in [("depth_camera", rig.depth), ("color_camera", rig.color)] {
+        let c = &v["cameras"][name];
+        assert_eq!(c["type"], "CalibratedCamera", "{v}");
+        let i = cam.intrinsics;
+        let k = [[i.fx, 0.0, i.cx], [0.0, i.fy, i.cy], [0.0, 0.0, 1.0]];
+        let inv = cam.world_from_camera.inverse();
+        let r = inv.rotation.to_rotation_matrix();
+        for row in 0..3 {
+            for col in 0..3 {
+                assert!(
+                    (c["K"][row][col].as_f64().unwrap() - k[row][col]).abs() < 1e-9,
+                    "{name}: {c}"
+                );
+                assert!(
+                    (c["R"][row][col].as_f64().unwrap() - r[(row, col)]).abs() < 1e-9,
+                    "{name}: {c}"
+                );
+            }
+            assert!(
+                (c["t"][row].as_f64().unwrap() - inv.translation.vector[row]).abs() < 1e-9,
+                "{name}: {c}"
+            );
+        }
+        let dist: Vec<f64> = c["dist"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        assert_eq!(dist, i.distortion.to_vec());
+        // A world point projects where the rig projects it.
+        let p = nalgebra::Point3::new(30.0, -20.0, 10.0);
+        let q = inv * p;
+        let rp = |m: &serde_json::Value, v: [f64; 3], row: usize| {
+            (0..3).map(|j| m[row][j].as_f64().unwrap() * v[j]).sum::<f64>()
+        };
+        let pc: [f64; 3] = std::array::from_fn(|row| rp(&c["R"], [p.x, p.y, p.z], row) + c["t"][row].as_f64().unwrap());
+        assert!((pc[0] - q.x).abs() < 1e-6 && (pc[2] - q.z).abs() < 1e-6, "{name}");
+    }
+    assert_eq!(v["device"], "depth_camera");
+
+    // The videos, by paths relative to the NWB file, with their sizes and frames.
+    let depth_frames = SessionReader::open(fixture()).unwrap().depth_count();
+    let rows = mousepose::runtime::sink::poses::read_poses(&run.join("poses.csv")).unwrap();
+    let t0 = rows[0].depth.device_ns;
+    let last_s = |ns: u64| (ns - t0) as f64 / 1e9;
+    // The source's times from depth_ts.txt beside it: the depth frames' own, exactly.
+    let session_depth: Vec<_> = SessionReader::open(fixture())
+        .unwrap()
+        .depth_frames()
+        .map(|f| f.unwrap().stamp.device_ns)
+        .collect();
+    let source = &v["source_video"];
+    assert_eq!(source["file"], serde_json::json!(["../moseq/depth.avi"]), "{v}");
+    assert_eq!(source["dimension"], serde_json::json!([640, 480]), "{v}");
+    assert_eq!(source["frames"], depth_frames, "{v}");
+    assert!(
+        (source["first_s"].as_f64().unwrap() - last_s(session_depth[0])).abs() < 1e-9,
+        "{v}"
+    );
+    assert!(
+        (source["last_s"].as_f64().unwrap() - last_s(*session_depth.last().unwrap())).abs() < 1e-9,
+        "{v}"
+    );
+    // The labelled video's: its own (variable frame rate, a frame per pose row).
+    let labeled = &v["labeled_video"];
+    assert_eq!(labeled["file"], serde_json::json!(["../labeled.mp4"]), "{v}");
+    assert_eq!(labeled["frames"], rows.len(), "{v}");
+    let end = last_s(rows.last().unwrap().depth.device_ns);
+    assert!((labeled["last_s"].as_f64().unwrap() - end).abs() < 0.001, "{v}");
+
+    // Each frame's status, orientation confidence and each joint's source, as poses.csv has them.
+    let csv = std::fs::read_to_string(run.join("poses.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let body: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    assert_eq!(v["status"].as_array().unwrap().len(), body.len());
+    let mut sources = std::collections::BTreeSet::new();
+    for (k, cells) in body.iter().enumerate() {
+        assert_eq!(v["status"][k], cells[col("status")], "row {k}");
+        let oc = cells[col("orientation_confidence")];
+        match v["orientation_confidence"][k].as_f64() {
+            Some(x) => assert!((x - oc.parse::<f64>().unwrap()).abs() < 1e-9, "row {k}"),
+            None => assert_eq!(oc, "", "row {k}"),
+        }
+        let cs = cells[col("color_seq")];
+        assert_eq!(
+            v["color_seq"][k],
+            if cs.is_empty() { -1 } else { cs.parse::<i64>().unwrap() },
+            "row {k}"
+        );
+        for (j, joint) in mousepose::core::skeleton::Joint::ALL.iter().enumerate() {
+            let s = cells[col(&format!("{}_source", joint.name()))];
+            assert_eq!(v["joint_source"][k][j], s, "row {k} {}", joint.name());
+            sources.insert(s.to_owned());
+        }
+    }
+    assert!(
+        sources.contains("depth") && sources.contains("paw") && sources.contains("ik"),
+        "{sources:?}"
+    );
+
+    // A video that is not there is refused before anything is written.
+    let missing = mousepose()
+        .args(["export", "nwb"])
+        .arg(&run)
+        .arg("--out")
+        .arg(tmp.path().join("b.nwb"))
+        .args(["--source-video", "/nonexistent.avi"])
+        .output()
+        .unwrap();
+    assert_eq!(missing.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("not a file"));
+    assert!(!tmp.path().join("b.nwb").exists());
+}
+
+#[test]
+fn moseq_export_says_how_far_moseqs_millimetres_are_from_the_cameras() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out_dir = tmp.path().join("m");
+    let out = mousepose()
+        .args(["export", "moseq", "--json"])
+        .arg(fixture())
+        .arg("--out")
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // moseq2-extract's convert_pxs_to_mm: a 512 x 424 frame over a 70.6 x 60 degree field of
+    // view, the angles taken in radians as they are.
+    let moseq_fx = 512.0 / (2.0 * 35.3f64.to_radians());
+    let moseq_fy = 424.0 / (2.0 * 30.0f64.to_radians());
+    let rig = SessionReader::open(fixture()).unwrap().meta().rig.unwrap();
+    let (fx, fy) = (rig.depth.intrinsics.fx, rig.depth.intrinsics.fy);
+    let said: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let provenance: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join(PROVENANCE_FILE)).unwrap()).unwrap();
+    for mm in [&said["millimetres"], &provenance["millimetres"]] {
+        assert!((mm["scale_x"].as_f64().unwrap() - moseq_fx / fx).abs() < 1e-9, "{mm}");
+        assert!((mm["scale_y"].as_f64().unwrap() - moseq_fy / fy).abs() < 1e-9, "{mm}");
+        assert_eq!(mm["fx"], fx);
+        assert_eq!(mm["intrinsics_from"], "rig calibration");
+    }
+    // The fixture's camera (570 px) is far from moseq2's assumption: the operator is told.
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("warning") && err.contains("Kinect v2"), "{err}");
+    assert!(err.contains(&format!("{:.4}", moseq_fx / fx)), "{err}");
+}
+
+#[test]
+fn a_replay_of_a_short_moseq_export_starts_no_ffmpeg_per_background_frame() {
+    let tmp = tempfile::tempdir().unwrap();
+    let moseq = tmp.path().join("moseq");
+    export_moseq(&fixture(), &moseq, None, None, false, |_, _| {}).unwrap();
+    // An ffmpeg first on the search path that notes each run, then runs the real one.
+    let path = std::env::var_os("PATH").unwrap();
+    let real = std::env::split_paths(&path)
+        .map(|d| d.join("ffmpeg"))
+        .find(|p| p.is_file())
+        .unwrap();
+    let bin = tmp.path().join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    let log = tmp.path().join("ffmpeg.log");
+    let wrapper = bin.join("ffmpeg");
+    std::fs::write(
+        &wrapper,
+        format!(
+            "#!/bin/sh\necho \"$*\" >> '{}'\nexec '{}' \"$@\"\n",
+            log.display(),
+            real.display()
+        ),
+    )
+    .unwrap();
+    let mut perms = std::fs::metadata(&wrapper).unwrap().permissions();
+    std::os::unix::fs::PermissionsExt::set_mode(&mut perms, 0o755);
+    std::fs::set_permissions(&wrapper, perms).unwrap();
+    let mut dirs = vec![bin.clone()];
+    dirs.extend(std::env::split_paths(&path));
+    let out = mousepose()
+        .env("PATH", std::env::join_paths(dirs).unwrap())
+        .env("MOUSEPOSE_MODELS", repo_root().join("fixtures/models"))
+        .arg("replay")
+        .arg(&moseq)
+        .arg("--calibration")
+        .arg(moseq.join(RIG_FILE))
+        .arg("--out")
+        .arg(tmp.path().join("run"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let runs = std::fs::read_to_string(&log).unwrap();
+    // The 29 frames: one ffmpeg samples the background, one decodes the frames for the
+    // replay, one draws frame.png (it was one per background frame, 31 in all).
+    assert!(
+        runs.lines().count() <= 3,
+        "{} ffmpeg runs:\n{runs}",
+        runs.lines().count()
+    );
+    let rows = std::fs::read_to_string(tmp.path().join("run/poses.csv"))
+        .unwrap()
+        .lines()
+        .count()
+        - 1;
+    assert_eq!(rows, SessionReader::open(fixture()).unwrap().depth_count());
+}

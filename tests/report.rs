@@ -212,3 +212,110 @@ fn gait_of_a_rendered_walk_matches_the_animators_stride() {
     let first = frame_input(rows[0].depth.device_ns, &rows[0]);
     assert_eq!(first.t_s, 0.0);
 }
+
+#[test]
+fn a_depth_only_run_says_gait_needs_the_bottom_camera_and_shows_no_empty_gait() {
+    use mousepose::engine::export::moseq::{RIG_FILE, export_moseq};
+    let tmp = tempfile::tempdir().unwrap();
+    // The fixture's depth frames alone: a MoSeq recording has no colour camera.
+    let moseq = tmp.path().join("moseq");
+    export_moseq(
+        &repo_root().join("fixtures/sessions/synthetic-small"),
+        &moseq,
+        None,
+        None,
+        false,
+        |_, _| {},
+    )
+    .unwrap();
+    let run = tmp.path().join("run");
+    replay(&mousepose::engine::replay::ReplayOptions {
+        calibration: Some(moseq.join(RIG_FILE)),
+        ..crate::util::replay_options(&moseq, &run, 1)
+    })
+    .unwrap();
+    let out = tmp.path().join("report");
+    let done = mousepose()
+        .arg("report")
+        .arg(&run)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
+    let said = String::from_utf8_lossy(&done.stdout);
+    assert!(said.contains("needs the bottom camera"), "{said}");
+    let page = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(page.contains("Gait needs the bottom camera"), "{page}");
+    // No empty gait chart, no value-less cell with a unit.
+    assert!(
+        !page.contains("src=\"gait.png\"") && !page.contains("src=\"stance.png\""),
+        "{page}"
+    );
+    assert!(!out.join("gait.png").exists());
+    for empty in [
+        "<td> mm",
+        "<td> Hz",
+        "<td> mm/s",
+        "<td> deg",
+        " mm.</p>",
+        "fore  mm",
+        "-0.0",
+    ] {
+        assert!(!page.contains(empty), "{empty:?} in {page}");
+    }
+    assert_eq!(images_in_chromium(&out), "images 5 broken 0");
+    let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert!(
+        summary["gait_unavailable"].as_str().unwrap().contains("bottom camera"),
+        "{summary}"
+    );
+    // Heading and turning come from the depth image alone.
+    assert!(summary["mean_angular_speed_deg_s"].as_f64().unwrap() > 0.0, "{summary}");
+    let frames = std::fs::read_to_string(out.join("frames.csv")).unwrap();
+    let header: Vec<&str> = frames.lines().next().unwrap().split(',').collect();
+    let at = header.iter().position(|h| *h == "heading_deg").unwrap();
+    let headed = frames
+        .lines()
+        .skip(1)
+        .filter(|l| !l.split(',').nth(at).unwrap().is_empty())
+        .count();
+    assert!(headed > 10, "{headed} frames with a heading");
+}
+
+#[test]
+fn the_report_measures_heading_turning_immobility_and_stride_variability() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = tmp.path().join("run");
+    replay_to(&repo_root().join("fixtures/sessions/synthetic-small"), &run);
+    let out = tmp.path().join("report");
+    // Everything slower than 10 m/s is immobile, and every immobile stretch freezing.
+    let done = mousepose()
+        .arg("report")
+        .arg(&run)
+        .args(["--immobile", "10000", "--freezing", "0", "--json", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&done.stdout).unwrap();
+    assert_eq!(summary["gait_unavailable"], serde_json::Value::Null, "{summary}");
+    for key in [
+        "mean_angular_speed_deg_s",
+        "turned_deg",
+        "net_turn_deg",
+        "immobile_s",
+        "freezing_s",
+    ] {
+        assert!(summary[key].is_number(), "{key}: {summary}");
+    }
+    assert_eq!(summary["immobility_bouts"], summary["freezing_bouts"], "{summary}");
+    for paw in ["left_fore", "right_fore", "left_hind", "right_hind"] {
+        assert!(summary["stride_variability"][paw]["strides"].is_number(), "{summary}");
+    }
+    let bouts = std::fs::read_to_string(out.join("bouts.csv")).unwrap();
+    let immobility = bouts.lines().filter(|l| l.starts_with("immobility,")).count();
+    assert_eq!(immobility as u64, summary["immobility_bouts"].as_u64().unwrap());
+    let page = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(page.contains("stride length CV") && page.contains("freezing"), "{page}");
+}

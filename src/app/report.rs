@@ -5,6 +5,7 @@ use crate::app::output::{print, print_json};
 use crate::engine::Failure;
 use crate::engine::report::{ReportOptions, report_with, summary};
 use crate::vision::behaviour::{Arena, BehaviourConfig};
+use crate::vision::movement::ActivityConfig;
 use clap::Args;
 use std::path::PathBuf;
 
@@ -33,6 +34,13 @@ pub struct ReportArgs {
     /// By the walls: the body's centre within this of a wall, mm.
     #[arg(long, value_name = "MM", default_value_t = 60.0, value_parser = parse_mm)]
     pub wall: f64,
+    /// Immobile: the body slower than this (and turning slower than 30 degrees/s) for 0.5 s
+    /// or more, mm/s.
+    #[arg(long, value_name = "MM_S", default_value_t = 10.0, value_parser = parse_speed)]
+    pub immobile: f64,
+    /// Freezing: immobile for at least this long, seconds.
+    #[arg(long, value_name = "S", default_value_t = 2.0, value_parser = parse_seconds)]
+    pub freezing: f64,
     /// Print the summary as one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -43,6 +51,10 @@ pub struct ReportArgs {
 
 fn parse_speed(s: &str) -> Result<f64, String> {
     crate::app::parse::ranged(s, "a speed in mm/s", 0.0, 10_000.0)
+}
+
+fn parse_seconds(s: &str) -> Result<f64, String> {
+    crate::app::parse::ranged(s, "a duration in seconds", 0.0, 3600.0)
 }
 
 fn parse_mm(s: &str) -> Result<f64, String> {
@@ -71,6 +83,8 @@ fn parse_arena(s: &str) -> Result<Arena, String> {
     })
 }
 
+/// What a report is made with besides the run: the thresholds, and the arena (`None`: the
+/// run's own, see [`ReportArgs::arena`]).
 /// `mousepose report`.
 pub fn command(args: &ReportArgs) -> crate::app::Outcome {
     if args.walk_min >= args.walk_max {
@@ -88,29 +102,44 @@ pub fn command(args: &ReportArgs) -> crate::app::Outcome {
             wall_band_mm: args.wall,
             ..BehaviourConfig::default()
         },
+        activity: ActivityConfig {
+            immobile_mm_s: args.immobile,
+            min_freezing_s: args.freezing,
+            ..ActivityConfig::default()
+        },
         arena: args.arena,
     };
-    let (b, arena) = report_with(&args.run, &args.out, args.force, &options)
+    let reported = report_with(&args.run, &args.out, args.force, &options)
         .map_err(|f| f.context(format!("reporting on {:?}", args.run)))?;
     if args.json {
-        return Ok(print_json(&summary(&args.run, &options.config, arena, &b))?);
+        return Ok(print_json(&summary(&args.run, &options, &reported))?);
     }
+    let (b, arena) = (&reported.behaviour, reported.arena);
     let stride = |k: usize| {
         b.paws[k]
             .stride_length_mm
             .map_or_else(|| "-".to_owned(), |v| format!("{v:.1}"))
     };
     Ok(print(&format!(
-        "{:.1} s, {:.0} mm travelled, {} rearing and {} walking bouts, {} strides (stride length mm: {} {} {} {}); {}; report in {:?}\n",
+        "{:.1} s, {:.0} mm travelled, {} rearing and {} walking bouts, {} immobile ({:.1} s, {} freezing), {}; {}; report in {:?}\n",
         b.duration_s,
         b.distance_mm,
         b.rearing.len(),
         b.walking.len(),
-        b.strides.len(),
-        stride(0),
-        stride(1),
-        stride(2),
-        stride(3),
+        reported.activity.immobility.len(),
+        reported.activity.immobile_s(),
+        reported.activity.freezing.len(),
+        match reported.gait_unavailable {
+            Some(_) => "no gait (needs the bottom camera: the run has no colour frames)".to_owned(),
+            None => format!(
+                "{} strides (stride length mm: {} {} {} {})",
+                b.strides.len(),
+                stride(0),
+                stride(1),
+                stride(2),
+                stride(3)
+            ),
+        },
         match arena.from {
             "default" => "arena: the synthetic 500 x 450 mm cage (the run names none; give --arena)".to_owned(),
             from => {

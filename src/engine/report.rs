@@ -1,5 +1,5 @@
-//! The engine of `mousepose report RUN --out DIR`: a run's behaviour and gait as a page of PNG
-//! charts and CSV tables that opens without a network:
+//! The engine of `mousepose report RUN --out DIR`: a run's behaviour and gait as a page of PNG charts and
+//! CSV tables that opens without a network:
 //!
 //! ```text
 //! DIR/index.html     the page: figures, tables, how each measure is taken
@@ -28,6 +28,7 @@ use crate::io::output::Staging;
 use crate::runtime::sink::poses::{POSES_FILE, read_poses};
 use crate::runtime::stages::{PoseRecord, PoseStatus};
 use crate::vision::behaviour::{Arena, Behaviour, BehaviourConfig, FrameInput, PAW_NAMES, analyse_in};
+use crate::vision::movement::{Activity, ActivityConfig, StrideVariability, activity};
 use anyhow::Context as _;
 use nalgebra::{Point2, Vector2};
 use std::fmt::Write as _;
@@ -37,11 +38,10 @@ use std::path::Path;
 /// places a paw the leg cannot reach on the glass up its ray instead).
 const ON_GLASS_MM: f64 = 6.0;
 
-/// What a report is made with besides the run: the thresholds, and the arena (`None`: the
-/// run's own: the replay's `world.arena_mm`, else the synthetic cage).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ReportOptions {
     pub config: BehaviourConfig,
+    pub activity: ActivityConfig,
     pub arena: Option<Arena>,
 }
 
@@ -125,13 +125,13 @@ fn nan(v: Option<f64>) -> f64 {
     v.unwrap_or(f64::NAN)
 }
 
-fn frames_csv(b: &Behaviour, inputs: &[FrameInput]) -> String {
+fn frames_csv(b: &Behaviour, a: &Activity, inputs: &[FrameInput]) -> String {
     let mut s = String::from("t_s,x_mm,y_mm,speed_mm_s,distance_mm,zone,head_z_mm,rearing,walking");
     for p in PAW_NAMES {
         let _ = write!(s, ",{p}_stance");
     }
-    s.push('\n');
-    for (f, i) in b.frames.iter().zip(inputs) {
+    s.push_str(",heading_deg,angular_speed_deg_s,immobile\n");
+    for (k, (f, i)) in b.frames.iter().zip(inputs).enumerate() {
         let _ = write!(
             s,
             "{:.4},{},{},{},{:.1},{},{},{},{}",
@@ -148,7 +148,13 @@ fn frames_csv(b: &Behaviour, inputs: &[FrameInput]) -> String {
         for st in f.stance {
             let _ = write!(s, ",{}", u8::from(st));
         }
-        s.push('\n');
+        let _ = writeln!(
+            s,
+            ",{},{},{}",
+            opt(a.heading_deg[k], 1),
+            opt(a.angular_speed_deg_s[k], 1),
+            u8::from(a.immobile[k])
+        );
     }
     s
 }
@@ -170,9 +176,14 @@ fn strides_csv(b: &Behaviour) -> String {
     s
 }
 
-fn bouts_csv(b: &Behaviour) -> String {
+fn bouts_csv(b: &Behaviour, a: &Activity) -> String {
     let mut s = String::from("kind,start_s,end_s,duration_s\n");
-    for (kind, bouts) in [("walking", &b.walking), ("rearing", &b.rearing)] {
+    for (kind, bouts) in [
+        ("walking", &b.walking),
+        ("rearing", &b.rearing),
+        ("immobility", &a.immobility),
+        ("freezing", &a.freezing),
+    ] {
         for x in bouts {
             let _ = writeln!(s, "{kind},{:.4},{:.4},{:.4}", x.start_s, x.end_s, x.duration_s());
         }
@@ -180,11 +191,32 @@ fn bouts_csv(b: &Behaviour) -> String {
     s
 }
 
+/// A measure and its unit for the page, or "none" (no unit) when there is none.
+fn measure(v: Option<f64>, decimals: usize, unit: &str) -> String {
+    v.map_or_else(
+        || "none".to_owned(),
+        |v| format!("{v:.decimals$}{}{unit}", if unit.is_empty() { "" } else { " " }),
+    )
+}
+
+/// Why the run has no gait, when it cannot have one: no colour frame (a depth-only run).
+fn no_gait(rows: &[PoseRecord]) -> Option<&'static str> {
+    rows.iter().all(|r| r.color.is_none()).then_some(
+        "Gait needs the bottom camera: this run has no colour frames, so no paw was seen on the glass and there are no stance phases or strides.",
+    )
+}
+
 fn html_escape(text: &str) -> String {
     text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
-fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig, arena: &ArenaUsed) -> String {
+fn page(
+    run: &Path,
+    (b, a): (&Behaviour, &Activity),
+    (config, activity): (&BehaviourConfig, &ActivityConfig),
+    arena: &ArenaUsed,
+    no_gait: Option<&str>,
+) -> String {
     let total: f64 = b.zone_s.iter().sum::<f64>().max(1e-9);
     let mut h = String::from(
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>mousepose report</title>\n<style>body{font-family:sans-serif;max-width:960px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 10px;text-align:right}th{background:#f3f3f3}img{max-width:100%;border:1px solid #eee}</style></head><body>\n",
@@ -197,10 +229,10 @@ fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig, arena: &ArenaUsed) 
     let _ = writeln!(
         h,
         "<table><tr><th>duration</th><th>distance</th><th>mean speed</th><th>in the centre</th><th>by the walls</th><th>between</th><th>mouse not found</th><th>rearing bouts</th><th>walking bouts</th></tr>\
-         <tr><td>{:.1} s</td><td>{:.0} mm</td><td>{} mm/s</td><td>{:.1} s ({:.0} %)</td><td>{:.1} s ({:.0} %)</td><td>{:.1} s ({:.0} %)</td><td>{:.1} s</td><td>{} ({:.1} s)</td><td>{} ({:.1} s)</td></tr></table>",
+         <tr><td>{:.1} s</td><td>{:.0} mm</td><td>{}</td><td>{:.1} s ({:.0} %)</td><td>{:.1} s ({:.0} %)</td><td>{:.1} s ({:.0} %)</td><td>{:.1} s</td><td>{} ({:.1} s)</td><td>{} ({:.1} s)</td></tr></table>",
         b.duration_s,
         b.distance_mm,
-        opt(b.mean_speed_mm_s, 0),
+        measure(b.mean_speed_mm_s, 0, "mm/s"),
         b.zone_s[0],
         100.0 * b.zone_s[0] / total,
         b.zone_s[1],
@@ -209,9 +241,21 @@ fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig, arena: &ArenaUsed) 
         100.0 * b.zone_s[2] / total,
         b.zone_s[3],
         b.rearing.len(),
-        b.rearing.iter().map(|x| x.duration_s()).sum::<f64>(),
+        b.rearing.iter().map(|x| x.duration_s()).fold(0.0, |a, d| a + d),
         b.walking.len(),
-        b.walking.iter().map(|x| x.duration_s()).sum::<f64>(),
+        b.walking.iter().map(|x| x.duration_s()).fold(0.0, |a, d| a + d),
+    );
+    let _ = writeln!(
+        h,
+        "<table><tr><th>turning (mean angular speed)</th><th>turned in all</th><th>net turn (counter-clockwise)</th><th>immobile</th><th>freezing</th></tr>\
+         <tr><td>{}</td><td>{:.0} deg</td><td>{:.0} deg</td><td>{} bouts, {:.1} s</td><td>{} bouts, {:.1} s</td></tr></table>",
+        measure(a.mean_angular_speed_deg_s, 0, "deg/s"),
+        a.turned_deg,
+        a.net_turn_deg,
+        a.immobility.len(),
+        a.immobile_s(),
+        a.freezing.len(),
+        a.freezing_s(),
     );
     for (img, alt) in [
         ("path.png", "path in the arena"),
@@ -222,27 +266,10 @@ fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig, arena: &ArenaUsed) 
     ] {
         let _ = writeln!(h, "<p><img src=\"{img}\" alt=\"{alt}\"></p>");
     }
-    h.push_str("<h2>Gait (walking bouts only)</h2>\n<table><tr><th>paw</th><th>strides</th><th>stride length</th><th>cadence</th><th>duty factor</th><th>phase to left hind</th></tr>\n");
-    for (k, p) in b.paws.iter().enumerate() {
-        let _ = writeln!(
-            h,
-            "<tr><td>{}</td><td>{}</td><td>{} mm</td><td>{} Hz</td><td>{}</td><td>{}</td></tr>",
-            PAW_NAMES[k].replace('_', " "),
-            p.strides,
-            opt(p.stride_length_mm, 1),
-            opt(p.cadence_hz, 2),
-            opt(p.duty_factor, 2),
-            opt(b.phase_to_left_hind[k], 2)
-        );
-    }
-    let _ = writeln!(
-        h,
-        "</table><p>Base of support: fore {} mm, hind {} mm.</p>",
-        opt(b.base_of_support_fore_mm, 1),
-        opt(b.base_of_support_hind_mm, 1)
-    );
-    for (img, alt) in [("stance.png", "stance of each paw"), ("gait.png", "gait per paw")] {
-        let _ = writeln!(h, "<p><img src=\"{img}\" alt=\"{alt}\"></p>");
+    if let Some(why) = no_gait {
+        let _ = writeln!(h, "<h2>Gait</h2>\n<p>{}</p>", html_escape(why));
+    } else {
+        gait_section(&mut h, b, a);
     }
     let _ = writeln!(
         h,
@@ -255,7 +282,11 @@ fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig, arena: &ArenaUsed) 
          (planted, a paw stays put; in swing it overtakes the body); one-frame gaps and blips are smoothed over. \
          A stride runs from a touchdown to the paw's next one in the same walking bout ({:.2}-{:.1} s); its length is the distance between the two footprints, \
          its duty factor the stance time over the period. Base of support: the distance across the body axis between the left and right paws both in stance. \
-         Phase: where in the left hind paw's stride each paw touches down (0.5: half a stride later).</li></ul>",
+         Phase: where in the left hind paw's stride each paw touches down (0.5: half a stride later). \
+         Stride variability: the coefficient of variation (standard deviation over mean) of a paw's stride lengths and periods, with 3 strides or more.</li>\
+         <li>Heading: where the body points seen from above (tail base to neck), degrees counter-clockwise from the world's x axis; \
+         turning: its rate of change over {:.2} s.</li>\
+         <li>Immobile: the body slower than {:.0} mm/s and turning slower than {:.0} deg/s for {:.1} s or more; freezing: immobile for {:.1} s or more.</li></ul>",
         config.smooth_s,
         config.wall_band_mm,
         arena.arena.size_mm().0,
@@ -275,14 +306,50 @@ fn page(run: &Path, b: &Behaviour, config: &BehaviourConfig, arena: &ArenaUsed) 
         config.stance_speed_factor,
         config.stance_margin_mm_s,
         config.min_stride_s,
-        config.max_stride_s
+        config.max_stride_s,
+        config.smooth_s,
+        activity.immobile_mm_s,
+        activity.immobile_turn_deg_s,
+        activity.min_immobile_s,
+        activity.min_freezing_s,
     );
     h.push_str("<p>Tables: <a href=\"frames.csv\">frames.csv</a>, <a href=\"strides.csv\">strides.csv</a>, <a href=\"bouts.csv\">bouts.csv</a>, <a href=\"summary.json\">summary.json</a>.</p>\n</body></html>\n");
     h
 }
 
-/// What the summary holds (`summary.json`, and `report --json`): the analysis without its
-/// per-frame rows.
+/// The page's gait table and charts.
+fn gait_section(h: &mut String, b: &Behaviour, a: &Activity) {
+    h.push_str("<h2>Gait (walking bouts only)</h2>\n<table><tr><th>paw</th><th>strides</th><th>stride length</th><th>cadence</th><th>duty factor</th><th>phase to left hind</th><th>stride length CV</th><th>stride period CV</th></tr>\n");
+    for (k, p) in b.paws.iter().enumerate() {
+        let v = a.stride_variability[k];
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            PAW_NAMES[k].replace('_', " "),
+            p.strides,
+            measure(p.stride_length_mm, 1, "mm"),
+            measure(p.cadence_hz, 2, "Hz"),
+            measure(p.duty_factor, 2, ""),
+            measure(b.phase_to_left_hind[k], 2, ""),
+            measure(v.length_cv, 2, ""),
+            measure(v.period_cv, 2, ""),
+        );
+    }
+    let _ = writeln!(
+        h,
+        "</table><p>Base of support: fore {}, hind {}.</p>",
+        measure(b.base_of_support_fore_mm, 1, "mm"),
+        measure(b.base_of_support_hind_mm, 1, "mm")
+    );
+    if b.strides.is_empty() {
+        h.push_str("<p>No strides: no walking bout had its paws found on the glass long enough.</p>\n");
+    }
+    for (img, alt) in [("stance.png", "stance of each paw"), ("gait.png", "gait per paw")] {
+        let _ = writeln!(h, "<p><img src=\"{img}\" alt=\"{alt}\"></p>");
+    }
+}
+
+/// What the summary holds: the analysis without its per-frame rows.
 #[derive(Debug, serde::Serialize)]
 pub struct Summary<'a> {
     run: &'a Path,
@@ -302,6 +369,18 @@ pub struct Summary<'a> {
     phase_to_left_hind: std::collections::BTreeMap<&'static str, Option<f64>>,
     base_of_support_fore_mm: Option<f64>,
     base_of_support_hind_mm: Option<f64>,
+    /// Why there is no gait (a depth-only run), absent when there can be.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    gait_unavailable: Option<&'static str>,
+    stride_variability: std::collections::BTreeMap<&'static str, StrideVariability>,
+    activity_config: &'a ActivityConfig,
+    mean_angular_speed_deg_s: Option<f64>,
+    turned_deg: f64,
+    net_turn_deg: f64,
+    immobility_bouts: usize,
+    immobile_s: f64,
+    freezing_bouts: usize,
+    freezing_s: f64,
 }
 
 /// Reads `run/poses.csv`, analyses it and writes the report into `out`.
@@ -309,19 +388,25 @@ pub struct Summary<'a> {
 /// # Errors
 /// The poses cannot be read (or there are none), or `out` cannot be written.
 pub fn report(run: &Path, out: &Path, force: bool) -> Result<Behaviour, Failure> {
-    report_with(run, out, force, &ReportOptions::default()).map(|(b, _)| b)
+    report_with(run, out, force, &ReportOptions::default()).map(|r| r.behaviour)
+}
+
+/// What [`report_with`] measured.
+#[derive(Clone, Debug)]
+pub struct Reported {
+    pub behaviour: Behaviour,
+    pub activity: Activity,
+    /// The arena it used.
+    pub arena: ArenaUsed,
+    /// Why the run has no gait (a depth-only run), if so.
+    pub gait_unavailable: Option<&'static str>,
 }
 
 /// [`report`] with other thresholds or another arena; also says which arena it used.
 ///
 /// # Errors
 /// The poses cannot be read (or there are none), or `out` cannot be written.
-pub fn report_with(
-    run: &Path,
-    out: &Path,
-    force: bool,
-    options: &ReportOptions,
-) -> Result<(Behaviour, ArenaUsed), Failure> {
+pub fn report_with(run: &Path, out: &Path, force: bool, options: &ReportOptions) -> Result<Reported, Failure> {
     let rows = read_poses(&run.join(POSES_FILE)).map_err(Failure::usage)?;
     let Some(first) = rows.first() else {
         return Err(Failure::usage(anyhow::anyhow!(
@@ -334,6 +419,8 @@ pub fn report_with(
     let config = options.config;
     let arena = arena_of(run, options);
     let b = analyse_in(&inputs, &arena.arena, &config);
+    let act = activity(&inputs, &b, config.smooth_s, &options.activity);
+    let gait_unavailable = no_gait(&rows);
     let staging = Staging::new(out, force).map_err(output_failure)?;
     let dir = staging.path();
     let t: Vec<f64> = b.frames.iter().map(|f| f.t_s).collect();
@@ -400,10 +487,13 @@ pub fn report_with(
         .collect();
     rows_raster.push(("walking", b.frames.iter().map(|f| f.walking).collect()));
     rows_raster.push(("rearing", b.frames.iter().map(|f| f.rearing).collect()));
-    write_png(
-        "stance.png",
-        raster_chart("STANCE PER PAW", "TIME (S)", &t, &rows_raster),
-    )?;
+    rows_raster.push(("immobile", act.immobile.clone()));
+    if gait_unavailable.is_none() {
+        write_png(
+            "stance.png",
+            raster_chart("STANCE PER PAW", "TIME (S)", &t, &rows_raster),
+        )?;
+    }
     let paws: Vec<String> = PAW_NAMES.iter().map(|p| p.replace('_', " ")).collect();
     let length: Vec<f64> = b.paws.iter().map(|p| p.stride_length_mm.unwrap_or(0.0)).collect();
     let cadence10: Vec<f64> = b.paws.iter().map(|p| 10.0 * p.cadence_hz.unwrap_or(0.0)).collect();
@@ -413,19 +503,39 @@ pub fn report_with(
         ("cadence x10 hz", [40, 140, 80], &cadence10),
         ("duty factor %", [200, 80, 40], &duty100),
     ];
-    write_png("gait.png", bar_chart("GAIT PER PAW (WALKING)", "", &paws, &series))?;
-    crate::engine::write_report_file(dir, "frames.csv", frames_csv(&b, &inputs).as_bytes())?;
+    if gait_unavailable.is_none() {
+        write_png("gait.png", bar_chart("GAIT PER PAW (WALKING)", "", &paws, &series))?;
+    }
+    crate::engine::write_report_file(dir, "frames.csv", frames_csv(&b, &act, &inputs).as_bytes())?;
     crate::engine::write_report_file(dir, "strides.csv", strides_csv(&b).as_bytes())?;
-    crate::engine::write_report_file(dir, "bouts.csv", bouts_csv(&b).as_bytes())?;
-    let summary = summary(run, &config, arena, &b);
+    crate::engine::write_report_file(dir, "bouts.csv", bouts_csv(&b, &act).as_bytes())?;
+    let reported = Reported {
+        behaviour: b,
+        activity: act,
+        arena,
+        gait_unavailable,
+    };
+    let summary = summary(run, options, &reported);
     crate::engine::write_report_file(dir, "summary.json", &serde_json::to_vec_pretty(&summary)?)?;
-    crate::engine::write_report_file(dir, "index.html", page(run, &b, &config, &arena).as_bytes())?;
+    crate::engine::write_report_file(
+        dir,
+        "index.html",
+        page(
+            run,
+            (&reported.behaviour, &reported.activity),
+            (&config, &options.activity),
+            &arena,
+            gait_unavailable,
+        )
+        .as_bytes(),
+    )?;
     staging.commit().map_err(output_failure)?;
-    Ok((b, arena))
+    Ok(reported)
 }
 
-/// The summary of `b`, the analysis of `run`.
-pub fn summary<'a>(run: &'a Path, config: &'a BehaviourConfig, arena: ArenaUsed, b: &Behaviour) -> Summary<'a> {
+/// The summary of a report: every measure of the page.
+pub fn summary<'a>(run: &'a Path, options: &'a ReportOptions, r: &Reported) -> Summary<'a> {
+    let (config, arena, b, a) = (&options.config, r.arena, &r.behaviour, &r.activity);
     Summary {
         run,
         config,
@@ -444,5 +554,15 @@ pub fn summary<'a>(run: &'a Path, config: &'a BehaviourConfig, arena: ArenaUsed,
         phase_to_left_hind: PAW_NAMES.iter().copied().zip(b.phase_to_left_hind).collect(),
         base_of_support_fore_mm: b.base_of_support_fore_mm,
         base_of_support_hind_mm: b.base_of_support_hind_mm,
+        gait_unavailable: r.gait_unavailable,
+        stride_variability: PAW_NAMES.iter().copied().zip(a.stride_variability).collect(),
+        activity_config: &options.activity,
+        mean_angular_speed_deg_s: a.mean_angular_speed_deg_s,
+        turned_deg: a.turned_deg,
+        net_turn_deg: a.net_turn_deg,
+        immobility_bouts: a.immobility.len(),
+        immobile_s: a.immobile_s(),
+        freezing_bouts: a.freezing.len(),
+        freezing_s: a.freezing_s(),
     }
 }

@@ -254,11 +254,10 @@ impl Recording {
                 .filter_map(|k| r.depth_frame(k * count / picks).ok())
                 .collect()),
             Recording::Moseq { config: c, .. } => {
-                // Seeking: `depth.dat` directly, `depth.avi` by an ffmpeg per frame.
+                // Seeking: `depth.dat` directly, `depth.avi` by an ffmpeg per frame or, short, in one pass.
                 let source = Self::moseq(c)?;
-                (0..picks)
-                    .map(|k| source.frame_at(k * count / picks).map_err(RecordingError::Moseq))
-                    .collect()
+                let indices: Vec<usize> = (0..picks).map(|k| k * count / picks).collect();
+                source.frames_at(&indices).map_err(RecordingError::Moseq)
             }
         }
     }

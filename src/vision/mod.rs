@@ -7,6 +7,7 @@ pub mod behaviour;
 pub mod calibrate;
 pub mod forest;
 pub mod fusion;
+pub mod movement;
 pub mod orientation;
 pub mod paws;
 pub mod segment;

@@ -26,7 +26,7 @@ pub struct MoseqArgs {
     #[arg(long)]
     pub force: bool,
     /// Print what was written as one JSON object (`out`, `depth_frames`, `color_frames`,
-    /// `skipped_frames`).
+    /// `skipped_frames`, `millimetres`).
     #[arg(long)]
     pub json: bool,
 }
@@ -40,6 +40,16 @@ pub fn command(args: &MoseqArgs) -> crate::app::Outcome {
         session_name: args.session_name.clone(),
         force: args.force,
     })?;
+    match e.millimetres.as_ref() {
+        Some(mm) => {
+            if let Some(w) = mm.warning() {
+                eprintln!("warning: {w}");
+            }
+        }
+        None => eprintln!(
+            "warning: the depth camera's intrinsics are unknown (no rig calibration, a camera the table does not know): moseq2-extract's millimetre scalars assume a Kinect v2's field of view and may be off"
+        ),
+    }
     if args.json {
         return Ok(crate::app::output::print_json(&e)?);
     }

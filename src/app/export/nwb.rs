@@ -62,6 +62,15 @@ pub struct NwbArgs {
     /// The institution the lab belongs to.
     #[arg(long, value_name = "NAME")]
     pub institution: Option<String>,
+    /// The video the poses were estimated from (e.g. `export moseq`'s depth.avi), linked from
+    /// the PoseEstimation by its path relative to the NWB file; its frames' times come from the
+    /// MoSeq time file beside it (depth_ts.txt), else are the video's own, its first frame at
+    /// the run's first pose.
+    #[arg(long, value_name = "VIDEO")]
+    pub source_video: Option<PathBuf>,
+    /// The video with the poses drawn (`export video` of the run), linked as the source video.
+    #[arg(long, value_name = "VIDEO")]
+    pub labeled_video: Option<PathBuf>,
     /// The Python with pynwb and ndx-pose (default: $MOUSEPOSE_PYTHON, else /opt/mousepose/venv).
     #[arg(long, value_name = "PROGRAM")]
     pub python: Option<PathBuf>,
@@ -241,6 +250,8 @@ pub fn command(args: &NwbArgs) -> crate::app::Outcome {
         experimenter: args.experimenter.clone(),
         lab: args.lab.clone(),
         institution: args.institution.clone(),
+        source_video: args.source_video.clone(),
+        labeled_video: args.labeled_video.clone(),
         python: args.python.clone(),
         force: args.force,
     })?;

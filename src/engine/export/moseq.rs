@@ -83,6 +83,65 @@ struct Provenance {
     color_pixel_format: Option<&'static str>,
     depth_frames: u64,
     color_frames: u64,
+    /// The depth camera's intrinsics and how moseq2-extract's millimetres differ from them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    millimetres: Option<MoseqMillimetres>,
+}
+
+/// moseq2-extract turns pixels into millimetres as if every depth camera were a Kinect v2 at
+/// 512 x 424 (`convert_pxs_to_mm` with its defaults: a focal length of
+/// `512 / (2 · 35.3°)` by `424 / (2 · 30°)` pixels, angles in radians, and the principal point
+/// at (256, 212)); its `*_mm` scalars of another camera are off by the ratio of the two focal
+/// lengths, and nothing in its config or `metadata.json` changes that.
+pub const MOSEQ_FOCAL_PX: (f64, f64) = (
+    512.0 / (2.0 * 35.3 * std::f64::consts::PI / 180.0),
+    424.0 / (2.0 * std::f64::consts::FRAC_PI_6),
+);
+
+/// What a MoSeq export knows of the depth camera's millimetres.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MoseqMillimetres {
+    /// Where the intrinsics come from: `rig calibration` or a camera of the table, nominal.
+    pub intrinsics_from: String,
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    /// Multiply moseq2-extract's millimetres along the image's x (y) by this to get true
+    /// millimetres: its focal length over the camera's.
+    pub scale_x: f64,
+    pub scale_y: f64,
+}
+
+impl MoseqMillimetres {
+    pub fn new(intrinsics: &crate::core::geometry::Intrinsics, from: String) -> Self {
+        Self {
+            intrinsics_from: from,
+            fx: intrinsics.fx,
+            fy: intrinsics.fy,
+            cx: intrinsics.cx,
+            cy: intrinsics.cy,
+            scale_x: MOSEQ_FOCAL_PX.0 / intrinsics.fx,
+            scale_y: MOSEQ_FOCAL_PX.1 / intrinsics.fy,
+        }
+    }
+
+    /// The warning to print when moseq2-extract's millimetres are more than 2 % off.
+    pub fn warning(&self) -> Option<String> {
+        let off = |s: f64| (s - 1.0).abs() > 0.02;
+        (off(self.scale_x) || off(self.scale_y)).then(|| {
+            format!(
+                "moseq2-extract's millimetre scalars (centroid_*_mm, velocity_*_mm, length_mm, width_mm, area_mm) assume a Kinect v2's field of view: for this camera (fx {:.1}, fy {:.1} px, {}) they come out {:.2} x (along x) and {:.2} x (along y) the true values; multiply them by {:.4} and {:.4} (both are in {PROVENANCE_FILE}), or use the *_px scalars with these intrinsics",
+                self.fx,
+                self.fy,
+                self.intrinsics_from,
+                1.0 / self.scale_x,
+                1.0 / self.scale_y,
+                self.scale_x,
+                self.scale_y
+            )
+        })
+    }
 }
 
 /// What an export wrote.
@@ -93,6 +152,9 @@ pub struct MoseqExport {
     pub color_frames: u64,
     /// Frames of the session that could not be read (damaged records), left out.
     pub skipped_frames: u64,
+    /// How moseq2-extract's millimetres differ from this camera's (`None` when the depth
+    /// camera's intrinsics are unknown).
+    pub millimetres: Option<MoseqMillimetres>,
 }
 
 /// A stamp in milliseconds, exact to the nanosecond.
@@ -249,6 +311,18 @@ pub fn export_moseq(
         nidaq_channels: 0,
         nidaq_sampling_rate: 0.0,
     };
+    // The depth camera's intrinsics: the session's calibration, else the camera table's.
+    let millimetres = match &meta.rig {
+        Some(rig) => Some(MoseqMillimetres::new(
+            &rig.depth.intrinsics,
+            "rig calibration".to_owned(),
+        )),
+        None => {
+            crate::core::cameras::depth_camera(Some(depth_meta.model.as_str()), depth_meta.width, depth_meta.height)
+                .ok()
+                .map(|m| MoseqMillimetres::new(&m.intrinsics(), format!("{}, nominal", m.label())))
+        }
+    };
     let provenance = Provenance {
         software_version: env!("CARGO_PKG_VERSION"),
         session: std::fs::canonicalize(session).unwrap_or_else(|_| session.to_owned()),
@@ -257,6 +331,7 @@ pub fn export_moseq(
         color_pixel_format,
         depth_frames,
         color_frames,
+        millimetres: millimetres.clone(),
     };
     crate::engine::write_report_file(&dir, METADATA, &serde_json::to_vec_pretty(&metadata)?)?;
     crate::engine::write_report_file(&dir, PROVENANCE_FILE, &serde_json::to_vec_pretty(&provenance)?)?;
@@ -271,6 +346,7 @@ pub fn export_moseq(
         depth_frames,
         color_frames,
         skipped_frames: skipped,
+        millimetres,
     })
 }
 

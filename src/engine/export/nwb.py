@@ -3,21 +3,88 @@
 Usage: python nwb.py POSES_CSV META_JSON OUT_NWB
 
 META_JSON (written by mousepose) holds the session and subject metadata, the joint names in
-order, the skeleton's edges (pairs of joint indices), the cameras, the software version and
-the models. Positions are stored in millimetres with conversion 0.001 to metres; a joint
-without an estimate is NaN; confidence is the joint's score.
+order, the skeleton's edges (pairs of joint indices), the cameras (with their calibration
+when the run has one), the videos to link, the software version and the models. Positions
+are stored in millimetres with conversion 0.001 to metres; a joint without an estimate is
+NaN; confidence is the joint's score. Each frame's status, orientation confidence and the
+source of each joint go to the `PoseFrames` table beside the PoseEstimation.
 """
 
 import csv
 import json
 import math
+import os
+import subprocess
 import sys
 from datetime import datetime
 
 import numpy as np
-from ndx_pose import PoseEstimation, PoseEstimationSeries, Skeleton, Skeletons
+from hdmf.common import DynamicTable, VectorData
+from ndx_pose import CalibratedCamera, PoseEstimation, PoseEstimationSeries, Skeleton, Skeletons
 from pynwb import NWBHDF5IO, NWBFile
 from pynwb.file import Subject
+from pynwb.image import ImageSeries
+
+
+def video_frames(path):
+    """The video's frame times (s, from its first frame) and its width and height, by ffprobe."""
+    out = subprocess.run(
+        ["ffprobe", "-v", "error", "-select_streams", "v:0", "-show_entries",
+         "packet=pts_time:stream=width,height", "-of", "json", path],
+        check=True, capture_output=True, text=True,
+    )
+    probe = json.loads(out.stdout)
+    stream = probe["streams"][0]
+    times = sorted(float(p["pts_time"]) for p in probe.get("packets", []) if p.get("pts_time") not in (None, "N/A"))
+    if not times:
+        raise SystemExit(f"{path}: ffprobe finds no video frames in it")
+    return np.array(times, dtype=np.float64) - times[0], [int(stream["width"]), int(stream["height"])]
+
+
+def moseq_times(path, frames, t0_ns):
+    """The device times of a MoSeq layout's video (`depth.avi` -> `depth_ts.txt`, first column,
+    ms), in seconds from `t0_ns`, when that file is there with a line per frame; else None."""
+    stem, _ = os.path.splitext(path)
+    ts = f"{stem}_ts.txt"
+    if not os.path.isfile(ts):
+        return None
+    with open(ts, encoding="utf-8") as f:
+        lines = [line.split() for line in f if line.strip()]
+    if len(lines) != frames:
+        return None
+    # Milliseconds with six decimals: whole nanoseconds, kept exact.
+    def ns(text):
+        whole, _, frac = text.partition(".")
+        return int(whole) * 1_000_000 + int((frac + "000000")[:6])
+    return np.array([(ns(cols[0]) - t0_ns) / 1e9 for cols in lines], dtype=np.float64)
+
+
+def linked_video(nwb, name, video, out, t0_ns, description):
+    """An ImageSeries in /acquisition pointing at `video` by its path relative to the NWB file.
+    Its frame times: a MoSeq layout's time file beside it, else the video's own from its
+    first frame, that frame at `start_s`; a constant rate is stored as a rate."""
+    times, size = video_frames(video["path"])
+    exact = moseq_times(video["path"], len(times), t0_ns)
+    times = exact if exact is not None else times + video["start_s"]
+    rel = os.path.relpath(os.path.abspath(video["path"]), os.path.dirname(os.path.abspath(out)))
+    steps = np.unique(np.round(np.diff(times), decimals=9))
+    timing = (
+        dict(starting_time=float(times[0]), rate=float(1.0 / steps[0]))
+        if len(times) > 2 and steps.size == 1 and steps[0] > 0
+        else dict(timestamps=times)
+    )
+    series = ImageSeries(
+        name=name,
+        description=description,
+        unit="n/a",
+        format="external",
+        external_file=[rel],
+        starting_frame=[0],
+        dimension=size,
+        **timing,
+    )
+    nwb.add_acquisition(series)
+    return series
 
 
 def main(poses_csv, meta_json, out):
@@ -61,7 +128,8 @@ def main(poses_csv, meta_json, out):
         description=s.get("description") or None,
     )
     # Each camera a Device with its serial number, linked to a DeviceModel (its model and
-    # maker), as NWB 2.9 has them (a Device's own `manufacturer` is deprecated).
+    # maker), as NWB 2.9 has them (a Device's own `manufacturer` is deprecated); a camera the
+    # run's rig calibration covers is an ndx-pose CalibratedCamera holding it.
     models = {}
     for d in meta["devices"]:
         if d["model"] not in models:
@@ -70,15 +138,27 @@ def main(poses_csv, meta_json, out):
                 manufacturer=d["manufacturer"],
                 description=f"camera model {d['model']}",
             )
-    devices = [
-        nwb.create_device(
+    devices = []
+    for d in meta["devices"]:
+        common = dict(
             name=d["name"],
             description=d["description"],
             serial_number=d.get("serial_number") or None,
             model=models[d["model"]],
         )
-        for d in meta["devices"]
-    ]
+        c = d.get("calibration")
+        if c is None:
+            devices.append(nwb.create_device(**common))
+            continue
+        camera = CalibratedCamera(
+            **common,
+            intrinsic_matrix=np.array(c["intrinsic_matrix"], dtype=np.float64),
+            rotation_matrix=np.array(c["rotation_matrix"], dtype=np.float64),
+            translation_vector=np.array(c["translation_vector"], dtype=np.float64),
+            distortion_coefficients=np.array(c["distortion_coefficients"], dtype=np.float64),
+        )
+        nwb.add_device(camera)
+        devices.append(camera)
     skeleton = Skeleton(
         name="mouse",
         nodes=joints,
@@ -104,8 +184,22 @@ def main(poses_csv, meta_json, out):
                 confidence_definition="the joint's score in [0, 1] (0 where the joint has no estimate)",
             )
         )
+    videos = meta.get("videos") or {}
+    source_video = labeled_video = None
+    if videos.get("source"):
+        source_video = linked_video(
+            nwb, "source_video", videos["source"], out, t0,
+            "the video the poses were estimated from (external file, path relative to this file)",
+        )
+    if videos.get("labeled"):
+        labeled_video = linked_video(
+            nwb, "labeled_video", videos["labeled"], out, t0,
+            "the poses drawn over the frames (mousepose export video; external file, path relative to this file)",
+        )
     estimation = PoseEstimation(
         name="PoseEstimation",
+        source_video=source_video,
+        labeled_video=labeled_video,
         pose_estimation_series=series,
         description=meta["description"],
         scorer=meta["scorer"],
@@ -119,6 +213,32 @@ def main(poses_csv, meta_json, out):
     behavior = nwb.create_processing_module(name="behavior", description="3D pose of the mouse from mousepose")
     behavior.add(Skeletons(skeletons=[skeleton]))
     behavior.add(estimation)
+    # What poses.csv says of each frame beyond the positions: one row per frame, in the
+    # series' order.
+    def seq(text):
+        return int(text) if text != "" else -1
+
+    frames = DynamicTable(
+        name="PoseFrames",
+        description="per frame of the PoseEstimation series (same rows, same order): how each pose was made",
+        columns=[
+            VectorData(name="timestamp", description="seconds, as the PoseEstimationSeries' timestamps", data=timestamps),
+            VectorData(name="depth_seq", description="the depth camera's frame counter", data=np.array([seq(r["depth_seq"]) for r in rows], dtype=np.int64)),
+            VectorData(name="color_seq", description="the colour camera's frame counter of the pair, -1 for a depth-only frame", data=np.array([seq(r["color_seq"]) for r in rows], dtype=np.int64)),
+            VectorData(name="status", description="ok (joints estimated) or no_mouse", data=[r["status"] for r in rows]),
+            VectorData(
+                name="orientation_confidence",
+                description="how sure the orientation tracker is of which end of the mouse is the head, 0.5 (a guess) to 1; NaN without a mouse",
+                data=np.array([number(r.get("orientation_confidence") or "") for r in rows], dtype=np.float64),
+            ),
+            VectorData(
+                name="joint_source",
+                description="per joint in the skeleton's node order, where its position comes from: depth (the top depth image), paw (a detection in the bottom colour image), ik (inverse kinematics), default (the model's rest pose) or missing",
+                data=[[r[f"{name}_source"] for name in joints] for r in rows],
+            ),
+        ],
+    )
+    behavior.add(frames)
     with NWBHDF5IO(out, mode="w") as io:
         io.write(nwb)
 

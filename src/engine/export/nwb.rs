@@ -14,6 +14,7 @@ use crate::engine::Failure;
 use crate::engine::export::{Run, check_file_out};
 use crate::io::session::{CameraMeta, SessionReader};
 use crate::runtime::sink::poses::POSES_FILE;
+use crate::vision::calibrate::{CameraCalibration, RigCalibration};
 use anyhow::Context as _;
 use serde::Serialize;
 use std::path::PathBuf;
@@ -47,6 +48,10 @@ pub struct NwbOptions {
     pub experimenter: Vec<String>,
     pub lab: Option<String>,
     pub institution: Option<String>,
+    /// The video the poses were estimated from, linked from the PoseEstimation.
+    pub source_video: Option<PathBuf>,
+    /// The video with the poses drawn, linked as the labelled video.
+    pub labeled_video: Option<PathBuf>,
     /// The Python with pynwb and ndx-pose (default: $MOUSEPOSE_PYTHON, else [`DEFAULT_PYTHON`]).
     pub python: Option<PathBuf>,
     /// Replace the file if it exists.
@@ -76,6 +81,46 @@ struct Device {
     model: String,
     manufacturer: String,
     firmware: String,
+    /// The camera's calibration, when the run has one.
+    calibration: Option<Calibration>,
+}
+
+/// One camera's calibration as ndx-pose's `CalibratedCamera` holds it: OpenCV's convention,
+/// `p_camera = R · p_world + t` (world millimetres), pixels with centres at integers.
+#[derive(Debug, Serialize)]
+struct Calibration {
+    intrinsic_matrix: [[f64; 3]; 3],
+    rotation_matrix: [[f64; 3]; 3],
+    translation_vector: [f64; 3],
+    distortion_coefficients: [f64; 5],
+}
+
+impl Calibration {
+    fn of(c: &CameraCalibration) -> Self {
+        let i = &c.intrinsics;
+        let camera_from_world = c.world_from_camera.inverse();
+        let r = camera_from_world.rotation.to_rotation_matrix();
+        let t = camera_from_world.translation.vector;
+        Self {
+            intrinsic_matrix: [[i.fx, 0.0, i.cx], [0.0, i.fy, i.cy], [0.0, 0.0, 1.0]],
+            rotation_matrix: std::array::from_fn(|row| std::array::from_fn(|col| r[(row, col)])),
+            translation_vector: [t.x, t.y, t.z],
+            distortion_coefficients: i.distortion,
+        }
+    }
+}
+
+/// A video to link: its path and where its first frame falls on the poses' time axis, s.
+#[derive(Debug, Serialize)]
+struct Video {
+    path: PathBuf,
+    start_s: f64,
+}
+
+#[derive(Debug, Default, Serialize)]
+struct Videos {
+    source: Option<Video>,
+    labeled: Option<Video>,
 }
 
 #[derive(Debug, Serialize)]
@@ -109,9 +154,10 @@ struct Meta<'a> {
     description: String,
     scorer: String,
     software_version: &'static str,
+    videos: Videos,
 }
 
-fn device(c: &CameraMeta) -> Device {
+fn device(c: &CameraMeta, rig: Option<&RigCalibration>) -> Device {
     let known = |v: &str| Some(v.trim().to_owned()).filter(|v| !v.is_empty() && v != "unknown");
     Device {
         name: format!("{}_camera", c.role.name()),
@@ -128,7 +174,19 @@ fn device(c: &CameraMeta) -> Device {
         model: known(&c.model).unwrap_or_else(|| format!("unknown {} camera", c.role.name())),
         manufacturer: c.model.split_whitespace().next().unwrap_or("unknown").to_owned(),
         firmware: c.firmware.clone(),
+        calibration: rig.map(|r| Calibration::of(r.camera(c.role))),
     }
+}
+
+/// The rig calibration the run's poses were made with: the file its replay was given, else
+/// the session's own; `None` for a recording without one (its world is the fitted floor's).
+fn run_calibration(run: &Run, session: Option<&crate::core::geometry::Rig>) -> Result<Option<RigCalibration>, Failure> {
+    if let Some(path) = &run.calibration {
+        return RigCalibration::load(path).map(Some).map_err(|e| {
+            Failure::usage(anyhow::Error::from(e).context(format!("reading the run's calibration {path:?}")))
+        });
+    }
+    Ok(session.map(RigCalibration::from_rig))
 }
 
 /// `mousepose export nwb`: writes `options.out` through the helper.
@@ -179,6 +237,21 @@ pub fn nwb(options: &NwbOptions) -> Result<NwbSummary, Failure> {
             .unwrap_or("unknown")
             .to_owned()
     };
+    let calibration = run_calibration(&run, session_meta.rig.as_ref())?;
+    let video = |path: &Option<PathBuf>, what: &str| -> Result<Option<Video>, Failure> {
+        match path {
+            Some(p) if !p.is_file() => Err(Failure::usage(anyhow::anyhow!("the {what} {p:?} is not a file"))),
+            Some(p) => Ok(Some(Video {
+                path: std::path::absolute(p).with_context(|| format!("finding {p:?}"))?,
+                start_s: 0.0,
+            })),
+            None => Ok(None),
+        }
+    };
+    let videos = Videos {
+        source: video(&options.source_video, "--source-video")?,
+        labeled: video(&options.labeled_video, "--labeled-video")?,
+    };
     let session_name = run
         .session
         .file_name()
@@ -208,7 +281,11 @@ pub fn nwb(options: &NwbOptions) -> Result<NwbSummary, Failure> {
             weight: options.weight.as_deref(),
             description: options.subject_description.as_deref(),
         },
-        devices: session_meta.cameras.iter().map(device).collect(),
+        devices: session_meta
+            .cameras
+            .iter()
+            .map(|c| device(c, calibration.as_ref()))
+            .collect(),
         joints: Joint::ALL.iter().map(|j| j.name()).collect(),
         edges: BONES.iter().map(|(a, b, _)| [a.index(), b.index()]).collect(),
         description: "24 joints of the mouse in 3D: 1-12 from the top depth image (regression forest), \
@@ -216,6 +293,7 @@ pub fn nwb(options: &NwbOptions) -> Result<NwbSummary, Failure> {
             .to_owned(),
         scorer: format!("body model {}; paw model {}", model("body_model"), model("paw_model")),
         software_version: env!("CARGO_PKG_VERSION"),
+        videos,
     };
     let python = options
         .python
