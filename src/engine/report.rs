@@ -25,6 +25,7 @@ use crate::core::skeleton::Joint;
 use crate::engine::chart::{Series, bar_chart, path_chart, raster_chart, series_chart};
 use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
+use crate::io::table::{Fixed, table};
 use crate::runtime::sink::poses::{POSES_FILE, read_poses};
 use crate::runtime::stages::{PoseRecord, PoseStatus};
 use crate::vision::behaviour::{Arena, Behaviour, BehaviourConfig, FrameInput, PAW_NAMES, analyse_in};
@@ -117,78 +118,102 @@ pub fn frame_input(t0_ns: u64, r: &PoseRecord) -> FrameInput {
     }
 }
 
-fn opt(v: Option<f64>, decimals: usize) -> String {
-    v.map(|v| format!("{v:.decimals$}")).unwrap_or_default()
-}
-
 fn nan(v: Option<f64>) -> f64 {
     v.unwrap_or(f64::NAN)
 }
 
-fn frames_csv(b: &Behaviour, a: &Activity, inputs: &[FrameInput]) -> String {
-    let mut s = String::from("t_s,x_mm,y_mm,speed_mm_s,distance_mm,zone,head_z_mm,rearing,walking");
-    for p in PAW_NAMES {
-        let _ = write!(s, ",{p}_stance");
-    }
-    s.push_str(",heading_deg,angular_speed_deg_s,immobile\n");
-    for (k, (f, i)) in b.frames.iter().zip(inputs).enumerate() {
-        let _ = write!(
-            s,
-            "{:.4},{},{},{},{:.1},{},{},{},{}",
-            f.t_s,
-            opt(i.centre.map(|c| c.x), 2),
-            opt(i.centre.map(|c| c.y), 2),
-            opt(f.speed_mm_s, 1),
-            f.distance_mm,
-            f.zone.name(),
-            opt(i.head_z_mm, 2),
-            u8::from(f.rearing),
-            u8::from(f.walking)
-        );
-        for st in f.stance {
-            let _ = write!(s, ",{}", u8::from(st));
-        }
-        let _ = writeln!(
-            s,
-            ",{},{},{}",
-            opt(a.heading_deg[k], 1),
-            opt(a.angular_speed_deg_s[k], 1),
-            u8::from(a.immobile[k])
-        );
-    }
-    s
+/// `frames.csv`: per frame its time, centre, speed, distance, zone, head height, bouts, stance
+/// of each paw, heading, angular speed and immobility.
+fn frames_csv(b: &Behaviour, a: &Activity, inputs: &[FrameInput]) -> Result<Vec<u8>, csv::Error> {
+    let stance: Vec<String> = PAW_NAMES.iter().map(|p| format!("{p}_stance")).collect();
+    let columns: Vec<&str> = [
+        "t_s",
+        "x_mm",
+        "y_mm",
+        "speed_mm_s",
+        "distance_mm",
+        "zone",
+        "head_z_mm",
+        "rearing",
+        "walking",
+    ]
+    .into_iter()
+    .chain(stance.iter().map(String::as_str))
+    .chain(["heading_deg", "angular_speed_deg_s", "immobile"])
+    .collect();
+    let rows: Vec<_> = b
+        .frames
+        .iter()
+        .zip(inputs)
+        .enumerate()
+        .map(|(k, (f, i))| {
+            (
+                (
+                    Fixed::<4>(f.t_s),
+                    i.centre.map(|c| Fixed::<2>(c.x)),
+                    i.centre.map(|c| Fixed::<2>(c.y)),
+                    f.speed_mm_s.map(Fixed::<1>),
+                    Fixed::<1>(f.distance_mm),
+                    f.zone.name(),
+                    i.head_z_mm.map(Fixed::<2>),
+                    u8::from(f.rearing),
+                    u8::from(f.walking),
+                ),
+                f.stance.map(u8::from),
+                (
+                    a.heading_deg[k].map(Fixed::<1>),
+                    a.angular_speed_deg_s[k].map(Fixed::<1>),
+                    u8::from(a.immobile[k]),
+                ),
+            )
+        })
+        .collect();
+    table(&columns, &rows)
 }
 
-fn strides_csv(b: &Behaviour) -> String {
-    let mut s = String::from("paw,start_s,period_s,length_mm,cadence_hz,duty_factor\n");
-    for st in &b.strides {
-        let _ = writeln!(
-            s,
-            "{},{:.4},{:.4},{:.2},{:.3},{:.3}",
-            PAW_NAMES[st.paw],
-            st.start_s,
-            st.period_s,
-            st.length_mm,
-            1.0 / st.period_s,
-            st.duty_factor
-        );
-    }
-    s
+/// `strides.csv`: per stride its paw, start, period, length, cadence and duty factor.
+fn strides_csv(b: &Behaviour) -> Result<Vec<u8>, csv::Error> {
+    let rows: Vec<_> = b
+        .strides
+        .iter()
+        .map(|st| {
+            (
+                PAW_NAMES[st.paw],
+                Fixed::<4>(st.start_s),
+                Fixed::<4>(st.period_s),
+                Fixed::<2>(st.length_mm),
+                Fixed::<3>(1.0 / st.period_s),
+                Fixed::<3>(st.duty_factor),
+            )
+        })
+        .collect();
+    table(
+        &["paw", "start_s", "period_s", "length_mm", "cadence_hz", "duty_factor"],
+        &rows,
+    )
 }
 
-fn bouts_csv(b: &Behaviour, a: &Activity) -> String {
-    let mut s = String::from("kind,start_s,end_s,duration_s\n");
-    for (kind, bouts) in [
+/// `bouts.csv`: the walking, rearing, immobility and freezing bouts.
+fn bouts_csv(b: &Behaviour, a: &Activity) -> Result<Vec<u8>, csv::Error> {
+    let rows: Vec<_> = [
         ("walking", &b.walking),
         ("rearing", &b.rearing),
         ("immobility", &a.immobility),
         ("freezing", &a.freezing),
-    ] {
-        for x in bouts {
-            let _ = writeln!(s, "{kind},{:.4},{:.4},{:.4}", x.start_s, x.end_s, x.duration_s());
-        }
-    }
-    s
+    ]
+    .into_iter()
+    .flat_map(|(kind, bouts)| {
+        bouts.iter().map(move |x| {
+            (
+                kind,
+                Fixed::<4>(x.start_s),
+                Fixed::<4>(x.end_s),
+                Fixed::<4>(x.duration_s()),
+            )
+        })
+    })
+    .collect();
+    table(&["kind", "start_s", "end_s", "duration_s"], &rows)
 }
 
 /// A measure and its unit for the page, or "none" (no unit) when there is none.
@@ -506,9 +531,9 @@ pub fn report_with(run: &Path, out: &Path, force: bool, options: &ReportOptions)
     if gait_unavailable.is_none() {
         write_png("gait.png", bar_chart("GAIT PER PAW (WALKING)", "", &paws, &series))?;
     }
-    crate::engine::write_report_file(dir, "frames.csv", frames_csv(&b, &act, &inputs).as_bytes())?;
-    crate::engine::write_report_file(dir, "strides.csv", strides_csv(&b).as_bytes())?;
-    crate::engine::write_report_file(dir, "bouts.csv", bouts_csv(&b, &act).as_bytes())?;
+    crate::engine::write_report_file(dir, "frames.csv", &frames_csv(&b, &act, &inputs)?)?;
+    crate::engine::write_report_file(dir, "strides.csv", &strides_csv(&b)?)?;
+    crate::engine::write_report_file(dir, "bouts.csv", &bouts_csv(&b, &act)?)?;
     let reported = Reported {
         behaviour: b,
         activity: act,
