@@ -90,7 +90,7 @@ pub struct SessionArgs {
     mice: crate::synth::Mice,
     /// What the mouse does: anything (mixed), stays in place (still: standing, sniffing,
     /// grooming, rearing, bending), or walks (walking).
-    #[arg(long, value_enum, default_value = "mixed")]
+    #[arg(long, value_name = "mixed|still|walking", default_value = "mixed", value_parser = parse_activity)]
     activity: crate::synth::animate::Activity,
     /// visible: the tail rendered; hidden: not rendered, as a depth camera that does not see a
     /// 3-5 mm tail shows it (the truth keeps its joints).
@@ -173,5 +173,16 @@ fn parse_tail(s: &str) -> Result<bool, String> {
         "visible" => Ok(false),
         "hidden" => Ok(true),
         _ => Err(format!("{s:?} is not a tail: visible or hidden")),
+    }
+}
+
+/// `--activity mixed|still|walking`.
+fn parse_activity(s: &str) -> Result<crate::synth::animate::Activity, String> {
+    use crate::synth::animate::Activity;
+    match s {
+        "mixed" => Ok(Activity::Mixed),
+        "still" => Ok(Activity::Still),
+        "walking" => Ok(Activity::Walking),
+        _ => Err(format!("{s:?} is not an activity: mixed, still or walking")),
     }
 }

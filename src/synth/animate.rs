@@ -11,7 +11,7 @@ use std::f64::consts::{PI, TAU};
 /// What the animated mouse does: anything (`Mixed`, the default), stay in place (`Still`:
 /// standing, sniffing, grooming, rearing and bending where it is), or walk (`Walking`: walking
 /// and the turns the walls ask for).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Activity {
     #[default]
     Mixed,

@@ -259,7 +259,7 @@ pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
             shape: Shape::Capsule {
                 a: m.tail[k],
                 b: m.tail[k + 1],
-                radius: (1.8 - 1.2 * t) * s,
+                radius: (2.4 - 1.6 * t) * s,
             },
             labeller: Labeller::Fixed(Part::Tail),
             material: Material::Skin,
