@@ -1,4 +1,4 @@
-//! `mousepose eval body|parts|paws`: a model's figures on a held-back dataset, with reports.
+//! `mousepose eval body|parts|paws|orientation`: a model's figures on a held-back dataset, with reports.
 
 use crate::app::chart::{bar_chart, confusion_chart, line_chart};
 use crate::app::train::ModelTarget;
@@ -36,6 +36,9 @@ pub struct EvalArgs {
 
 /// `mousepose eval body|parts|paws`.
 pub fn run(args: &EvalArgs) -> crate::app::Outcome {
+    if args.target == ModelTarget::Orientation {
+        return eval_orientation(args);
+    }
     Ok(eval(args)?)
 }
 
@@ -44,6 +47,8 @@ fn eval(args: &EvalArgs) -> Result<()> {
         ModelTarget::Body => ModelKind::Body,
         ModelTarget::Parts => ModelKind::Parts,
         ModelTarget::Paws => return eval_paws(args),
+        // `run` sends it to `eval_orientation` before this.
+        ModelTarget::Orientation => bail!("an orientation model is evaluated by eval_orientation"),
     };
     let model = model::load(&args.model, Some(kind))?;
     let (ds, samples) = training::load(&args.data).with_context(|| format!("reading test dataset {:?}", args.data))?;
@@ -291,4 +296,70 @@ fn eval_paws(args: &EvalArgs) -> Result<()> {
         report.true_positives, report.false_positives, report.neutral
     );
     print(&t)
+}
+
+/// What `eval orientation` prints: the share of views whose head end the model gets right,
+/// over all and by the tail hidden or shown and the resolution.
+#[derive(serde::Serialize)]
+struct OrientationFigures {
+    views: usize,
+    accuracy: f64,
+    tail_hidden: f64,
+    tail_shown: f64,
+    full_resolution: f64,
+    half_resolution: f64,
+}
+
+fn eval_orientation(args: &EvalArgs) -> crate::app::Outcome {
+    use crate::app::Failure;
+    use crate::vision::body_shape::ShapeModel;
+    if args.report.is_some() || args.baseline.is_some() {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "eval orientation takes no --report or --baseline; it prints its figures (--json for JSON)"
+        )));
+    }
+    let model = ShapeModel::load(&args.model).map_err(Failure::usage)?;
+    let (ds, samples) = training::load(&args.data).with_context(|| format!("reading test dataset {:?}", args.data))?;
+    if samples.is_empty() {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "test dataset {:?} has no images",
+            args.data
+        )));
+    }
+    if ds.meta.seed == model.provenance.dataset_seed {
+        tracing::warn!(
+            message = "The test dataset has the seed of the training dataset; its figures are not held-back figures.",
+            seed = ds.meta.seed,
+        );
+    }
+    let rig = ds.meta.rig.unwrap_or_else(crate::core::geometry::Rig::default_rig);
+    let views = training::orientation::views(&samples, &rig, 0x7E57)?;
+    let share = |keep: &dyn Fn(&training::orientation::View) -> bool| {
+        let kept: Vec<_> = views
+            .iter()
+            .filter(|v| keep(v))
+            .map(|v| (v.features, v.head_plus))
+            .collect();
+        model.accuracy(&kept)
+    };
+    let figures = OrientationFigures {
+        views: views.len(),
+        accuracy: share(&|_| true),
+        tail_hidden: share(&|v| v.tail_hidden),
+        tail_shown: share(&|v| !v.tail_hidden),
+        full_resolution: share(&|v| !v.coarse),
+        half_resolution: share(&|v| v.coarse),
+    };
+    if args.json {
+        return Ok(print_json(&figures)?);
+    }
+    Ok(print(&format!(
+        "head end right in {:.2} % of {} views (tail hidden {:.2} %, tail shown {:.2} %; full resolution {:.2} %, half {:.2} %)\n",
+        100.0 * figures.accuracy,
+        figures.views,
+        100.0 * figures.tail_hidden,
+        100.0 * figures.tail_shown,
+        100.0 * figures.full_resolution,
+        100.0 * figures.half_resolution,
+    ))?)
 }

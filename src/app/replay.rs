@@ -179,6 +179,9 @@ pub struct ReplaySummary {
     pub body_model: PathBuf,
     /// The paw cascade, when the models directory has one.
     pub paw_model: Option<PathBuf>,
+    /// The orientation model (which end is the head from the body's shape), when the models
+    /// directory has one.
+    pub orientation_model: Option<PathBuf>,
     pub realtime: bool,
     pub world: WorldSummary,
     /// Lines of a MoSeq `depth_ts.txt` repeating the timestamp before them: their frames are
@@ -389,7 +392,8 @@ pub fn replay_with(
     });
     let models = models?;
     let (mut chosen, background) = scene?;
-    let (body_model, paw_model) = (models.body_path(), models.paws_path());
+    let (body_model, paw_model, orientation_model) =
+        (models.body_path(), models.paws_path(), models.orientation_path());
     let depth_size = (background.region().width, background.region().height);
     let floor = background.floor_plane();
     if !chosen.calibrated {
@@ -442,6 +446,7 @@ pub fn replay_with(
         processing: Some(Processing {
             segment: SegmentStage::new(segmenter),
             body: models.body,
+            orientation: models.orientation,
             paws: models.paws,
             rig,
             workers: options.workers,
@@ -513,6 +518,7 @@ pub fn replay_with(
         software_version: env!("CARGO_PKG_VERSION"),
         body_model,
         paw_model,
+        orientation_model,
         realtime: options.realtime,
         world: world.clone(),
         duplicate_timestamps: recording.duplicate_timestamps(),
@@ -644,11 +650,13 @@ pub fn summary_text(summary: &ReplaySummary, out: &Path) -> String {
         let share = |n: u64| 100.0 * n as f64 / o.frames as f64;
         let _ = writeln!(
             text,
-            "head and tail swapped vs truth: {:.1} % of {} frames (each frame alone {:.1} %, the forest alone {:.1} %); heading error otherwise {:.1} deg",
+            "head and tail swapped vs truth: {:.1} % of {} frames (each frame alone {:.1} %, the forest alone {:.1} %, the body shape alone {:.1} % of {}); heading error otherwise {:.1} deg",
             share(o.flipped_tracked),
             o.frames,
             share(o.flipped_frame_alone),
             share(o.flipped_forest),
+            100.0 * o.flipped_shape as f64 / o.shape_frames.max(1) as f64,
+            o.shape_frames,
             o.heading_error_deg
         );
     }

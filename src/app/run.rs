@@ -253,6 +253,7 @@ pub fn run(
         processing: Some(Processing {
             segment: segment.with_floor_slot(Arc::clone(&floor)),
             body: models.body,
+            orientation: models.orientation,
             paws: models.paws,
             rig,
             workers: config.body_workers,

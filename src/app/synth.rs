@@ -151,6 +151,14 @@ pub struct SessionArgs {
     /// for odd seeds.
     #[arg(long, value_name = "KIND", default_value = "standard")]
     mice: crate::synth::Mice,
+    /// What the mouse does: anything (mixed), stays in place (still: standing, sniffing,
+    /// grooming, rearing, bending), or walks (walking).
+    #[arg(long, value_name = "mixed|still|walking", default_value = "mixed", value_parser = parse_activity)]
+    activity: crate::synth::animate::Activity,
+    /// visible: the tail rendered; hidden: not rendered, as a depth camera that does not see a
+    /// 3-5 mm tail shows it (the truth keeps its joints).
+    #[arg(long, value_name = "visible|hidden", default_value = "visible", value_parser = parse_tail, action = clap::ArgAction::Set)]
+    tail: bool,
     /// Replace the output directory if it is not empty.
     #[arg(long)]
     force: bool,
@@ -231,6 +239,8 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         color_format: PixelFormat::BayerRg8,
         color: !args.no_color,
         mice: args.mice,
+        activity: args.activity,
+        tail_hidden: args.tail,
     };
     let bar = progress::bar(0, "rendering");
     let summary = write_session(staging.path(), &spec, |done, total| {
@@ -256,4 +266,24 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         }))?;
     }
     Ok(())
+}
+
+/// `--tail visible|hidden`: whether the tail is hidden.
+fn parse_tail(s: &str) -> Result<bool, String> {
+    match s {
+        "visible" => Ok(false),
+        "hidden" => Ok(true),
+        _ => Err(format!("{s:?} is not a tail: visible or hidden")),
+    }
+}
+
+/// `--activity mixed|still|walking`.
+fn parse_activity(s: &str) -> Result<crate::synth::animate::Activity, String> {
+    use crate::synth::animate::Activity;
+    match s {
+        "mixed" => Ok(Activity::Mixed),
+        "still" => Ok(Activity::Still),
+        "walking" => Ok(Activity::Walking),
+        _ => Err(format!("{s:?} is not an activity: mixed, still or walking")),
+    }
 }

@@ -96,6 +96,8 @@ pub struct Processing {
     /// Segmentation with a known background, or one learnt live.
     pub segment: SegmentStage,
     pub body: BodyEstimator,
+    /// Which end is the head from the body's shape; `None` without an orientation model.
+    pub orientation: Option<crate::vision::body_shape::ShapeModel>,
     pub paws: Option<PawDetector>,
     pub rig: Rig,
     /// Workers of the body and paw stages; 0: one per core.
@@ -344,7 +346,7 @@ impl Topology<'_> {
                 .stage("segment", vec![p.segment], &pair_rx, &seg_tx)
                 .map_err(threads)?;
             drop((pair_rx, seg_tx));
-            let body = BodyStage::new(p.body, p.rig.depth, PIPELINE_VOTE_BUDGET);
+            let body = BodyStage::new(p.body, p.orientation, p.rig.depth, PIPELINE_VOTE_BUDGET);
             runner
                 .stage("body", vec![body; workers], &seg_rx, &body_tx)
                 .map_err(threads)?;

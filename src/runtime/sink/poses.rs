@@ -59,6 +59,10 @@ pub struct OrientationCheck {
     pub flipped_tracked: u64,
     pub flipped_frame_alone: u64,
     pub flipped_forest: u64,
+    /// Of the frames where the body-shape model said anything (`shape_frames`), how many its
+    /// choice alone would have swapped.
+    pub shape_frames: u64,
+    pub flipped_shape: u64,
     /// Mean angle (degrees) between the tracked heading and the truth's, over frames not flipped.
     pub heading_error_deg: f64,
 }
@@ -78,6 +82,10 @@ impl OrientationCheck {
         }
         self.flipped_frame_alone += u64::from(flipped(orientation.frame_alone));
         self.flipped_forest += u64::from(flipped(orientation.forest));
+        if orientation.shape.is_some() {
+            self.shape_frames += 1;
+            self.flipped_shape += u64::from(flipped(orientation.shape));
+        }
     }
 }
 
@@ -412,6 +420,7 @@ fn parse_row(line: &str, orientation: bool) -> Result<PoseRecord, String> {
             confidence,
             frame_alone: None,
             forest: None,
+            shape: None,
         }),
     })
 }
