@@ -578,6 +578,8 @@ fn detect_paws_finds_the_paws_in_single_bottom_views() {
             .iter()
             .map(|d| {
                 let f = |k: &str| d[k].as_f64().unwrap();
+                // Each box has its detector score.
+                assert!(f("score").is_finite(), "{d}");
                 ((f("x0") + f("x1")) / 2.0, (f("y0") + f("y1")) / 2.0)
             })
             .collect();

@@ -43,6 +43,7 @@ fn spec(noise: DepthNoise, seed: u64) -> DatasetSpec {
         seed,
         noise,
         bottom_views: false,
+        bottom_clutter: false,
         mice: mousepose::synth::Mice::Standard,
     }
 }

@@ -292,8 +292,8 @@ fn eval_paws(args: &EvalArgs) -> Result<()> {
     );
     let _ = writeln!(
         t,
-        "{} true, {} false, {} of lifted or hidden paws (neither)",
-        report.true_positives, report.false_positives, report.neutral
+        "{} true, {} false ({} on marks of the view, {} on the body's look-alikes of paws), {} of lifted or hidden paws (neither)",
+        report.true_positives, report.false_positives, report.false_on_marks, report.false_on_body, report.neutral
     );
     print(&t)
 }

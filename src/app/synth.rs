@@ -104,6 +104,11 @@ pub struct DatasetArgs {
     /// Leave out the bottom colour views (smaller and faster, for body and part training).
     #[arg(long)]
     no_bottom: bool,
+    /// Draw into the bottom views what real ones show besides the paws: glare at the glass's
+    /// edge, pale spots and scratches on the glass, a pale patch of belly fur (the paw
+    /// detector's hard negatives; their boxes are stored with the views).
+    #[arg(long, conflicts_with = "no_bottom")]
+    bottom_clutter: bool,
     /// Print what was written as one JSON object (`out`, `images`).
     #[arg(long)]
     json: bool,
@@ -210,6 +215,7 @@ fn synth_dataset(args: &DatasetArgs) -> Outcome {
             gaussian_mm: args.noise.noise_mm,
         },
         bottom_views: !args.no_bottom,
+        bottom_clutter: args.bottom_clutter,
         mice: args.mice,
     };
     let bar = progress::bar(spec.count, "rendering");

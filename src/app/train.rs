@@ -242,6 +242,8 @@ fn paw_params(args: &TrainArgs) -> crate::vision::paws::train::TrainParams {
 
 /// Augmented copies of each paw window besides the plain one.
 const PAW_AUGMENT: usize = 3;
+/// Hard negative windows cut around each of a view's look-alikes of paws.
+const HARD_PER_PLACE: usize = 2;
 
 /// `mousepose train paws`.
 fn train_paws(args: &TrainArgs) -> Result<()> {
@@ -253,6 +255,7 @@ fn train_paws(args: &TrainArgs) -> Result<()> {
             width: WINDOW_PX as usize,
             height: WINDOW_PX as usize,
             augment: PAW_AUGMENT,
+            hard_per_place: HARD_PER_PLACE,
             seed: args.seed,
         },
     )
@@ -261,6 +264,7 @@ fn train_paws(args: &TrainArgs) -> Result<()> {
         message = "Training windows cut.",
         paws = set.paws,
         positives = set.positive_count(),
+        hard_negatives = set.hard_count(),
         backgrounds = set.backgrounds.len(),
     );
     let params = paw_params(args);
@@ -274,6 +278,7 @@ fn train_paws(args: &TrainArgs) -> Result<()> {
             stage = r.stage,
             positives = r.positives,
             negatives = r.negatives,
+            hard_negatives = r.hard_negatives,
             weak = r.weak,
             hit_rate = r.hit_rate,
             false_alarm = r.false_alarm,
@@ -303,6 +308,7 @@ fn train_paws(args: &TrainArgs) -> Result<()> {
             "stages": trained.cascade.stages.len(),
             "weak": weak,
             "features": trained.cascade.features.len(),
+            "hard_negative_windows": set.hard_count(),
             "training_seconds": started.elapsed().as_secs_f64(),
         }))?;
     }
