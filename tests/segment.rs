@@ -30,9 +30,11 @@ fn noises() -> [(&'static str, DepthNoise, f64); 4] {
         ("none", noise(NoiseModel::None, 0.0), 0.95),
         ("structured-light", noise(NoiseModel::StructuredLight, 0.0), 0.95),
         ("tof", noise(NoiseModel::Tof, 0.0), 0.94),
-        // Engine 2's mice are slimmer at the head and neck (docs/MOUSE-SHAPE.md), so a larger
-        // share of their pixels lie on the edge that 2 mm of noise blurs: 0.947 where engine
-        // 1's mice gave at least 0.95, with the segmenter unchanged.
+        // Lowered from 0.95 for engine 2's mice (docs/MOUSE-SHAPE.md), which give 0.947: the
+        // bar is not met. Under 2 mm of Gaussian noise the pixels missed are mostly the tail's
+        // (tail recall 0.66; most missed pixels are 2-4 mm above the floor), while each body
+        // part loses about 1 %. A nine-reading ridge did not help (0.9487, and time of flight
+        // fell to 0.940).
         ("gaussian 2 mm", noise(NoiseModel::None, 2.0), 0.94),
     ]
 }

@@ -231,11 +231,12 @@ fn cluttered_bottom_views_keep_their_marks_and_plain_ones_are_unchanged() {
         let b = render_sample(&rig, &cluttered, &lib, i);
         // The same mouse and paws; only the view's picture and marks differ.
         assert_eq!(a.top, b.top);
+        let bytes = encode_sample(&b);
         let (va, vb) = (a.bottom.expect("bottom"), b.bottom.expect("bottom"));
         assert_eq!(va.paws, vb.paws);
         assert!(va.marks.is_empty());
         marks += vb.marks.len();
-        let back = decode_sample(&encode_sample(&b)).expect("decodes");
+        let back = decode_sample(&bytes).expect("decodes");
         assert_eq!(back.bottom.expect("bottom").marks, vb.marks);
     }
     assert!(marks > 0, "no marks in 8 cluttered views");
