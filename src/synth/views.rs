@@ -477,8 +477,8 @@ impl Blob {
                     continue;
                 }
                 let px = &mut img[(y * w + x) as usize];
-                for ch in 0..3 {
-                    px[ch] = px[ch] * (1.0 - self.cover * k) + self.colour[ch] * k;
+                for (v, c) in px.iter_mut().zip(self.colour) {
+                    *v = *v * (1.0 - self.cover * k) + c * k;
                 }
             }
         }
