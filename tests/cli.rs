@@ -361,6 +361,49 @@ fn an_interrupted_run_leaves_nothing_that_looks_complete() {
     );
 }
 
+/// `train orientation` fits the body-shape model to a dataset's mice (tails hidden and shown)
+/// and `eval orientation` measures it; a damaged model file is refused with one sentence.
+#[test]
+fn train_and_eval_orientation_on_the_fixture_dataset() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let data = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/datasets/small");
+    let model = tmp.path().join("orientation.json");
+    let o = run(&["train", "orientation", "--data", data, "--out", model.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = fs::read_to_string(&model).expect("written");
+    assert!(text.len() < 8_000, "{} bytes", text.len());
+    let o = run(&[
+        "eval",
+        "orientation",
+        "--model",
+        model.to_str().unwrap(),
+        "--data",
+        data,
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    // 24 images, four views each (tail hidden and shown, full and half resolution).
+    assert!(v["views"].as_u64().is_some_and(|n| n > 80), "{v}");
+    assert!(v["tail_hidden"].as_f64().is_some_and(|a| a > 0.9), "{v}");
+    // The bundled model on the same images (engine 2's mice).
+    let bundled = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/models/orientation.json");
+    let o = run(&["eval", "orientation", "--model", bundled, "--data", data, "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert!(v["accuracy"].as_f64().is_some_and(|a| a > 0.95), "{v}");
+    fs::write(&model, "{\"format\": 3}").expect("write");
+    let o = run(&[
+        "eval",
+        "orientation",
+        "--model",
+        model.to_str().unwrap(),
+        "--data",
+        data,
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("is not an orientation model"), "{}", stderr(&o));
+}
+
 #[test]
 fn train_and_eval_body_and_parts_on_the_fixture_dataset() {
     let tmp = tempfile::tempdir().expect("tmp");

@@ -589,6 +589,7 @@ fn eval_bundled(
             gaussian_mm: 0.0,
         },
         bottom_views: false,
+        bottom_clutter: false,
         mice: mousepose::synth::Mice::Standard,
     };
     let library = pose_library();
@@ -681,6 +682,7 @@ fn a_hidden_tail_teaches_no_tail_tip() {
             gaussian_mm: 0.0,
         },
         bottom_views: false,
+        bottom_clutter: false,
         mice: mousepose::synth::Mice::Standard,
     };
     let library = pose_library();
@@ -741,6 +743,7 @@ fn a_tail_not_seen_gets_no_tail_tip_off_the_mouse() {
             gaussian_mm: 0.0,
         },
         bottom_views: false,
+        bottom_clutter: false,
         mice: mousepose::synth::Mice::Standard,
     };
     let library = pose_library();
@@ -836,6 +839,7 @@ fn the_body_forest_loaded_for_run_time_and_its_clones_estimate_bit_for_bit_alike
             gaussian_mm: 1.0,
         },
         bottom_views: false,
+        bottom_clutter: false,
         mice: mousepose::synth::Mice::Mixed,
     };
     let library = pose_library();

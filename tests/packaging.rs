@@ -256,6 +256,7 @@ fn package_holds_the_daemon_and_its_system_files() {
         ("/usr/bin/mousepose", "-rwxr-xr-x"),
         ("/usr/share/mousepose/models/body.forest", "-rw-r--r--"),
         ("/usr/share/mousepose/models/paws.xml", "-rw-r--r--"),
+        ("/usr/share/mousepose/models/orientation.json", "-rw-r--r--"),
         ("/lib/systemd/system/mousepose.service", "-rw-r--r--"),
         ("/usr/lib/sysusers.d/mousepose.conf", "-rw-r--r--"),
         ("/usr/lib/tmpfiles.d/mousepose.conf", "-rw-r--r--"),
@@ -297,6 +298,10 @@ fn package_holds_the_daemon_and_its_system_files() {
         ("etc/mousepose/rig.toml", "docs/rig.example.toml"),
         ("usr/share/mousepose/models/body.forest", "fixtures/models/body.forest"),
         ("usr/share/mousepose/models/paws.xml", "fixtures/models/paws.xml"),
+        (
+            "usr/share/mousepose/models/orientation.json",
+            "fixtures/models/orientation.json",
+        ),
         ("usr/share/doc/mousepose/README.md", "README.md"),
         ("usr/share/mousepose/nwb-env", "scripts/nwb-env"),
     ] {

@@ -145,6 +145,7 @@ fn paw_cascade_agrees_with_opencv() {
         seed: 3,
         noise: mousepose::core::noise::DepthNoise::default(),
         bottom_views: true,
+        bottom_clutter: false,
         mice: mousepose::synth::Mice::Standard,
     };
     let rig = mousepose::core::geometry::Rig::default_rig();
@@ -198,10 +199,13 @@ fn eval_paws_end_to_end_with_the_committed_model() {
             "12",
             "--seed",
             "77",
+            "--bottom-clutter",
         ])
         .output()
         .expect("runs");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let meta = std::fs::read_to_string(data.join("dataset.toml")).expect("dataset.toml");
+    assert!(meta.contains("bottom_clutter = true"), "{meta}");
     let report = tmp.path().join("report");
     let o = mousepose()
         .args([
@@ -222,6 +226,11 @@ fn eval_paws_end_to_end_with_the_committed_model() {
         assert!((0.0..=1000.0).contains(&x), "{key} = {x}");
     }
     assert!(v["contact_paws"].as_u64().unwrap_or(0) > 0);
+    // False detections are told apart by where they lie: on the view's marks, on the body.
+    let fp = v["false_positives"].as_u64().expect("false_positives");
+    let on_marks = v["false_on_marks"].as_u64().expect("false_on_marks");
+    let on_body = v["false_on_body"].as_u64().expect("false_on_body");
+    assert!(on_marks + on_body <= fp, "{v}");
     for f in ["precision_recall.png", "precision_recall.csv", "summary.json"] {
         assert!(report.join(f).is_file(), "{f} missing");
     }

@@ -19,6 +19,7 @@ fn clean_spec(count: u64) -> DatasetSpec {
         seed: 42,
         noise: DepthNoise::default(),
         bottom_views: true,
+        bottom_clutter: false,
         mice: mousepose::synth::Mice::Standard,
     }
 }
@@ -88,6 +89,7 @@ fn rendered_top_view_is_consistent() {
     let lib = pose_library();
     let spec = DatasetSpec {
         bottom_views: false,
+        bottom_clutter: false,
         ..clean_spec(300)
     };
     for index in 0..300 {
@@ -212,6 +214,32 @@ fn samples_round_trip_and_corruption_is_refused() {
     huge[0..4].copy_from_slice(&u32::MAX.to_le_bytes());
     assert!(decode_sample(&huge).is_err());
     assert!(decode_sample(b"PNG\r\n\x1a\n not a sample at all").is_err());
+}
+
+#[test]
+fn cluttered_bottom_views_keep_their_marks_and_plain_ones_are_unchanged() {
+    let rig = Rig::default_rig();
+    let lib = pose_library();
+    let plain = clean_spec(8);
+    let cluttered = DatasetSpec {
+        bottom_clutter: true,
+        ..plain
+    };
+    let mut marks = 0;
+    for i in 0..8 {
+        let a = render_sample(&rig, &plain, &lib, i);
+        let b = render_sample(&rig, &cluttered, &lib, i);
+        // The same mouse and paws; only the view's picture and marks differ.
+        assert_eq!(a.top, b.top);
+        let bytes = encode_sample(&b);
+        let (va, vb) = (a.bottom.expect("bottom"), b.bottom.expect("bottom"));
+        assert_eq!(va.paws, vb.paws);
+        assert!(va.marks.is_empty());
+        marks += vb.marks.len();
+        let back = decode_sample(&bytes).expect("decodes");
+        assert_eq!(back.bottom.expect("bottom").marks, vb.marks);
+    }
+    assert!(marks > 0, "no marks in 8 cluttered views");
 }
 
 #[test]

@@ -88,6 +88,10 @@ pub enum ModelTarget {
     /// The paw detector: a boosted cascade of Haar features on the bottom colour view,
     /// stored as OpenCV cascade XML.
     Paws,
+    /// Which end of the mouse is its head from the shape of its body seen from above: a
+    /// logistic model on the silhouette and height profile along the body, learnt from the
+    /// dataset's mice with their tails hidden and shown (JSON, a few KB).
+    Orientation,
 }
 
 impl From<ModelTarget> for crate::engine::train::ModelTarget {
@@ -96,6 +100,7 @@ impl From<ModelTarget> for crate::engine::train::ModelTarget {
             ModelTarget::Body => Self::Body,
             ModelTarget::Parts => Self::Parts,
             ModelTarget::Paws => Self::Paws,
+            ModelTarget::Orientation => Self::Orientation,
         }
     }
 }

@@ -134,6 +134,11 @@ pub struct DatasetArgs {
     /// Leave out the bottom colour views (smaller and faster, for body and part training).
     #[arg(long)]
     no_bottom: bool,
+    /// Draw into the bottom views what real ones show besides the paws: glare at the glass's
+    /// edge, pale spots and scratches on the glass, a pale patch of belly fur (the paw
+    /// detector's hard negatives; their boxes are stored with the views).
+    #[arg(long, conflicts_with = "no_bottom")]
+    bottom_clutter: bool,
     /// Print what was written as one JSON object (`out`, `images`).
     #[arg(long)]
     json: bool,
@@ -181,6 +186,14 @@ pub struct SessionArgs {
     /// for odd seeds.
     #[arg(long, value_name = "KIND", default_value = "standard")]
     mice: crate::synth::Mice,
+    /// What the mouse does: anything (mixed), stays in place (still: standing, sniffing,
+    /// grooming, rearing, bending), or walks (walking).
+    #[arg(long, value_name = "mixed|still|walking", default_value = "mixed", value_parser = parse_activity)]
+    activity: crate::synth::animate::Activity,
+    /// visible: the tail rendered; hidden: not rendered, as a depth camera that does not see a
+    /// 3-5 mm tail shows it (the truth keeps its joints).
+    #[arg(long, value_name = "visible|hidden", default_value = "visible", value_parser = parse_tail, action = clap::ArgAction::Set)]
+    tail: bool,
     /// Replace the output directory if it is not empty.
     #[arg(long)]
     force: bool,
@@ -243,6 +256,7 @@ fn synth_dataset(args: &DatasetArgs) -> Outcome {
             gaussian_mm: args.noise.noise_mm,
         },
         bottom_views: !args.no_bottom,
+        bottom_clutter: args.bottom_clutter,
         mice: args.mice,
     };
     let summary = engine::synth_dataset(&DatasetOptions {
@@ -269,6 +283,8 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         color_format: PixelFormat::BayerRg8,
         color: !args.no_color,
         mice: args.mice,
+        activity: args.activity,
+        tail_hidden: args.tail,
     };
     let summary = engine::synth_session(&SessionOptions {
         out: args.out.clone(),
@@ -284,4 +300,24 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         }))?;
     }
     Ok(())
+}
+
+/// `--tail visible|hidden`: whether the tail is hidden.
+fn parse_tail(s: &str) -> Result<bool, String> {
+    match s {
+        "visible" => Ok(false),
+        "hidden" => Ok(true),
+        _ => Err(format!("{s:?} is not a tail: visible or hidden")),
+    }
+}
+
+/// `--activity mixed|still|walking`.
+fn parse_activity(s: &str) -> Result<crate::synth::animate::Activity, String> {
+    use crate::synth::animate::Activity;
+    match s {
+        "mixed" => Ok(Activity::Mixed),
+        "still" => Ok(Activity::Still),
+        "walking" => Ok(Activity::Walking),
+        _ => Err(format!("{s:?} is not an activity: mixed, still or walking")),
+    }
 }

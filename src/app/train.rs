@@ -142,6 +142,7 @@ pub fn run(args: &TrainArgs) -> Outcome {
             stages,
             weak,
             features,
+            hard_negative_windows,
             training_seconds,
         } => serde_json::json!({
             "out": out,
@@ -149,6 +150,19 @@ pub fn run(args: &TrainArgs) -> Outcome {
             "stages": stages,
             "weak": weak,
             "features": features,
+            "hard_negative_windows": hard_negative_windows,
+            "training_seconds": training_seconds,
+        }),
+        TrainSummary::Orientation {
+            out,
+            views,
+            training_accuracy,
+            training_seconds,
+        } => serde_json::json!({
+            "out": out,
+            "kind": "orientation",
+            "views": views,
+            "training_accuracy": training_accuracy,
             "training_seconds": training_seconds,
         }),
     };

@@ -192,6 +192,7 @@ pub fn run(quick: bool) -> BenchReport {
             gaussian_mm: 0.0,
         },
         bottom_views: false,
+        bottom_clutter: false,
         mice: crate::synth::Mice::Standard,
     };
     // Warm up caches and the thread pool.
@@ -258,6 +259,7 @@ fn bench_training(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick:
             gaussian_mm: 0.0,
         },
         bottom_views: false,
+        bottom_clutter: false,
         mice: crate::synth::Mice::Standard,
     };
     let samples: Vec<_> = (0..images)
@@ -396,6 +398,7 @@ fn bench_forest(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: b
             gaussian_mm: 0.0,
         },
         bottom_views: false,
+        bottom_clutter: false,
         mice: crate::synth::Mice::Standard,
     };
     let frames: Vec<_> = (0..50)

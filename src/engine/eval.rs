@@ -1,5 +1,5 @@
-//! The engine of `mousepose eval body|parts|paws`: a model's figures on a held-back dataset,
-//! with reports.
+//! The engine of `mousepose eval body|parts|paws|orientation`: a model's figures on a held-back
+//! dataset, with reports.
 
 use crate::engine::chart::{bar_chart, confusion_chart, line_chart};
 use crate::engine::train::ModelTarget;
@@ -34,6 +34,7 @@ pub enum EvalSummary {
     Body(BodyFigures),
     Parts(training::PartsReport),
     Paws(training::paws_eval::PawReport),
+    Orientation(OrientationFigures),
 }
 
 /// `mousepose eval body|parts|paws`: the figures, and the tables and charts in
@@ -42,6 +43,9 @@ pub enum EvalSummary {
 /// # Errors
 /// The model or dataset cannot be read, or the report cannot be written.
 pub fn eval(options: &EvalOptions) -> Result<EvalSummary, Failure> {
+    if options.target == ModelTarget::Orientation {
+        return eval_orientation(options);
+    }
     Ok(run(options)?)
 }
 
@@ -50,6 +54,8 @@ fn run(options: &EvalOptions) -> Result<EvalSummary> {
         ModelTarget::Body => ModelKind::Body,
         ModelTarget::Parts => ModelKind::Parts,
         ModelTarget::Paws => return eval_paws(options),
+        // `eval` sends it to `eval_orientation` before this.
+        ModelTarget::Orientation => bail!("an orientation model is evaluated by eval_orientation"),
     };
     let model = model::load(&options.model, Some(kind))?;
     let (ds, samples) =
@@ -304,8 +310,8 @@ fn paws_text(report: &training::paws_eval::PawReport) -> String {
     );
     let _ = writeln!(
         t,
-        "{} true, {} false, {} of lifted or hidden paws (neither)",
-        report.true_positives, report.false_positives, report.neutral
+        "{} true, {} false ({} on marks of the view, {} on the body's look-alikes of paws), {} of lifted or hidden paws (neither)",
+        report.true_positives, report.false_positives, report.false_on_marks, report.false_on_body, report.neutral
     );
     t
 }
@@ -317,6 +323,70 @@ impl EvalSummary {
             Self::Body(report) => body_text(report),
             Self::Parts(report) => parts_text(report),
             Self::Paws(report) => paws_text(report),
+            Self::Orientation(f) => format!(
+                "head end right in {:.2} % of {} views (tail hidden {:.2} %, tail shown {:.2} %; full resolution {:.2} %, half {:.2} %)\n",
+                100.0 * f.accuracy,
+                f.views,
+                100.0 * f.tail_hidden,
+                100.0 * f.tail_shown,
+                100.0 * f.full_resolution,
+                100.0 * f.half_resolution,
+            ),
         }
     }
+}
+
+/// What `eval orientation` prints: the share of views whose head end the model gets right,
+/// over all and by the tail hidden or shown and the resolution.
+#[derive(Debug, serde::Serialize)]
+pub struct OrientationFigures {
+    views: usize,
+    accuracy: f64,
+    tail_hidden: f64,
+    tail_shown: f64,
+    full_resolution: f64,
+    half_resolution: f64,
+}
+
+fn eval_orientation(options: &EvalOptions) -> Result<EvalSummary, Failure> {
+    use crate::vision::body_shape::ShapeModel;
+    if options.report.is_some() || options.baseline.is_some() {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "eval orientation takes no --report or --baseline; it prints its figures (--json for JSON)"
+        )));
+    }
+    let model = ShapeModel::load(&options.model).map_err(Failure::usage)?;
+    let (ds, samples) =
+        training::load(&options.data).with_context(|| format!("reading test dataset {:?}", options.data))?;
+    if samples.is_empty() {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "test dataset {:?} has no images",
+            options.data
+        )));
+    }
+    if ds.meta.seed == model.provenance.dataset_seed {
+        tracing::warn!(
+            message = "The test dataset has the seed of the training dataset; its figures are not held-back figures.",
+            seed = ds.meta.seed,
+        );
+    }
+    let rig = ds.meta.rig.unwrap_or_else(crate::core::geometry::Rig::default_rig);
+    let views = training::orientation::views(&samples, &rig, 0x7E57)?;
+    let share = |keep: &dyn Fn(&training::orientation::View) -> bool| {
+        let kept: Vec<_> = views
+            .iter()
+            .filter(|v| keep(v))
+            .map(|v| (v.features, v.head_plus))
+            .collect();
+        model.accuracy(&kept)
+    };
+    let figures = OrientationFigures {
+        views: views.len(),
+        accuracy: share(&|_| true),
+        tail_hidden: share(&|v| v.tail_hidden),
+        tail_shown: share(&|v| !v.tail_hidden),
+        full_resolution: share(&|v| !v.coarse),
+        half_resolution: share(&|v| v.coarse),
+    };
+    Ok(EvalSummary::Orientation(figures))
 }

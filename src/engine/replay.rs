@@ -190,6 +190,9 @@ pub struct ReplaySummary {
     pub body_model: PathBuf,
     /// The paw cascade, when the models directory has one.
     pub paw_model: Option<PathBuf>,
+    /// The orientation model (which end is the head from the body's shape), when the models
+    /// directory has one.
+    pub orientation_model: Option<PathBuf>,
     pub realtime: bool,
     pub world: WorldSummary,
     /// Lines of a MoSeq `depth_ts.txt` repeating the timestamp before them: their frames are
@@ -400,7 +403,8 @@ pub fn replay_with(
     });
     let models = models?;
     let (mut chosen, background) = scene?;
-    let (body_model, paw_model) = (models.body_path(), models.paws_path());
+    let (body_model, paw_model, orientation_model) =
+        (models.body_path(), models.paws_path(), models.orientation_path());
     let depth_size = (background.region().width, background.region().height);
     let floor = background.floor_plane();
     if !chosen.calibrated {
@@ -523,6 +527,7 @@ pub fn replay_with(
         software_version: env!("CARGO_PKG_VERSION"),
         body_model,
         paw_model,
+        orientation_model,
         realtime: options.realtime,
         world: world.clone(),
         duplicate_timestamps: recording.duplicate_timestamps(),

@@ -1,5 +1,5 @@
-//! The engine of `mousepose train body|parts|paws`: forests and the paw cascade from
-//! synthetic datasets.
+//! The engine of `mousepose train body|parts|paws|orientation`: forests, the paw cascade and the
+//! orientation model from synthetic datasets.
 
 use crate::engine::progress;
 use crate::engine::{Exists, Failure};
@@ -20,6 +20,10 @@ pub enum ModelTarget {
     Parts,
     /// The paw detector: a boosted cascade of Haar features on the bottom colour view.
     Paws,
+    /// Which end of the mouse is its head from the shape of its body seen from above: a
+    /// logistic model on the silhouette and height profile along the body, learnt from the
+    /// dataset's mice with their tails hidden and shown (JSON, a few KB).
+    Orientation,
 }
 
 /// What `train` trains, on what, and where it writes it (see its `--help`).
@@ -73,6 +77,14 @@ pub enum TrainSummary {
         stages: usize,
         weak: usize,
         features: usize,
+        hard_negative_windows: usize,
+        training_seconds: f64,
+    },
+    /// The orientation model.
+    Orientation {
+        out: PathBuf,
+        views: usize,
+        training_accuracy: f64,
         training_seconds: f64,
     },
 }
@@ -102,6 +114,9 @@ pub fn train(options: &TrainOptions) -> Result<TrainSummary, Failure> {
     if options.target == ModelTarget::Paws {
         return Ok(train_paws(options)?);
     }
+    if options.target == ModelTarget::Orientation {
+        return Ok(train_orientation(options)?);
+    }
     let params = TrainParams {
         trees: options.trees as usize,
         max_depth: options.depth,
@@ -113,7 +128,7 @@ pub fn train(options: &TrainOptions) -> Result<TrainSummary, Failure> {
     let job = TrainJob {
         target: match options.target {
             ModelTarget::Body => Target::Body,
-            ModelTarget::Parts | ModelTarget::Paws => Target::Parts,
+            ModelTarget::Parts | ModelTarget::Paws | ModelTarget::Orientation => Target::Parts,
         },
         train: &options.data,
         discriminative: options.discriminative.as_deref(),
@@ -142,7 +157,7 @@ pub fn train(options: &TrainOptions) -> Result<TrainSummary, Failure> {
             Some(path) => {
                 let kind = match options.target {
                     ModelTarget::Body => ModelKind::Body,
-                    ModelTarget::Parts | ModelTarget::Paws => ModelKind::Parts,
+                    ModelTarget::Parts | ModelTarget::Paws | ModelTarget::Orientation => ModelKind::Parts,
                 };
                 Some(model::load(path, Some(kind))?)
             }
@@ -176,7 +191,7 @@ pub fn train(options: &TrainOptions) -> Result<TrainSummary, Failure> {
         out: options.out.clone(),
         kind: match options.target {
             ModelTarget::Body => "body",
-            ModelTarget::Parts | ModelTarget::Paws => "parts",
+            ModelTarget::Parts | ModelTarget::Paws | ModelTarget::Orientation => "parts",
         },
         trees,
         nodes,
@@ -205,6 +220,8 @@ fn paw_params(options: &TrainOptions) -> crate::vision::paws::train::TrainParams
 
 /// Augmented copies of each paw window besides the plain one.
 const PAW_AUGMENT: usize = 3;
+/// Hard negative windows cut around each of a view's look-alikes of paws.
+const HARD_PER_PLACE: usize = 2;
 
 /// `mousepose train paws`.
 fn train_paws(options: &TrainOptions) -> Result<TrainSummary> {
@@ -216,6 +233,7 @@ fn train_paws(options: &TrainOptions) -> Result<TrainSummary> {
             width: WINDOW_PX as usize,
             height: WINDOW_PX as usize,
             augment: PAW_AUGMENT,
+            hard_per_place: HARD_PER_PLACE,
             seed: options.seed,
         },
     )
@@ -224,6 +242,7 @@ fn train_paws(options: &TrainOptions) -> Result<TrainSummary> {
         message = "Training windows cut.",
         paws = set.paws,
         positives = set.positive_count(),
+        hard_negatives = set.hard_count(),
         backgrounds = set.backgrounds.len(),
     );
     let params = paw_params(options);
@@ -237,6 +256,7 @@ fn train_paws(options: &TrainOptions) -> Result<TrainSummary> {
             stage = r.stage,
             positives = r.positives,
             negatives = r.negatives,
+            hard_negatives = r.hard_negatives,
             weak = r.weak,
             hit_rate = r.hit_rate,
             false_alarm = r.false_alarm,
@@ -275,6 +295,51 @@ fn train_paws(options: &TrainOptions) -> Result<TrainSummary> {
         stages: trained.cascade.stages.len(),
         weak,
         features: trained.cascade.features.len(),
+        hard_negative_windows: set.hard_count(),
         training_seconds,
+    })
+}
+
+/// L2 penalty on the orientation model's scaled weights.
+const ORIENTATION_L2: f64 = 1.0;
+
+fn train_orientation(options: &TrainOptions) -> Result<TrainSummary> {
+    use crate::training::orientation::views;
+    use crate::vision::body_shape::{Provenance, ShapeModel};
+    let (ds, samples) =
+        training::load(&options.data).with_context(|| format!("reading training dataset {:?}", options.data))?;
+    if samples.is_empty() {
+        anyhow::bail!("training dataset {:?} has no images", options.data);
+    }
+    let rig = ds.meta.rig.unwrap_or_else(crate::core::geometry::Rig::default_rig);
+    let views = views(&samples, &rig, options.seed).context("segmenting the dataset's mice")?;
+    let labelled: Vec<_> = views.iter().map(|v| (v.features, v.head_plus)).collect();
+    let provenance = Provenance {
+        dataset_seed: ds.meta.seed,
+        images: samples.len() as u64,
+        engine_version: ds.meta.engine_version,
+        views: labelled.len(),
+        training_accuracy: 0.0,
+    };
+    let started = std::time::Instant::now();
+    let mut model = ShapeModel::fit(&labelled, ORIENTATION_L2, provenance);
+    model.provenance.training_accuracy = model.accuracy(&labelled);
+    if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
+    }
+    model
+        .save(&options.out)
+        .with_context(|| format!("writing {:?}", options.out))?;
+    tracing::info!(
+        message = "Orientation model written.",
+        path = %options.out.display(),
+        views = labelled.len(),
+        training_accuracy = format!("{:.4}", model.provenance.training_accuracy),
+    );
+    Ok(TrainSummary::Orientation {
+        out: options.out.clone(),
+        views: labelled.len(),
+        training_accuracy: model.provenance.training_accuracy,
+        training_seconds: started.elapsed().as_secs_f64(),
     })
 }

@@ -10,6 +10,8 @@ use std::path::{Path, PathBuf};
 pub const BODY_MODEL: &str = "body.forest";
 /// The paw cascade's file name in a models directory.
 pub const PAWS_MODEL: &str = "paws.xml";
+/// The orientation model's file name in a models directory.
+pub const ORIENTATION_MODEL: &str = crate::vision::body_shape::MODEL_FILE;
 
 /// Why the models cannot be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -24,6 +26,8 @@ pub enum ModelsError {
     },
     #[error("cannot load the paw cascade")]
     Paws(#[source] PawError),
+    #[error("cannot load the orientation model")]
+    Orientation(#[source] Box<crate::vision::body_shape::ShapeModelError>),
 }
 
 /// Where the bundled models are: `$MOUSEPOSE_MODELS`, then beside an installed binary
@@ -65,6 +69,9 @@ pub struct Models {
     /// `None` when the directory has no paw cascade, so that older model directories still
     /// work (the limbs then take their default configuration).
     pub paws: Option<PawDetector>,
+    /// `None` when the directory has no orientation model (older model directories): head
+    /// and tail are then told apart by the forest's votes and the motion alone.
+    pub orientation: Option<crate::vision::body_shape::ShapeModel>,
 }
 
 impl Models {
@@ -80,6 +87,7 @@ impl Models {
         Ok(Self {
             body: load_body(&dir)?,
             paws: load_paws(&dir)?,
+            orientation: load_orientation(&dir)?,
             dir,
         })
     }
@@ -87,6 +95,11 @@ impl Models {
     /// The body forest's file.
     pub fn body_path(&self) -> PathBuf {
         self.dir.join(BODY_MODEL)
+    }
+
+    /// The orientation model's file, when there is one.
+    pub fn orientation_path(&self) -> Option<PathBuf> {
+        self.orientation.is_some().then(|| self.dir.join(ORIENTATION_MODEL))
     }
 
     /// The paw cascade's file, when there is one.
@@ -116,4 +129,18 @@ pub fn load_paws(models: &Path) -> Result<Option<PawDetector>, ModelsError> {
         return Ok(None);
     }
     PawDetector::load(&path).map(Some).map_err(ModelsError::Paws)
+}
+
+/// Loads the orientation model of a models directory; `None` when the directory has none.
+///
+/// # Errors
+/// The file is there but is not an orientation model this version reads.
+pub fn load_orientation(models: &Path) -> Result<Option<crate::vision::body_shape::ShapeModel>, ModelsError> {
+    let path = models.join(ORIENTATION_MODEL);
+    if !path.exists() {
+        return Ok(None);
+    }
+    crate::vision::body_shape::ShapeModel::load(&path)
+        .map(Some)
+        .map_err(|e| ModelsError::Orientation(Box::new(e)))
 }

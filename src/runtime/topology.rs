@@ -375,7 +375,12 @@ fn declare_processing(
     let fuser = Fuser::new(rig.color, FusionConfig::default());
     chain
         .map(segment)?
-        .map_parallel(BodyStage::new(models.body, rig.depth, PIPELINE_VOTE_BUDGET))?
+        .map_parallel(BodyStage::new(
+            models.body,
+            models.orientation,
+            rig.depth,
+            PIPELINE_VOTE_BUDGET,
+        ))?
         .map_parallel(PawStage::new(models.paws, rig.color))?
         .map(FuseStage::new(fuser, rig, overlays))?
         .sink("poses", poses, end_to_end)

@@ -8,6 +8,17 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::{PI, TAU};
 
+/// What the animated mouse does: anything (`Mixed`, the default), stay in place (`Still`:
+/// standing, sniffing, grooming, rearing and bending where it is), or walk (`Walking`: walking
+/// and the turns the walls ask for).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Activity {
+    #[default]
+    Mixed,
+    Still,
+    Walking,
+}
+
 /// Time constant of the easing between behaviours, seconds.
 const EASE_S: f64 = 0.18;
 /// Keep the rump this far from the walls.
@@ -30,6 +41,7 @@ pub struct Animator {
     look: f64,
     amount: f64,
     clock_s: f64,
+    activity: Activity,
 }
 
 impl Animator {
@@ -56,7 +68,19 @@ impl Animator {
             look: 0.0,
             amount: 0.5,
             clock_s: 0.0,
+            activity: Activity::Mixed,
         }
+    }
+
+    /// The same mouse doing only `activity` from now on.
+    pub fn with_activity(mut self, activity: Activity) -> Self {
+        self.activity = activity;
+        match activity {
+            Activity::Mixed => {}
+            Activity::Still => self.behaviour = Behaviour::Stand,
+            Activity::Walking => self.behaviour = Behaviour::Walk,
+        }
+        self
     }
 
     /// The current behaviour.
@@ -90,6 +114,11 @@ impl Animator {
             r if r < 0.82 => (Behaviour::Groom, self.rng.gen_range(1.5..4.0)),
             r if r < 0.92 => (Behaviour::Sniff, self.rng.gen_range(0.6..1.8)),
             _ => (Behaviour::Bend, self.rng.gen_range(0.5..1.2)),
+        };
+        let (behaviour, duration) = match (self.activity, behaviour) {
+            (Activity::Still, Behaviour::Walk | Behaviour::Run | Behaviour::Turn) => (Behaviour::Stand, duration),
+            (Activity::Walking, _) => (Behaviour::Walk, duration),
+            (_, chosen) => (chosen, duration),
         };
         self.behaviour = behaviour;
         self.remaining_s = duration;
@@ -127,7 +156,10 @@ impl Animator {
             self.choose_next();
         }
         let steer = self.wall_steer();
-        if steer != 0.0 && matches!(self.behaviour, Behaviour::Walk | Behaviour::Run | Behaviour::Stand) {
+        if steer != 0.0
+            && self.activity != Activity::Still
+            && matches!(self.behaviour, Behaviour::Walk | Behaviour::Run | Behaviour::Stand)
+        {
             self.behaviour = Behaviour::Turn;
             self.remaining_s = 0.6;
             self.bend_target = steer * 0.9;

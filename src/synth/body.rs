@@ -178,7 +178,7 @@ pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
         shape: ellipsoid(
             head - head_frame * Vector3::new(1.0 * s, 0.0, 0.0),
             head_frame,
-            [8.5 * s, 7.2 * s * g, 6.6 * s],
+            [8.5 * s, 7.8 * s * g, 6.0 * s],
         ),
         labeller: Labeller::Fixed(Part::Head),
         material: Material::Fur,
@@ -187,17 +187,18 @@ pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
         shape: ellipsoid(
             head + (snout - head) * 0.5 - head_frame * Vector3::new(0.0, 0.0, 0.6 * s),
             head_frame,
-            [0.5 * muzzle_len + 1.6 * s, 5.0 * s * g, 4.4 * s],
+            [0.5 * muzzle_len + 1.6 * s, 4.6 * s * g, 4.0 * s],
         ),
         labeller: Labeller::Fixed(Part::Head),
         material: Material::Fur,
     });
     for (ear, side) in [(Joint::LeftEar, Side::Left), (Joint::RightEar, Side::Right)] {
-        // A thin disc facing forward and outward.
-        let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), side.sign() * 0.5);
-        let tilt = Rotation3::from_axis_angle(&Vector3::y_axis(), -0.35);
+        // A thin disc facing outward and a little forward, laid back along the head as a
+        // walking mouse carries its ears.
+        let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), side.sign() * 1.0);
+        let tilt = Rotation3::from_axis_angle(&Vector3::y_axis(), -0.8);
         out.push(Primitive {
-            shape: ellipsoid(j(ear), head_frame * turn * tilt, [1.3 * s, 4.4 * s, 4.4 * s]),
+            shape: ellipsoid(j(ear), head_frame * turn * tilt, [1.2 * s, 4.0 * s, 4.0 * s]),
             labeller: Labeller::Fixed(Part::Head),
             material: Material::Skin,
         });
@@ -241,7 +242,7 @@ pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
         shape: ellipsoid(
             j(Joint::Neck) - neck_frame * Vector3::new(-s, 0.0, 1.6 * s),
             neck_frame,
-            [8.0 * s, 8.6 * s * g, 7.8 * s],
+            [7.5 * s, 8.0 * s * g, 7.0 * s],
         ),
         labeller: Labeller::Neck {
             origin: j(Joint::Neck),
@@ -292,13 +293,13 @@ fn along(spine: &[Joint], lengths: &[f64], at: f64, m: &MouseInstance) -> (Point
 /// tail base to the neck.
 fn trunk_profile(u: f64) -> [f64; 2] {
     const PROFILE: [(f64, f64, f64); 7] = [
-        (0.0, 5.5, 5.0),
-        (0.12, 11.0, 9.0),
-        (0.3, 16.0, 11.8),
-        (0.5, 16.0, 11.6),
-        (0.7, 14.0, 11.0),
-        (0.88, 11.8, 9.8),
-        (1.0, 9.8, 8.6),
+        (0.0, 6.0, 5.5),
+        (0.12, 11.0, 9.5),
+        (0.28, 14.0, 12.5),
+        (0.45, 14.2, 12.8),
+        (0.62, 13.0, 11.5),
+        (0.8, 11.0, 9.8),
+        (1.0, 8.8, 8.0),
     ];
     for w in PROFILE.windows(2) {
         let ((u0, y0, z0), (u1, y1, z1)) = (w[0], w[1]);
@@ -308,4 +309,127 @@ fn trunk_profile(u: f64) -> [f64; 2] {
         }
     }
     [PROFILE[6].1, PROFILE[6].2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::geometry::Rig;
+    use crate::core::noise::DepthNoise;
+    use crate::synth::mouse::{Behaviour, Placement, behaviour_params, pose_mouse};
+    use crate::synth::render::Cage;
+    use crate::synth::views::render_top;
+    use nalgebra::Point2;
+    use rand::SeedableRng;
+
+    /// The body seen from above, tail left out: per 5 mm slice along the mouse (from its tail
+    /// base forward, mouse frame), its width and the highest point (mm above the floor).
+    fn top_profile(m: &MouseInstance) -> Vec<(f64, f64, f64)> {
+        let rig = Rig::default_rig();
+        let cam = &rig.depth;
+        let view = render_top(
+            cam,
+            &Cage::new(cam),
+            &skin(m),
+            None,
+            2,
+            &DepthNoise::default(),
+            &mut rand_chacha::ChaCha8Rng::seed_from_u64(1),
+        );
+        let base = m.joint(Joint::TailBase);
+        let r = view.region;
+        let mut slices = vec![(f64::INFINITY, f64::NEG_INFINITY, 0.0f64); 40];
+        for (k, (&d, &label)) in view.depth.iter().zip(&view.label).enumerate() {
+            if label == 255 || label == Part::Tail.label() || d == 0 {
+                continue;
+            }
+            let px = Point2::new(
+                f64::from(r.x0) + (k % r.width as usize) as f64,
+                f64::from(r.y0) + (k / r.width as usize) as f64,
+            );
+            let p = cam.world_from_camera * cam.intrinsics.unproject(&px, f64::from(d));
+            let (x, y) = (p.x - base.x, p.y - base.y);
+            if let Ok(slice) = usize::try_from((x / 5.0).floor() as i64) {
+                if let Some(s) = slices.get_mut(slice) {
+                    *s = (s.0.min(y), s.1.max(y), s.2.max(p.z));
+                }
+            }
+        }
+        slices
+            .into_iter()
+            .enumerate()
+            .filter(|(_, s)| s.1 > s.0)
+            .map(|(k, s)| (5.0 * k as f64 + 2.5, s.1 - s.0, s.2))
+            .collect()
+    }
+
+    /// The shape figures of docs/MOUSE-SHAPE.md, on the unscaled mouse: seen from above, its
+    /// highest and widest parts lie behind the body's middle, the head end (front fifth) is
+    /// lower and narrower, the back 25-35 mm high and the body at most about 30 mm wide (adult
+    /// C57BL/6 mice), for standing, walking, sniffing and a hunched back; rearing keeps its
+    /// widest part behind the middle.
+    #[test]
+    fn seen_from_above_the_mouse_is_widest_and_highest_behind_its_middle() {
+        let hunched = |mut p: crate::synth::mouse::PoseParams| {
+            crate::synth::Carriage {
+                hunch: 0.3,
+                ..crate::synth::Carriage::default()
+            }
+            .apply(&mut p);
+            p
+        };
+        let cases = [
+            ("stand", behaviour_params(Behaviour::Stand, 0.25, 0.0, 0.0, 0.0, 0.5)),
+            ("walk", behaviour_params(Behaviour::Walk, 0.25, 0.0, 0.0, 0.0, 0.5)),
+            (
+                "walk, head up",
+                behaviour_params(Behaviour::Walk, 0.6, 0.0, 0.0, 0.8, 0.8),
+            ),
+            ("sniff", behaviour_params(Behaviour::Sniff, 0.25, 0.0, 0.0, 0.0, 0.9)),
+            (
+                "hunched",
+                hunched(behaviour_params(Behaviour::Stand, 0.0, 0.0, 0.0, 0.0, 0.5)),
+            ),
+            ("rear", behaviour_params(Behaviour::Rear, 0.25, 0.0, 0.0, 0.0, 0.5)),
+        ];
+        for (name, params) in cases {
+            let m = pose_mouse(&params, &Placement::default());
+            let profile = top_profile(&m);
+            let length = profile.last().map_or(0.0, |s| s.0 + 2.5);
+            let rear = |x: f64| x < 0.5 * length;
+            let widest = profile
+                .iter()
+                .copied()
+                .fold((0.0, 0.0, 0.0), |a, s| if s.1 > a.1 { s } else { a });
+            assert!(
+                rear(widest.0),
+                "{name}: widest at {widest:?} of {length} mm: {profile:?}"
+            );
+            if name == "rear" {
+                continue;
+            }
+            let highest = profile
+                .iter()
+                .copied()
+                .fold((0.0, 0.0, 0.0), |a, s| if s.2 > a.2 { s } else { a });
+            assert!(
+                rear(highest.0),
+                "{name}: highest at {highest:?} of {length} mm: {profile:?}"
+            );
+            assert!((25.0..=35.0).contains(&highest.2), "{name}: back {highest:?}");
+            assert!((25.0..=32.0).contains(&widest.1), "{name}: width {widest:?}");
+            let head: Vec<_> = profile.iter().filter(|s| s.0 > 0.8 * length).collect();
+            let head_height = head.iter().map(|s| s.2).fold(0.0, f64::max);
+            let head_width = head.iter().map(|s| s.1).fold(0.0, f64::max);
+            let lower_by = if name == "walk, head up" { 1.0 } else { 4.0 };
+            assert!(
+                head_height <= highest.2 - lower_by,
+                "{name}: head {head_height} mm high: {profile:?}"
+            );
+            assert!(
+                head_width <= widest.1 - 5.0,
+                "{name}: head {head_width} mm wide: {profile:?}"
+            );
+        }
+    }
 }

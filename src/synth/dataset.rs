@@ -8,7 +8,7 @@
 use super::body::skin;
 use super::mouse::{Behaviour, fit_in_cage, pose_library, pose_mouse};
 use super::render::Cage;
-use super::views::{BottomView, PawBox, TopView, render_bottom, render_top};
+use super::views::{BottomClutter, BottomView, Mark, MarkKind, PawBox, TopView, render_bottom_with, render_top};
 use super::{ENGINE_VERSION, Mice, item_rng, jitter_pose, random_placement, varied_build};
 use crate::core::geometry::Rig;
 use crate::core::image::Region;
@@ -49,6 +49,10 @@ pub struct DatasetMeta {
     pub seed: u64,
     pub noise: DepthNoise,
     pub bottom_views: bool,
+    /// Whether the bottom views show glare, marks on the glass and pale belly fur besides
+    /// the paws (written only when they do; datasets without the key have none).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub bottom_clutter: bool,
     /// Which mice (datasets written before this key have the standard ones).
     #[serde(default)]
     pub mice: Mice,
@@ -63,6 +67,9 @@ pub struct DatasetSpec {
     pub seed: u64,
     pub noise: DepthNoise,
     pub bottom_views: bool,
+    /// Glare, marks on the glass and pale belly fur in the bottom views (hard negatives for
+    /// the paw detector).
+    pub bottom_clutter: bool,
     pub mice: Mice,
 }
 
@@ -124,9 +131,14 @@ pub fn render_sample(rig: &Rig, spec: &DatasetSpec, library: &[super::mouse::Pos
         &spec.noise,
         &mut rng,
     );
+    let clutter = if spec.bottom_clutter {
+        BottomClutter::GlassAndBelly
+    } else {
+        BottomClutter::None
+    };
     let bottom = spec
         .bottom_views
-        .then(|| render_bottom(&rig.color, &m, &skin, BOTTOM_MARGIN_PX, &mut rng));
+        .then(|| render_bottom_with(&rig.color, &m, &skin, BOTTOM_MARGIN_PX, clutter, &mut rng));
     Sample {
         index,
         pose_id: pose_id as u32,
@@ -177,6 +189,7 @@ pub fn write_dataset(
         seed: spec.seed,
         noise: spec.noise,
         bottom_views: spec.bottom_views,
+        bottom_clutter: spec.bottom_views && spec.bottom_clutter,
         mice: spec.mice,
         rig: Some(*rig),
     };
@@ -211,7 +224,11 @@ pub fn encode_sample(s: &Sample) -> Vec<u8> {
     body.extend_from_slice(&s.pose_id.to_le_bytes());
     body.push(s.behaviour.code());
     body.push(u8::from(s.bottom.is_some()));
-    body.extend_from_slice(&0u16.to_le_bytes());
+    let marks = s
+        .bottom
+        .as_ref()
+        .map_or(0, |b| b.marks.len().min(usize::from(u16::MAX)));
+    body.extend_from_slice(&(marks as u16).to_le_bytes());
     body.extend_from_slice(&s.scale.to_le_bytes());
     for p in &s.joints {
         for c in [p.x, p.y, p.z] {
@@ -232,6 +249,14 @@ pub fn encode_sample(s: &Sample) -> Vec<u8> {
             }
             body.push(u8::from(paw.contact));
             body.push(u8::from(paw.visible));
+            body.extend_from_slice(&0u16.to_le_bytes());
+        }
+        for mark in b.marks.iter().take(marks) {
+            for v in [mark.x0, mark.y0, mark.x1, mark.y1] {
+                body.extend_from_slice(&v.to_le_bytes());
+            }
+            body.push(mark.kind.code());
+            body.push(0);
             body.extend_from_slice(&0u16.to_le_bytes());
         }
     }
@@ -311,7 +336,7 @@ pub fn decode_sample(payload: &[u8]) -> Result<Sample, String> {
         .find(|b| b.code() == code)
         .ok_or_else(|| format!("unknown behaviour code {code}"))?;
     let has_bottom = c.u8()? != 0;
-    c.u16()?;
+    let mark_count = c.u16()?;
     let scale = c.f32()?;
     let mut joints = [Point3::origin(); JOINT_COUNT];
     for p in &mut joints {
@@ -349,7 +374,21 @@ pub fn decode_sample(payload: &[u8]) -> Result<Sample, String> {
             };
             c.u16()?;
         }
-        Some(BottomView { region, rgb, paws })
+        let mut marks = Vec::with_capacity(usize::from(mark_count));
+        for _ in 0..mark_count {
+            let (x0, y0, x1, y1) = (c.f32()?, c.f32()?, c.f32()?, c.f32()?);
+            let code = c.u8()?;
+            let kind = MarkKind::from_code(code).ok_or_else(|| format!("unknown mark kind {code}"))?;
+            c.u8()?;
+            c.u16()?;
+            marks.push(Mark { kind, x0, y0, x1, y1 });
+        }
+        Some(BottomView {
+            region,
+            rgb,
+            paws,
+            marks,
+        })
     } else {
         None
     };

@@ -24,7 +24,7 @@ use rand::Rng;
 
 /// Version of the synthesis engine's model and renderers; data files record it so a dataset
 /// made by another version is recognised as such.
-pub const ENGINE_VERSION: u32 = 1;
+pub const ENGINE_VERSION: u32 = 2;
 
 /// Random variation of a library pose for a training image: placement anywhere in the cage,
 /// any heading, pitch and roll up to 10 degrees, scale 0.85-1.15, bone lengths +-10 %.
@@ -90,7 +90,9 @@ pub struct Carriage {
     /// Added to the tail's lift above the floor (mm) and to its curl.
     pub tail_lift: f64,
     pub tail_curl: f64,
-    /// Added to the pitch of the back's two middle segments (positive: hunched).
+    /// How hunched the back is (positive) or stretched (negative): the back rises this much
+    /// more (radians) from the rump to the mid-back and falls half as much again from there to
+    /// the withers, so the hump is over the loins, behind the body's middle, as in real mice.
     pub hunch: f64,
     /// The rump's height is multiplied by this (1 for the standard mice).
     pub rump_height: f64,
@@ -112,8 +114,8 @@ impl Carriage {
     pub fn apply(&self, params: &mut PoseParams) {
         params.tail_lift += self.tail_lift;
         params.tail_curl += self.tail_curl;
-        params.pitch[1] += self.hunch;
-        params.pitch[2] += self.hunch;
+        params.pitch[0] += self.hunch;
+        params.pitch[1] -= 1.5 * self.hunch;
         params.rump_height *= self.rump_height;
     }
 }

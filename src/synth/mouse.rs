@@ -98,9 +98,9 @@ impl Default for PoseParams {
         Self {
             behaviour: Behaviour::Stand,
             rump_height: 16.0,
-            trunk_pitch: 0.06,
+            trunk_pitch: 0.10,
             yaw: [0.0; SPINE_SEGMENTS],
-            pitch: [0.0, 0.04, -0.05, -0.12, -0.18],
+            pitch: [0.0, -0.10, -0.12, -0.10, -0.20],
             roll: 0.0,
             tail_yaw: 0.0,
             tail_curl: 0.0,
@@ -500,7 +500,7 @@ pub fn behaviour_params(behaviour: Behaviour, phase: f64, bend: f64, head: f64, 
         }
         Behaviour::Sniff => {
             // Head down to the floor, back arched.
-            p.pitch = [0.08, 0.12, -0.25 - 0.2 * amount, -0.45 + 0.2 * look, -0.3];
+            p.pitch = [0.14, -0.20, -0.26 - 0.2 * amount, -0.4 + 0.2 * look, -0.3];
             p.rump_height = 16.0 + 1.5 * amount;
             p.paw_offsets[0][0] = 2.0 * cycle;
             p.paw_offsets[1][0] = -2.0 * cycle;

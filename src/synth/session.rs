@@ -41,6 +41,11 @@ pub struct SessionSpec {
     pub color: bool,
     /// The standard mice, mice well outside the training range, or either by the seed.
     pub mice: Mice,
+    /// What the mouse does (anything, stay in place, walk).
+    pub activity: super::animate::Activity,
+    /// Render the mouse without its tail, as a depth camera that does not see a 3-5 mm tail
+    /// shows it (the truth keeps the tail's joints).
+    pub tail_hidden: bool,
 }
 
 impl Default for SessionSpec {
@@ -57,6 +62,8 @@ impl Default for SessionSpec {
             color_format: PixelFormat::BayerRg8,
             color: true,
             mice: Mice::Standard,
+            activity: super::animate::Activity::Mixed,
+            tail_hidden: false,
         }
     }
 }
@@ -191,7 +198,8 @@ fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
         .collect();
     times.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
 
-    let (mut animator, carriage) = session_mouse(spec.seed, spec.mice);
+    let (animator, carriage) = session_mouse(spec.seed, spec.mice);
+    let mut animator = animator.with_activity(spec.activity);
     let mut now = 0.0;
     let mut shots = Vec::with_capacity(times.len());
     let mut events = Vec::new();
@@ -238,21 +246,40 @@ fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
 }
 
 /// Renders a full depth frame: the cage, the mouse, the sensor's noise.
-fn depth_frame(rig: &Rig, background: &[f32], shot: &Shot, noise: &DepthNoise, seed: u64) -> DepthFrame {
+fn depth_frame(
+    rig: &Rig,
+    background: &[f32],
+    shot: &Shot,
+    noise: &DepthNoise,
+    seed: u64,
+    tail_hidden: bool,
+) -> DepthFrame {
     let i = &rig.depth.intrinsics;
     let mut rng = item_rng(seed, STREAM_DEPTH, shot.stamp.seq);
     DepthFrame {
         stamp: shot.stamp,
         width: i.width,
         height: i.height,
-        data: render_top_frame(&rig.depth, background, &skin(&shot.mouse), noise, &mut rng),
+        data: render_top_frame(
+            &rig.depth,
+            background,
+            &seen_skin(&shot.mouse, tail_hidden),
+            noise,
+            &mut rng,
+        ),
     }
 }
 
-fn color_frame(rig: &Rig, shot: &Shot, format: PixelFormat, seed: u64) -> ColorFrame {
+fn color_frame(rig: &Rig, shot: &Shot, format: PixelFormat, seed: u64, tail_hidden: bool) -> ColorFrame {
     let i = &rig.color.intrinsics;
     let mut rng = item_rng(seed, STREAM_COLOR, shot.stamp.seq);
-    let (data, _) = render_bottom_frame(&rig.color, &shot.mouse, &skin(&shot.mouse), format, &mut rng);
+    let (data, _) = render_bottom_frame(
+        &rig.color,
+        &shot.mouse,
+        &seen_skin(&shot.mouse, tail_hidden),
+        format,
+        &mut rng,
+    );
     ColorFrame {
         stamp: shot.stamp,
         width: i.width,
@@ -312,6 +339,14 @@ pub fn write_session(
         toml::Value::Integer(i64::from(spec.color_binning)),
     );
     table.insert("engine_version".into(), toml::Value::Integer(i64::from(ENGINE_VERSION)));
+    // Only when not the default, so the default sessions' files stay as they were.
+    if spec.activity != super::animate::Activity::Mixed {
+        let name = format!("{:?}", spec.activity).to_lowercase();
+        table.insert("activity".into(), toml::Value::String(name));
+    }
+    if spec.tail_hidden {
+        table.insert("tail_hidden".into(), toml::Value::Boolean(true));
+    }
     meta.synthetic = Some(table);
 
     let (shots, drop_events, end_host) = plan(spec);
@@ -340,8 +375,17 @@ pub fn write_session(
             .par_iter()
             .map(|shot| {
                 (!shot.dropped).then(|| match shot.role {
-                    CameraRole::Depth => Rendered::Depth(depth_frame(&rig, &background, shot, &spec.noise, spec.seed)),
-                    CameraRole::Color => Rendered::Color(color_frame(&rig, shot, spec.color_format, spec.seed)),
+                    CameraRole::Depth => Rendered::Depth(depth_frame(
+                        &rig,
+                        &background,
+                        shot,
+                        &spec.noise,
+                        spec.seed,
+                        spec.tail_hidden,
+                    )),
+                    CameraRole::Color => {
+                        Rendered::Color(color_frame(&rig, shot, spec.color_format, spec.seed, spec.tail_hidden))
+                    }
                 })
             })
             .collect();
@@ -396,4 +440,13 @@ fn true_partner(colors: &[(f64, u64)], depth_time_s: f64, fps: f64) -> Option<u6
         .filter(|(dt, _)| *dt < 0.5 / fps)
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map(|(_, seq)| seq)
+}
+
+/// The skin the cameras see: without the tail's when `tail_hidden`.
+fn seen_skin(mouse: &MouseInstance, tail_hidden: bool) -> Vec<super::body::Primitive> {
+    let mut skin = skin(mouse);
+    if tail_hidden {
+        skin.retain(|p| p.labeller != super::body::Labeller::Fixed(crate::core::skeleton::Part::Tail));
+    }
+    skin
 }

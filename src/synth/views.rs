@@ -101,6 +101,69 @@ pub struct BottomView {
     pub region: Region,
     pub rgb: Vec<u8>,
     pub paws: [PawBox; 4],
+    /// What was drawn into the view besides the mouse when it was rendered with
+    /// [`BottomClutter`] (empty otherwise): things a paw detector must not take for paws.
+    pub marks: Vec<Mark>,
+}
+
+/// Something in a bottom view that is not a paw but can look like one to a detector.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MarkKind {
+    /// The LED ring's reflection at the glass's edge: a bright, soft band.
+    Glare,
+    /// A pale spot on the glass (a dried drop, dust, a smear).
+    Spot,
+    /// A thin bright scratch on the glass.
+    Scratch,
+    /// A pale patch of the mouse's belly fur.
+    BellySpot,
+}
+
+impl MarkKind {
+    /// The code stored in datasets (`docs/FORMATS.md`).
+    pub fn code(self) -> u8 {
+        match self {
+            Self::Glare => 0,
+            Self::Spot => 1,
+            Self::Scratch => 2,
+            Self::BellySpot => 3,
+        }
+    }
+
+    /// The kind stored as `code`.
+    pub fn from_code(code: u8) -> Option<Self> {
+        [Self::Glare, Self::Spot, Self::Scratch, Self::BellySpot]
+            .into_iter()
+            .find(|k| k.code() == code)
+    }
+}
+
+/// A [`MarkKind`] drawn into a bottom view, with its box in the full colour image's pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Mark {
+    pub kind: MarkKind,
+    pub x0: f32,
+    pub y0: f32,
+    pub x1: f32,
+    pub y1: f32,
+}
+
+impl Mark {
+    /// The box's centre.
+    pub fn centre(&self) -> (f64, f64) {
+        (f64::from(self.x0 + self.x1) / 2.0, f64::from(self.y0 + self.y1) / 2.0)
+    }
+}
+
+/// Whether a bottom view is rendered with the things real bottom views show besides the
+/// mouse's paws: glare at the glass's edge, pale spots and scratches on the glass, a pale
+/// patch of belly fur. The paw detector's training and test sets use them as hard negatives.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BottomClutter {
+    #[default]
+    None,
+    GlassAndBelly,
 }
 
 /// A paw closer to the glass than this touches it.
@@ -215,11 +278,29 @@ pub fn render_bottom(
     margin: u32,
     rng: &mut impl Rng,
 ) -> BottomView {
+    render_bottom_with(camera, m, skin, margin, BottomClutter::None, rng)
+}
+
+/// [`render_bottom`], with `clutter` drawn in (no random draw is spent on it when `None`, so
+/// views without clutter are the same as before it existed).
+pub fn render_bottom_with(
+    camera: &Camera,
+    m: &MouseInstance,
+    skin: &[Primitive],
+    margin: u32,
+    clutter: BottomClutter,
+    rng: &mut impl Rng,
+) -> BottomView {
     let scene = Scene::new(camera, skin);
     let i = &camera.intrinsics;
     let region = scene.bounds.grown(margin, i.width, i.height);
     let hits = scene.cast(region);
-    let shaded = shade(camera, &scene, &hits);
+    let mut shaded = shade(camera, &scene, &hits);
+    let paws = paw_boxes(m, &scene, &hits);
+    let marks = match clutter {
+        BottomClutter::None => Vec::new(),
+        BottomClutter::GlassAndBelly => draw_clutter(camera, m, region, &paws, &mut shaded, rng),
+    };
     let mut rgb = Vec::with_capacity(region.len() * 3);
     for px in &shaded {
         for &v in px {
@@ -229,7 +310,178 @@ pub fn render_bottom(
     BottomView {
         region,
         rgb,
-        paws: paw_boxes(m, &scene, &hits),
+        paws,
+        marks,
+    }
+}
+
+/// Margin (pixels) kept between a mark's box and any paw's, so no positive window of a paw
+/// is spoilt by a mark.
+const MARK_CLEARANCE_PX: f32 = 4.0;
+
+/// Draws glare, glass marks and a belly patch into `img` (the shaded view over `region`),
+/// none of them within [`MARK_CLEARANCE_PX`] of a paw's box, and returns their boxes.
+fn draw_clutter(
+    camera: &Camera,
+    m: &MouseInstance,
+    region: Region,
+    paws: &[PawBox; 4],
+    img: &mut [[f32; 3]],
+    rng: &mut impl Rng,
+) -> Vec<Mark> {
+    let (rx, ry) = (region.x0 as f32, region.y0 as f32);
+    let (rw, rh) = (region.width as f32, region.height as f32);
+    let clear = |b: [f32; 4]| {
+        paws.iter().filter(|p| p.x1 > p.x0).all(|p| {
+            b[0] > p.x1 + MARK_CLEARANCE_PX
+                || b[2] < p.x0 - MARK_CLEARANCE_PX
+                || b[1] > p.y1 + MARK_CLEARANCE_PX
+                || b[3] < p.y0 - MARK_CLEARANCE_PX
+        })
+    };
+    let mut marks = Vec::new();
+    let mut place = |kind: MarkKind, blob: Blob, img: &mut [[f32; 3]]| {
+        let b = blob.bounds();
+        if !clear(b) || b[2] < rx || b[3] < ry || b[0] > rx + rw || b[1] > ry + rh {
+            return;
+        }
+        blob.draw(region, img);
+        marks.push(Mark {
+            kind,
+            x0: b[0].max(rx),
+            y0: b[1].max(ry),
+            x1: b[2].min(rx + rw),
+            y1: b[3].min(ry + rh),
+        });
+    };
+    // Glare: a soft bright band along one edge of the view, the glass's edge catching the LEDs.
+    if rng.gen_bool(0.7) {
+        let along = rng.gen_range(20.0f32..70.0);
+        let across = rng.gen_range(2.5f32..7.0);
+        let side = rng.gen_range(0..4);
+        let inset = rng.gen_range(0.0f32..10.0);
+        let (cx, cy, angle) = match side {
+            0 => (rx + rng.gen_range(0.0..rw), ry + inset, 0.0),
+            1 => (rx + rng.gen_range(0.0..rw), ry + rh - inset, 0.0),
+            2 => (rx + inset, ry + rng.gen_range(0.0..rh), std::f32::consts::FRAC_PI_2),
+            _ => (
+                rx + rw - inset,
+                ry + rng.gen_range(0.0..rh),
+                std::f32::consts::FRAC_PI_2,
+            ),
+        };
+        let level = rng.gen_range(90.0f32..230.0);
+        let blob = Blob {
+            cx,
+            cy,
+            half_length: along / 2.0,
+            sigma: across / 2.0,
+            angle: angle + rng.gen_range(-0.2..0.2),
+            colour: [level * 0.95, level, level * 1.05],
+            cover: 1.0,
+        };
+        place(MarkKind::Glare, blob, img);
+    }
+    // Spots and scratches anywhere in the view: on the glass, so over the mouse too.
+    for _ in 0..rng.gen_range(0..=3) {
+        let (cx, cy) = (rx + rng.gen_range(0.0..rw), ry + rng.gen_range(0.0..rh));
+        let level = rng.gen_range(70.0f32..190.0);
+        let blob = if rng.gen_bool(0.7) {
+            Blob {
+                cx,
+                cy,
+                half_length: rng.gen_range(0.0f32..4.0),
+                sigma: rng.gen_range(2.0f32..6.0),
+                angle: rng.gen_range(0.0..std::f32::consts::PI),
+                colour: [level, level * 0.97, level * 0.92],
+                cover: rng.gen_range(0.3f32..0.8),
+            }
+        } else {
+            Blob {
+                cx,
+                cy,
+                half_length: rng.gen_range(6.0f32..20.0),
+                sigma: rng.gen_range(0.6f32..1.2),
+                angle: rng.gen_range(0.0..std::f32::consts::PI),
+                colour: [level; 3],
+                cover: 0.0,
+            }
+        };
+        let kind = if blob.sigma < 1.5 {
+            MarkKind::Scratch
+        } else {
+            MarkKind::Spot
+        };
+        place(kind, blob, img);
+    }
+    // A pale patch of belly fur, under the back between the mid back and the rump.
+    if rng.gen_bool(0.5) {
+        let t = rng.gen_range(0.0..1.0);
+        let a = m.joint(Joint::MidBack);
+        let b = m.joint(Joint::Rump);
+        let on_belly = nalgebra::Point3::new(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, 0.0);
+        if let Some(p) = camera.project_world(&on_belly) {
+            let blob = Blob {
+                cx: p.x as f32,
+                cy: p.y as f32,
+                half_length: rng.gen_range(0.0f32..6.0),
+                sigma: rng.gen_range(3.0f32..7.0),
+                angle: rng.gen_range(0.0..std::f32::consts::PI),
+                colour: [150.0, 122.0, 116.0].map(|c| c * rng.gen_range(0.6f32..1.0)),
+                cover: 0.8,
+            };
+            place(MarkKind::BellySpot, blob, img);
+        }
+    }
+    marks
+}
+
+/// A soft elongated blob: a segment of `2 * half_length` pixels at `angle` with a Gaussian
+/// profile of `sigma` across it. It covers what is under it by `cover` (0: adds light, as
+/// glare and scratches do) and adds `colour` by its profile.
+struct Blob {
+    cx: f32,
+    cy: f32,
+    half_length: f32,
+    sigma: f32,
+    angle: f32,
+    colour: [f32; 3],
+    cover: f32,
+}
+
+impl Blob {
+    fn bounds(&self) -> [f32; 4] {
+        let (s, c) = self.angle.sin_cos();
+        let r = 2.0 * self.sigma;
+        let (dx, dy) = ((c * self.half_length).abs() + r, (s * self.half_length).abs() + r);
+        [self.cx - dx, self.cy - dy, self.cx + dx, self.cy + dy]
+    }
+
+    fn draw(&self, region: Region, img: &mut [[f32; 3]]) {
+        let b = self.bounds();
+        let (s, c) = self.angle.sin_cos();
+        let (w, h) = (region.width as i64, region.height as i64);
+        let x0 = ((b[0] - region.x0 as f32).floor() as i64).max(0);
+        let y0 = ((b[1] - region.y0 as f32).floor() as i64).max(0);
+        let x1 = ((b[2] - region.x0 as f32).ceil() as i64).min(w - 1);
+        let y1 = ((b[3] - region.y0 as f32).ceil() as i64).min(h - 1);
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let (px, py) = (x as f32 + region.x0 as f32 + 0.5, y as f32 + region.y0 as f32 + 0.5);
+                let (u, v) = (px - self.cx, py - self.cy);
+                let along = (u * c + v * s).abs();
+                let across = (-u * s + v * c).abs();
+                let d = (along - self.half_length).max(0.0).hypot(across);
+                let k = (-(d * d) / (2.0 * self.sigma * self.sigma)).exp();
+                if k < 0.01 {
+                    continue;
+                }
+                let px = &mut img[(y * w + x) as usize];
+                for (v, c) in px.iter_mut().zip(self.colour) {
+                    *v = *v * (1.0 - self.cover * k) + c * k;
+                }
+            }
+        }
     }
 }
 
@@ -268,4 +520,79 @@ pub fn render_bottom_frame(
         }
     }
     (out, paw_boxes(m, &scene, &hits))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::geometry::Rig;
+    use crate::synth::body::skin;
+    use crate::synth::mouse::{pose_library, pose_mouse};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn clutter_marks_the_glass_and_the_belly_but_never_a_paw() {
+        let rig = Rig::default_rig();
+        let library = pose_library();
+        let (mut marks, mut kinds) = (0, std::collections::HashSet::new());
+        for k in 0..24 {
+            let mut rng = ChaCha8Rng::seed_from_u64(k);
+            let m = pose_mouse(
+                &library[(k as usize * 31) % library.len()],
+                &crate::synth::random_placement(&mut rng),
+            );
+            let s = skin(&m);
+            let plain = render_bottom(&rig.color, &m, &s, 12, &mut ChaCha8Rng::seed_from_u64(k));
+            let none = render_bottom_with(
+                &rig.color,
+                &m,
+                &s,
+                12,
+                BottomClutter::None,
+                &mut ChaCha8Rng::seed_from_u64(k),
+            );
+            assert_eq!(plain, none, "no clutter renders as before");
+            let view = render_bottom_with(
+                &rig.color,
+                &m,
+                &s,
+                12,
+                BottomClutter::GlassAndBelly,
+                &mut ChaCha8Rng::seed_from_u64(k),
+            );
+            assert_eq!(view.paws, plain.paws);
+            let r = view.region;
+            for mark in &view.marks {
+                marks += 1;
+                kinds.insert(mark.kind);
+                for p in view.paws.iter().filter(|p| p.x1 > p.x0) {
+                    let apart = mark.x0 > p.x1 || mark.x1 < p.x0 || mark.y0 > p.y1 || mark.y1 < p.y0;
+                    assert!(apart, "{mark:?} on the paw {p:?}");
+                }
+                // The mark is paler than what it lies on (3x3 pixels at its centre).
+                let (cx, cy) = mark.centre();
+                let at = |v: &BottomView| {
+                    let mut sum = 0;
+                    for dy in -1..=1 {
+                        for dx in -1..=1 {
+                            let x = (cx as i64 + dx).clamp(i64::from(r.x0), i64::from(r.x0 + r.width - 1)) as u32;
+                            let y = (cy as i64 + dy).clamp(i64::from(r.y0), i64::from(r.y0 + r.height - 1)) as u32;
+                            let i = ((y - r.y0) * r.width + (x - r.x0)) as usize * 3;
+                            sum += v.rgb[i..i + 3].iter().map(|&c| i32::from(c)).sum::<i32>();
+                        }
+                    }
+                    sum / 9
+                };
+                assert!(
+                    at(&view) >= at(&plain) + 20,
+                    "{mark:?}: {} against {}",
+                    at(&view),
+                    at(&plain)
+                );
+            }
+        }
+        assert!(marks >= 24, "{marks} marks in 24 views");
+        assert_eq!(kinds.len(), 4, "{kinds:?}");
+    }
 }

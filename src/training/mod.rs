@@ -4,6 +4,7 @@
 //! Both start from the same training pixels: each image's mouse pixels (as the segmenter finds
 //! them), a random subset per image, with the image itself kept for the depth features.
 
+pub mod orientation;
 pub mod paws_data;
 pub mod paws_eval;
 

@@ -13,9 +13,16 @@
 //! * Backgrounds: the whole grey view with every paw's box (grown by a pixel) marked as
 //!   excluded; negatives are windows of these that touch no paw (fur, tail, the cage floor),
 //!   drawn by the trainer at every scale the detector runs.
+//! * Hard negatives: windows centred on what real bottom views show that looks like a paw
+//!   and is not one: the snout, the chin, the throat, the belly, the genitals, the tail's base,
+//!   and the glare, glass marks and pale belly fur of views rendered with clutter
+//!   ([`crate::synth::views::BottomClutter`]), each at a random size the detector runs at
+//!   (0.8-1.25 windows), turned and shifted a little; none touching a paw's box.
 
 use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
-use crate::synth::dataset::Dataset;
+use crate::core::geometry::{Camera, Rig};
+use crate::core::skeleton::Joint;
+use crate::synth::dataset::{Dataset, Sample};
 use crate::synth::views::BottomView;
 use crate::vision::paws::CANONICAL_PX_PER_MM;
 use crate::vision::paws::grey::{GreyImage, Greyer};
@@ -76,7 +83,37 @@ pub struct CutParams {
     pub height: usize,
     /// Augmented copies per paw (besides the plain one).
     pub augment: usize,
+    /// Windows cut around each hard negative's place.
+    pub hard_per_place: usize,
     pub seed: u64,
+}
+
+/// Where in the full colour image the hard negatives of a sample lie: its body's landmarks
+/// that look like paws from below, then its view's marks.
+pub fn hard_places(sample: &Sample, camera: &Camera) -> Vec<(f64, f64)> {
+    let j = |joint: Joint| sample.joints[joint.index()];
+    let lerp = |a: Joint, b: Joint, t: f64| {
+        let (a, b) = (j(a), j(b));
+        a + (b - a) * t
+    };
+    let body = [
+        j(Joint::Snout),
+        lerp(Joint::Snout, Joint::Head, 0.5),    // the chin
+        lerp(Joint::Head, Joint::Neck, 0.6),     // the throat
+        j(Joint::MidBack),                       // the belly
+        lerp(Joint::Rump, Joint::TailBase, 0.7), // the genitals
+        j(Joint::TailBase),
+        lerp(Joint::TailBase, Joint::TailTip, 0.15),
+    ];
+    let mut places: Vec<(f64, f64)> = body
+        .iter()
+        .filter_map(|p| camera.project_world(p))
+        .map(|p| (p.x, p.y))
+        .collect();
+    if let Some(view) = &sample.bottom {
+        places.extend(view.marks.iter().map(crate::synth::views::Mark::centre));
+    }
+    places
 }
 
 /// Where a window is cut: centred on `(cx, cy)` of the image, turned by `angle` radians,
@@ -128,8 +165,10 @@ pub fn load(dir: &Path, params: CutParams) -> Result<TrainingSet, PawDataError> 
         height: params.height,
         ..TrainingSet::default()
     };
+    let rig = ds.meta.rig.unwrap_or_else(Rig::default_rig);
     let mut greyer = Greyer::default();
     let mut rng = ChaCha8Rng::seed_from_u64(params.seed ^ 0x9A75_0001);
+    let mut hard_rng = ChaCha8Rng::seed_from_u64(params.seed ^ 0x4A2D_0001);
     let mut buf = Vec::new();
     ds.for_each(|sample| {
         let Some(view) = &sample.bottom else {
@@ -183,6 +222,34 @@ pub fn load(dir: &Path, params: CutParams) -> Result<TrainingSet, PawDataError> 
                     let p = v * gain + offset + n * noise;
                     set.positives.push((p + 0.5).clamp(0.0, 255.0) as u8);
                 }
+            }
+        }
+        for (x, y) in hard_places(&sample, &rig.color) {
+            let (cx, cy) = ((x - rx) / k, (y - ry) / k);
+            for _ in 0..params.hard_per_place {
+                let scale = hard_rng.gen_range(0.8..1.25);
+                let warp = Warp {
+                    cx: cx + hard_rng.gen_range(-1.5..1.5),
+                    cy: cy + hard_rng.gen_range(-1.5..1.5),
+                    angle: hard_rng.gen_range(0.0..std::f64::consts::TAU),
+                    scale,
+                };
+                let half = params.width as f64 * scale / 2.0;
+                let (x0, y0, x1, y1) = (warp.cx - half, warp.cy - half, warp.cx + half, warp.cy + half);
+                let inside = x0 >= 0.0 && y0 >= 0.0 && x1 <= grey.width as f64 && y1 <= grey.height as f64;
+                // The turned window's corners reach out to half its diagonal.
+                let r = half * std::f64::consts::SQRT_2;
+                let touches = excluded.iter().any(|b| {
+                    warp.cx - r < f64::from(b[2])
+                        && warp.cx + r > f64::from(b[0])
+                        && warp.cy - r < f64::from(b[3])
+                        && warp.cy + r > f64::from(b[1])
+                });
+                if !inside || touches {
+                    continue;
+                }
+                warp_window(&grey, warp, params.width, params.height, &mut buf);
+                set.hard.extend(buf.iter().map(|v| (v + 0.5).clamp(0.0, 255.0) as u8));
             }
         }
         set.backgrounds.push(Background { grey, excluded });

@@ -10,9 +10,15 @@
 //!   really there; any other (including a second detection of a matched paw) is false.
 //! * The centre error is the distance, in full-frame pixels, from a true positive's centre
 //!   to its paw box's centre.
+//! * A false detection is counted as on a mark when its centre lies in the box of one of the
+//!   view's marks (glare, glass marks, pale belly fur: `synth dataset --bottom-clutter`),
+//!   else as on the body when it lies within [`LANDMARK_RADIUS_MM`] of one of the body's
+//!   look-alikes of paws (snout, chin, throat, belly, genitals, tail base,
+//!   [`super::paws_data::hard_places`]), else as elsewhere.
 
-use super::paws_data::{DATASET_PX_PER_MM, PawDataError, bottom_frame};
+use super::paws_data::{DATASET_PX_PER_MM, PawDataError, bottom_frame, hard_places};
 use crate::synth::dataset::Dataset;
+use crate::synth::views::Mark;
 use crate::vision::paws::{PawDetection, PawDetector};
 use serde::Serialize;
 use std::path::Path;
@@ -35,6 +41,11 @@ pub struct PawReport {
     pub detections: usize,
     pub true_positives: usize,
     pub false_positives: usize,
+    /// Of the false positives, those on a mark of the view (glare, a glass mark, pale belly fur).
+    pub false_on_marks: usize,
+    /// Of the false positives, those on the body's look-alikes of paws (snout, chin, throat,
+    /// belly, genitals, tail base).
+    pub false_on_body: usize,
     /// Detections of lifted or hidden paws: neither true nor false.
     pub neutral: usize,
     pub precision: f64,
@@ -51,12 +62,52 @@ pub struct PawReport {
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Outcome {
     True(f64),
-    False,
+    False(FalseAt),
     Neutral,
 }
 
+/// Where a false detection lies.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum FalseAt {
+    Mark,
+    Body,
+    Elsewhere,
+}
+
+/// How near (mm on the glass) to a body's look-alike of a paw a false detection is counted
+/// as on it.
+pub const LANDMARK_RADIUS_MM: f64 = 6.0;
+
+/// What one image holds besides its paws: its marks and its body's look-alikes of paws
+/// (full-frame pixels).
+struct LookAlikes<'a> {
+    marks: &'a [Mark],
+    places: Vec<(f64, f64)>,
+}
+
+impl LookAlikes<'_> {
+    fn classify(&self, (x, y): (f64, f64)) -> FalseAt {
+        let on_mark = self.marks.iter().any(|m| {
+            (f64::from(m.x0)..=f64::from(m.x1)).contains(&x) && (f64::from(m.y0)..=f64::from(m.y1)).contains(&y)
+        });
+        let radius = LANDMARK_RADIUS_MM * DATASET_PX_PER_MM;
+        if on_mark {
+            FalseAt::Mark
+        } else if self.places.iter().any(|&(px, py)| (x - px).hypot(y - py) <= radius) {
+            FalseAt::Body
+        } else {
+            FalseAt::Elsewhere
+        }
+    }
+}
+
 /// Matches one image's detections to its paws (see the module's rules).
-fn match_image(dets: &mut [PawDetection], paws: &[crate::synth::views::PawBox; 4], out: &mut Vec<(f32, Outcome)>) {
+fn match_image(
+    dets: &mut [PawDetection],
+    paws: &[crate::synth::views::PawBox; 4],
+    look_alikes: &LookAlikes,
+    out: &mut Vec<(f32, Outcome)>,
+) {
     dets.sort_by(|a, b| b.score.total_cmp(&a.score));
     let mut taken = [false; 4];
     for d in dets.iter() {
@@ -82,7 +133,7 @@ fn match_image(dets: &mut [PawDetection], paws: &[crate::synth::views::PawBox; 4
                     Outcome::Neutral
                 }
             }
-            None => Outcome::False,
+            None => Outcome::False(look_alikes.classify((cx, cy))),
         };
         out.push((d.score, outcome));
     }
@@ -98,6 +149,7 @@ fn ratio(a: usize, b: usize) -> f64 {
 /// When the dataset cannot be read or has no visible paw on the glass.
 pub fn evaluate(detector: &PawDetector, dir: &Path) -> Result<PawReport, PawDataError> {
     let ds = Dataset::open(dir)?;
+    let rig = ds.meta.rig.unwrap_or_else(crate::core::geometry::Rig::default_rig);
     let mut headline = detector.clone();
     let mut all = detector.clone();
     all.set_min_neighbors(0);
@@ -124,19 +176,26 @@ pub fn evaluate(detector: &PawDetector, dir: &Path) -> Result<PawReport, PawData
             d.y0 += ry;
             d.y1 += ry;
         };
+        // Only the body's landmarks: the marks are classified by their boxes.
+        let mut places = hard_places(&sample, &rig.color);
+        places.truncate(places.len() - view.marks.len());
+        let look_alikes = LookAlikes {
+            marks: &view.marks,
+            places,
+        };
         headline.detect(&frame, roi, DATASET_PX_PER_MM, &mut dets);
         dets.iter_mut().for_each(shift);
-        match_image(&mut dets, &view.paws, &mut outcomes);
+        match_image(&mut dets, &view.paws, &look_alikes, &mut outcomes);
         all.detect(&frame, roi, DATASET_PX_PER_MM, &mut dets);
         dets.iter_mut().for_each(shift);
-        match_image(&mut dets, &view.paws, &mut curve_outcomes);
+        match_image(&mut dets, &view.paws, &look_alikes, &mut curve_outcomes);
         Ok(())
     })?;
     if contact == 0 {
         return Err(PawDataError::NoPaws { path: dir.to_owned() });
     }
     let count = |o: &[(f32, Outcome)], min: f32| {
-        let (mut t, mut f, mut n, mut err) = (0, 0, 0, 0.0);
+        let (mut t, mut f, mut n, mut err) = (0, [0usize; 3], 0, 0.0);
         for &(s, outcome) in o {
             if s < min {
                 continue;
@@ -146,13 +205,14 @@ pub fn evaluate(detector: &PawDetector, dir: &Path) -> Result<PawReport, PawData
                     t += 1;
                     err += d;
                 }
-                Outcome::False => f += 1,
+                Outcome::False(at) => f[at as usize] += 1,
                 Outcome::Neutral => n += 1,
             }
         }
         (t, f, n, err)
     };
-    let (tp, fp, neutral, err) = count(&outcomes, f32::NEG_INFINITY);
+    let (tp, fp_at, neutral, err) = count(&outcomes, f32::NEG_INFINITY);
+    let fp = fp_at.iter().sum();
     let precision = ratio(tp, tp + fp);
     let recall = ratio(tp, contact);
     let f1 = if precision + recall > 0.0 {
@@ -171,6 +231,7 @@ pub fn evaluate(detector: &PawDetector, dir: &Path) -> Result<PawReport, PawData
             continue;
         }
         let (ct, cf, _, _) = count(&curve_outcomes, t);
+        let cf: usize = cf.iter().sum();
         curve.push(CurvePoint {
             min_score: f64::from(t),
             precision: ratio(ct, ct + cf),
@@ -184,6 +245,8 @@ pub fn evaluate(detector: &PawDetector, dir: &Path) -> Result<PawReport, PawData
         detections: outcomes.len(),
         true_positives: tp,
         false_positives: fp,
+        false_on_marks: fp_at[FalseAt::Mark as usize],
+        false_on_body: fp_at[FalseAt::Body as usize],
         neutral,
         precision,
         recall,

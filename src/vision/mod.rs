@@ -4,6 +4,7 @@
 //! files they are asked to (models, calibrations).
 
 pub mod behaviour;
+pub mod body_shape;
 pub mod calibrate;
 pub mod forest;
 pub mod fusion;

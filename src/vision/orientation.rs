@@ -4,10 +4,13 @@
 //! votes for the front joints land on both ends and the skeleton folds. So the body stage
 //! estimates the joints twice, once with the head at each end of the body's long axis
 //! ([`Headings`]), and gathers the evidence of the frame for either end: where the forest's
-//! votes for the front and rear joints lie, and which end is higher (the head is carried, the
-//! tail lies low). The [`Tracker`] then chooses between the two hypotheses frame by frame
-//! with a Viterbi recursion over them: a flip from one to the other costs, evidence adds up
-//! over frames, and a mouse that moves fast mostly moves head first. It decides each frame
+//! votes for the front and rear joints lie (the tail's among them, where a tail is seen), and
+//! what a model learnt from rendered mice with their tails hidden says of the body's shape
+//! seen from above ([`crate::vision::body_shape`]). The [`Tracker`] then chooses between the
+//! two hypotheses frame by frame with a Viterbi recursion over them: a flip from one to the
+//! other costs, evidence adds up over frames, a mouse that moves fast mostly moves head first,
+//! and the body's shape counts more when nothing else does (the first frame, a still mouse).
+//! It decides each frame
 //! when it comes (no look-ahead, so the daemon's latency does not grow), and its margin
 //! between the two hypotheses is the frame's orientation confidence.
 
@@ -39,9 +42,9 @@ pub struct Headings {
     /// side of the centre that puts the head toward `+axis`, less the share that puts it
     /// toward `-axis` (-1 to 1).
     pub votes: f64,
-    /// The heights of the body's two ends: `tanh` of how much higher (in 10 mm) the `+axis`
-    /// end is than the `-axis` end (-1 to 1).
-    pub ends: f64,
+    /// The learnt body-shape model's log-odds that the head lies toward `+axis` (0 without a
+    /// model or when the mouse is too small to judge).
+    pub shape: f64,
     /// The main-body joints with the head toward `+axis` (`[0]`) and toward `-axis` (`[1]`).
     pub joints: [BodyJoints; 2],
     /// Tail base to neck of the forest's own estimate (world x, y), when it has both.
@@ -52,7 +55,12 @@ pub struct Headings {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TrackerConfig {
     pub votes_weight: f64,
-    pub ends_weight: f64,
+    /// Weight of the body-shape log-odds, clipped to `±shape_clip`.
+    pub shape_weight: f64,
+    pub shape_clip: f64,
+    /// Weight of the body-shape log-odds on a tracker's first frame and while the mouse is
+    /// still (slower than `min_speed_mm_s`): it starts the tracker and holds it.
+    pub still_shape_weight: f64,
     /// Log-odds added for the head toward the direction of motion, at full speed.
     pub motion_weight: f64,
     /// Speed (mm/s) below which motion says nothing, and at which it counts fully.
@@ -68,7 +76,9 @@ impl Default for TrackerConfig {
     fn default() -> Self {
         Self {
             votes_weight: 4.0,
-            ends_weight: 2.0,
+            shape_weight: 1.0,
+            shape_clip: 6.0,
+            still_shape_weight: 2.0,
             motion_weight: 2.0,
             min_speed_mm_s: 40.0,
             full_speed_mm_s: 150.0,
@@ -79,9 +89,14 @@ impl Default for TrackerConfig {
 }
 
 impl TrackerConfig {
-    /// The log-odds of the head toward `+axis` from the frame alone (votes and ends).
+    /// The log-odds of the head toward `+axis` from the frame alone (votes and shape).
     pub fn frame_evidence(&self, h: &Headings) -> f64 {
-        self.votes_weight * h.votes + self.ends_weight * h.ends
+        self.votes_weight * h.votes + self.shape_weight * self.shape(h)
+    }
+
+    /// The frame's body-shape log-odds, clipped.
+    fn shape(&self, h: &Headings) -> f64 {
+        h.shape.clamp(-self.shape_clip, self.shape_clip)
     }
 }
 
@@ -104,6 +119,8 @@ pub struct Orientation {
     pub confidence: f64,
     pub frame_alone: Option<Vector2<f64>>,
     pub forest: Option<Vector2<f64>>,
+    /// The heading the body-shape model alone chooses, when it said anything.
+    pub shape: Option<Vector2<f64>>,
 }
 
 /// Viterbi over head toward `+axis` / toward `-axis`, decided frame by frame.
@@ -128,6 +145,8 @@ impl Tracker {
     pub fn update(&mut self, time_ns: u64, h: &Headings) -> Decision {
         let c = self.config;
         let mut evidence = c.frame_evidence(h);
+        // The shape's extra weight on a first frame or a still mouse.
+        let still_extra = (c.still_shape_weight - c.shape_weight) * c.shape(h);
         match self.last {
             Some((t, axis, centre)) if time_ns > t && time_ns - t <= c.reset_after_ns => {
                 // The axis's sign is arbitrary: keep each hypothesis on the same end of the
@@ -141,9 +160,14 @@ impl Tracker {
                 if speed > c.min_speed_mm_s {
                     let full = (speed / c.full_speed_mm_s).min(1.0);
                     evidence += c.motion_weight * full * velocity.dot(&h.axis) / speed;
+                } else {
+                    evidence += still_extra;
                 }
             }
-            _ => self.cost = [0.0; 2],
+            _ => {
+                self.cost = [0.0; 2];
+                evidence += still_extra;
+            }
         }
         self.last = Some((time_ns, h.axis, h.centre));
         let [plus, minus] = self.cost;
@@ -188,7 +212,7 @@ mod tests {
             axis,
             centre,
             votes,
-            ends: 0.0,
+            shape: 0.0,
             joints: [[JointEstimate::default(); Joint::MAIN_BODY.len()]; 2],
             forest_heading: None,
         }
@@ -236,6 +260,28 @@ mod tests {
         // After two seconds without a mouse the old costs are forgotten.
         let d = tracker.update(3_000_000_000, &frame(axis, Point2::origin(), 0.1));
         assert_eq!(d.chosen, 0);
+    }
+
+    #[test]
+    fn the_body_shape_starts_the_tracker_and_holds_a_still_mouse_against_the_votes() {
+        let mut tracker = Tracker::new(TrackerConfig::default());
+        let axis = Vector2::new(1.0, 0.0);
+        // The forest's votes firmly on the wrong end (as on real mice unlike our renders), the
+        // body's shape less firmly on the right one: each frame alone goes wrong, the tracker
+        // of a still mouse does not, from its first frame on.
+        let mut h = frame(axis, Point2::origin(), -0.9);
+        h.shape = 2.5;
+        for k in 0..60u64 {
+            let d = tracker.update(k * 33_000_000, &h);
+            assert_eq!((d.chosen, d.frame_alone), (0, 1), "frame {k}");
+        }
+        // Clipped: a wild log-odds counts no more than the clip.
+        h.shape = -1e9;
+        let c = TrackerConfig::default();
+        assert_eq!(
+            c.frame_evidence(&h),
+            c.votes_weight * -0.9 - c.shape_weight * c.shape_clip
+        );
     }
 
     #[test]

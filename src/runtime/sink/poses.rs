@@ -74,6 +74,10 @@ pub struct OrientationCheck {
     pub flipped_tracked: u64,
     pub flipped_frame_alone: u64,
     pub flipped_forest: u64,
+    /// Of the frames where the body-shape model said anything (`shape_frames`), how many its
+    /// choice alone would have swapped.
+    pub shape_frames: u64,
+    pub flipped_shape: u64,
     /// Mean angle (degrees) between the tracked heading and the truth's, over frames not flipped.
     pub heading_error_deg: f64,
 }
@@ -93,6 +97,10 @@ impl OrientationCheck {
         }
         self.flipped_frame_alone += u64::from(flipped(orientation.frame_alone));
         self.flipped_forest += u64::from(flipped(orientation.forest));
+        if orientation.shape.is_some() {
+            self.shape_frames += 1;
+            self.flipped_shape += u64::from(flipped(orientation.shape));
+        }
     }
 }
 
@@ -441,6 +449,7 @@ fn parse_row(record: &csv::StringRecord, orientation: bool) -> Result<PoseRecord
             confidence,
             frame_alone: None,
             forest: None,
+            shape: None,
         }),
     })
 }

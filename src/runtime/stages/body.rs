@@ -1,10 +1,12 @@
-//! The body stage: the body forest on the segmented mouse, joints 1-12 in the world frame.
+//! The body stage: the body forest on the segmented mouse, joints 1-12 in the world frame, and
+//! the evidence of which end is the head (the forest's votes, the learnt body shape).
 
 use super::{PoseRecord, PoseStatus, Posed, Segmented};
 use crate::core::geometry::Camera;
 use crate::core::pose::{JointEstimate, JointSource, Pose};
 use crate::core::skeleton::Joint;
 use crate::runtime::pipeline::{Map, StageError};
+use crate::vision::body_shape::{ShapeModel, aligned};
 use crate::vision::forest::depth::{BODY_JOINTS, DepthImage};
 use crate::vision::forest::infer::{BodyEstimator, JointGuess, Oriented, Pixel, sample_pixels};
 use crate::vision::orientation::{self, BodyJoints, Headings, TrackerConfig};
@@ -20,25 +22,51 @@ pub const PIPELINE_VOTE_BUDGET: usize = 200;
 #[derive(Debug, Clone)]
 pub struct BodyStage {
     estimator: BodyEstimator,
+    orientation: Option<ShapeModel>,
     camera: Camera,
     budget: usize,
     pixels: Vec<Pixel>,
     mask: Vec<bool>,
     crop: Vec<u16>,
+    points: Vec<Point3<f64>>,
 }
 
 impl BodyStage {
     /// A stage for the depth camera `camera` (its intrinsics and pose in the world), running
-    /// at most `budget` mouse pixels per frame through the forest.
-    pub fn new(estimator: BodyEstimator, camera: Camera, budget: usize) -> Self {
+    /// at most `budget` mouse pixels per frame through the forest, with the body-shape model
+    /// `orientation` when there is one.
+    pub fn new(estimator: BodyEstimator, orientation: Option<ShapeModel>, camera: Camera, budget: usize) -> Self {
         Self {
             estimator,
+            orientation,
             camera,
             budget: budget.max(1),
             pixels: Vec::new(),
             mask: Vec::new(),
             crop: Vec::new(),
+            points: Vec::new(),
         }
+    }
+
+    /// The body-shape model's log-odds that the head lies toward `axis` (world x, y), from
+    /// every mouse pixel of `image` in the world frame; 0 without a model or features.
+    fn shape(&mut self, image: &DepthImage, axis: &Vector2<f64>) -> f64 {
+        let Some(model) = &self.orientation else {
+            return 0.0;
+        };
+        let r = image.region;
+        let (intrinsics, world) = (&self.camera.intrinsics, &self.camera.world_from_camera);
+        self.points.clear();
+        self.points.extend(image.on_mouse().map(|(k, d)| {
+            let pixel = Point2::new(
+                f64::from(r.x0) + (k % r.width as usize) as f64,
+                f64::from(r.y0) + (k / r.width as usize) as f64,
+            );
+            world * intrinsics.unproject(&pixel, f64::from(d))
+        }));
+        // The model's axis and the forest's may differ a little: its evidence counts as much
+        // as they agree.
+        aligned(&self.points).map_or(0.0, |a| model.log_odds(&a.features) * a.axis.dot(axis))
     }
 
     /// The world-frame joints and evidence of a frame's [`Oriented`] estimate.
@@ -60,7 +88,7 @@ impl BodyStage {
                 .unwrap_or_else(Vector2::x),
             centre: Point2::new(centre.x, centre.y),
             votes: f64::from(oriented.votes),
-            ends: f64::from(oriented.ends),
+            shape: 0.0,
             joints: oriented.ahead.each_ref().map(to_world),
             forest_heading: orientation::heading(&to_world(&oriented.raw)),
         }
@@ -110,7 +138,8 @@ impl Map for BodyStage {
                 let oriented = self
                     .estimator
                     .estimate_oriented(&image, &self.pixels, &self.camera.intrinsics, &up);
-                let headings = self.headings(&oriented);
+                let mut headings = self.headings(&oriented);
+                headings.shape = self.shape(&image, &headings.axis);
                 let alone = TrackerConfig::default().frame_evidence(&headings) < 0.0;
                 for (joint, estimate) in Joint::MAIN_BODY.iter().zip(headings.joints[usize::from(alone)]) {
                     *record.pose.joint_mut(*joint) = estimate;

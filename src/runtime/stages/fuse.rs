@@ -48,6 +48,9 @@ impl Map for FuseStage {
                 confidence: decision.confidence,
                 frame_alone: orientation::heading(&headings.joints[decision.frame_alone]),
                 forest: headings.forest_heading,
+                shape: (headings.shape != 0.0)
+                    .then(|| orientation::heading(&headings.joints[usize::from(headings.shape < 0.0)]))
+                    .flatten(),
             });
         }
         // Depth-only pairs keep joints 1-12 (the paper's single depth image mode).

@@ -423,7 +423,6 @@ impl BodyEstimator {
             axis,
             centre,
             votes: 0.0,
-            ends: ends_evidence(&self.points, up, &centre, &axis),
         };
         let (mut agree, mut weight) = (0.0f32, 0.0f32);
         for (j, joint) in Joint::MAIN_BODY.iter().enumerate() {
@@ -548,9 +547,6 @@ pub struct Oriented {
     /// The front and rear joints' votes: share of weight on the side that puts the head toward
     /// `+axis` less the share on the other (-1 to 1).
     pub votes: f32,
-    /// How much higher the `+axis` end of the body is than the other: `tanh` of the
-    /// difference in 10 mm (-1 to 1).
-    pub ends: f32,
 }
 
 /// The centre of `points` and their long axis seen along `up`: the main direction of the
@@ -577,35 +573,6 @@ fn long_axis(points: &[Vector3<f32>], up: &Vector3<f32>) -> (Vector3<f32>, Vecto
         up.cross(&Vector3::x()).try_normalize(1e-6).unwrap_or_else(Vector3::y)
     };
     (centre, axis)
-}
-
-/// The share of the body's length at each end whose height is compared in [`ends_evidence`].
-const END_SHARE: f32 = 0.2;
-
-/// How much higher the `+axis` end of `points` is than the `-axis` end (the mean height of
-/// the points in the outer [`END_SHARE`] of the length at each end), as `tanh` of the
-/// difference in 10 mm: the tail lies low, the head is carried.
-fn ends_evidence(points: &[Vector3<f32>], up: &Vector3<f32>, centre: &Vector3<f32>, axis: &Vector3<f32>) -> f32 {
-    let along = |p: &Vector3<f32>| (p - centre).dot(axis);
-    let (lo, hi) = points
-        .iter()
-        .map(along)
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), s| (lo.min(s), hi.max(s)));
-    if hi <= lo {
-        return 0.0;
-    }
-    let cut = END_SHARE * (hi - lo);
-    let mean_height = |near_end: &dyn Fn(f32) -> bool| {
-        let (sum, n) = points
-            .iter()
-            .filter(|p| near_end(along(p)))
-            .fold((0.0f32, 0u32), |(sum, n), p| (sum + p.dot(up), n + 1));
-        (n > 0).then(|| sum / n as f32)
-    };
-    match (mean_height(&|s| s >= hi - cut), mean_height(&|s| s <= lo + cut)) {
-        (Some(plus), Some(minus)) => ((plus - minus) / 10.0).tanh(),
-        _ => 0.0,
-    }
 }
 
 /// Where the tail base and the tail tip sit among the main-body joints.

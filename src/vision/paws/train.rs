@@ -1,7 +1,9 @@
 //! Training of the attentional cascade: stage after stage of boosted stumps
 //! ([`super::boost`]), each trained on the positives the cascade so far still accepts and on
-//! negatives bootstrapped from background images: windows that touch no paw and that the
-//! cascade so far still (wrongly) accepts. Training stops after the requested number of
+//! negatives the cascade so far still (wrongly) accepts: first hard negatives (windows cut
+//! on things known to look like paws: the snout, the chin, the tail base, the genitals,
+//! glare and marks on the glass, pale belly fur), up to a share of the stage's negatives,
+//! then windows bootstrapped from background images that touch no paw. Training stops after the requested number of
 //! stages, or early when the backgrounds no longer yield enough such windows (the cascade
 //! then rejects almost everything that is not a paw) and says so.
 //!
@@ -37,12 +39,20 @@ pub struct TrainingSet {
     pub backgrounds: Vec<Background>,
     /// Paws on the glass and visible that the positives were cut around.
     pub paws: usize,
+    /// Hard negative windows (each `width * height` bytes, concatenated): cut on things that
+    /// look like paws and are not.
+    pub hard: Vec<u8>,
 }
 
 impl TrainingSet {
     /// The number of positive windows.
     pub fn positive_count(&self) -> usize {
         self.positives.len() / (self.width * self.height).max(1)
+    }
+
+    /// The number of hard negative windows.
+    pub fn hard_count(&self) -> usize {
+        self.hard.len() / (self.width * self.height).max(1)
     }
 }
 
@@ -59,6 +69,8 @@ pub struct TrainParams {
     pub negatives: usize,
     /// Negatives taken from one background image per stage (at most).
     pub per_image: usize,
+    /// The share of a stage's negatives that hard negatives may take (at most).
+    pub hard_share: f64,
     pub seed: u64,
 }
 
@@ -72,6 +84,7 @@ impl Default for TrainParams {
             positives: 3000,
             negatives: 3000,
             per_image: 4,
+            hard_share: 0.5,
             seed: 0,
         }
     }
@@ -83,6 +96,8 @@ pub struct StageReport {
     pub stage: usize,
     pub positives: usize,
     pub negatives: usize,
+    /// Of the negatives, hard ones.
+    pub hard_negatives: usize,
     pub weak: usize,
     pub hit_rate: f64,
     pub false_alarm: f64,
@@ -174,6 +189,18 @@ pub fn train(
     }
     let mut image_order: Vec<usize> = (0..set.backgrounds.len()).collect();
     image_order.shuffle(&mut rng);
+    // The hard negatives, shuffled once (no draw when there are none).
+    let mut hard_order: Vec<usize> = (0..set.hard_count()).collect();
+    hard_order.shuffle(&mut rng);
+    let mut hard_pool = Windows::new(w, h);
+    for &k in &hard_order {
+        ii.compute(&set.hard[k * w * h..(k + 1) * w * h], w, h);
+        let (factor, ok) = window_norm(&ii, 0, 0, w, h);
+        if ok {
+            hard_pool.push(&ii, factor);
+        }
+    }
+    let hard_limit = (params.negatives as f64 * params.hard_share.clamp(0.0, 1.0)) as usize;
     let mut cascade = Cascade {
         width: w as u32,
         height: h as u32,
@@ -191,29 +218,15 @@ pub fn train(
     let mut stop = StopReason::Done;
     for stage_index in 0..params.stages {
         // Positives the cascade still accepts.
-        let mut pos = Windows::new(w, h);
-        let corners = pool.corners();
-        for i in 0..pool.len() {
-            if pos.len() >= params.positives {
-                break;
-            }
-            let sums = &pool.sums[i * corners..(i + 1) * corners];
-            ii.stride = w + 1;
-            ii.rows = h + 1;
-            ii.sum.clear();
-            ii.sum.extend_from_slice(sums);
-            ii.sqsum.clear();
-            ii.sqsum.resize(corners, 0);
-            if accepts_stages(&cascade, &ii, pool.factors[i]) {
-                pos.push(&ii, pool.factors[i]);
-            }
-        }
+        let pos = still_accepted(&cascade, &pool, params.positives, &mut ii);
         if pos.len() < 10 {
             stop = StopReason::NoPositives { found: pos.len() };
             break;
         }
-        // Negatives the cascade still accepts.
-        let (neg, scanned, accepted) = bootstrap(&cascade, &set.backgrounds, &image_order, params, stage_index);
+        // Negatives the cascade still accepts: hard ones first, then the backgrounds'.
+        let mut neg = still_accepted(&cascade, &hard_pool, hard_limit, &mut ii);
+        let hard_negatives = neg.len();
+        let (scanned, accepted) = bootstrap(&cascade, &set.backgrounds, &image_order, params, stage_index, &mut neg);
         if neg.len() < (params.negatives / 20).max(10) {
             stop = StopReason::NoNegatives {
                 found: neg.len(),
@@ -251,6 +264,7 @@ pub fn train(
             stage: stage_index,
             positives: npos,
             negatives: neg.len(),
+            hard_negatives,
             weak: boosted.stumps.len(),
             hit_rate: boosted.hit_rate,
             false_alarm: boosted.false_alarm,
@@ -298,6 +312,28 @@ fn raw_value(f: &super::haar::HaarFeature, sums: &[i32], stride: usize) -> f32 {
     acc
 }
 
+/// The first `limit` windows of `pool` that every stage of `cascade` accepts.
+fn still_accepted(cascade: &Cascade, pool: &Windows, limit: usize, ii: &mut Integral) -> Windows {
+    let mut out = Windows::new(pool.width, pool.height);
+    let corners = pool.corners();
+    for i in 0..pool.len() {
+        if out.len() >= limit {
+            break;
+        }
+        let sums = &pool.sums[i * corners..(i + 1) * corners];
+        ii.stride = pool.width + 1;
+        ii.rows = pool.height + 1;
+        ii.sum.clear();
+        ii.sum.extend_from_slice(sums);
+        ii.sqsum.clear();
+        ii.sqsum.resize(corners, 0);
+        if accepts_stages(cascade, ii, pool.factors[i]) {
+            out.push(ii, pool.factors[i]);
+        }
+    }
+    out
+}
+
 /// Whether every stage trained so far accepts a window with known normalisation.
 fn accepts_stages(c: &Cascade, ii: &Integral, factor: f32) -> bool {
     for stage in &c.stages {
@@ -318,18 +354,22 @@ fn accepts_stages(c: &Cascade, ii: &Integral, factor: f32) -> bool {
     true
 }
 
-/// Windows of the backgrounds, at the detector's scales, that touch no excluded box and that
-/// `cascade` accepts: at most `per_image` from one image, images visited in `order`.
+/// Adds to `out`, until it holds `params.negatives`, windows of the backgrounds, at the
+/// detector's scales, that touch no excluded box and that `cascade` accepts: at most
+/// `per_image` from one image, images visited in `order`. Returns the windows scanned and
+/// accepted.
 fn bootstrap(
     cascade: &Cascade,
     backgrounds: &[Background],
     order: &[usize],
     params: &TrainParams,
     stage: usize,
-) -> (Windows, u64, u64) {
-    let (w, h) = (cascade.width as usize, cascade.height as usize);
-    let mut out = Windows::new(w, h);
+    out: &mut Windows,
+) -> (u64, u64) {
     let (mut scanned, mut accepted) = (0u64, 0u64);
+    if out.len() >= params.negatives {
+        return (scanned, accepted);
+    }
     let batch = 64;
     for chunk in order.chunks(batch) {
         let found: Vec<(Vec<Integral>, Vec<f32>, u64, u64)> = chunk
@@ -349,7 +389,7 @@ fn bootstrap(
             break;
         }
     }
-    (out, scanned, accepted)
+    (scanned, accepted)
 }
 
 fn negatives_of(
@@ -488,5 +528,102 @@ mod tests {
         // The same seed gives the same cascade.
         let again = train(&set, &params, &mut |_| {}).unwrap();
         assert_eq!(again.cascade, trained.cascade);
+    }
+
+    /// Bright squares look enough like the blobs that a cascade trained on the plain
+    /// backgrounds takes them; given as hard negatives, it learns to reject them and keeps
+    /// the blobs.
+    #[test]
+    fn hard_negatives_teach_the_cascade_what_is_not_a_paw() {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let (w, h) = (8usize, 8usize);
+        let blob = |x: f64, y: f64, cx: f64, cy: f64| 200.0 * (-((x - cx).powi(2) + (y - cy).powi(2)) / 4.0).exp();
+        // A hard-edged bright square: a glint on the glass rather than a soft paw.
+        let square = |x: f64, y: f64, cx: f64, cy: f64| {
+            if (x - cx).abs() < 2.0 && (y - cy).abs() < 2.0 {
+                200.0
+            } else {
+                0.0
+            }
+        };
+        let windows = |rng: &mut ChaCha8Rng, n: usize, squares: bool| {
+            let mut out = Vec::new();
+            for _ in 0..n {
+                let (cx, cy) = (rng.gen_range(3.0..5.0), rng.gen_range(3.0..5.0));
+                for y in 0..h {
+                    for x in 0..w {
+                        let v = if squares {
+                            square(x as f64, y as f64, cx, cy)
+                        } else {
+                            blob(x as f64, y as f64, cx, cy)
+                        };
+                        out.push((40.0 + v + rng.gen_range(-5.0..5.0)) as u8);
+                    }
+                }
+            }
+            out
+        };
+        let positives = windows(&mut rng, 300, false);
+        let hard = windows(&mut rng, 300, true);
+        let test_blobs = windows(&mut rng, 200, false);
+        let test_squares = windows(&mut rng, 200, true);
+        let mut backgrounds = Vec::new();
+        for _ in 0..20 {
+            let (gw, gh) = (40, 30);
+            let stripe = rng.gen_range(0..gw);
+            let data = (0..gw * gh)
+                .map(|i| (30.0 + if i % gw >= stripe { 60.0 } else { 0.0 } + rng.gen_range(-8.0..8.0)) as u8)
+                .collect();
+            backgrounds.push(Background {
+                grey: GreyImage {
+                    width: gw,
+                    height: gh,
+                    data,
+                },
+                excluded: Vec::new(),
+            });
+        }
+        let params = TrainParams {
+            stages: 4,
+            positives: 300,
+            negatives: 300,
+            per_image: 30,
+            max_weak: 10,
+            seed: 1,
+            ..TrainParams::default()
+        };
+        let accepted = |c: &Cascade, windows: &[u8]| {
+            let mut ii = Integral::default();
+            windows
+                .chunks_exact(w * h)
+                .filter(|win| {
+                    ii.compute(win, w, h);
+                    matches!(c.classify(&ii, 0, 0), Verdict::Accepted { .. })
+                })
+                .count()
+        };
+        let plain = TrainingSet {
+            width: w,
+            height: h,
+            positives: positives.clone(),
+            backgrounds: backgrounds.clone(),
+            ..TrainingSet::default()
+        };
+        let without = train(&plain, &params, &mut |_| {}).unwrap();
+        let with_hard = TrainingSet { hard, ..plain };
+        let mut used = 0;
+        let with = train(&with_hard, &params, &mut |r| used += r.hard_negatives).unwrap();
+        assert!(used > 0);
+        let without = accepted(&without.cascade, &test_squares);
+        let with_hard = accepted(&with.cascade, &test_squares);
+        assert!(
+            without >= 100,
+            "without hard negatives {without} of 200 squares accepted"
+        );
+        assert!(
+            with_hard <= 10,
+            "with hard negatives {with_hard} of 200 squares accepted"
+        );
+        assert!(accepted(&with.cascade, &test_blobs) >= 180, "blobs lost");
     }
 }
