@@ -342,9 +342,9 @@ impl MoseqDepth {
     /// # Errors
     /// An index past the end, or the file cannot be read there.
     pub fn frame_at(&self, index: usize) -> Result<DepthFrame, CaptureError> {
-        let Some(ts) = self.timestamps.get(index) else {
+        if index >= self.timestamps.len() {
             return Err(self.error(self.count_mismatch(index as u64)));
-        };
+        }
         let samples = self.frame_samples();
         let data = match self.kind {
             MoseqKind::Raw => read_raw_frame(&self.depth_path, samples, index as u64),
@@ -356,7 +356,13 @@ impl MoseqDepth {
             }
         }
         .map_err(|e| self.error(e))?;
-        Ok(DepthFrame {
+        Ok(self.frame(index, data))
+    }
+
+    /// Frame `index` with its stamp from the time file, holding `data`.
+    fn frame(&self, index: usize, data: Vec<u16>) -> DepthFrame {
+        let ts = &self.timestamps[index];
+        DepthFrame {
             stamp: Stamp {
                 seq: index as u64,
                 device_ns: ts.device_ns,
@@ -365,7 +371,7 @@ impl MoseqDepth {
             width: self.width,
             height: self.height,
             data,
-        })
+        }
     }
 
     /// Frames `indices` (in increasing order), each as [`Self::frame_at`] reads it. Of a
@@ -403,17 +409,7 @@ impl MoseqDepth {
             if wanted.next_if_eq(&&index).is_none() {
                 continue;
             }
-            let ts = &self.timestamps[index];
-            out.push(DepthFrame {
-                stamp: Stamp {
-                    seq: index as u64,
-                    device_ns: ts.device_ns,
-                    host_ns: ts.system_ns.unwrap_or(ts.device_ns),
-                },
-                width: self.width,
-                height: self.height,
-                data,
-            });
+            out.push(self.frame(index, data));
         }
         Ok(out)
     }
