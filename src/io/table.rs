@@ -30,14 +30,20 @@ impl<const DECIMALS: usize> Serialize for Fixed<DECIMALS> {
     }
 }
 
-/// The CSV line of one row (a struct, tuple or sequence of fields), with its `\n`.
+/// The bytes a row is first written into: a session's `timestamps.csv` row fits.
+const LINE_BUFFER: usize = 128;
+
+/// The CSV line of one row (a struct, tuple or sequence of fields), with its `\n`. Called
+/// for every frame a session records, so the writer's own buffer is kept small (a longer row
+/// goes through it in pieces) instead of the crate's 8 KiB.
 ///
 /// # Errors
 /// A field is not a scalar (a nested struct or sequence).
 pub fn line(row: &impl Serialize) -> Result<Vec<u8>, csv::Error> {
     let mut writer = csv::WriterBuilder::new()
         .has_headers(false)
-        .from_writer(Vec::with_capacity(64));
+        .buffer_capacity(LINE_BUFFER)
+        .from_writer(Vec::with_capacity(LINE_BUFFER));
     writer.serialize(row)?;
     writer.into_inner().map_err(|e| csv::Error::from(e.into_error()))
 }
