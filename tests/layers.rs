@@ -333,6 +333,7 @@ const EXTERNAL: &[(&str, &[&str])] = &[
     ("rayon", ALL),
     ("zstd", ALL),
     ("png", ALL),
+    ("image", ALL),
     ("crc32fast", ALL),
     ("roxmltree", ALL),
     ("safe_arch", ALL),

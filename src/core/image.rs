@@ -21,7 +21,7 @@ impl std::fmt::Debug for RgbImage {
     }
 }
 
-/// Errors writing an image.
+/// Errors reading or writing an image.
 #[derive(Debug, thiserror::Error)]
 pub enum ImageError {
     #[error("cannot create {path:?}")]
@@ -35,6 +35,12 @@ pub enum ImageError {
         path: std::path::PathBuf,
         #[source]
         source: png::EncodingError,
+    },
+    #[error("{path:?} is not a picture that can be read (PNG, JPEG, BMP or TIFF)")]
+    Unreadable {
+        path: std::path::PathBuf,
+        #[source]
+        source: image::ImageError,
     },
 }
 
@@ -150,6 +156,38 @@ impl RgbImage {
             x0 += img.width + gap;
         }
         out
+    }
+
+    /// Reads a picture file (PNG, JPEG, BMP or TIFF, any channel count or depth) as 8-bit RGB.
+    ///
+    /// # Errors
+    /// When the file cannot be read or is not a picture of those formats.
+    pub fn read(path: &Path) -> Result<Self, ImageError> {
+        let unreadable = |source| ImageError::Unreadable {
+            path: path.to_owned(),
+            source,
+        };
+        let picture = image::ImageReader::open(path)
+            .map_err(|e| unreadable(image::ImageError::IoError(e)))?
+            .with_guessed_format()
+            .map_err(|e| unreadable(image::ImageError::IoError(e)))?
+            .decode()
+            .map_err(unreadable)?
+            .into_rgb8();
+        Ok(Self {
+            width: picture.width(),
+            height: picture.height(),
+            data: picture.into_raw(),
+        })
+    }
+
+    /// The image in 8-bit grey, with OpenCV's weights and rounding (`COLOR_RGB2GRAY`:
+    /// 0.299 R + 0.587 G + 0.114 B), so a grey picture stays as it is.
+    pub fn grey(&self) -> Vec<u8> {
+        self.data
+            .chunks_exact(3)
+            .map(|p| ((u32::from(p[0]) * 4899 + u32::from(p[1]) * 9617 + u32::from(p[2]) * 1868 + 8192) >> 14) as u8)
+            .collect()
     }
 
     /// Writes the image as a PNG file.

@@ -9,8 +9,6 @@ use crate::io::output::Staging;
 use crate::runtime::models::{PAWS_MODEL, default_models_dir};
 use crate::vision::paws::{PawDetection, PawDetector};
 use anyhow::Context as _;
-use opencv::core::{Mat, MatTraitConst, MatTraitConstManual};
-use opencv::imgcodecs;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -53,26 +51,16 @@ pub struct Detections {
 
 /// Reads an image file as an RGB colour frame.
 fn read_image(path: &Path) -> anyhow::Result<ColorFrame> {
-    let unreadable = || format!("{path:?} is not an image OpenCV can read");
     if !path.is_file() {
         anyhow::bail!("{path:?} does not exist or is not a file");
     }
-    let bgr: Mat = imgcodecs::imread(path, imgcodecs::IMREAD_COLOR).with_context(unreadable)?;
-    if bgr.empty() {
-        anyhow::bail!(unreadable());
-    }
-    let (width, height) = (
-        u32::try_from(bgr.cols()).with_context(unreadable)?,
-        u32::try_from(bgr.rows()).with_context(unreadable)?,
-    );
-    let bytes = bgr.data_bytes().with_context(unreadable)?;
-    let data: Vec<u8> = bytes.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect();
+    let picture = RgbImage::read(path)?;
     Ok(ColorFrame {
         stamp: Stamp::default(),
-        width,
-        height,
+        width: picture.width,
+        height: picture.height,
         format: PixelFormat::Rgb8,
-        data,
+        data: picture.data,
     })
 }
 

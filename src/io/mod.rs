@@ -12,6 +12,17 @@ pub mod video;
 use std::io::{self, Read as _};
 use std::path::Path;
 
+/// Little-endian 16-bit samples (depth) from their bytes; an odd last byte is left out. A
+/// plain loop over a buffer of the right size, which the compiler turns into vector code (an
+/// iterator collected runs a sample at a time: 5 % of a MoSeq replay).
+pub fn u16_samples(bytes: &[u8]) -> Vec<u16> {
+    let mut samples = vec![0u16; bytes.len() / 2];
+    for (v, b) in samples.iter_mut().zip(bytes.chunks_exact(2)) {
+        *v = u16::from_le_bytes([b[0], b[1]]);
+    }
+    samples
+}
+
 /// The bytes of a regular file of at most `max` bytes: a device (`/dev/zero`), a FIFO or a
 /// directory is refused before anything is read (opening a FIFO waits for a writer, a device
 /// never ends), and a larger file after `max` bytes. Every reader of a file a user names goes

@@ -343,11 +343,7 @@ pub fn decode_sample(payload: &[u8]) -> Result<Sample, String> {
         *p = Point3::new(f64::from(c.f32()?), f64::from(c.f32()?), f64::from(c.f32()?));
     }
     let region = c.region()?;
-    let depth = c
-        .take(region.len() * 2)?
-        .chunks_exact(2)
-        .map(|b| u16::from_le_bytes([b[0], b[1]]))
-        .collect();
+    let depth = crate::io::u16_samples(c.take(region.len() * 2)?);
     let label = c.take(region.len())?.to_vec();
     let top = TopView { region, depth, label };
     let bottom = if has_bottom {

@@ -9,10 +9,11 @@
 //! squares beyond the corner corners are dark, light, light, dark in a way a half turn swaps,
 //! which is what fixes the board's orientation in an image.
 
+use crate::core::image::RgbImage;
 use nalgebra::{Point2, Point3};
 use opencv::core::{self, Mat, Point2f, Size, TermCriteria, Vector};
 use opencv::prelude::*;
-use opencv::{calib3d, imgcodecs, imgproc};
+use opencv::{calib3d, imgproc};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -302,20 +303,14 @@ fn mean_around(grey: &Mat, centre: Point2<f64>, radius: f64) -> Option<f64> {
     (n > 0).then(|| sum / f64::from(n))
 }
 
-/// Reads an image file as 8-bit grey (any format OpenCV reads).
+/// Reads an image file as 8-bit grey ([`RgbImage::read`]'s formats).
 ///
 /// # Errors
 /// [`BoardError::Unreadable`] when the file cannot be read or decoded.
 pub fn read_grey(path: &Path) -> Result<Mat, BoardError> {
-    if !path.is_file() {
-        return Err(BoardError::Unreadable(path.to_owned()));
-    }
-    let m =
-        imgcodecs::imread(path, imgcodecs::IMREAD_GRAYSCALE).map_err(|_| BoardError::Unreadable(path.to_owned()))?;
-    if m.empty() {
-        return Err(BoardError::Unreadable(path.to_owned()));
-    }
-    Ok(m)
+    let unreadable = || BoardError::Unreadable(path.to_owned());
+    let picture = RgbImage::read(path).map_err(|_| unreadable())?;
+    grey_mat(picture.width, picture.height, &picture.grey()).map_err(|_| unreadable())
 }
 
 /// An 8-bit grey `Mat` from row-major pixels.

@@ -9,12 +9,13 @@
 use super::board::{Board, Side, read_grey};
 use super::{CalibrationError, CameraCalibration, RigCalibration};
 use crate::core::geometry::Intrinsics;
+use crate::core::image::RgbImage;
 use crate::io::session::CameraRole;
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
 use opencv::calib3d;
 use opencv::core::{self, Mat, Point2f, Point3f, Scalar, TermCriteria, Vector};
+use opencv::imgproc;
 use opencv::prelude::*;
-use opencv::{imgcodecs, imgproc};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -281,9 +282,13 @@ fn axes_png(
         )
         .map_err(cv_err("draw the axes"))?;
     }
-    let mut buf: Vector<u8> = Vector::new();
-    imgcodecs::imencode(".png", &bgr, &mut buf, &Vector::new()).map_err(cv_err("encode a PNG"))?;
-    Ok(buf.to_vec())
+    let bytes = bgr.data_bytes().map_err(cv_err("encode a PNG"))?;
+    let picture = RgbImage {
+        width: u32::try_from(bgr.cols()).unwrap_or(0),
+        height: u32::try_from(bgr.rows()).unwrap_or(0),
+        data: bytes.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect(),
+    };
+    picture.to_png().map_err(CalibrationError::Png)
 }
 
 /// Poses both cameras against one board lying on the glass and returns the rig calibration.

@@ -101,6 +101,8 @@ pub enum CalibrationError {
     Intrinsics(#[from] intrinsics::IntrinsicsError),
     #[error(transparent)]
     Extrinsics(#[from] extrinsics::ExtrinsicsError),
+    #[error("cannot encode the picture of the board's axes as PNG")]
+    Png(#[source] png::EncodingError),
     #[error("OpenCV failed to {what}")]
     Solve {
         what: String,

@@ -15,7 +15,7 @@
 //! Buffers live in the estimator and are reused, so estimating a frame allocates nothing once
 //! the first frame has sized them.
 
-use super::depth::{BODY_JOINTS, DepthFeature, DepthImage, JointLeaf, JointVote};
+use super::depth::{BODY_JOINTS, DepthFeature, DepthImage, JointLeaf, SparseLeaves};
 use super::simd::{self, Kernel, PixelLanes};
 use super::{BadTree, Forest, PackedTree, Traversal, Tree, model};
 use crate::core::geometry::Intrinsics;
@@ -110,45 +110,6 @@ struct RunTrees {
     trees: Vec<(PackedTree<DepthFeature>, SparseLeaves)>,
 }
 
-/// A tree's leaves' votes: leaf `l`'s are `votes[start[l]..start[l + 1]]`, for the joints
-/// `joints[start[l]..start[l + 1]]` (ascending).
-#[derive(Debug, Default)]
-struct SparseLeaves {
-    start: Vec<u32>,
-    joints: Vec<u8>,
-    votes: Vec<JointVote>,
-}
-
-impl SparseLeaves {
-    fn new(leaves: &[JointLeaf]) -> Self {
-        let count = leaves.iter().flatten().filter(|v| v.weight > 0.0).count();
-        let mut out = Self {
-            start: Vec::with_capacity(leaves.len() + 1),
-            joints: Vec::with_capacity(count),
-            votes: Vec::with_capacity(count),
-        };
-        out.start.push(0);
-        for leaf in leaves {
-            for (j, v) in leaf.iter().enumerate().filter(|(_, v)| v.weight > 0.0) {
-                out.joints.push(j as u8);
-                out.votes.push(*v);
-            }
-            out.start.push(out.votes.len() as u32);
-        }
-        out
-    }
-
-    /// The votes of leaf `leaf` with their joints.
-    #[inline]
-    fn leaf(&self, leaf: u32) -> impl Iterator<Item = (usize, &JointVote)> {
-        let range = self.start[leaf as usize] as usize..self.start[leaf as usize + 1] as usize;
-        self.joints[range.clone()]
-            .iter()
-            .map(|&j| usize::from(j))
-            .zip(&self.votes[range])
-    }
-}
-
 impl RunTrees {
     /// Converts `forest` tree by tree, each tree's training form dropped once converted.
     fn new(forest: Forest<DepthFeature, JointLeaf>) -> Result<Self, BadTree> {
@@ -161,7 +122,7 @@ impl RunTrees {
     }
 
     fn tree(tree: &Tree<DepthFeature, JointLeaf>) -> Result<(PackedTree<DepthFeature>, SparseLeaves), BadTree> {
-        Ok((tree.packed()?, SparseLeaves::new(&tree.leaves)))
+        Ok((tree.packed()?, SparseLeaves::from_leaves(&tree.leaves)))
     }
 }
 
@@ -219,7 +180,7 @@ impl BodyEstimator {
     /// # Errors
     /// As [`model::load`].
     pub fn load(path: &std::path::Path, settings: VoteSettings) -> Result<Self, model::ModelError> {
-        let (_, trees) = model::load_body_trees(path, |tree| RunTrees::tree(&tree))?;
+        let (_, trees) = model::load_body_trees(path, |tree, leaves| Ok::<_, BadTree>((tree.packed()?, leaves)))?;
         // The reader checks every tree as `packed` does, so this error is not expected.
         let trees = trees
             .into_iter()

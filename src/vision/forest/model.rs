@@ -20,7 +20,7 @@
 //! the kind, the checksum, every length against what is left, and every child and leaf index
 //! against the arrays, so a tree loaded is one that can be walked.
 
-use super::depth::{BODY_JOINTS, DepthFeature, JointLeaf, JointVote};
+use super::depth::{BODY_JOINTS, DepthFeature, JointLeaf, JointVote, SparseLeaves};
 use super::{Forest, Node, Tree};
 use crate::core::skeleton::PART_COUNT;
 use serde::{Deserialize, Serialize};
@@ -606,6 +606,13 @@ pub fn decode(bytes: &[u8], path: &Path, expected: Option<ModelKind>) -> Result<
 /// A body forest's leaf: the mask of the joints it votes for, then each vote.
 fn body_leaf(r: &mut impl Source, version: u32) -> Result<JointLeaf, String> {
     let mut leaf = [JointVote::default(); BODY_JOINTS];
+    body_votes(r, version, |j, v| leaf[j] = v)?;
+    Ok(leaf)
+}
+
+/// Reads a body forest's leaf and hands each of its votes to `vote` with its joint, in joint
+/// order, each checked.
+fn body_votes(r: &mut impl Source, version: u32, mut vote: impl FnMut(usize, JointVote)) -> Result<(), String> {
     let m = r.take(2, "leaf")?;
     let mask = u16::from_le_bytes([m[0], m[1]]);
     if mask >> BODY_JOINTS != 0 {
@@ -614,9 +621,9 @@ fn body_leaf(r: &mut impl Source, version: u32) -> Result<JointLeaf, String> {
     // The leaf's votes at once: 20 bytes each in version 1, 10 in version 2.
     let size = if version == 1 { 20 } else { 10 };
     let bytes = r.take(size * mask.count_ones() as usize, "leaf")?;
-    let voted = leaf.iter_mut().enumerate().filter(|(j, _)| mask & (1 << j) != 0);
-    for ((j, v), b) in voted.zip(bytes.chunks_exact(size)) {
-        *v = if version == 1 {
+    let voted = (0..BODY_JOINTS).filter(|j| mask & (1 << j) != 0);
+    for (j, b) in voted.zip(bytes.chunks_exact(size)) {
+        let v = if version == 1 {
             let f = |k: usize| f32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]);
             JointVote {
                 offset: [f(0), f(4), f(8)],
@@ -635,20 +642,22 @@ fn body_leaf(r: &mut impl Source, version: u32) -> Result<JointLeaf, String> {
         if !(v.offset.iter().all(|c| c.is_finite()) && v.weight > 0.0 && v.weight <= 1.0 && v.spread >= 0.0) {
             return Err(format!("a leaf's vote for joint {} is not valid", j + 1));
         }
+        vote(j, v);
     }
-    Ok(leaf)
+    Ok(())
 }
 
 /// Loads a body forest file as [`load`] does, checking the same, but hands each tree to
-/// `convert` as soon as it is read and never holds the decompressed section (44 MB for the
-/// bundled forest) nor every tree in the training form: the run-time form is built tree by
-/// tree (see `BodyEstimator::load`).
+/// `convert` as soon as it is read, its nodes with its leaves' votes as run time reads them,
+/// and never holds the decompressed section (44 MB for the bundled forest) nor any leaf in
+/// the training form (240 bytes each, for 80 in the file): the run-time form is built tree
+/// by tree, straight from the bytes (see `BodyEstimator::load`).
 ///
 /// # Errors
 /// As [`load`]; a file of another kind is [`ModelError::WrongKind`].
 pub fn load_body_trees<T>(
     path: &Path,
-    convert: impl FnMut(Tree<DepthFeature, JointLeaf>) -> T,
+    mut convert: impl FnMut(Tree<DepthFeature, ()>, SparseLeaves) -> T,
 ) -> Result<(ModelInfo, Vec<T>), ModelError> {
     use std::io::{Read as _, Seek as _};
     let io = |source| ModelError::Io {
@@ -711,7 +720,17 @@ pub fn load_body_trees<T>(
         // A description longer than the bytes kept: read as a whole, as `load` does.
         Err(ModelError::Corrupt { .. }) if head.len() < body_len => {
             return match load(path, Some(ModelKind::Body))? {
-                Model::Body(info, forest) => Ok((info, forest.trees.into_iter().map(convert).collect())),
+                Model::Body(info, forest) => {
+                    let trees = forest.trees.into_iter().map(|tree| {
+                        let leaves = SparseLeaves::from_leaves(&tree.leaves);
+                        let nodes = Tree {
+                            nodes: tree.nodes,
+                            leaves: vec![(); tree.leaves.len()],
+                        };
+                        convert(nodes, leaves)
+                    });
+                    Ok((info, trees.collect()))
+                }
                 Model::Parts(..) => Err(corrupt("it changed while it was read".to_owned())),
             };
         }
@@ -726,12 +745,17 @@ pub fn load_body_trees<T>(
     let unreadable = |e: std::io::Error| corrupt(format!("its trees do not decompress: {e}"));
     let mut inner = zstd::stream::read::Decoder::new(file.take(len as u64)).map_err(unreadable)?;
     // Decompressed on a thread of its own while this one decodes what it has already: the two
-    // halves of the load overlap. Chunks of 256 KiB, at most 4 ahead.
+    // halves of the load overlap. Chunks of 256 KiB, at most 4 ahead; each chunk read goes
+    // back to be filled again, so the section is not written into fresh pages (the page faults
+    // of a new chunk each time cost as much as the decompression).
+    const CHUNK: usize = 1 << 18;
     let (tx, rx) = std::sync::mpsc::sync_channel::<std::io::Result<Vec<u8>>>(4);
+    let (back, spare) = std::sync::mpsc::channel::<Vec<u8>>();
     std::thread::scope(|scope| {
         scope.spawn(move || {
             loop {
-                let mut chunk = vec![0u8; 1 << 18];
+                let mut chunk = spare.try_recv().unwrap_or_default();
+                chunk.resize(CHUNK, 0);
                 let mut filled = 0;
                 let result = loop {
                     match inner.read(&mut chunk[filled..]) {
@@ -762,21 +786,30 @@ pub fn load_body_trees<T>(
         let mut r = Stream::new(
             Chunks {
                 rx,
+                back,
                 chunk: Vec::new(),
                 pos: 0,
             },
             limit,
         );
-        let trees = decode_trees(&mut r, 2, |r| body_leaf(r, version), convert).map_err(corrupt);
+        // Each leaf's votes go straight into the tree's run-time form, taken as the tree ends.
+        let leaves = std::cell::RefCell::new(SparseLeaves::default());
+        let leaf = |r: &mut Stream<Chunks>| {
+            body_votes(r, version, |j, v| leaves.borrow_mut().push(j, v))?;
+            leaves.borrow_mut().end_leaf();
+            Ok(())
+        };
+        let trees = decode_trees(&mut r, 2, leaf, |tree| convert(tree, leaves.take())).map_err(corrupt);
         // Dropping the receiver ends the decompressing thread at its next chunk.
         drop(r);
         Ok((info, trees?))
     })
 }
 
-/// The decompressed chunks another thread sends, read in order.
+/// The decompressed chunks another thread sends, read in order, each sent back once read.
 struct Chunks {
     rx: std::sync::mpsc::Receiver<std::io::Result<Vec<u8>>>,
+    back: std::sync::mpsc::Sender<Vec<u8>>,
     chunk: Vec<u8>,
     pos: usize,
 }
@@ -786,7 +819,9 @@ impl std::io::Read for Chunks {
         while self.pos == self.chunk.len() {
             match self.rx.recv() {
                 Ok(chunk) => {
-                    self.chunk = chunk?;
+                    let read = std::mem::replace(&mut self.chunk, chunk?);
+                    // The decompressing thread may have ended: the chunk is then dropped.
+                    let _ = self.back.send(read);
                     self.pos = 0;
                 }
                 // The sender is done: the end of the section.
@@ -834,7 +869,16 @@ mod tests {
         e.finish().unwrap_or_default()
     }
 
-    type Trees = Result<Vec<Tree<DepthFeature, JointLeaf>>, String>;
+    type Trees = Result<Vec<(Tree<DepthFeature, ()>, SparseLeaves)>, String>;
+
+    /// A tree in the form [`load_body_trees`] gives it.
+    fn run_form(tree: &Tree<DepthFeature, JointLeaf>) -> (Tree<DepthFeature, ()>, SparseLeaves) {
+        let nodes = Tree {
+            nodes: tree.nodes.clone(),
+            leaves: vec![(); tree.leaves.len()],
+        };
+        (nodes, SparseLeaves::from_leaves(&tree.leaves))
+    }
     type Compress = fn(&[u8]) -> Vec<u8>;
 
     /// Both readings of a file: in memory ([`load`]) and streamed ([`load_body_trees`]).
@@ -847,8 +891,10 @@ mod tests {
             Ok(Model::Parts(..)) => Err("parts".to_owned()),
             Err(e) => Err(e.to_string()),
         };
-        let streamed = load_body_trees(&path, |t| t).map(|(_, t)| t).map_err(|e| e.to_string());
-        (loaded, streamed)
+        let streamed = load_body_trees(&path, |t, l| (t, l))
+            .map(|(_, t)| t)
+            .map_err(|e| e.to_string());
+        (loaded.map(|trees| trees.iter().map(run_form).collect()), streamed)
     }
 
     /// A tree section: `trees` trees of three nodes (a split and two leaves) with two leaves
@@ -885,8 +931,9 @@ mod tests {
         let Ok(Model::Body(_, forest)) = load(&bundled(), Some(ModelKind::Body)) else {
             panic!("the bundled body forest loads")
         };
-        let (_, streamed) = load_body_trees(&bundled(), |t| t).unwrap_or_else(|e| panic!("{e}"));
-        assert!(streamed == forest.trees, "the streamed trees differ");
+        let (_, streamed) = load_body_trees(&bundled(), |t, l| (t, l)).unwrap_or_else(|e| panic!("{e}"));
+        let loaded: Vec<_> = forest.trees.iter().map(run_form).collect();
+        assert!(streamed == loaded, "the streamed trees differ");
     }
 
     #[test]

@@ -253,17 +253,16 @@ pub fn decode_depth(payload: &[u8]) -> Result<DepthFrame> {
         });
     }
     let row = usize::from(header.width);
-    let mut data = vec![0u16; pixels.len() / 2];
-    if header.codec == Codec::DeltaZstd && row > 0 {
+    let data = if header.codec == Codec::DeltaZstd && row > 0 {
+        let mut data = vec![0u16; pixels.len() / 2];
         // The filter is undone in the same pass: a running sum that restarts at each row.
         for (line, bytes) in data.chunks_exact_mut(row).zip(pixels.chunks_exact(2 * row)) {
             undo_sample_delta(bytes, line);
         }
+        data
     } else {
-        for (v, b) in data.iter_mut().zip(pixels.chunks_exact(2)) {
-            *v = u16::from_le_bytes([b[0], b[1]]);
-        }
-    }
+        crate::io::u16_samples(&pixels)
+    };
     Ok(DepthFrame {
         stamp: header.stamp,
         width: header.width.into(),

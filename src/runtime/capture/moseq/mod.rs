@@ -505,10 +505,7 @@ impl FrameSource for MoseqDepth {
                 bytes.resize(samples * 2, 0);
                 let read = read_full(file, bytes);
                 match read {
-                    Ok(n) if n == bytes.len() => bytes
-                        .chunks_exact(2)
-                        .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                        .collect(),
+                    Ok(n) if n == bytes.len() => crate::io::u16_samples(bytes),
                     Ok(_) => return Err(self.error(self.count_mismatch(index as u64))),
                     Err(source) => {
                         return Err(self.error(MoseqError::Io {

@@ -111,10 +111,7 @@ pub(super) fn read_raw_frame(path: &Path, samples: usize, index: u64) -> Result<
         .map_err(io_error)?;
     let mut bytes = vec![0u8; samples * 2];
     file.read_exact(&mut bytes).map_err(io_error)?;
-    Ok(bytes
-        .chunks_exact(2)
-        .map(|b| u16::from_le_bytes([b[0], b[1]]))
-        .collect())
+    Ok(crate::io::u16_samples(&bytes))
 }
 
 /// Decodes one frame of `depth.avi` at `seconds` from its start (ffmpeg seeks to it).
@@ -158,11 +155,7 @@ pub(super) fn read_video_frame(
             ),
         });
     }
-    Ok(output
-        .stdout
-        .chunks_exact(2)
-        .map(|b| u16::from_le_bytes([b[0], b[1]]))
-        .collect())
+    Ok(crate::io::u16_samples(&output.stdout))
 }
 
 /// What frames are read from while the source runs.
@@ -242,10 +235,7 @@ fn decode_frames(
     loop {
         match read_full(&mut stdout, &mut bytes) {
             Ok(n) if n == bytes.len() => {
-                let frame = bytes
-                    .chunks_exact(2)
-                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                    .collect();
+                let frame = crate::io::u16_samples(&bytes);
                 if sender.send(Ok(frame)).is_err() {
                     return;
                 }
