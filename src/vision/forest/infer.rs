@@ -15,7 +15,7 @@
 //! Buffers live in the estimator and are reused, so estimating a frame allocates nothing once
 //! the first frame has sized them.
 
-use super::depth::{BODY_JOINTS, DepthFeature, DepthImage, JointLeaf, SparseLeaves};
+use super::depth::{BODY_JOINTS, DepthFeature, DepthImage, JointLeaf, Located, SparseLeaves};
 use super::simd::{self, Kernel, PixelLanes};
 use super::{BadTree, Forest, PackedTree, Traversal, Tree, model};
 use crate::core::geometry::Intrinsics;
@@ -95,6 +95,8 @@ pub struct BodyEstimator {
     doubtful: Vec<VoteCloud>,
     /// Each pixel's 3D point (camera frame).
     points: Vec<Vector3<f32>>,
+    /// Each pixel's leaf in the tree being read ([`SparseLeaves::locate`]).
+    located: Vec<Located>,
     router: Router,
     tail_end: TailEnd,
     /// The mouse's surface points (camera frame) of the frame being judged ([`Self::judge_placement`]).
@@ -205,6 +207,7 @@ impl BodyEstimator {
             confident: vec![VoteCloud::default(); BODY_JOINTS],
             doubtful: vec![VoteCloud::default(); BODY_JOINTS],
             points: Vec::new(),
+            located: Vec::new(),
             router,
             tail_end: TailEnd::default(),
             surface: Vec::new(),
@@ -269,10 +272,16 @@ impl BodyEstimator {
             max_spread * r * r
         });
         let (points, confident, doubtful) = (&self.points, &mut self.confident, &mut self.doubtful);
+        let located = &mut self.located;
         self.router.route(&self.trees, image, pixels, |tree, leaves| {
-            for (p, &leaf) in points.iter().zip(leaves) {
+            // Each pixel's leaf lies anywhere in megabytes of leaves, and waiting for each in
+            // turn was a third of this stage: they are all looked up first, loads that do
+            // not wait for one another, and then read from the cache.
+            located.clear();
+            located.extend(leaves.iter().map(|&leaf| tree.locate(leaf)));
+            for (p, &at) in points.iter().zip(located.iter()) {
                 // Only the votes with a weight are kept, in joint order.
-                for (j, v) in tree.leaf(leaf) {
+                for (j, v) in tree.votes(at) {
                     let cloud = if v.spread <= bounds[j] {
                         &mut confident[j]
                     } else {

@@ -184,31 +184,47 @@ fn encode_trees<L>(forest: &Forest<DepthFeature, L>, mut leaf: impl FnMut(&mut V
     out
 }
 
+/// Bytes of a vote in a leaf of a version 2 file.
+pub(super) const VOTE_BYTES: usize = 10;
+
+/// A body leaf as a version 2 file stores it, appended to `out`: a bit mask of the joints the
+/// leaf votes for (those with a weight), then their votes in joint order, each 3 offsets, its
+/// weight and its spread ([`vote_from_bytes`] reads one).
+pub(super) fn leaf_record(leaf: &JointLeaf, out: &mut Vec<u8>) {
+    let mask = leaf
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.weight > 0.0)
+        .fold(0u16, |m, (j, _)| m | (1 << j));
+    out.extend_from_slice(&mask.to_le_bytes());
+    for v in leaf.iter().filter(|v| v.weight > 0.0) {
+        for c in v.offset {
+            out.extend_from_slice(&quantise_i16(c, OFFSET_UNIT_MM).to_le_bytes());
+        }
+        out.extend_from_slice(&quantise_u16(v.weight, 1.0 / 65535.0, 1).to_le_bytes());
+        out.extend_from_slice(&quantise_u16(v.spread, SPREAD_UNIT_MM2, 0).to_le_bytes());
+    }
+}
+
+/// A vote of a version 2 leaf from its [`VOTE_BYTES`] bytes.
+#[inline]
+pub(super) fn vote_from_bytes(b: &[u8]) -> JointVote {
+    let i = |k: usize| i16::from_le_bytes([b[k], b[k + 1]]);
+    let u = |k: usize| u16::from_le_bytes([b[k], b[k + 1]]);
+    JointVote {
+        offset: [0, 2, 4].map(|k| f32::from(i(k)) * OFFSET_UNIT_MM),
+        weight: f32::from(u(6)) / 65535.0,
+        spread: f32::from(u(8)) * SPREAD_UNIT_MM2,
+    }
+}
+
 /// Encodes a model file.
 ///
 /// # Errors
 /// When the description cannot be serialised or compression fails.
 pub fn encode(model: &Model) -> Result<Vec<u8>, String> {
     let (info, trees) = match model {
-        Model::Body(info, f) => (
-            info,
-            encode_trees(f, |out, leaf: &JointLeaf| {
-                // Sparse: a bit mask of the joints the leaf votes for, then their votes.
-                let mask = leaf
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, v)| v.weight > 0.0)
-                    .fold(0u16, |m, (j, _)| m | (1 << j));
-                out.extend_from_slice(&mask.to_le_bytes());
-                for v in leaf.iter().filter(|v| v.weight > 0.0) {
-                    for c in v.offset {
-                        out.extend_from_slice(&quantise_i16(c, OFFSET_UNIT_MM).to_le_bytes());
-                    }
-                    out.extend_from_slice(&quantise_u16(v.weight, 1.0 / 65535.0, 1).to_le_bytes());
-                    out.extend_from_slice(&quantise_u16(v.spread, SPREAD_UNIT_MM2, 0).to_le_bytes());
-                }
-            }),
-        ),
+        Model::Body(info, f) => (info, encode_trees(f, |out, leaf: &JointLeaf| leaf_record(leaf, out))),
         Model::Parts(info, f) => (
             info,
             encode_trees(f, |out, leaf: &Vec<f32>| {
@@ -612,17 +628,33 @@ fn body_leaf(r: &mut impl Source, version: u32) -> Result<JointLeaf, String> {
 
 /// Reads a body forest's leaf and hands each of its votes to `vote` with its joint, in joint
 /// order, each checked.
-fn body_votes(r: &mut impl Source, version: u32, mut vote: impl FnMut(usize, JointVote)) -> Result<(), String> {
+fn body_votes(r: &mut impl Source, version: u32, vote: impl FnMut(usize, JointVote)) -> Result<(), String> {
+    let mask = leaf_mask(r)?;
+    let bytes = r.take(vote_bytes(version) * mask.count_ones() as usize, "leaf")?;
+    check_votes(mask, bytes, version, vote)
+}
+
+/// The bytes of a vote in a file of `version`: 20 in version 1 (five `f32`), [`VOTE_BYTES`]
+/// in version 2.
+fn vote_bytes(version: u32) -> usize {
+    if version == 1 { 20 } else { VOTE_BYTES }
+}
+
+/// A body leaf's mask of the joints it votes for, checked.
+fn leaf_mask(r: &mut impl Source) -> Result<u16, String> {
     let m = r.take(2, "leaf")?;
     let mask = u16::from_le_bytes([m[0], m[1]]);
     if mask >> BODY_JOINTS != 0 {
         return Err(format!("a leaf votes for joints that do not exist (mask {mask:#06x})"));
     }
-    // The leaf's votes at once: 20 bytes each in version 1, 10 in version 2.
-    let size = if version == 1 { 20 } else { 10 };
-    let bytes = r.take(size * mask.count_ones() as usize, "leaf")?;
+    Ok(mask)
+}
+
+/// The votes of a leaf with `mask` from their bytes in a file of `version`, each checked and
+/// handed to `vote` with its joint.
+fn check_votes(mask: u16, bytes: &[u8], version: u32, mut vote: impl FnMut(usize, JointVote)) -> Result<(), String> {
     let voted = (0..BODY_JOINTS).filter(|j| mask & (1 << j) != 0);
-    for (j, b) in voted.zip(bytes.chunks_exact(size)) {
+    for (j, b) in voted.zip(bytes.chunks_exact(vote_bytes(version))) {
         let v = if version == 1 {
             let f = |k: usize| f32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]);
             JointVote {
@@ -631,19 +663,28 @@ fn body_votes(r: &mut impl Source, version: u32, mut vote: impl FnMut(usize, Joi
                 spread: f(16),
             }
         } else {
-            let i = |k: usize| i16::from_le_bytes([b[k], b[k + 1]]);
-            let u = |k: usize| u16::from_le_bytes([b[k], b[k + 1]]);
-            JointVote {
-                offset: [0, 2, 4].map(|k| f32::from(i(k)) * OFFSET_UNIT_MM),
-                weight: f32::from(u(6)) / 65535.0,
-                spread: f32::from(u(8)) * SPREAD_UNIT_MM2,
-            }
+            vote_from_bytes(b)
         };
         if !(v.offset.iter().all(|c| c.is_finite()) && v.weight > 0.0 && v.weight <= 1.0 && v.spread >= 0.0) {
             return Err(format!("a leaf's vote for joint {} is not valid", j + 1));
         }
         vote(j, v);
     }
+    Ok(())
+}
+
+/// Reads a body forest's leaf, checked as [`body_votes`] does, onto `out` in the form a
+/// version 2 file stores it ([`leaf_record`]): a version 2 leaf's bytes as they are, a version
+/// 1 leaf's votes quantised.
+fn body_leaf_record(r: &mut impl Source, version: u32, out: &mut SparseLeaves) -> Result<(), String> {
+    if version == 1 {
+        out.push_leaf(&body_leaf(r, version)?);
+        return Ok(());
+    }
+    let mask = leaf_mask(r)?;
+    let bytes = r.take(VOTE_BYTES * mask.count_ones() as usize, "leaf")?;
+    check_votes(mask, bytes, version, |_, _| {})?;
+    out.push_record(mask, bytes);
     Ok(())
 }
 
@@ -792,13 +833,9 @@ pub fn load_body_trees<T>(
             },
             limit,
         );
-        // Each leaf's votes go straight into the tree's run-time form, taken as the tree ends.
+        // Each leaf goes straight into the tree's run-time form, taken as the tree ends.
         let leaves = std::cell::RefCell::new(SparseLeaves::default());
-        let leaf = |r: &mut Stream<Chunks>| {
-            body_votes(r, version, |j, v| leaves.borrow_mut().push(j, v))?;
-            leaves.borrow_mut().end_leaf();
-            Ok(())
-        };
+        let leaf = |r: &mut Stream<Chunks>| body_leaf_record(r, version, &mut leaves.borrow_mut());
         let trees = decode_trees(&mut r, 2, leaf, |tree| convert(tree, leaves.take())).map_err(corrupt);
         // Dropping the receiver ends the decompressing thread at its next chunk.
         drop(r);
