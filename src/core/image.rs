@@ -1,5 +1,5 @@
 //! Small RGB images for previews, overlays and reports: PNG output, a depth colour map,
-//! lines, boxes and discs, side-by-side panels. Skeletons and text are drawn by
+//! lines, boxes and discs, side-by-side panels; pictures read. Skeletons and text are drawn by
 //! [`crate::core::draw`].
 
 use super::geometry::Intrinsics;
@@ -334,5 +334,45 @@ impl Region {
     /// Whether the pixel `(x, y)` of the full image lies in the region.
     pub fn contains(&self, x: u32, y: u32) -> bool {
         x >= self.x0 && y >= self.y0 && x < self.x0 + self.width && y < self.y0 + self.height
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_picture_written_reads_back_and_a_grey_one_stays_grey() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.path().join("picture.png");
+        let mut picture = RgbImage::new(5, 3, [0, 0, 0]);
+        for (i, p) in picture.data.chunks_exact_mut(3).enumerate() {
+            let v = (i * 17) as u8;
+            p.copy_from_slice(&[v, v, v]);
+        }
+        picture.write_png(&path).unwrap_or_else(|e| panic!("{e}"));
+        let read = RgbImage::read(&path).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(read, picture);
+        let grey: Vec<u8> = picture.data.iter().step_by(3).copied().collect();
+        assert_eq!(read.grey(), grey);
+        // OpenCV's weights: pure red, green and blue.
+        let rgb = RgbImage {
+            width: 3,
+            height: 1,
+            data: vec![255, 0, 0, 0, 255, 0, 0, 0, 255],
+        };
+        assert_eq!(rgb.grey(), vec![76, 150, 29]);
+    }
+
+    #[test]
+    fn a_file_that_is_no_picture_is_named_in_one_sentence() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.path().join("notes.png");
+        std::fs::write(&path, "not a picture").unwrap_or_else(|e| panic!("{e}"));
+        let message = RgbImage::read(&path).err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(
+            message.contains("notes.png") && message.contains("is not a picture"),
+            "{message}"
+        );
     }
 }
