@@ -24,7 +24,6 @@ use crate::vision::orientation;
 use nalgebra::{Point2, Point3, Vector3};
 use std::collections::VecDeque;
 use std::sync::Arc;
-use wide::f32x8;
 
 /// A mouse pixel to run through the forest: full-image position and depth (mm).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -316,7 +315,7 @@ impl BodyEstimator {
         let h2 = self.settings.bandwidth_mm * self.settings.bandwidth_mm;
         let mut at = start;
         for _ in 0..self.settings.iterations {
-            let (acc, w) = votes.kernel_sums(&at, h2);
+            let (acc, w) = votes.kernel_sums(self.router.kernel, &at, h2);
             if w <= 1e-12 {
                 break;
             }
@@ -327,7 +326,7 @@ impl BodyEstimator {
                 break;
             }
         }
-        (at, votes.kernel_sums(&at, h2).1)
+        (at, votes.kernel_sums(self.router.kernel, &at, h2).1)
     }
 
     /// The modes mean-shift finds from the mean of a joint's votes and from its three
@@ -675,35 +674,15 @@ impl VoteCloud {
 
     /// The mean-shift sums at `at`: the kernel-weighted sum of the votes and the sum of the
     /// kernel weights (the density there). The hot loop of vote aggregation, so it runs
-    /// [`Self::LANES`] votes per vector instruction, in that many interleaved partial sums (a
-    /// fixed order, so the result is reproducible).
-    fn kernel_sums(&self, at: &Vector3<f32>, h2: f32) -> (Vector3<f32>, f32) {
+    /// [`Self::LANES`] votes per vector instruction ([`simd::kernel_lanes`], in AVX where the
+    /// processor has it), in that many interleaved partial sums (a fixed order, so the result
+    /// is reproducible, and the same with either kernel).
+    fn kernel_sums(&self, code: Kernel, at: &Vector3<f32>, h2: f32) -> (Vector3<f32>, f32) {
         const L: usize = VoteCloud::LANES;
         let scale = kernel_scale(h2);
         let n = self.w.len() / L * L;
-        let lanes = |s: &[f32]| {
-            let mut a = [0.0f32; L];
-            a.copy_from_slice(s);
-            f32x8::new(a)
-        };
-        let (ax, ay, az) = (f32x8::splat(at.x), f32x8::splat(at.y), f32x8::splat(at.z));
-        let (one, zero, scale8) = (f32x8::splat(1.0), f32x8::splat(0.0), f32x8::splat(scale));
-        let (mut sx, mut sy, mut sz, mut sw) = (zero, zero, zero, zero);
-        let chunks = self.x[..n]
-            .chunks_exact(L)
-            .zip(self.y[..n].chunks_exact(L))
-            .zip(self.z[..n].chunks_exact(L).zip(self.w[..n].chunks_exact(L)));
-        for ((x, y), (z, w)) in chunks {
-            let (x, y, z, w) = (lanes(x), lanes(y), lanes(z), lanes(w));
-            let (dx, dy, dz) = (x - ax, y - ay, z - az);
-            // `kernel`, eight at a time.
-            let t = (one - (dx * dx + dy * dy + dz * dz) * scale8).fast_max(zero);
-            let k = w * t * t;
-            sx += k * x;
-            sy += k * y;
-            sz += k * z;
-            sw += k;
-        }
+        let votes = [&self.x[..], &self.y, &self.z, &self.w];
+        let [sx, sy, sz, sw] = simd::kernel_lanes(code, votes, [at.x, at.y, at.z], scale);
         let (mut x, mut y, mut z, mut w) = (sx.reduce_add(), sy.reduce_add(), sz.reduce_add(), sw.reduce_add());
         for i in n..self.w.len() {
             let (dx, dy, dz) = (self.x[i] - at.x, self.y[i] - at.y, self.z[i] - at.z);
