@@ -179,14 +179,12 @@ fn rate(n: u64, f: impl FnOnce()) -> f64 {
     n as f64 / t.elapsed().as_secs_f64().max(1e-9)
 }
 
-/// Runs the benchmarks; `quick` takes a few seconds instead of about a minute.
-pub fn run(quick: bool) -> BenchReport {
-    let rig = Rig::default_rig();
-    let library = pose_library();
-    let n: u64 = if quick { 400 } else { 6000 };
-    let spec = DatasetSpec {
-        count: n,
-        seed: 0xBE7C,
+/// `count` standard mice seen from above only, structured-light noise without Gaussian noise:
+/// what every benchmark here renders.
+fn clean_top_views(count: u64, seed: u64) -> DatasetSpec {
+    DatasetSpec {
+        count,
+        seed,
         noise: DepthNoise {
             model: NoiseModel::StructuredLight,
             gaussian_mm: 0.0,
@@ -194,7 +192,15 @@ pub fn run(quick: bool) -> BenchReport {
         bottom_views: false,
         bottom_clutter: false,
         mice: crate::synth::Mice::Standard,
-    };
+    }
+}
+
+/// Runs the benchmarks; `quick` takes a few seconds instead of about a minute.
+pub fn run(quick: bool) -> BenchReport {
+    let rig = Rig::default_rig();
+    let library = pose_library();
+    let n: u64 = if quick { 400 } else { 6000 };
+    let spec = clean_top_views(n, 0xBE7C);
     // Warm up caches and the thread pool.
     (0..32)
         .into_par_iter()
@@ -251,17 +257,7 @@ fn bench_training(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick:
     use crate::vision::forest::depth::{DepthSpace, JointObjective};
     use crate::vision::forest::discriminative::ErrorScope;
     let images = if quick { 100 } else { 600 };
-    let spec = DatasetSpec {
-        count: images,
-        seed: 0x7EA1,
-        noise: DepthNoise {
-            model: NoiseModel::StructuredLight,
-            gaussian_mm: 0.0,
-        },
-        bottom_views: false,
-        bottom_clutter: false,
-        mice: crate::synth::Mice::Standard,
-    };
+    let spec = clean_top_views(images, 0x7EA1);
     let samples: Vec<_> = (0..images)
         .into_par_iter()
         .map(|i| render_sample(rig, &spec, library, i))
@@ -390,17 +386,7 @@ fn bench_forest(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: b
     let Ok(Model::Body(_, forest)) = load(&path, Some(ModelKind::Body)) else {
         return None;
     };
-    let spec = DatasetSpec {
-        count: 50,
-        seed: 0xB0D1,
-        noise: DepthNoise {
-            model: NoiseModel::StructuredLight,
-            gaussian_mm: 0.0,
-        },
-        bottom_views: false,
-        bottom_clutter: false,
-        mice: crate::synth::Mice::Standard,
-    };
+    let spec = clean_top_views(50, 0xB0D1);
     let frames: Vec<_> = (0..50)
         .map(|i| {
             let s = render_sample(rig, &spec, library, i);

@@ -245,24 +245,8 @@ impl SparseLeaves {
         self.start.push(self.records.len() as u32);
     }
 
-    /// How many leaves there are.
-    pub fn len(&self) -> usize {
-        self.start.len() - 1
-    }
-
-    /// Whether there is no leaf.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    /// The votes of leaf `leaf` with their joints, in joint order.
-    #[inline]
-    pub fn leaf(&self, leaf: u32) -> LeafVotes<'_> {
-        self.votes(self.locate(leaf))
-    }
-
-    /// Where leaf `leaf`'s votes lie, and which joints they are for: the first half of
-    /// [`Self::leaf`], which reads the leaf's first bytes.
+    /// Where leaf `leaf`'s votes lie, and which joints they are for (this reads the leaf's
+    /// first bytes); [`Self::votes`] then reads the votes.
     #[inline]
     pub fn locate(&self, leaf: u32) -> Located {
         // Every record starts with its two bytes of mask.

@@ -622,16 +622,10 @@ pub fn decode(bytes: &[u8], path: &Path, expected: Option<ModelKind>) -> Result<
 /// A body forest's leaf: the mask of the joints it votes for, then each vote.
 fn body_leaf(r: &mut impl Source, version: u32) -> Result<JointLeaf, String> {
     let mut leaf = [JointVote::default(); BODY_JOINTS];
-    body_votes(r, version, |j, v| leaf[j] = v)?;
-    Ok(leaf)
-}
-
-/// Reads a body forest's leaf and hands each of its votes to `vote` with its joint, in joint
-/// order, each checked.
-fn body_votes(r: &mut impl Source, version: u32, vote: impl FnMut(usize, JointVote)) -> Result<(), String> {
     let mask = leaf_mask(r)?;
     let bytes = r.take(vote_bytes(version) * mask.count_ones() as usize, "leaf")?;
-    check_votes(mask, bytes, version, vote)
+    check_votes(mask, bytes, version, |j, v| leaf[j] = v)?;
+    Ok(leaf)
 }
 
 /// The bytes of a vote in a file of `version`: 20 in version 1 (five `f32`), [`VOTE_BYTES`]
@@ -673,7 +667,7 @@ fn check_votes(mask: u16, bytes: &[u8], version: u32, mut vote: impl FnMut(usize
     Ok(())
 }
 
-/// Reads a body forest's leaf, checked as [`body_votes`] does, onto `out` in the form a
+/// Reads a body forest's leaf, checked as [`body_leaf`] does, onto `out` in the form a
 /// version 2 file stores it ([`leaf_record`]): a version 2 leaf's bytes as they are, a version
 /// 1 leaf's votes quantised.
 fn body_leaf_record(r: &mut impl Source, version: u32, out: &mut SparseLeaves) -> Result<(), String> {
@@ -762,14 +756,7 @@ pub fn load_body_trees<T>(
         Err(ModelError::Corrupt { .. }) if head.len() < body_len => {
             return match load(path, Some(ModelKind::Body))? {
                 Model::Body(info, forest) => {
-                    let trees = forest.trees.into_iter().map(|tree| {
-                        let leaves = SparseLeaves::from_leaves(&tree.leaves);
-                        let nodes = Tree {
-                            nodes: tree.nodes,
-                            leaves: vec![(); tree.leaves.len()],
-                        };
-                        convert(nodes, leaves)
-                    });
+                    let trees = forest.trees.into_iter().map(run_form).map(|(t, l)| convert(t, l));
                     Ok((info, trees.collect()))
                 }
                 Model::Parts(..) => Err(corrupt("it changed while it was read".to_owned())),
@@ -843,6 +830,17 @@ pub fn load_body_trees<T>(
     })
 }
 
+/// A body tree of the training form in the form [`load_body_trees`] hands on: its nodes, and
+/// its leaves as run time reads them.
+fn run_form(tree: Tree<DepthFeature, JointLeaf>) -> (Tree<DepthFeature, ()>, SparseLeaves) {
+    let leaves = SparseLeaves::from_leaves(&tree.leaves);
+    let nodes = Tree {
+        nodes: tree.nodes,
+        leaves: vec![(); tree.leaves.len()],
+    };
+    (nodes, leaves)
+}
+
 /// The decompressed chunks another thread sends, read in order, each sent back once read.
 struct Chunks {
     rx: std::sync::mpsc::Receiver<std::io::Result<Vec<u8>>>,
@@ -907,15 +905,6 @@ mod tests {
     }
 
     type Trees = Result<Vec<(Tree<DepthFeature, ()>, SparseLeaves)>, String>;
-
-    /// A tree in the form [`load_body_trees`] gives it.
-    fn run_form(tree: &Tree<DepthFeature, JointLeaf>) -> (Tree<DepthFeature, ()>, SparseLeaves) {
-        let nodes = Tree {
-            nodes: tree.nodes.clone(),
-            leaves: vec![(); tree.leaves.len()],
-        };
-        (nodes, SparseLeaves::from_leaves(&tree.leaves))
-    }
     type Compress = fn(&[u8]) -> Vec<u8>;
 
     /// Both readings of a file: in memory ([`load`]) and streamed ([`load_body_trees`]).
@@ -931,7 +920,7 @@ mod tests {
         let streamed = load_body_trees(&path, |t, l| (t, l))
             .map(|(_, t)| t)
             .map_err(|e| e.to_string());
-        (loaded.map(|trees| trees.iter().map(run_form).collect()), streamed)
+        (loaded.map(|trees| trees.into_iter().map(run_form).collect()), streamed)
     }
 
     /// A tree section: `trees` trees of three nodes (a split and two leaves) with two leaves
@@ -969,7 +958,7 @@ mod tests {
             panic!("the bundled body forest loads")
         };
         let (_, streamed) = load_body_trees(&bundled(), |t, l| (t, l)).unwrap_or_else(|e| panic!("{e}"));
-        let loaded: Vec<_> = forest.trees.iter().map(run_form).collect();
+        let loaded: Vec<_> = forest.trees.into_iter().map(run_form).collect();
         assert!(streamed == loaded, "the streamed trees differ");
     }
 
