@@ -716,8 +716,9 @@ fn a_hidden_tail_teaches_no_tail_tip() {
 /// Issue 27, item 4: a mouse whose tail the camera does not see gets no tail tip guessed off
 /// its body. Each mouse is segmented, then its pixels behind the tail base (the tail) are
 /// taken out, as a depth camera that loses the 3-5 mm tail shows it; the tail tip of either
-/// orientation is then either not reported or within 19 mm of a pixel of the mouse. With the
-/// tail in view, the tip is still reported.
+/// orientation is then never more than 19 mm off the mouse, and mostly not reported at all
+/// (the mask where the votes put it is the body's rim, not a thin tail). With the tail in
+/// view, the tip is still reported.
 #[test]
 fn a_tail_not_seen_gets_no_tail_tip_off_the_mouse() {
     use mousepose::core::geometry::Rig;
@@ -752,6 +753,7 @@ fn a_tail_not_seen_gets_no_tail_tip_off_the_mouse() {
     let up = (camera_from_world.rotation * Vector3::z()).cast::<f32>();
     let tip = Joint::MAIN_BODY.iter().position(|j| *j == Joint::TailTip).unwrap();
     let (mut hidden_off, mut hidden_frames, mut seen_reported, mut seen_frames) = (0, 0, 0, 0);
+    let mut hidden_reported = 0;
     let mut pixels = Vec::new();
     for i in 0..spec.count {
         let s = render_sample(&rig, &spec, &library, i);
@@ -796,15 +798,20 @@ fn a_tail_not_seen_gets_no_tail_tip_off_the_mouse() {
                     hidden_frames += 1;
                     let off = reported.is_some_and(|p| surface.iter().all(|q| (q - p).norm() > 19.0));
                     hidden_off += usize::from(off);
+                    hidden_reported += usize::from(reported.is_some());
                 }
             }
         }
     }
     println!(
-        "tail hidden: {hidden_off} of {hidden_frames} tips off the mouse; tail seen: {seen_reported} of {seen_frames} reported"
+        "tail hidden: {hidden_reported} of {hidden_frames} tips reported, {hidden_off} off the mouse; tail seen: {seen_reported} of {seen_frames} reported"
     );
     assert!(hidden_frames >= 60, "{hidden_frames} hypotheses");
     assert_eq!(hidden_off, 0, "tail tips more than 19 mm off the mouse");
+    assert!(
+        hidden_reported * 10 <= hidden_frames,
+        "{hidden_reported} of {hidden_frames} tips reported with no tail in view"
+    );
     assert!(
         seen_reported * 10 >= seen_frames * 8,
         "{seen_reported} of {seen_frames} tips reported with the tail in view"

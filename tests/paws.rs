@@ -153,7 +153,12 @@ fn paw_cascade_agrees_with_opencv() {
     let sample = mousepose::synth::dataset::render_sample(&rig, &ds, &library, 0);
     let view = sample.bottom.expect("bottom view");
     let mut greyer = mousepose::vision::paws::grey::Greyer::default();
-    let (grey, _) = mousepose::training::paws_data::canonical_view(&view, &mut greyer).expect("grey");
+    let (grey, _) = mousepose::training::paws_data::canonical_view(
+        &view,
+        mousepose::training::paws_data::DATASET_PX_PER_MM,
+        &mut greyer,
+    )
+    .expect("grey");
     agree(&path, &cut, std::slice::from_ref(&grey));
     agree(&paw_model(), &c, std::slice::from_ref(&grey));
 }

@@ -658,6 +658,20 @@ fn a_still_mouse_without_a_visible_tail_keeps_its_head_in_front() {
         o.flipped_shape * 50 <= o.shape_frames,
         "the body shape alone swapped more than 2 %: {o:?}"
     );
+    // Depth only: no paw cascade is read.
+    assert!(s.paw_model.is_none());
+    // No tail is seen, so no tail tip is given (issue 27, item 4), in all but a few frames.
+    let text = std::fs::read_to_string(out.join("poses.csv")).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (status, tip) = (column("status"), column("tail_tip_x"));
+    let rows: Vec<Vec<&str>> = text.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let found = rows.iter().filter(|r| r[status] == "ok").count();
+    let given = rows.iter().filter(|r| r[status] == "ok" && !r[tip].is_empty()).count();
+    assert!(
+        given * 20 <= found,
+        "a tail tip in {given} of {found} frames without a tail"
+    );
 }
 
 #[test]

@@ -24,6 +24,10 @@ pub struct EvalArgs {
     /// A baseline model to compare against in the report (body).
     #[arg(long, value_name = "FILE")]
     pub baseline: Option<PathBuf>,
+    /// See the bottom views as a colour camera binned by this factor sees them (1, 2 or 4;
+    /// paws).
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = crate::app::parse::binning)]
+    pub color_binning: u32,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -37,6 +41,7 @@ pub fn run(args: &EvalArgs) -> crate::app::Outcome {
         data: args.data.clone(),
         report: args.report.clone(),
         baseline: args.baseline.clone(),
+        color_binning: args.color_binning,
     })?;
     if args.json {
         return Ok(print_json(&summary)?);

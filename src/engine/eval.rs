@@ -25,6 +25,8 @@ pub struct EvalOptions {
     pub report: Option<PathBuf>,
     /// A baseline model to compare against in the report (body).
     pub baseline: Option<PathBuf>,
+    /// The colour camera's binning the bottom views are seen at (paws; 1 is the full sensor).
+    pub color_binning: u32,
 }
 
 /// A model's figures: what `eval --json` prints; [`EvalSummary::text`] is its table.
@@ -43,6 +45,11 @@ pub enum EvalSummary {
 /// # Errors
 /// The model or dataset cannot be read, or the report cannot be written.
 pub fn eval(options: &EvalOptions) -> Result<EvalSummary, Failure> {
+    if options.color_binning != 1 && options.target != ModelTarget::Paws {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "--color-binning applies to eval paws only (the bottom colour views)"
+        )));
+    }
     if options.target == ModelTarget::Orientation {
         return eval_orientation(options);
     }
@@ -257,7 +264,7 @@ fn eval_paws(options: &EvalOptions) -> Result<EvalSummary> {
     use crate::training::paws_eval as eval;
     use crate::vision::paws::PawDetector;
     let detector = PawDetector::load(&options.model)?;
-    let report = eval::evaluate(&detector, &options.data)
+    let report = eval::evaluate(&detector, &options.data, options.color_binning)
         .with_context(|| format!("evaluating on test dataset {:?}", options.data))?;
     if let Some(dir) = &options.report {
         report_dir(dir)?;

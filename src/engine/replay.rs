@@ -188,7 +188,7 @@ pub struct ReplaySummary {
     pub calibration: Option<PathBuf>,
     pub software_version: &'static str,
     pub body_model: PathBuf,
-    /// The paw cascade, when the models directory has one.
+    /// The paw cascade, when the models directory has one and the recording colour frames.
     pub paw_model: Option<PathBuf>,
     /// The orientation model (which end is the head from the body's shape), when the models
     /// directory has one.
@@ -376,9 +376,10 @@ pub fn replay_with(
     let recording = Recording::open(&options.session)?;
     // The models load on a thread of their own while the empty cage is modelled from the
     // recording (the two longest steps of a MoSeq recording's start-up); their errors come
-    // first, as when they were loaded first.
+    // first, as when they were loaded first. Without colour frames the paw cascade is not read.
+    let color = recording.has_color();
     let (models, scene) = std::thread::scope(|scope| {
-        let models = scope.spawn(|| Models::load(options.models.as_deref()));
+        let models = scope.spawn(|| Models::load_for(options.models.as_deref(), color));
         let scene = (|| {
             let chosen = match &options.calibration {
                 Some(path) => RecordingRig {

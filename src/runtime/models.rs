@@ -80,13 +80,22 @@ impl Models {
     /// # Errors
     /// No bundled models, or a model file missing, damaged or of the wrong kind.
     pub fn load(dir: Option<&Path>) -> Result<Self, ModelsError> {
+        Self::load_for(dir, true)
+    }
+
+    /// [`Self::load`] for a recording with colour frames or without (`color` false): then the
+    /// paw cascade is not read, since nothing would run it, and `paws` is `None`.
+    ///
+    /// # Errors
+    /// As [`Self::load`].
+    pub fn load_for(dir: Option<&Path>, color: bool) -> Result<Self, ModelsError> {
         let dir = match dir {
             Some(dir) => dir.to_path_buf(),
             None => default_models_dir()?,
         };
         Ok(Self {
             body: load_body(&dir)?,
-            paws: load_paws(&dir)?,
+            paws: if color { load_paws(&dir)? } else { None },
             orientation: load_orientation(&dir)?,
             dir,
         })

@@ -103,6 +103,14 @@ impl Recording {
         Ok(Recording::Session(Box::new(SessionReader::open(dir)?)))
     }
 
+    /// Whether it holds colour frames (a MoSeq recording never does).
+    pub fn has_color(&self) -> bool {
+        match self {
+            Recording::Session(reader) => reader.color_count() > 0,
+            Recording::Moseq { .. } => false,
+        }
+    }
+
     /// The directory it was read from.
     pub fn dir(&self) -> PathBuf {
         match self {

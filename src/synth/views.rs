@@ -106,6 +106,66 @@ pub struct BottomView {
     pub marks: Vec<Mark>,
 }
 
+impl BottomView {
+    /// The view as a colour camera binned by `factor` sees it (each pixel the mean of a
+    /// `factor x factor` block of the full sensor's, as sensor binning averages), with the
+    /// region, the paws' boxes and the marks in the binned image's pixels. Blocks the region
+    /// cuts are left out; `factor` 1 gives the view itself.
+    pub fn binned(&self, factor: u32) -> BottomView {
+        let f = factor.max(1);
+        let r = self.region;
+        let (bx0, by0) = (r.x0.div_ceil(f), r.y0.div_ceil(f));
+        let (bx1, by1) = ((r.x0 + r.width) / f, (r.y0 + r.height) / f);
+        let region = Region {
+            x0: bx0,
+            y0: by0,
+            width: bx1.saturating_sub(bx0),
+            height: by1.saturating_sub(by0),
+        };
+        let (w, fu) = (r.width as usize, f as usize);
+        let mut rgb = Vec::with_capacity(region.len() * 3);
+        for by in by0..by0 + region.height {
+            for bx in bx0..bx0 + region.width {
+                let mut sum = [0u32; 3];
+                for y in (by * f - r.y0) as usize..(by * f - r.y0) as usize + fu {
+                    for x in (bx * f - r.x0) as usize..(bx * f - r.x0) as usize + fu {
+                        for (c, s) in sum.iter_mut().enumerate() {
+                            *s += u32::from(self.rgb[(y * w + x) * 3 + c]);
+                        }
+                    }
+                }
+                let n = (fu * fu) as u32;
+                rgb.extend(sum.map(|s| ((s + n / 2) / n) as u8));
+            }
+        }
+        let k = f as f32;
+        let paws = self.paws.map(|p| PawBox {
+            x0: p.x0 / k,
+            y0: p.y0 / k,
+            x1: p.x1 / k,
+            y1: p.y1 / k,
+            ..p
+        });
+        let marks = self
+            .marks
+            .iter()
+            .map(|m| Mark {
+                x0: m.x0 / k,
+                y0: m.y0 / k,
+                x1: m.x1 / k,
+                y1: m.y1 / k,
+                ..*m
+            })
+            .collect();
+        BottomView {
+            region,
+            rgb,
+            paws,
+            marks,
+        }
+    }
+}
+
 /// Something in a bottom view that is not a paw but can look like one to a detector.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -530,6 +590,56 @@ mod tests {
     use crate::synth::mouse::{pose_library, pose_mouse};
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn a_binned_view_averages_whole_blocks_and_scales_its_boxes() {
+        let paw = PawBox {
+            joint: Joint::LeftForePaw,
+            x0: 4.0,
+            y0: 6.0,
+            x1: 10.0,
+            y1: 12.0,
+            contact: true,
+            visible: true,
+        };
+        // A 5x4 region at (3, 2): blocks of 2 start at (4, 2); column 3 and the last column
+        // are cut, leaving 2x2 blocks.
+        let region = Region {
+            x0: 3,
+            y0: 2,
+            width: 5,
+            height: 4,
+        };
+        let rgb: Vec<u8> = (0..region.len()).flat_map(|i| [i as u8 * 10, 7, 200]).collect();
+        let view = BottomView {
+            region,
+            rgb,
+            paws: [paw; 4],
+            marks: vec![Mark {
+                kind: MarkKind::Spot,
+                x0: 2.0,
+                y0: 2.0,
+                x1: 4.0,
+                y1: 4.0,
+            }],
+        };
+        let b = view.binned(2);
+        assert_eq!(
+            b.region,
+            Region {
+                x0: 2,
+                y0: 1,
+                width: 2,
+                height: 2
+            }
+        );
+        // The first block: the view's pixels (1, 0), (2, 0), (1, 1), (2, 1), i.e. 1, 2, 6, 7.
+        assert_eq!(&b.rgb[..3], &[(10 + 20 + 60 + 70 + 2) / 4, 7, 200]);
+        assert_eq!(b.rgb.len(), 2 * 2 * 3);
+        assert_eq!((b.paws[0].x0, b.paws[0].y1), (2.0, 6.0));
+        assert_eq!((b.marks[0].x0, b.marks[0].y1), (1.0, 2.0));
+        assert_eq!(view.binned(1), view);
+    }
 
     #[test]
     fn clutter_marks_the_glass_and_the_belly_but_never_a_paw() {

@@ -3,7 +3,9 @@
 //! Each bottom view (RGB at the full sensor's 2 px/mm) is first turned into what the camera
 //! really delivers, a Bayer RG mosaic, and then into a grey image at the canonical scale by
 //! the detector's own conversion ([`super::grey`]), so training sees exactly the pixels the
-//! detector will.
+//! detector will. Each view is also seen as binned colour cameras deliver it
+//! ([`CutParams::binnings`], [`BottomView::binned`]: blocks averaged; binned 4x4, 0.5 px/mm,
+//! enlarged to the canonical scale by the detector), and material is cut from every one.
 //!
 //! * Positives: windows centred on paws that touch the glass and are visible, augmented by
 //!   a random rotation, a size change of up to 10 %, a shift of up to one pixel, a
@@ -23,7 +25,7 @@ use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
 use crate::core::geometry::{Camera, Rig};
 use crate::core::skeleton::Joint;
 use crate::synth::dataset::{Dataset, Sample};
-use crate::synth::views::BottomView;
+use crate::synth::views::{BottomView, Mark};
 use crate::vision::paws::CANONICAL_PX_PER_MM;
 use crate::vision::paws::grey::{GreyImage, Greyer};
 use crate::vision::paws::train::{Background, TrainingSet};
@@ -62,14 +64,15 @@ pub fn bottom_frame(view: &BottomView) -> ColorFrame {
     }
 }
 
-/// A bottom view in grey at the canonical scale, and the scale from view pixels to it.
-pub fn canonical_view(view: &BottomView, greyer: &mut Greyer) -> Option<(GreyImage, f64)> {
+/// A bottom view seen at `px_per_mm` in grey at the canonical scale, and the scale from
+/// view pixels to it.
+pub fn canonical_view(view: &BottomView, px_per_mm: f64, greyer: &mut Greyer) -> Option<(GreyImage, f64)> {
     let frame = bottom_frame(view);
     let mut grey = GreyImage::default();
     let place = greyer.convert(
         &frame,
         (0, 0, frame.width, frame.height),
-        DATASET_PX_PER_MM,
+        px_per_mm,
         CANONICAL_PX_PER_MM,
         &mut grey,
     )?;
@@ -85,12 +88,16 @@ pub struct CutParams {
     pub augment: usize,
     /// Windows cut around each hard negative's place.
     pub hard_per_place: usize,
+    /// The colour binnings each view is also seen at ([`BottomView::binned`]), 1 being the
+    /// full sensor: material is cut from every one, so the cascade knows paws as a binned
+    /// camera blurs them.
+    pub binnings: &'static [u32],
     pub seed: u64,
 }
 
-/// Where in the full colour image the hard negatives of a sample lie: its body's landmarks
-/// that look like paws from below, then its view's marks.
-pub fn hard_places(sample: &Sample, camera: &Camera) -> Vec<(f64, f64)> {
+/// Where in `camera`'s image the hard negatives of a sample lie: its body's landmarks that
+/// look like paws from below, then the centres of `marks` (the view's, in the same image).
+pub fn hard_places(sample: &Sample, camera: &Camera, marks: &[Mark]) -> Vec<(f64, f64)> {
     let j = |joint: Joint| sample.joints[joint.index()];
     let lerp = |a: Joint, b: Joint, t: f64| {
         let (a, b) = (j(a), j(b));
@@ -110,9 +117,7 @@ pub fn hard_places(sample: &Sample, camera: &Camera) -> Vec<(f64, f64)> {
         .filter_map(|p| camera.project_world(p))
         .map(|p| (p.x, p.y))
         .collect();
-    if let Some(view) = &sample.bottom {
-        places.extend(view.marks.iter().map(crate::synth::views::Mark::centre));
-    }
+    places.extend(marks.iter().map(Mark::centre));
     places
 }
 
@@ -171,88 +176,99 @@ pub fn load(dir: &Path, params: CutParams) -> Result<TrainingSet, PawDataError> 
     let mut hard_rng = ChaCha8Rng::seed_from_u64(params.seed ^ 0x4A2D_0001);
     let mut buf = Vec::new();
     ds.for_each(|sample| {
-        let Some(view) = &sample.bottom else {
+        let Some(full) = &sample.bottom else {
             return Ok(());
         };
-        let Some((grey, k)) = canonical_view(view, &mut greyer) else {
-            return Ok(());
-        };
-        let (rx, ry) = (f64::from(view.region.x0), f64::from(view.region.y0));
-        let mut excluded = Vec::new();
-        for paw in &view.paws {
-            if paw.x1 <= paw.x0 {
+        for &binning in params.binnings {
+            let binned;
+            let view = if binning == 1 {
+                full
+            } else {
+                binned = full.binned(binning);
+                &binned
+            };
+            let px_per_mm = DATASET_PX_PER_MM / f64::from(binning);
+            let Some((grey, k)) = canonical_view(view, px_per_mm, &mut greyer) else {
                 continue;
-            }
-            let b = [
-                ((f64::from(paw.x0) - rx) / k) as f32 - 1.0,
-                ((f64::from(paw.y0) - ry) / k) as f32 - 1.0,
-                ((f64::from(paw.x1) - rx) / k) as f32 + 1.0,
-                ((f64::from(paw.y1) - ry) / k) as f32 + 1.0,
-            ];
-            excluded.push(b);
-            if !(paw.contact && paw.visible) {
-                continue;
-            }
-            set.paws += 1;
-            let cx = (f64::from(paw.x0 + paw.x1) / 2.0 - rx) / k;
-            let cy = (f64::from(paw.y0 + paw.y1) / 2.0 - ry) / k;
-            for a in 0..=params.augment {
-                let (angle, scale, dx, dy, gain, offset, noise) = if a == 0 {
-                    (0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0)
-                } else {
-                    (
-                        rng.gen_range(0.0..std::f64::consts::TAU),
-                        rng.gen_range(0.9..1.1),
-                        rng.gen_range(-1.0..1.0),
-                        rng.gen_range(-1.0..1.0),
-                        rng.gen_range(0.8f32..1.2),
-                        rng.gen_range(-8.0f32..8.0),
-                        rng.gen_range(0.0f32..2.5),
-                    )
-                };
-                let warp = Warp {
-                    cx: cx + dx,
-                    cy: cy + dy,
-                    angle,
-                    scale,
-                };
-                warp_window(&grey, warp, params.width, params.height, &mut buf);
-                for v in &buf {
-                    let n: f32 = StandardNormal.sample(&mut rng);
-                    let p = v * gain + offset + n * noise;
-                    set.positives.push((p + 0.5).clamp(0.0, 255.0) as u8);
-                }
-            }
-        }
-        for (x, y) in hard_places(&sample, &rig.color) {
-            let (cx, cy) = ((x - rx) / k, (y - ry) / k);
-            for _ in 0..params.hard_per_place {
-                let scale = hard_rng.gen_range(0.8..1.25);
-                let warp = Warp {
-                    cx: cx + hard_rng.gen_range(-1.5..1.5),
-                    cy: cy + hard_rng.gen_range(-1.5..1.5),
-                    angle: hard_rng.gen_range(0.0..std::f64::consts::TAU),
-                    scale,
-                };
-                let half = params.width as f64 * scale / 2.0;
-                let (x0, y0, x1, y1) = (warp.cx - half, warp.cy - half, warp.cx + half, warp.cy + half);
-                let inside = x0 >= 0.0 && y0 >= 0.0 && x1 <= grey.width as f64 && y1 <= grey.height as f64;
-                // The turned window's corners reach out to half its diagonal.
-                let r = half * std::f64::consts::SQRT_2;
-                let touches = excluded.iter().any(|b| {
-                    warp.cx - r < f64::from(b[2])
-                        && warp.cx + r > f64::from(b[0])
-                        && warp.cy - r < f64::from(b[3])
-                        && warp.cy + r > f64::from(b[1])
-                });
-                if !inside || touches {
+            };
+            let (rx, ry) = (f64::from(view.region.x0), f64::from(view.region.y0));
+            let mut excluded = Vec::new();
+            for paw in &view.paws {
+                if paw.x1 <= paw.x0 {
                     continue;
                 }
-                warp_window(&grey, warp, params.width, params.height, &mut buf);
-                set.hard.extend(buf.iter().map(|v| (v + 0.5).clamp(0.0, 255.0) as u8));
+                let b = [
+                    ((f64::from(paw.x0) - rx) / k) as f32 - 1.0,
+                    ((f64::from(paw.y0) - ry) / k) as f32 - 1.0,
+                    ((f64::from(paw.x1) - rx) / k) as f32 + 1.0,
+                    ((f64::from(paw.y1) - ry) / k) as f32 + 1.0,
+                ];
+                excluded.push(b);
+                if !(paw.contact && paw.visible) {
+                    continue;
+                }
+                set.paws += 1;
+                let cx = (f64::from(paw.x0 + paw.x1) / 2.0 - rx) / k;
+                let cy = (f64::from(paw.y0 + paw.y1) / 2.0 - ry) / k;
+                for a in 0..=params.augment {
+                    let (angle, scale, dx, dy, gain, offset, noise) = if a == 0 {
+                        (0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0)
+                    } else {
+                        (
+                            rng.gen_range(0.0..std::f64::consts::TAU),
+                            rng.gen_range(0.9..1.1),
+                            rng.gen_range(-1.0..1.0),
+                            rng.gen_range(-1.0..1.0),
+                            rng.gen_range(0.8f32..1.2),
+                            rng.gen_range(-8.0f32..8.0),
+                            rng.gen_range(0.0f32..2.5),
+                        )
+                    };
+                    let warp = Warp {
+                        cx: cx + dx,
+                        cy: cy + dy,
+                        angle,
+                        scale,
+                    };
+                    warp_window(&grey, warp, params.width, params.height, &mut buf);
+                    for v in &buf {
+                        let n: f32 = StandardNormal.sample(&mut rng);
+                        let p = v * gain + offset + n * noise;
+                        set.positives.push((p + 0.5).clamp(0.0, 255.0) as u8);
+                    }
+                }
             }
+            let camera = rig.with_color_binning(binning).color;
+            for (x, y) in hard_places(&sample, &camera, &view.marks) {
+                let (cx, cy) = ((x - rx) / k, (y - ry) / k);
+                for _ in 0..params.hard_per_place {
+                    let scale = hard_rng.gen_range(0.8..1.25);
+                    let warp = Warp {
+                        cx: cx + hard_rng.gen_range(-1.5..1.5),
+                        cy: cy + hard_rng.gen_range(-1.5..1.5),
+                        angle: hard_rng.gen_range(0.0..std::f64::consts::TAU),
+                        scale,
+                    };
+                    let half = params.width as f64 * scale / 2.0;
+                    let (x0, y0, x1, y1) = (warp.cx - half, warp.cy - half, warp.cx + half, warp.cy + half);
+                    let inside = x0 >= 0.0 && y0 >= 0.0 && x1 <= grey.width as f64 && y1 <= grey.height as f64;
+                    // The turned window's corners reach out to half its diagonal.
+                    let r = half * std::f64::consts::SQRT_2;
+                    let touches = excluded.iter().any(|b| {
+                        warp.cx - r < f64::from(b[2])
+                            && warp.cx + r > f64::from(b[0])
+                            && warp.cy - r < f64::from(b[3])
+                            && warp.cy + r > f64::from(b[1])
+                    });
+                    if !inside || touches {
+                        continue;
+                    }
+                    warp_window(&grey, warp, params.width, params.height, &mut buf);
+                    set.hard.extend(buf.iter().map(|v| (v + 0.5).clamp(0.0, 255.0) as u8));
+                }
+            }
+            set.backgrounds.push(Background { grey, excluded });
         }
-        set.backgrounds.push(Background { grey, excluded });
         Ok(())
     })?;
     if set.paws == 0 {

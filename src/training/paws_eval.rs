@@ -52,6 +52,8 @@ pub struct PawReport {
     pub recall: f64,
     pub f1: f64,
     pub mean_centre_error_px: f64,
+    /// The colour camera's binning the views were seen at (1: the full sensor).
+    pub color_binning: u32,
     /// Detector settings used for the figures above.
     pub min_neighbors: usize,
     pub scales: Vec<f64>,
@@ -143,11 +145,14 @@ fn ratio(a: usize, b: usize) -> f64 {
     if b == 0 { 0.0 } else { a as f64 / b as f64 }
 }
 
-/// Runs `detector` (as configured) on every bottom view of the dataset at `dir`.
+/// Runs `detector` (as configured) on every bottom view of the dataset at `dir`, each seen by
+/// a colour camera binned by `binning` ([`crate::synth::views::BottomView::binned`]; 1 is the
+/// full sensor). Boxes are matched in the full sensor's pixels.
 ///
 /// # Errors
 /// When the dataset cannot be read or has no visible paw on the glass.
-pub fn evaluate(detector: &PawDetector, dir: &Path) -> Result<PawReport, PawDataError> {
+pub fn evaluate(detector: &PawDetector, dir: &Path, binning: u32) -> Result<PawReport, PawDataError> {
+    let binning = binning.max(1);
     let ds = Dataset::open(dir)?;
     let rig = ds.meta.rig.unwrap_or_else(crate::core::geometry::Rig::default_rig);
     let mut headline = detector.clone();
@@ -167,26 +172,27 @@ pub fn evaluate(detector: &PawDetector, dir: &Path) -> Result<PawReport, PawData
             .iter()
             .filter(|p| p.contact && p.visible && p.x1 > p.x0)
             .count();
-        let frame = bottom_frame(view);
+        let seen = view.binned(binning);
+        let frame = bottom_frame(&seen);
         let roi = (0, 0, frame.width, frame.height);
-        let (rx, ry) = (view.region.x0 as f32, view.region.y0 as f32);
+        let (rx, ry, k) = (seen.region.x0 as f32, seen.region.y0 as f32, binning as f32);
         let shift = |d: &mut PawDetection| {
-            d.x0 += rx;
-            d.x1 += rx;
-            d.y0 += ry;
-            d.y1 += ry;
+            d.x0 = (d.x0 + rx) * k;
+            d.x1 = (d.x1 + rx) * k;
+            d.y0 = (d.y0 + ry) * k;
+            d.y1 = (d.y1 + ry) * k;
         };
         // Only the body's landmarks: the marks are classified by their boxes.
-        let mut places = hard_places(&sample, &rig.color);
-        places.truncate(places.len() - view.marks.len());
+        let places = hard_places(&sample, &rig.color, &[]);
         let look_alikes = LookAlikes {
             marks: &view.marks,
             places,
         };
-        headline.detect(&frame, roi, DATASET_PX_PER_MM, &mut dets);
+        let px_per_mm = DATASET_PX_PER_MM / f64::from(binning);
+        headline.detect(&frame, roi, px_per_mm, &mut dets);
         dets.iter_mut().for_each(shift);
         match_image(&mut dets, &view.paws, &look_alikes, &mut outcomes);
-        all.detect(&frame, roi, DATASET_PX_PER_MM, &mut dets);
+        all.detect(&frame, roi, px_per_mm, &mut dets);
         dets.iter_mut().for_each(shift);
         match_image(&mut dets, &view.paws, &look_alikes, &mut curve_outcomes);
         Ok(())
@@ -252,6 +258,7 @@ pub fn evaluate(detector: &PawDetector, dir: &Path) -> Result<PawReport, PawData
         recall,
         f1,
         mean_centre_error_px: if tp > 0 { err / tp as f64 } else { 0.0 },
+        color_binning: binning,
         min_neighbors: detector.min_neighbors(),
         scales: detector.scales().to_vec(),
         curve,

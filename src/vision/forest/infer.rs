@@ -10,7 +10,9 @@
 //! segmented tail is where the tip is, whenever the tail was segmented to its end. Under
 //! either orientation ([`BodyEstimator::estimate_oriented`], what the pipeline runs), a joint
 //! the votes put off the mouse ([`OFF_MOUSE_MM`] from every pixel of it) is not taken for a
-//! seen one: the tail tip is then withdrawn (no tail seen there), any other joint scored low.
+//! seen one: the tail tip is then withdrawn (no tail seen there), any other joint scored low;
+//! and the tail tip is withdrawn too where the mask near it is not thin as a tail is
+//! ([`TailView::Unseen`]: the votes put it on the body's rim, as they do when no tail is seen).
 //!
 //! Buffers live in the estimator and are reused, so estimating a frame allocates nothing once
 //! the first frame has sized them.
@@ -431,7 +433,9 @@ impl BodyEstimator {
         oriented.votes = if weight > 0.0 { agree / weight } else { 0.0 };
         if self.settings.follow_tail {
             for guesses in &mut oriented.ahead {
-                self.follow_tail(image, intrinsics, guesses);
+                if self.follow_tail(image, intrinsics, guesses) == TailView::Unseen {
+                    guesses[TAIL_TIP] = None;
+                }
             }
         }
         self.surface.clear();
@@ -449,18 +453,22 @@ impl BodyEstimator {
         oriented
     }
 
-    /// Moves the tail tip to the far end of the segmented tail ([`TailEnd`]).
+    /// Moves the tail tip to the far end of the segmented tail ([`TailEnd`]), and says what
+    /// the mask shows near the tip ([`TailView::Lost`] when there is no tip or base to judge).
     fn follow_tail(
         &mut self,
         image: &DepthImage,
         intrinsics: &Intrinsics,
         guesses: &mut [Option<JointGuess>; BODY_JOINTS],
-    ) {
-        if let (Some(base), Some(tip)) = (guesses[TAIL_BASE], &mut guesses[TAIL_TIP])
-            && let Some(end) = self.tail_end.find(image, intrinsics, base.position_mm, tip.position_mm)
-        {
+    ) -> TailView {
+        let (Some(base), Some(tip)) = (guesses[TAIL_BASE], &mut guesses[TAIL_TIP]) else {
+            return TailView::Lost;
+        };
+        let view = self.tail_end.find(image, intrinsics, base.position_mm, tip.position_mm);
+        if let TailView::End(end) = view {
             tip.position_mm = end;
         }
+        view
     }
 }
 
@@ -552,6 +560,25 @@ const _: () = assert!(matches!(Joint::MAIN_BODY[TAIL_TIP], Joint::TailTip));
 
 /// How far (mm) the tail tip may move from the votes' estimate to the end of the segmented tail.
 const TAIL_END_REACH_MM: f32 = 20.0;
+/// The segmented tail's end is judged over a square this many mm either side of it.
+const TAIL_THIN_RADIUS_MM: f32 = 4.0;
+/// A tail's end is thin: under this share of the square around it is mouse (a 3-5 mm tail
+/// fills about a tenth; the rim of the body, where the votes' tip lands when no tail is seen,
+/// a third to two thirds).
+const TAIL_THIN_SHARE: f32 = 0.25;
+
+/// What the segmented mouse shows where the votes put the tail tip.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum TailView {
+    /// A tail, reaching the tip: its far end (camera frame), where the tip moves.
+    End(Vector3<f32>),
+    /// A tail that stops short of the tip (its last part lost in the noise, as a time-of-flight
+    /// camera loses it), or nothing to judge: the votes' tip stays.
+    Lost,
+    /// No tail near the tip, only the body's rim or nothing of the mouse: no tail is seen
+    /// there, so no tip is.
+    Unseen,
+}
 /// The tail tip moves only when the votes put it within this distance (mm) of a segmented
 /// pixel: an estimate off the mask means the tail's last part was lost in the noise (as a
 /// time-of-flight camera loses it), and then the votes know better than the mask where it ends.
@@ -559,7 +586,8 @@ const TAIL_ON_MASK_MM: f32 = 3.0;
 
 /// Finds the far end of the segmented tail: of the mouse's pixels near the votes' tail tip, the
 /// one furthest from the tail base along the mouse (8-connected steps over its pixels, so a
-/// curled tail is followed rather than cut across). Buffers are kept between frames.
+/// curled tail is followed rather than cut across), and whether the mask is thin there, as a
+/// tail is. Buffers are kept between frames.
 #[derive(Clone, Debug, Default)]
 struct TailEnd {
     /// Per pixel of the region: steps from the pixel nearest the tail base, `u32::MAX` when not
@@ -569,28 +597,28 @@ struct TailEnd {
 }
 
 impl TailEnd {
-    /// The 3D point (camera frame) of the tail's far end, or `None` when the tip should stay
-    /// where the votes put it: no mouse pixel within [`TAIL_END_REACH_MM`] of it, or none
-    /// within [`TAIL_ON_MASK_MM`].
-    fn find(
-        &mut self,
-        image: &DepthImage,
-        intrinsics: &Intrinsics,
-        base: Vector3<f32>,
-        tip: Vector3<f32>,
-    ) -> Option<Vector3<f32>> {
+    /// What the mask shows near `tip` ([`TailView`]): `Unseen` when no mouse pixel lies
+    /// within [`TAIL_END_REACH_MM`] of it or the furthest one is not thin
+    /// ([`TAIL_THIN_SHARE`]); `Lost` when it is thin but no mouse pixel lies within
+    /// [`TAIL_ON_MASK_MM`] of the tip (or there is nothing to judge); else `End`.
+    fn find(&mut self, image: &DepthImage, intrinsics: &Intrinsics, base: Vector3<f32>, tip: Vector3<f32>) -> TailView {
         let r = image.region;
         let (w, h) = (r.width as usize, r.height as usize);
         let point = |k: usize, d: f32| -> Vector3<f32> {
             let pixel = Point2::new((r.x0 as usize + k % w) as f64, (r.y0 as usize + k / w) as f64);
             intrinsics.unproject(&pixel, f64::from(d)).coords.cast()
         };
-        let b = intrinsics.project(&Point3::from(base.cast::<f64>()))?;
+        let Some(b) = intrinsics.project(&Point3::from(base.cast::<f64>())) else {
+            return TailView::Lost;
+        };
         let (bx, by) = (b.x - f64::from(r.x0), b.y - f64::from(r.y0));
         let from_base = |k: usize| ((k % w) as f64 - bx).powi(2) + ((k / w) as f64 - by).powi(2);
-        let (start, _) = image
+        let Some((start, _)) = image
             .on_mouse()
-            .min_by(|(a, _), (b, _)| from_base(*a).total_cmp(&from_base(*b)))?;
+            .min_by(|(a, _), (b, _)| from_base(*a).total_cmp(&from_base(*b)))
+        else {
+            return TailView::Lost;
+        };
         self.steps.clear();
         self.steps.resize(w * h, u32::MAX);
         self.queue.clear();
@@ -620,8 +648,29 @@ impl TailEnd {
                 }
             }
         }
-        let (_, k) = end.filter(|_| nearest <= TAIL_ON_MASK_MM)?;
-        Some(point(k, image.mouse_depth(k)?))
+        let Some((_, k)) = end else {
+            return TailView::Unseen;
+        };
+        let Some(d) = image.mouse_depth(k) else {
+            return TailView::Unseen;
+        };
+        // The share of mouse pixels in the square around the end.
+        let radius = (TAIL_THIN_RADIUS_MM * intrinsics.fx as f32 / d).round().max(1.0) as usize;
+        let (x, y) = (k % w, k / w);
+        let mut on = 0usize;
+        for ny in y.saturating_sub(radius)..(y + radius + 1).min(h) {
+            for nx in x.saturating_sub(radius)..(x + radius + 1).min(w) {
+                on += usize::from(image.mouse_depth(ny * w + nx).is_some());
+            }
+        }
+        let side = 2 * radius + 1;
+        if on as f32 >= TAIL_THIN_SHARE * (side * side) as f32 {
+            TailView::Unseen
+        } else if nearest > TAIL_ON_MASK_MM {
+            TailView::Lost
+        } else {
+            TailView::End(point(k, d))
+        }
     }
 }
 
