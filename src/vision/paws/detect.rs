@@ -226,10 +226,17 @@ pub struct PawDetector {
     scaled: GreyImage,
     rows: ResampleScratch,
     ii: Integral,
+    /// The integral images' stride: the widest image scanned so far, in steps of
+    /// [`STRIDE_STEP`], so that the cascade's offsets are compiled again only when an image is
+    /// wider than any before (a large cascade takes as long to compile as to scan a frame).
+    stride: usize,
     raw: Vec<Raw>,
     labels: Vec<usize>,
     groups: Vec<Group>,
 }
+
+/// See [`PawDetector`]'s `stride`.
+const STRIDE_STEP: usize = 64;
 
 /// The object scales run by default: paws up to 30 % smaller or larger than the window's.
 pub const DEFAULT_SCALES: [f64; 3] = [0.8, 1.0, 1.25];
@@ -260,6 +267,7 @@ impl PawDetector {
             scaled: GreyImage::default(),
             rows: ResampleScratch::default(),
             ii: Integral::default(),
+            stride: 0,
             raw: Vec::new(),
             labels: Vec::new(),
             groups: Vec::new(),
@@ -336,7 +344,8 @@ impl PawDetector {
         if img.width < w || img.height < h {
             return;
         }
-        self.ii.compute(&img.data, img.width, img.height);
+        self.stride = self.stride.max((img.width + 1).next_multiple_of(STRIDE_STEP));
+        self.ii.compute_strided(&img.data, img.width, img.height, self.stride);
         self.runner.compiled.compile(&self.cascade, self.ii.stride);
         let (nx, ny) = (img.width + 1 - w, img.height + 1 - h);
         let s = scale as f32;

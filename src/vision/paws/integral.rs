@@ -8,7 +8,8 @@
 /// Sum and squared-sum integral images, reusable across images of any size.
 #[derive(Clone, Debug, Default)]
 pub struct Integral {
-    /// Corners per row: the image's width plus one.
+    /// Corners per row: the image's width plus one, or more when asked
+    /// ([`Self::compute_strided`]; the corners past the image's are never read).
     pub stride: usize,
     /// Corner rows: the image's height plus one.
     pub rows: usize,
@@ -25,8 +26,18 @@ impl Integral {
     /// # Panics
     /// When `grey` holds fewer than `width * height` bytes.
     pub fn compute(&mut self, grey: &[u8], width: usize, height: usize) {
+        self.compute_strided(grey, width, height, width + 1);
+    }
+
+    /// [`Self::compute`] with `stride` corners per row (at least `width + 1`), so that images
+    /// of different widths can share one layout.
+    ///
+    /// # Panics
+    /// When `grey` holds fewer than `width * height` bytes or `stride` is not above `width`.
+    pub fn compute_strided(&mut self, grey: &[u8], width: usize, height: usize, stride: usize) {
         assert!(grey.len() >= width * height, "grey image smaller than its size");
-        self.stride = width + 1;
+        assert!(stride > width, "a stride of {stride} corners for an image {width} wide");
+        self.stride = stride;
         self.rows = height + 1;
         let n = self.stride * self.rows;
         self.sum.clear();
@@ -85,23 +96,28 @@ mod tests {
     fn rectangle_sums_match_brute_force() {
         let (w, h) = (13, 9);
         let grey: Vec<u8> = (0..w * h).map(|i| ((i * 37 + 11) % 256) as u8).collect();
+        let mut wide = Integral::default();
+        wide.compute_strided(&grey, w, h, 64);
+        assert_eq!(wide.stride, 64);
         let mut ii = Integral::default();
         ii.compute(&grey, w, h);
-        for y in 0..h {
-            for x in 0..w {
-                for rh in 1..=h - y {
-                    for rw in 1..=w - x {
-                        let mut s = 0i64;
-                        let mut sq = 0i64;
-                        for yy in y..y + rh {
-                            for xx in x..x + rw {
-                                let p = i64::from(grey[yy * w + xx]);
-                                s += p;
-                                sq += p * p;
+        for ii in [ii, wide] {
+            for y in 0..h {
+                for x in 0..w {
+                    for rh in 1..=h - y {
+                        for rw in 1..=w - x {
+                            let mut s = 0i64;
+                            let mut sq = 0i64;
+                            for yy in y..y + rh {
+                                for xx in x..x + rw {
+                                    let p = i64::from(grey[yy * w + xx]);
+                                    s += p;
+                                    sq += p * p;
+                                }
                             }
+                            assert_eq!(i64::from(ii.rect_sum(x, y, rw, rh)), s);
+                            assert_eq!(i64::from(ii.rect_sqsum(x, y, rw, rh)), sq);
                         }
-                        assert_eq!(i64::from(ii.rect_sum(x, y, rw, rh)), s);
-                        assert_eq!(i64::from(ii.rect_sqsum(x, y, rw, rh)), sq);
                     }
                 }
             }
