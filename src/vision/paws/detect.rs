@@ -140,24 +140,44 @@ impl Compiled {
 /// Classifies windows of one cascade, with the stump fast path when every tree is a stump.
 #[derive(Clone, Debug)]
 struct CascadeScan {
-    compiled: Compiled,
+    /// The cascade compiled for the strides met last ([`LAYOUTS`] at most), the one in use
+    /// first: the images a detector scans change width from frame to frame and scale to
+    /// scale, and a large cascade takes about as long to compile as to scan a frame.
+    layouts: Vec<Compiled>,
     stumps_only: bool,
 }
+
+/// How many compiled layouts a detector keeps.
+const LAYOUTS: usize = 8;
 
 impl CascadeScan {
     fn new(cascade: &Cascade) -> Self {
         Self {
-            compiled: Compiled::default(),
+            layouts: Vec::new(),
             stumps_only: cascade.max_nodes() == 1,
         }
     }
 
+    /// Makes the layout for `stride` the one in use, compiling it when it is not kept.
+    fn prepare(&mut self, cascade: &Cascade, stride: usize) {
+        if let Some(k) = self.layouts.iter().position(|c| c.stride == stride) {
+            self.layouts[..=k].rotate_right(1);
+            return;
+        }
+        let mut layout = if self.layouts.len() >= LAYOUTS {
+            self.layouts.pop().unwrap_or_default()
+        } else {
+            Compiled::default()
+        };
+        layout.compile(cascade, stride);
+        self.layouts.insert(0, layout);
+    }
+
     #[inline]
     fn classify(&self, cascade: &Cascade, ii: &Integral, x: usize, y: usize) -> Verdict {
-        if self.stumps_only {
-            self.compiled.classify(ii, y * ii.stride + x)
-        } else {
-            cascade.classify(ii, x, y)
+        match self.layouts.first() {
+            Some(layout) if self.stumps_only && layout.stride == ii.stride => layout.classify(ii, y * ii.stride + x),
+            _ => cascade.classify(ii, x, y),
         }
     }
 }
@@ -173,7 +193,7 @@ pub fn scan_like_opencv(cascade: &Cascade, grey: &GreyImage, out: &mut Vec<(u32,
     let mut ii = Integral::default();
     ii.compute(&grey.data, grey.width, grey.height);
     let mut runner = CascadeScan::new(cascade);
-    runner.compiled.compile(cascade, ii.stride);
+    runner.prepare(cascade, ii.stride);
     let step = 2;
     // Corners x with x + w < width + 1.
     let (nx, ny) = (grey.width + 1 - w, grey.height + 1 - h);
@@ -226,17 +246,14 @@ pub struct PawDetector {
     scaled: GreyImage,
     rows: ResampleScratch,
     ii: Integral,
-    /// The integral images' stride: the widest image scanned so far, in steps of
-    /// [`STRIDE_STEP`], so that the cascade's offsets are compiled again only when an image is
-    /// wider than any before (a large cascade takes as long to compile as to scan a frame).
-    stride: usize,
     raw: Vec<Raw>,
     labels: Vec<usize>,
     groups: Vec<Group>,
 }
 
-/// See [`PawDetector`]'s `stride`.
-const STRIDE_STEP: usize = 64;
+/// The integral images' strides are multiples of this, so that images a few pixels apart in
+/// width share a compiled layout ([`CascadeScan::prepare`]).
+const STRIDE_STEP: usize = 16;
 
 /// The object scales run by default: paws up to 30 % smaller or larger than the window's.
 pub const DEFAULT_SCALES: [f64; 3] = [0.8, 1.0, 1.25];
@@ -267,7 +284,6 @@ impl PawDetector {
             scaled: GreyImage::default(),
             rows: ResampleScratch::default(),
             ii: Integral::default(),
-            stride: 0,
             raw: Vec::new(),
             labels: Vec::new(),
             groups: Vec::new(),
@@ -344,9 +360,9 @@ impl PawDetector {
         if img.width < w || img.height < h {
             return;
         }
-        self.stride = self.stride.max((img.width + 1).next_multiple_of(STRIDE_STEP));
-        self.ii.compute_strided(&img.data, img.width, img.height, self.stride);
-        self.runner.compiled.compile(&self.cascade, self.ii.stride);
+        let stride = (img.width + 1).next_multiple_of(STRIDE_STEP);
+        self.ii.compute_strided(&img.data, img.width, img.height, stride);
+        self.runner.prepare(&self.cascade, stride);
         let (nx, ny) = (img.width + 1 - w, img.height + 1 - h);
         let s = scale as f32;
         for y in (0..ny).step_by(self.step) {

@@ -40,10 +40,17 @@ impl Integral {
         self.stride = stride;
         self.rows = height + 1;
         let n = self.stride * self.rows;
-        self.sum.clear();
+        // Only the first row and column must start at zero: the rest of each row up to the
+        // image's width is written below, and the corners past it are never read (a wide
+        // stride must not cost a wide clear).
         self.sum.resize(n, 0);
-        self.sqsum.clear();
         self.sqsum.resize(n, 0);
+        self.sum[..stride].fill(0);
+        self.sqsum[..stride].fill(0);
+        for y in 1..self.rows {
+            self.sum[y * stride] = 0;
+            self.sqsum[y * stride] = 0;
+        }
         for y in 0..height {
             let row = &grey[y * width..(y + 1) * width];
             let (above, below) = self.sum.split_at_mut((y + 1) * self.stride);
