@@ -171,103 +171,25 @@ pub fn load(dir: &Path, params: CutParams) -> Result<TrainingSet, PawDataError> 
         ..TrainingSet::default()
     };
     let rig = ds.meta.rig.unwrap_or_else(Rig::default_rig);
-    let mut greyer = Greyer::default();
-    let mut rng = ChaCha8Rng::seed_from_u64(params.seed ^ 0x9A75_0001);
-    let mut hard_rng = ChaCha8Rng::seed_from_u64(params.seed ^ 0x4A2D_0001);
-    let mut buf = Vec::new();
+    let mut cutter = Cutter {
+        params,
+        greyer: Greyer::default(),
+        rng: ChaCha8Rng::seed_from_u64(params.seed ^ 0x9A75_0001),
+        hard_rng: ChaCha8Rng::seed_from_u64(params.seed ^ 0x4A2D_0001),
+        buf: Vec::new(),
+    };
     ds.for_each(|sample| {
         let Some(full) = &sample.bottom else {
             return Ok(());
         };
         for &binning in params.binnings {
-            let binned;
-            let view = if binning == 1 {
-                full
-            } else {
-                binned = full.binned(binning);
-                &binned
-            };
-            let px_per_mm = DATASET_PX_PER_MM / f64::from(binning);
-            let Some((grey, k)) = canonical_view(view, px_per_mm, &mut greyer) else {
-                continue;
-            };
-            let (rx, ry) = (f64::from(view.region.x0), f64::from(view.region.y0));
-            let mut excluded = Vec::new();
-            for paw in &view.paws {
-                if paw.x1 <= paw.x0 {
-                    continue;
-                }
-                let b = [
-                    ((f64::from(paw.x0) - rx) / k) as f32 - 1.0,
-                    ((f64::from(paw.y0) - ry) / k) as f32 - 1.0,
-                    ((f64::from(paw.x1) - rx) / k) as f32 + 1.0,
-                    ((f64::from(paw.y1) - ry) / k) as f32 + 1.0,
-                ];
-                excluded.push(b);
-                if !(paw.contact && paw.visible) {
-                    continue;
-                }
-                set.paws += 1;
-                let cx = (f64::from(paw.x0 + paw.x1) / 2.0 - rx) / k;
-                let cy = (f64::from(paw.y0 + paw.y1) / 2.0 - ry) / k;
-                for a in 0..=params.augment {
-                    let (angle, scale, dx, dy, gain, offset, noise) = if a == 0 {
-                        (0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0)
-                    } else {
-                        (
-                            rng.gen_range(0.0..std::f64::consts::TAU),
-                            rng.gen_range(0.9..1.1),
-                            rng.gen_range(-1.0..1.0),
-                            rng.gen_range(-1.0..1.0),
-                            rng.gen_range(0.8f32..1.2),
-                            rng.gen_range(-8.0f32..8.0),
-                            rng.gen_range(0.0f32..2.5),
-                        )
-                    };
-                    let warp = Warp {
-                        cx: cx + dx,
-                        cy: cy + dy,
-                        angle,
-                        scale,
-                    };
-                    warp_window(&grey, warp, params.width, params.height, &mut buf);
-                    for v in &buf {
-                        let n: f32 = StandardNormal.sample(&mut rng);
-                        let p = v * gain + offset + n * noise;
-                        set.positives.push((p + 0.5).clamp(0.0, 255.0) as u8);
-                    }
-                }
-            }
             let camera = rig.with_color_binning(binning).color;
-            for (x, y) in hard_places(&sample, &camera, &view.marks) {
-                let (cx, cy) = ((x - rx) / k, (y - ry) / k);
-                for _ in 0..params.hard_per_place {
-                    let scale = hard_rng.gen_range(0.8..1.25);
-                    let warp = Warp {
-                        cx: cx + hard_rng.gen_range(-1.5..1.5),
-                        cy: cy + hard_rng.gen_range(-1.5..1.5),
-                        angle: hard_rng.gen_range(0.0..std::f64::consts::TAU),
-                        scale,
-                    };
-                    let half = params.width as f64 * scale / 2.0;
-                    let (x0, y0, x1, y1) = (warp.cx - half, warp.cy - half, warp.cx + half, warp.cy + half);
-                    let inside = x0 >= 0.0 && y0 >= 0.0 && x1 <= grey.width as f64 && y1 <= grey.height as f64;
-                    // The turned window's corners reach out to half its diagonal.
-                    let r = half * std::f64::consts::SQRT_2;
-                    let touches = excluded.iter().any(|b| {
-                        warp.cx - r < f64::from(b[2])
-                            && warp.cx + r > f64::from(b[0])
-                            && warp.cy - r < f64::from(b[3])
-                            && warp.cy + r > f64::from(b[1])
-                    });
-                    if !inside || touches {
-                        continue;
-                    }
-                    warp_window(&grey, warp, params.width, params.height, &mut buf);
-                    set.hard.extend(buf.iter().map(|v| (v + 0.5).clamp(0.0, 255.0) as u8));
-                }
+            let px_per_mm = DATASET_PX_PER_MM / f64::from(binning);
+            if binning == 1 {
+                cutter.cut(&mut set, &sample, full, px_per_mm, &camera);
+            } else {
+                cutter.cut(&mut set, &sample, &full.binned(binning), px_per_mm, &camera);
             }
-            set.backgrounds.push(Background { grey, excluded });
         }
         Ok(())
     })?;
@@ -275,6 +197,102 @@ pub fn load(dir: &Path, params: CutParams) -> Result<TrainingSet, PawDataError> 
         return Err(PawDataError::NoPaws { path: dir.to_owned() });
     }
     Ok(set)
+}
+
+/// Cuts the training material of one view after another, its random draws in order.
+struct Cutter {
+    params: CutParams,
+    greyer: Greyer,
+    rng: ChaCha8Rng,
+    hard_rng: ChaCha8Rng,
+    buf: Vec<f32>,
+}
+
+impl Cutter {
+    /// Cuts the positives, hard negatives and background of `view` (of `sample`, seen at
+    /// `px_per_mm` by `camera`) into `set`.
+    fn cut(&mut self, set: &mut TrainingSet, sample: &Sample, view: &BottomView, px_per_mm: f64, camera: &Camera) {
+        let Some((grey, k)) = canonical_view(view, px_per_mm, &mut self.greyer) else {
+            return;
+        };
+        let (rx, ry) = (f64::from(view.region.x0), f64::from(view.region.y0));
+        let mut excluded = Vec::new();
+        for paw in &view.paws {
+            if paw.x1 <= paw.x0 {
+                continue;
+            }
+            let b = [
+                ((f64::from(paw.x0) - rx) / k) as f32 - 1.0,
+                ((f64::from(paw.y0) - ry) / k) as f32 - 1.0,
+                ((f64::from(paw.x1) - rx) / k) as f32 + 1.0,
+                ((f64::from(paw.y1) - ry) / k) as f32 + 1.0,
+            ];
+            excluded.push(b);
+            if !(paw.contact && paw.visible) {
+                continue;
+            }
+            set.paws += 1;
+            let cx = (f64::from(paw.x0 + paw.x1) / 2.0 - rx) / k;
+            let cy = (f64::from(paw.y0 + paw.y1) / 2.0 - ry) / k;
+            for a in 0..=self.params.augment {
+                let (angle, scale, dx, dy, gain, offset, noise) = if a == 0 {
+                    (0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0)
+                } else {
+                    (
+                        self.rng.gen_range(0.0..std::f64::consts::TAU),
+                        self.rng.gen_range(0.9..1.1),
+                        self.rng.gen_range(-1.0..1.0),
+                        self.rng.gen_range(-1.0..1.0),
+                        self.rng.gen_range(0.8f32..1.2),
+                        self.rng.gen_range(-8.0f32..8.0),
+                        self.rng.gen_range(0.0f32..2.5),
+                    )
+                };
+                let warp = Warp {
+                    cx: cx + dx,
+                    cy: cy + dy,
+                    angle,
+                    scale,
+                };
+                warp_window(&grey, warp, self.params.width, self.params.height, &mut self.buf);
+                for v in &self.buf {
+                    let n: f32 = StandardNormal.sample(&mut self.rng);
+                    let p = v * gain + offset + n * noise;
+                    set.positives.push((p + 0.5).clamp(0.0, 255.0) as u8);
+                }
+            }
+        }
+        for (x, y) in hard_places(sample, camera, &view.marks) {
+            let (cx, cy) = ((x - rx) / k, (y - ry) / k);
+            for _ in 0..self.params.hard_per_place {
+                let scale = self.hard_rng.gen_range(0.8..1.25);
+                let warp = Warp {
+                    cx: cx + self.hard_rng.gen_range(-1.5..1.5),
+                    cy: cy + self.hard_rng.gen_range(-1.5..1.5),
+                    angle: self.hard_rng.gen_range(0.0..std::f64::consts::TAU),
+                    scale,
+                };
+                let half = self.params.width as f64 * scale / 2.0;
+                let (x0, y0, x1, y1) = (warp.cx - half, warp.cy - half, warp.cx + half, warp.cy + half);
+                let inside = x0 >= 0.0 && y0 >= 0.0 && x1 <= grey.width as f64 && y1 <= grey.height as f64;
+                // The turned window's corners reach out to half its diagonal.
+                let r = half * std::f64::consts::SQRT_2;
+                let touches = excluded.iter().any(|b| {
+                    warp.cx - r < f64::from(b[2])
+                        && warp.cx + r > f64::from(b[0])
+                        && warp.cy - r < f64::from(b[3])
+                        && warp.cy + r > f64::from(b[1])
+                });
+                if !inside || touches {
+                    continue;
+                }
+                warp_window(&grey, warp, self.params.width, self.params.height, &mut self.buf);
+                set.hard
+                    .extend(self.buf.iter().map(|v| (v + 0.5).clamp(0.0, 255.0) as u8));
+            }
+        }
+        set.backgrounds.push(Background { grey, excluded });
+    }
 }
 
 /// Why a dataset gives no paw material.
