@@ -567,6 +567,11 @@ const TAIL_THIN_RADIUS_MM: f32 = 4.0;
 /// a third to two thirds).
 const TAIL_THIN_SHARE: f32 = 0.25;
 
+/// The tail tip moves only when the votes put it within this distance (mm) of a segmented
+/// pixel: an estimate off the mask means the tail's last part was lost in the noise (as a
+/// time-of-flight camera loses it), and then the votes know better than the mask where it ends.
+const TAIL_ON_MASK_MM: f32 = 3.0;
+
 /// What the segmented mouse shows where the votes put the tail tip.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum TailView {
@@ -579,10 +584,6 @@ enum TailView {
     /// there, so no tip is.
     Unseen,
 }
-/// The tail tip moves only when the votes put it within this distance (mm) of a segmented
-/// pixel: an estimate off the mask means the tail's last part was lost in the noise (as a
-/// time-of-flight camera loses it), and then the votes know better than the mask where it ends.
-const TAIL_ON_MASK_MM: f32 = 3.0;
 
 /// Finds the far end of the segmented tail: of the mouse's pixels near the votes' tail tip, the
 /// one furthest from the tail base along the mouse (8-connected steps over its pixels, so a

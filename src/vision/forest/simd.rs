@@ -454,13 +454,19 @@ mod tests {
         DepthImage { region, depth }
     }
 
+    /// The AVX2 kernel, or `None` (the test is skipped, and says so) on a processor without.
+    fn avx2_or_skip() -> Option<Kernel> {
+        let kernel = Kernel::detect();
+        if kernel == Kernel::Portable {
+            eprintln!("skipped: this processor has no AVX2");
+            return None;
+        }
+        Some(kernel)
+    }
+
     #[test]
     fn avx_and_portable_kernel_sums_agree_bit_for_bit() {
-        let avx = Kernel::detect();
-        if avx == Kernel::Portable {
-            eprintln!("skipped: this processor has no AVX2");
-            return;
-        }
+        let Some(avx) = avx2_or_skip() else { return };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x5EED);
         for round in 0..500 {
             // Votes around a joint (mm, camera frame), some far beyond the kernel's reach, some
@@ -494,11 +500,7 @@ mod tests {
 
     #[test]
     fn avx2_and_portable_reach_the_same_leaves() {
-        let avx2 = Kernel::detect();
-        if avx2 == Kernel::Portable {
-            eprintln!("skipped: this processor has no AVX2");
-            return;
-        }
+        let Some(avx2) = avx2_or_skip() else { return };
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x51AD);
         let (mut scratch, mut lanes) = (Traversal::default(), PixelLanes::default());
         let (mut portable, mut fast) = (Vec::new(), Vec::new());
