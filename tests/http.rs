@@ -285,7 +285,9 @@ fn the_endpoints_answer_while_the_daemon_runs_and_the_page_renders_in_chromium()
     let e2e = |s: &Series| value(s, "mousepose_end_to_end_latency_seconds_count", &[]);
     assert!(e2e(&after) > e2e(&before));
 
-    for picture in ["/live/depth.png", "/live/mouse.png"] {
+    // The bottom view stays while the colour camera streams, even when one depth frame was
+    // paired with no colour frame.
+    for picture in ["/live/depth.png", "/live/mouse.png", "/live/bottom.png"] {
         let png = fetch(address, picture, None);
         assert_eq!(
             (png.status, png.content_type.as_deref()),

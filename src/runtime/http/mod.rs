@@ -209,10 +209,14 @@ struct Served {
 /// open: drawing and encoding them is the page's main cost to the machine.
 const PICTURE_INTERVAL: Duration = Duration::from_millis(500);
 
+/// How much older than the latest pose the bottom view may be: a colour frame missing from one
+/// pair keeps the last one on the page; a colour camera away for longer blanks it.
+const BOTTOM_STALE: Duration = Duration::from_secs(2);
+
 /// The live pictures of one frame pair, as PNG.
 #[derive(Debug, Clone)]
 struct Pictures {
-    /// Depth and colour frame numbers.
+    /// The depth frame's number, and that of the colour frame the bottom view shows.
     key: (u64, Option<u64>),
     drawn: std::time::Instant,
     depth: axum::body::Bytes,
@@ -340,7 +344,7 @@ async fn mouse_png(State(s): State<Arc<Served>>) -> Response {
 async fn bottom_png(State(s): State<Arc<Served>>) -> Response {
     match pictures(&s).await.and_then(|p| p.bottom) {
         Some(png) => with_type("image/png", png),
-        None => (StatusCode::NOT_FOUND, "no colour frame in the latest pose\n").into_response(),
+        None => (StatusCode::NOT_FOUND, "no colour frame in the last two seconds\n").into_response(),
     }
 }
 
@@ -352,7 +356,14 @@ async fn pictures(s: &Arc<Served>) -> Option<Pictures> {
         return Some(p.clone());
     }
     let (record, frames) = s.watch.latest()?;
-    let key = (record.depth.seq, record.color.map(|c| c.seq));
+    let bottom_source = s
+        .watch
+        .latest_with_color()
+        .filter(|(with, _)| record.depth.host_ns.saturating_sub(with.depth.host_ns) <= BOTTOM_STALE.as_nanos() as u64);
+    let key = (
+        record.depth.seq,
+        bottom_source.as_ref().and_then(|(with, _)| with.color.map(|c| c.seq)),
+    );
     if let Some(p) = cached.as_ref().filter(|p| p.key == key) {
         return Some(p.clone());
     }
@@ -364,10 +375,10 @@ async fn pictures(s: &Arc<Served>) -> Option<Pictures> {
             .to_png()
             .ok()?;
         let mouse = overlay::mouse_view(&rig, &frames.depth, &record).to_png().ok()?;
-        let bottom = frames
-            .color
-            .as_deref()
-            .and_then(|c| overlay::bottom_panel(&rig, c, &record).to_png().ok());
+        let bottom = bottom_source.and_then(|(with, pair)| {
+            let color = pair.color?;
+            overlay::bottom_panel(&rig, &color, &with).to_png().ok()
+        });
         Some(Pictures {
             key,
             drawn: std::time::Instant::now(),

@@ -474,6 +474,9 @@ pub struct Live {
     pub latest: Option<crate::runtime::stages::PoseRecord>,
     /// The latest pose's frames (shared with the pipeline, not copied).
     pub frames: Option<crate::core::frame::FramePair>,
+    /// The latest pose that had a colour frame, and its frames, for the bottom view: one
+    /// depth frame paired with no colour frame does not blank the operator's picture.
+    pub with_color: Option<(crate::runtime::stages::PoseRecord, crate::core::frame::FramePair)>,
     pub statuses: BTreeMap<&'static str, u64>,
     pub chunk: usize,
 }
@@ -697,6 +700,9 @@ impl Sink for ChunkPoses {
         live.rows += 1;
         live.rows_lost += u64::from(lost);
         *live.statuses.entry(record.status.name()).or_default() += 1;
+        if frames.color.is_some() {
+            live.with_color = Some((record.clone(), frames.clone()));
+        }
         live.latest = Some(record);
         live.frames = Some(frames);
         live.chunk = self.index;

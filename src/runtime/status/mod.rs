@@ -204,6 +204,12 @@ impl Watch {
         Some((live.latest.clone()?, live.frames.clone()?))
     }
 
+    /// The latest pose that had a colour frame, and its frames.
+    pub fn latest_with_color(&self) -> Option<(PoseRecord, FramePair)> {
+        let live = self.parts.live.lock().unwrap_or_else(PoisonError::into_inner);
+        live.with_color.clone()
+    }
+
     /// The run report so far.
     pub fn report(&self) -> RunReport {
         let live = self.live();
