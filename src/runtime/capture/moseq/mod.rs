@@ -43,7 +43,7 @@ pub use reader::{MoseqMetadata, metadata_resolution, read_metadata};
 pub use size_check::{SizeTried, smooth_share};
 pub use timestamps::{MoseqTimestamp, ns_from_ms, parse_timestamps};
 
-use reader::{Reader, probe, read_full, read_raw_frame, read_video_frame};
+use reader::{Reader, probe, read_raw_frame, read_samples, read_video_frame};
 
 use super::{CaptureError, Clock, FrameSource};
 use crate::core::frame::{DepthFrame, Stamp};
@@ -479,14 +479,12 @@ impl FrameSource for MoseqDepth {
         self.stop()?;
         self.next_index = 0;
         let reader = match self.kind {
-            MoseqKind::Raw => File::open(&self.depth_path)
-                .map(|f| Reader::Raw(f, Vec::new()))
-                .map_err(|source| {
-                    self.error(MoseqError::Io {
-                        path: self.depth_path.clone(),
-                        source,
-                    })
-                })?,
+            MoseqKind::Raw => File::open(&self.depth_path).map(Reader::Raw).map_err(|source| {
+                self.error(MoseqError::Io {
+                    path: self.depth_path.clone(),
+                    source,
+                })
+            })?,
             MoseqKind::Video => Reader::Video(self.spawn_decoder().map_err(|e| self.error(e))?),
         };
         self.reader = Some(reader);
@@ -498,14 +496,12 @@ impl FrameSource for MoseqDepth {
         let samples = self.frame_samples();
         let data = match self.reader.as_mut() {
             None => return Ok(None),
-            Some(Reader::Raw(file, bytes)) => {
+            Some(Reader::Raw(file)) => {
                 if index >= self.timestamps.len() {
                     return Ok(None);
                 }
-                bytes.resize(samples * 2, 0);
-                let read = read_full(file, bytes);
-                match read {
-                    Ok(n) if n == bytes.len() => crate::io::u16_samples(bytes),
+                match read_samples(file, samples) {
+                    Ok((frame, n)) if n == samples * 2 => frame,
                     Ok(_) => return Err(self.error(self.count_mismatch(index as u64))),
                     Err(source) => {
                         return Err(self.error(MoseqError::Io {

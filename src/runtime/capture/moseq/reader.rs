@@ -109,9 +109,24 @@ pub(super) fn read_raw_frame(path: &Path, samples: usize, index: u64) -> Result<
     let mut file = File::open(path).map_err(io_error)?;
     file.seek(SeekFrom::Start(index * samples as u64 * 2))
         .map_err(io_error)?;
-    let mut bytes = vec![0u8; samples * 2];
-    file.read_exact(&mut bytes).map_err(io_error)?;
-    Ok(crate::io::u16_samples(&bytes))
+    match read_samples(&mut file, samples) {
+        Ok((frame, n)) if n == samples * 2 => Ok(frame),
+        Ok(_) => Err(io_error(io::ErrorKind::UnexpectedEof.into())),
+        Err(e) => Err(io_error(e)),
+    }
+}
+
+/// A frame of `samples` little-endian depth readings read from `reader` straight into the
+/// frame's memory (no byte buffer between, no second copy), and the number of bytes read:
+/// fewer than `2 * samples` when the reader ended first.
+pub(super) fn read_samples(reader: &mut impl Read, samples: usize) -> io::Result<(Vec<u16>, usize)> {
+    let mut frame = vec![0u16; samples];
+    let n = read_full(reader, bytemuck::cast_slice_mut(&mut frame))?;
+    // Nothing to do on a little-endian machine.
+    for v in &mut frame {
+        *v = u16::from_le(*v);
+    }
+    Ok((frame, n))
 }
 
 /// Decodes one frame of `depth.avi` at `seconds` from its start (ffmpeg seeks to it).
@@ -161,9 +176,10 @@ pub(super) fn read_video_frame(
 /// What frames are read from while the source runs.
 #[derive(Debug)]
 pub(super) enum Reader {
-    /// `depth.dat`, read a frame at a time into the buffer kept beside it (no buffered reader:
-    /// whole frames are larger than its buffer would be, and it would copy them once more).
-    Raw(File, Vec<u8>),
+    /// `depth.dat`, read a frame at a time straight into the frame's samples (no buffered
+    /// reader: whole frames are larger than its buffer would be, and it would copy them once
+    /// more).
+    Raw(File),
     Video(VideoDecoder),
 }
 
@@ -231,16 +247,14 @@ fn decode_frames(
     path: &Path,
     sender: &mpsc::SyncSender<Result<Vec<u16>, MoseqError>>,
 ) {
-    let mut bytes = vec![0u8; samples * 2];
     loop {
-        match read_full(&mut stdout, &mut bytes) {
-            Ok(n) if n == bytes.len() => {
-                let frame = crate::io::u16_samples(&bytes);
+        match read_samples(&mut stdout, samples) {
+            Ok((frame, n)) if n == samples * 2 => {
                 if sender.send(Ok(frame)).is_err() {
                     return;
                 }
             }
-            Ok(n) => {
+            Ok((_, n)) => {
                 // End of output: clean after whole frames, otherwise ffmpeg failed.
                 let mut text = String::new();
                 let _ = stderr.read_to_string(&mut text);
@@ -271,7 +285,7 @@ fn decode_frames(
 }
 
 /// Reads until `buf` is full or the input ends; returns the number of bytes read.
-pub(super) fn read_full(reader: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
+fn read_full(reader: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
     let mut filled = 0;
     while filled < buf.len() {
         let Some(rest) = buf.get_mut(filled..) else { break };
