@@ -315,6 +315,8 @@ const EXTERNAL: &[(&str, &[&str])] = &[
     ("indicatif", COMMANDS),
     ("glob", COMMANDS),
     ("anyhow", COMMANDS),
+    // Depth samples read from files straight into their buffers: the readers.
+    ("bytemuck", &["io", "runtime"]),
     // The command line: the app alone.
     ("clap", &["app"]),
     // OpenCV: segmentation and calibration maths, and the commands that read images.
