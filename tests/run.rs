@@ -146,8 +146,10 @@ fn the_daemon_rides_out_a_colour_camera_restart_and_stops_cleanly_on_sigterm() {
     };
     read_notes(Instant::now() + Duration::from_secs(5));
     // The colour camera goes away for about three seconds, and comes back.
+    let went = Instant::now();
     drop(camera);
     read_notes(Instant::now() + Duration::from_secs(3));
+    let gone_s = went.elapsed().as_secs_f64();
     let camera = fake_camera();
     read_notes(Instant::now() + Duration::from_secs(7));
     let (status, out, err) = terminate(daemon, Duration::from_secs(30));
@@ -163,12 +165,13 @@ fn the_daemon_rides_out_a_colour_camera_restart_and_stops_cleanly_on_sigterm() {
     assert!(!outages.is_empty(), "{report:#}");
     let outage = &outages[0];
     assert!(outage["end_ns"].is_u64(), "the camera never came back: {report:#}");
-    // The outage is the real gap: from the last frame before the freeze to the first after
-    // it (4 s frozen), not from when the driver let go to the reopening.
+    // The outage is the real gap: from the last frame before the camera went to the first
+    // after it came back, so at least as long as it was gone (then its start-up, 0.4-1 s
+    // here), not from when the stall was seen (1 s after its last frame) to the reopening.
     let length_s = (outage["end_ns"].as_u64().unwrap() - outage["start_ns"].as_u64().unwrap()) as f64 * 1e-9;
     assert!(
-        (3.5..6.0).contains(&length_s),
-        "an outage of {length_s:.2} s: {report:#}"
+        (gone_s - 0.05..gone_s + 3.0).contains(&length_s),
+        "an outage of {length_s:.2} s for a camera gone {gone_s:.2} s: {report:#}"
     );
     let before = outage["frames_before"].as_u64().unwrap();
     let captured = color["captured"].as_u64().unwrap();
