@@ -12,6 +12,7 @@
 //! not at all, and tried again while the run goes on. Poses go on either way, and none of
 //! this stops the run.
 
+use crate::core::frame::FramePair;
 use crate::io::session::{
     CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionSummary, SessionWriter,
 };
@@ -19,7 +20,7 @@ use crate::runtime::capture::supervise::{SharedHealth, lock};
 use crate::runtime::capture::{Captured, Stamped, error_chain};
 use crate::runtime::pipeline::{Sink, StageError};
 use crate::runtime::sink::poses::{PoseTally, PoseWriter};
-use crate::runtime::stages::Fused;
+use crate::runtime::stages::{Fused, PoseRecord};
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
@@ -471,14 +472,38 @@ pub struct Live {
     /// Poses made, and those of them that could not be written (disk full, write error).
     pub rows: u64,
     pub rows_lost: u64,
-    pub latest: Option<crate::runtime::stages::PoseRecord>,
+    pub latest: Option<PoseRecord>,
     /// The latest pose's frames (shared with the pipeline, not copied).
-    pub frames: Option<crate::core::frame::FramePair>,
-    /// The latest pose that had a colour frame, and its frames, for the bottom view: one
-    /// depth frame paired with no colour frame does not blank the operator's picture.
-    pub with_color: Option<(crate::runtime::stages::PoseRecord, crate::core::frame::FramePair)>,
+    pub frames: Option<FramePair>,
+    /// While the latest pose has no colour frame: the latest one that had, and its frames, for
+    /// the bottom view (one depth frame paired with no colour frame does not blank the
+    /// operator's picture). Kept by moving the latest pose here, never by copying it.
+    pub with_color: Option<(PoseRecord, FramePair)>,
     pub statuses: BTreeMap<&'static str, u64>,
     pub chunk: usize,
+}
+
+impl Live {
+    /// Makes `record` the latest pose; the one before it stays for the bottom view when it had
+    /// a colour frame and `record` has none.
+    pub fn set_latest(&mut self, record: PoseRecord, frames: FramePair) {
+        let previous = (self.latest.replace(record), self.frames.replace(frames));
+        if self.frames.as_ref().is_some_and(|f| f.color.is_some()) {
+            self.with_color = None;
+        } else if let (Some(record), Some(frames)) = previous
+            && frames.color.is_some()
+        {
+            self.with_color = Some((record, frames));
+        }
+    }
+
+    /// The latest pose that had a colour frame, and its frames.
+    pub fn latest_with_color(&self) -> Option<(PoseRecord, FramePair)> {
+        match (&self.latest, &self.frames) {
+            (Some(record), Some(frames)) if frames.color.is_some() => Some((record.clone(), frames.clone())),
+            _ => self.with_color.clone(),
+        }
+    }
 }
 
 /// The pose sink of a live run: `poses.csv` of the current chunk, and the live status.
@@ -700,11 +725,7 @@ impl Sink for ChunkPoses {
         live.rows += 1;
         live.rows_lost += u64::from(lost);
         *live.statuses.entry(record.status.name()).or_default() += 1;
-        if frames.color.is_some() {
-            live.with_color = Some((record.clone(), frames.clone()));
-        }
-        live.latest = Some(record);
-        live.frames = Some(frames);
+        live.set_latest(record, frames);
         live.chunk = self.index;
         Ok(())
     }
@@ -728,4 +749,71 @@ pub fn chunk_meta(
     meta.rig = rig;
     meta.color_latency_ns = color_latency_ns;
     meta
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
+    use crate::core::pose::Pose;
+    use crate::runtime::stages::PoseStatus;
+
+    /// Pose `seq` and its frames, with a colour frame when `color`.
+    fn pose(seq: u64, color: bool) -> (PoseRecord, FramePair) {
+        let stamp = Stamp {
+            seq,
+            device_ns: seq,
+            host_ns: seq,
+        };
+        let color = color.then(|| {
+            Arc::new(ColorFrame {
+                stamp,
+                width: 1,
+                height: 1,
+                format: PixelFormat::Mono8,
+                data: vec![0],
+            })
+        });
+        let record = PoseRecord {
+            depth: stamp,
+            color: color.as_ref().map(|c| c.stamp),
+            skew_ns: 0,
+            status: PoseStatus::Ok,
+            pose: Pose::default(),
+            paws: Vec::new(),
+            headings: None,
+            orientation: None,
+        };
+        let frames = FramePair {
+            depth: Arc::new(DepthFrame {
+                stamp,
+                width: 1,
+                height: 1,
+                data: vec![0],
+            }),
+            color,
+            skew_ns: 0,
+        };
+        (record, frames)
+    }
+
+    #[test]
+    fn the_bottom_view_keeps_the_latest_pose_that_had_a_colour_frame() {
+        let mut live = Live::default();
+        let seq = |live: &Live| live.latest_with_color().map(|(r, _)| r.depth.seq);
+        assert_eq!(seq(&live), None);
+        let (r, f) = pose(1, false);
+        live.set_latest(r, f);
+        assert_eq!(seq(&live), None, "no colour frame yet");
+        for (n, color, expected) in [(2, true, 2), (3, false, 2), (4, false, 2), (5, true, 5), (6, false, 5)] {
+            let (r, f) = pose(n, color);
+            live.set_latest(r, f);
+            assert_eq!(seq(&live), Some(expected), "after pose {n}");
+            assert_eq!(live.latest.as_ref().map(|r| r.depth.seq), Some(n));
+        }
+        // While the latest pose has its colour frame, nothing else is held.
+        let (r, f) = pose(7, true);
+        live.set_latest(r, f);
+        assert!(live.with_color.is_none());
+    }
 }

@@ -207,7 +207,7 @@ impl Watch {
     /// The latest pose that had a colour frame, and its frames.
     pub fn latest_with_color(&self) -> Option<(PoseRecord, FramePair)> {
         let live = self.parts.live.lock().unwrap_or_else(PoisonError::into_inner);
-        live.with_color.clone()
+        live.latest_with_color()
     }
 
     /// The run report so far.
