@@ -784,7 +784,7 @@ fn a_tail_not_seen_gets_no_tail_tip_off_the_mouse() {
         let tailless = DepthImage::from_mask(r, &crop, &mask);
         for (view, hidden) in [(&image, false), (&tailless, true)] {
             sample_pixels(view, 200, &mut pixels);
-            let oriented = estimator.estimate_oriented(view, &pixels, &rig.depth.intrinsics, &up);
+            let oriented = estimator.estimate_oriented(view, &pixels, &rig.depth.intrinsics, &up, &[]);
             let surface: Vec<Point3<f64>> = view.on_mouse().map(|(k, d)| world(k, d)).collect();
             if !hidden {
                 // The orientation with the head at the tail's end puts its tip off the mouse.
@@ -861,9 +861,9 @@ fn the_body_forest_loaded_for_run_time_and_its_clones_estimate_bit_for_bit_alike
         };
         for budget in [200, 1200] {
             sample_pixels(&image, budget, &mut pixels);
-            let a = built.estimate_oriented(&image, &pixels, &rig.depth.intrinsics, &up);
-            let b = loaded.estimate_oriented(&image, &pixels, &rig.depth.intrinsics, &up);
-            let c = clone.estimate_oriented(&image, &pixels, &rig.depth.intrinsics, &up);
+            let a = built.estimate_oriented(&image, &pixels, &rig.depth.intrinsics, &up, &[]);
+            let b = loaded.estimate_oriented(&image, &pixels, &rig.depth.intrinsics, &up, &[]);
+            let c = clone.estimate_oriented(&image, &pixels, &rig.depth.intrinsics, &up, &[]);
             // Debug prints each float's shortest exact form: equal text, equal bits.
             assert_eq!(format!("{a:?}"), format!("{b:?}"), "sample {i}, {budget} pixels");
             assert_eq!(

@@ -16,6 +16,7 @@ mod http;
 mod layers;
 mod packaging;
 mod paws;
+mod realdata;
 mod realrig;
 mod record;
 mod replay;

@@ -624,7 +624,7 @@ fn detect_paws_finds_the_paws_in_single_bottom_views() {
 fn a_still_mouse_without_a_visible_tail_keeps_its_head_in_front() {
     use mousepose::synth::Mice;
     use mousepose::synth::animate::Activity;
-    use mousepose::synth::session::{SessionSpec, write_session};
+    use mousepose::synth::session::{SessionSpec, TailLook, write_session};
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("still");
     std::fs::create_dir_all(&dir).unwrap();
@@ -634,7 +634,7 @@ fn a_still_mouse_without_a_visible_tail_keeps_its_head_in_front() {
         color: false,
         mice: Mice::Varied,
         activity: Activity::Still,
-        tail_hidden: true,
+        tail: TailLook::Hidden,
         noise: DepthNoise {
             model: NoiseModel::Tof,
             gaussian_mm: 0.0,
@@ -860,4 +860,141 @@ fn a_mouse_outside_the_arena_is_reported() {
         .filter(|p| **p == mousepose::runtime::stages::overlay::ARENA_OUTLINE)
         .count();
     assert!(outline > 100, "{outline} pixels of the arena's outline");
+}
+
+/// Issue 41, item 3: a mouse against a wall 200 mm high (the wall's face seen by a camera
+/// tilted toward it, its mixed pixels and noise beside the mouse): no joint takes the wall's
+/// height; each lies within the mouse's own height.
+#[test]
+fn a_mouse_against_a_wall_keeps_its_joints_on_itself() {
+    use std::f64::consts::FRAC_PI_2;
+    const WALL_X_MM: f64 = 120.0;
+    const WALL_MM: f64 = 200.0;
+    let tmp = tempfile::tempdir().unwrap();
+    let cam = camera(nominal(512, 424), 680.0, 6.0);
+    let i = &cam.intrinsics;
+    let o = cam.centre();
+    // The floor at z = 0, and from x = WALL_X_MM on a wall 200 mm high (its face toward the
+    // camera's side).
+    let background: Vec<f32> = (0..i.height)
+        .flat_map(|y| (0..i.width).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let d = cam.world_from_camera.rotation * i.ray(&Point2::new(f64::from(x), f64::from(y)));
+            let t_floor = -o.z / d.z;
+            let t_top = (WALL_MM - o.z) / d.z;
+            let t_face = (WALL_X_MM - o.x) / d.x;
+            let t = if (o + d * t_top).x >= WALL_X_MM {
+                t_top
+            } else if (o + d * t_floor).x >= WALL_X_MM && d.x > 0.0 {
+                t_face
+            } else {
+                t_floor
+            };
+            t as f32
+        })
+        .collect();
+    // Mice walking along the wall, their flanks 0-8 mm from it, both ways; time-of-flight
+    // noise (flying pixels across the wall's edge, as real Kinects have them).
+    let mice: Vec<MouseInstance> = (0..30)
+        .map(|k| {
+            let heading = if k % 2 == 0 { FRAC_PI_2 } else { -FRAC_PI_2 };
+            let gap = (k % 5) as f64 * 2.0;
+            mouse(k, WALL_X_MM - 14.0 - gap, -60.0 + 4.0 * k as f64, heading)
+        })
+        .collect();
+    let dir = tmp.path().join("wall");
+    std::fs::create_dir_all(&dir).unwrap();
+    let tof = DepthNoise {
+        model: NoiseModel::Tof,
+        gaussian_mm: 0.0,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(41);
+    let mut dat = Vec::new();
+    let mut ts = String::new();
+    for (k, m) in mice.iter().enumerate() {
+        let frame = render_top_frame(&cam, &background, &skin(m), &tof, &mut rng);
+        dat.extend(frame.iter().flat_map(|v| v.to_le_bytes()));
+        ts.push_str(&format!("{:.3}\n", 1000.0 + k as f64 * 1000.0 / 30.0));
+    }
+    std::fs::write(dir.join("depth.dat"), dat).unwrap();
+    std::fs::write(dir.join("depth_ts.txt"), ts).unwrap();
+    std::fs::write(dir.join("metadata.json"), resolution(i)).unwrap();
+    let out = tmp.path().join("o");
+    let mut opts = options(&dir, &out);
+    opts.force = true;
+    replay(&opts).unwrap();
+    let text = std::fs::read_to_string(out.join("poses.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let mut posed = 0;
+    for (line, m) in lines.zip(&mice) {
+        let f: Vec<&str> = line.split(',').collect();
+        if f[col("status")] != "ok" {
+            continue;
+        }
+        posed += 1;
+        let top = Joint::MAIN_BODY.iter().map(|&j| m.joint(j).z).fold(0.0, f64::max);
+        for joint in Joint::MAIN_BODY {
+            // The replay's world is the fitted floor's: heights compare, places do not.
+            let Ok(z) = f[col(&format!("{}_z", joint.name()))].parse::<f64>() else {
+                continue;
+            };
+            eprintln!("{}: {} at {z:.0} mm, the mouse's top {top:.0} mm", f[0], joint.name());
+            assert!(
+                z <= top + 15.0,
+                "{}: {} at {z:.0} mm, the mouse's top {top:.0} mm",
+                f[0],
+                joint.name()
+            );
+        }
+    }
+    assert!(posed * 4 >= mice.len() * 3, "{posed} of {} frames posed", mice.len());
+}
+
+/// Issue 41, item 1: a tail that a real depth camera shows blurred and raised (about 6 mm wide,
+/// reading 24 mm above the floor at its base and 10 mm at its tip, where the back reads about
+/// 30 mm) is found as a tail and not taken for the head, whether the mouse moves or stays still
+/// from its first frame. (Before: the head on the tail's end in 296 of 296 frames of the first
+/// session.)
+#[test]
+fn a_raised_visible_tail_is_taken_for_a_tail_not_a_head() {
+    use mousepose::synth::Mice;
+    use mousepose::synth::animate::Activity;
+    use mousepose::synth::session::{SessionSpec, TailLook, write_session};
+    let tmp = tempfile::tempdir().unwrap();
+    for (seed, activity) in [(7401, Activity::Mixed), (7501, Activity::Still)] {
+        let dir = tmp.path().join(format!("s{seed}"));
+        std::fs::create_dir_all(&dir).unwrap();
+        let spec = SessionSpec {
+            seconds: 10.0,
+            seed,
+            color: false,
+            mice: Mice::Varied,
+            activity,
+            tail: TailLook::Raised,
+            noise: DepthNoise {
+                model: NoiseModel::Tof,
+                gaussian_mm: 0.0,
+            },
+            ..SessionSpec::default()
+        };
+        write_session(&dir, &spec, |_, _| {}).unwrap();
+        let out = tmp.path().join(format!("o{seed}"));
+        let s = replay(&options(&dir, &out)).unwrap();
+        let o = s.orientation.unwrap();
+        assert!(o.frames > 250, "{seed}: {o:?}");
+        assert!(
+            o.tail_frames * 2 >= o.frames,
+            "{seed}: the tail seen in too few frames: {o:?}"
+        );
+        assert!(
+            o.flipped_tail * 50 <= o.tail_frames,
+            "{seed}: the tail's end wrong: {o:?}"
+        );
+        assert!(
+            o.flipped_tracked * 50 <= o.frames,
+            "{seed}: more than 2 % flipped: {o:?}"
+        );
+    }
 }

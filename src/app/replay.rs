@@ -87,13 +87,15 @@ pub fn summary_text(summary: &ReplaySummary, out: &Path) -> String {
         let share = |n: u64| 100.0 * n as f64 / o.frames as f64;
         let _ = writeln!(
             text,
-            "head and tail swapped vs truth: {:.1} % of {} frames (each frame alone {:.1} %, the forest alone {:.1} %, the body shape alone {:.1} % of {}); heading error otherwise {:.1} deg",
+            "head and tail swapped vs truth: {:.1} % of {} frames (each frame alone {:.1} %, the forest alone {:.1} %, the body shape alone {:.1} % of {}, a visible tail alone {:.1} % of {}); heading error otherwise {:.1} deg",
             share(o.flipped_tracked),
             o.frames,
             share(o.flipped_frame_alone),
             share(o.flipped_forest),
             100.0 * o.flipped_shape as f64 / o.shape_frames.max(1) as f64,
             o.shape_frames,
+            100.0 * o.flipped_tail as f64 / o.tail_frames.max(1) as f64,
+            o.tail_frames,
             o.heading_error_deg
         );
     }

@@ -10,7 +10,7 @@ use crate::engine::calibrate::{self, ChessboardOptions};
 use crate::engine::synth::{self as engine, DatasetOptions, MoseqOptions, SessionOptions};
 use crate::synth::dataset::DatasetSpec;
 use crate::synth::moseq::MoseqSpec;
-use crate::synth::session::SessionSpec;
+use crate::synth::session::{SessionSpec, TailLook};
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 
@@ -190,10 +190,12 @@ pub struct SessionArgs {
     /// grooming, rearing, bending), or walks (walking).
     #[arg(long, value_name = "mixed|still|walking", default_value = "mixed", value_parser = parse_activity)]
     activity: crate::synth::animate::Activity,
-    /// visible: the tail rendered; hidden: not rendered, as a depth camera that does not see a
-    /// 3-5 mm tail shows it (the truth keeps its joints).
-    #[arg(long, value_name = "visible|hidden", default_value = "visible", value_parser = parse_tail, action = clap::ArgAction::Set)]
-    tail: bool,
+    /// visible: the tail rendered as it is (3-5 mm thick on the floor); hidden: not rendered,
+    /// as a depth camera that does not see a 3-5 mm tail shows it; raised: blurred and raised
+    /// by mixed pixels, as real Kinects show it (about 6 mm wide, reading 24 mm above the floor
+    /// at its base, 10 mm at its tip). The truth keeps its joints.
+    #[arg(long, value_name = "visible|hidden|raised", default_value = "visible", value_parser = parse_tail, action = clap::ArgAction::Set)]
+    tail: TailLook,
     /// Replace the output directory if it is not empty.
     #[arg(long)]
     force: bool,
@@ -284,7 +286,7 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         color: !args.no_color,
         mice: args.mice,
         activity: args.activity,
-        tail_hidden: args.tail,
+        tail: args.tail,
     };
     let summary = engine::synth_session(&SessionOptions {
         out: args.out.clone(),
@@ -302,12 +304,13 @@ fn synth_session(args: &SessionArgs) -> Outcome {
     Ok(())
 }
 
-/// `--tail visible|hidden`: whether the tail is hidden.
-fn parse_tail(s: &str) -> Result<bool, String> {
+/// `--tail visible|hidden|raised`: how the depth camera shows the tail.
+fn parse_tail(s: &str) -> Result<TailLook, String> {
     match s {
-        "visible" => Ok(false),
-        "hidden" => Ok(true),
-        _ => Err(format!("{s:?} is not a tail: visible or hidden")),
+        "visible" => Ok(TailLook::Visible),
+        "hidden" => Ok(TailLook::Hidden),
+        "raised" => Ok(TailLook::Raised),
+        _ => Err(format!("{s:?} is not a tail: visible, hidden or raised")),
     }
 }
 

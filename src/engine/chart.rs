@@ -308,7 +308,22 @@ pub fn series_chart(
 
 /// A path in a rectangle (the cage seen from above, `extent` its half sizes in mm, centred on
 /// the origin), coloured from blue (start) to red (end), with the centre zone outlined.
-pub fn path_chart(title: &str, points: &[Option<(f64, f64)>], extent: (f64, f64)) -> RgbImage {
+/// An arena's own outline on a path chart: its corners and its centre, about the chart's
+/// middle (mm).
+#[derive(Clone, Copy, Debug)]
+pub struct ChartOutline<'a> {
+    pub corners: &'a [(f64, f64)],
+    pub centre: (f64, f64),
+}
+
+/// `outline`, when given, is drawn with its centre zone (the outline at half its size about
+/// its centre) instead of the rectangle's.
+pub fn path_chart(
+    title: &str,
+    points: &[Option<(f64, f64)>],
+    extent: (f64, f64),
+    outline: Option<ChartOutline<'_>>,
+) -> RgbImage {
     let (hx, hy) = extent;
     let scale = ((f64::from(W) - LEFT - RIGHT) / (2.0 * hx)).min((f64::from(H) - TOP - 30.0) / (2.0 * hy));
     let (w, h) = (2.0 * hx * scale, 2.0 * hy * scale);
@@ -317,8 +332,23 @@ pub fn path_chart(title: &str, points: &[Option<(f64, f64)>], extent: (f64, f64)
     let (x0, y0) = ((f64::from(W) - w) / 2.0, TOP);
     // y up in the cage, down in the picture.
     let to_px = |(x, y): (f64, f64)| (x0 + (x + hx) * scale, y0 + (hy - y) * scale);
-    img.rect((x0, y0), (x0 + w, y0 + h), INK, 2.0);
-    img.rect(to_px((-hx / 2.0, hy / 2.0)), to_px((hx / 2.0, -hy / 2.0)), GRID, 1.0);
+    match outline {
+        Some(ChartOutline {
+            corners,
+            centre: (cx, cy),
+        }) if corners.len() > 2 => {
+            for (k, &a) in corners.iter().enumerate() {
+                let b = corners[(k + 1) % corners.len()];
+                img.line(to_px(a), to_px(b), INK, 2.0);
+                let half = |p: (f64, f64)| (cx + (p.0 - cx) / 2.0, cy + (p.1 - cy) / 2.0);
+                img.line(to_px(half(a)), to_px(half(b)), GRID, 1.0);
+            }
+        }
+        _ => {
+            img.rect((x0, y0), (x0 + w, y0 + h), INK, 2.0);
+            img.rect(to_px((-hx / 2.0, hy / 2.0)), to_px((hx / 2.0, -hy / 2.0)), GRID, 1.0);
+        }
+    }
     let n = points.len().max(2) as f64;
     let mut last: Option<(f64, f64)> = None;
     for (i, p) in points.iter().enumerate() {

@@ -122,6 +122,10 @@ pub struct WorldSummary {
     pub fy: f64,
     pub cx: f64,
     pub cy: f64,
+    /// The depth camera's pose in this world frame: the 4x4 matrix taking a point of the
+    /// camera's frame (mm) to the world's, row by row, to project joints back into the depth
+    /// image.
+    pub world_from_camera: [[f64; 4]; 4],
     /// The arena's share of the depth image, and whether it was given (`--roi`) or found.
     pub arena_share: f64,
     pub arena_from: &'static str,
@@ -134,6 +138,9 @@ pub struct WorldSummary {
     /// 0.5 % of the floor points it sees on each side, mm (what `report` takes as the cage).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub arena_mm: Option<crate::vision::behaviour::Arena>,
+    /// The same floor's own outline (a round arena is round), which `report` zones by.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub arena_outline_mm: Option<crate::vision::behaviour::Outline>,
 }
 
 /// Floor points of the background lie within this of the world's z = 0, mm.
@@ -143,15 +150,19 @@ const FLOOR_BAND_MM: f64 = 15.0;
 /// image, non-zero inside) see, from the background's depth there (`depth`, 0 = no reading):
 /// only the points on the floor (within [`FLOOR_BAND_MM`] of z = 0; walls and what stands on
 /// the floor left out), each side at the 0.5th percentile of the points so that a few stray
-/// pixels do not widen it. `None` when no arena pixel sees the floor.
+/// pixels do not widen it; and the floor's own outline
+/// ([`crate::vision::behaviour::Outline`]). `None` when no arena pixel sees the floor.
 fn arena_on_floor(
     mask: &[u8],
     depth: &[f32],
     region: crate::core::image::Region,
     camera: &crate::core::geometry::Camera,
-) -> Option<crate::vision::behaviour::Arena> {
+) -> Option<(
+    crate::vision::behaviour::Arena,
+    Option<crate::vision::behaviour::Outline>,
+)> {
     let width = region.width.max(1);
-    let (mut xs, mut ys) = (Vec::new(), Vec::new());
+    let (mut xs, mut ys, mut points) = (Vec::new(), Vec::new(), Vec::new());
     for (k, (&m, &z)) in mask.iter().zip(depth).enumerate() {
         if m == 0 || z <= 0.0 {
             continue;
@@ -162,6 +173,7 @@ fn arena_on_floor(
         if p.z.abs() <= FLOOR_BAND_MM {
             xs.push(p.x);
             ys.push(p.y);
+            points.push(nalgebra::Point2::new(p.x, p.y));
         }
     }
     if xs.is_empty() {
@@ -170,12 +182,13 @@ fn arena_on_floor(
     xs.sort_by(f64::total_cmp);
     ys.sort_by(f64::total_cmp);
     let at = |v: &[f64], q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-    Some(crate::vision::behaviour::Arena {
+    let rectangle = crate::vision::behaviour::Arena {
         x_min_mm: at(&xs, 0.005),
         y_min_mm: at(&ys, 0.005),
         x_max_mm: at(&xs, 0.995),
         y_max_mm: at(&ys, 0.995),
-    })
+    };
+    Some((rectangle, crate::vision::behaviour::Outline::of_points(&points)))
 }
 
 /// `summary.json`.
@@ -414,6 +427,7 @@ pub fn replay_with(
     }
     let rig = chosen.rig;
     let arena = background.arena();
+    let on_floor = arena_on_floor(arena, background.depth(), background.region(), &rig.depth);
     let world = WorldSummary {
         frame: if chosen.calibrated { "calibration" } else { "floor" },
         camera_height_mm: floor.camera_height_mm(),
@@ -423,10 +437,15 @@ pub fn replay_with(
         fy: rig.depth.intrinsics.fy,
         cx: rig.depth.intrinsics.cx,
         cy: rig.depth.intrinsics.cy,
+        world_from_camera: {
+            let m = rig.depth.world_from_camera.to_homogeneous();
+            std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
+        },
         arena_share: arena.iter().filter(|&&m| m != 0).count() as f64 / arena.len().max(1) as f64,
         arena_from: if options.roi.is_some() { "roi" } else { "found" },
         arena_check: background.arena_check(),
-        arena_mm: arena_on_floor(arena, background.depth(), background.region(), &rig.depth),
+        arena_mm: on_floor.as_ref().map(|f| f.0),
+        arena_outline_mm: on_floor.and_then(|f| f.1),
     };
     let arena = arena.to_vec();
     let segmenter = SegmenterConfig::default()

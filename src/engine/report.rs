@@ -22,13 +22,15 @@
 use crate::core::geometry::{CAGE_X_MM, CAGE_Y_MM};
 use crate::core::pose::JointSource;
 use crate::core::skeleton::Joint;
-use crate::engine::chart::{Series, bar_chart, path_chart, raster_chart, series_chart};
+use crate::engine::chart::{ChartOutline, Series, bar_chart, path_chart, raster_chart, series_chart};
 use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
 use crate::io::table::{Fixed, table};
 use crate::runtime::sink::poses::{POSES_FILE, read_poses};
 use crate::runtime::stages::{PoseRecord, PoseStatus};
-use crate::vision::behaviour::{Arena, Behaviour, BehaviourConfig, FrameInput, PAW_NAMES, analyse_in};
+use crate::vision::behaviour::{
+    Arena, Behaviour, BehaviourConfig, FrameInput, OUTLINE_RAYS, Outline, PAW_NAMES, analyse_in,
+};
 use crate::vision::movement::{Activity, ActivityConfig, StrideVariability, activity};
 use anyhow::Context as _;
 use nalgebra::{Point2, Vector2};
@@ -47,24 +49,40 @@ pub struct ReportOptions {
 }
 
 /// The arena a report used, and where it came from: `flag`, `recording` (the replay's
-/// `world.arena_mm`) or `default` (the synthetic cage).
-#[derive(Clone, Copy, Debug, serde::Serialize)]
+/// `world.arena_mm`, and its `world.arena_outline_mm` when it has one) or `default` (the
+/// synthetic cage).
+#[derive(Clone, Debug, serde::Serialize)]
 pub struct ArenaUsed {
     #[serde(flatten)]
     pub arena: Arena,
+    /// The floor's own outline, which the zones follow (a round arena is round).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub outline: Option<Outline>,
     pub from: &'static str,
 }
 
 /// The arena of `options`, else the run's summary's, else the synthetic cage.
 fn arena_of(run: &Path, options: &ReportOptions) -> ArenaUsed {
     if let Some(arena) = options.arena {
-        return ArenaUsed { arena, from: "flag" };
+        return ArenaUsed {
+            arena,
+            outline: None,
+            from: "flag",
+        };
     }
-    let recorded = std::fs::read(run.join(crate::engine::replay::SUMMARY_FILE))
+    let world = std::fs::read(run.join(crate::engine::replay::SUMMARY_FILE))
         .ok()
         .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-        .and_then(|v| {
-            let a = v.get("world")?.get("arena_mm")?;
+        .and_then(|v| v.get("world").cloned());
+    let outline = world
+        .as_ref()
+        .and_then(|w| w.get("arena_outline_mm"))
+        .and_then(|o| serde_json::from_value::<Outline>(o.clone()).ok())
+        .filter(|o| o.reach_mm.len() == OUTLINE_RAYS && o.reach_mm.iter().all(|r| r.is_finite() && *r > 0.0));
+    let recorded = world
+        .as_ref()
+        .and_then(|w| {
+            let a = w.get("arena_mm")?;
             let get = |k: &str| a.get(k).and_then(serde_json::Value::as_f64);
             Some(Arena {
                 x_min_mm: get("x_min_mm")?,
@@ -77,10 +95,12 @@ fn arena_of(run: &Path, options: &ReportOptions) -> ArenaUsed {
     match recorded {
         Some(arena) => ArenaUsed {
             arena,
+            outline,
             from: "recording",
         },
         None => ArenaUsed {
             arena: Arena::centred((CAGE_X_MM, CAGE_Y_MM)),
+            outline: None,
             from: "default",
         },
     }
@@ -300,7 +320,7 @@ fn page(
         h,
         "<h2>How</h2><ul>\
          <li>Body centre: <code>mid_back</code>, averaged over {:.2} s; speed from it, distance its path.</li>\
-         <li>Centre: the central rectangle of half the arena's length and width; walls: within {:.0} mm of a wall (arena {:.0} x {:.0} mm from x {:.0}, y {:.0} mm, {}).</li>\
+         <li>Centre: {}; walls: within {:.0} mm of a wall (arena {:.0} x {:.0} mm from x {:.0}, y {:.0} mm, {}).</li>\
          <li>Rearing: the head at least {:.0} mm above the glass for {:.2} s or more.</li>\
          <li>Walking: speed between {:.0} and {:.0} mm/s for {:.1} s or more, not rearing.</li>\
          <li>Stance: the paw found on the glass by the bottom camera (source <code>paw</code>) and moving slower than {:.1} times the body plus {:.0} mm/s \
@@ -310,9 +330,14 @@ fn page(
          Phase: where in the left hind paw's stride each paw touches down (0.5: half a stride later). \
          Stride variability: the coefficient of variation (standard deviation over mean) of a paw's stride lengths and periods, with 3 strides or more.</li>\
          <li>Heading: where the body points seen from above (tail base to neck), degrees counter-clockwise from the world's x axis; \
-         turning: its rate of change over {:.2} s.</li>\
+         turning: its rate of change over {:.2} s; turned in all and net: the changes of the heading averaged over that window.</li>\
          <li>Immobile: the body slower than {:.0} mm/s and turning slower than {:.0} deg/s for {:.1} s or more; freezing: immobile for {:.1} s or more.</li></ul>",
         config.smooth_s,
+        if arena.outline.is_some() {
+            "the arena's own outline (the floor the replay saw, as far as it reaches in each direction from its centre) at half its size about its centre"
+        } else {
+            "the central rectangle of half the arena's length and width"
+        },
         config.wall_band_mm,
         arena.arena.size_mm().0,
         arena.arena.size_mm().1,
@@ -379,7 +404,7 @@ fn gait_section(h: &mut String, b: &Behaviour, a: &Activity) {
 pub struct Summary<'a> {
     run: &'a Path,
     config: &'a BehaviourConfig,
-    arena: ArenaUsed,
+    arena: &'a ArenaUsed,
     duration_s: f64,
     distance_mm: f64,
     mean_speed_mm_s: Option<f64>,
@@ -443,7 +468,7 @@ pub fn report_with(run: &Path, out: &Path, force: bool, options: &ReportOptions)
     let inputs: Vec<FrameInput> = rows.iter().map(|r| frame_input(t0, r)).collect();
     let config = options.config;
     let arena = arena_of(run, options);
-    let b = analyse_in(&inputs, &arena.arena, &config);
+    let b = analyse_in(&inputs, &arena.arena, arena.outline.as_ref(), &config);
     let act = activity(&inputs, &b, config.smooth_s, &options.activity);
     let gait_unavailable = no_gait(&rows);
     let staging = Staging::new(out, force).map_err(output_failure)?;
@@ -460,9 +485,16 @@ pub fn report_with(run: &Path, out: &Path, force: bool, options: &ReportOptions)
         .map(|i| i.centre.map(|c| (c.x - middle.x, c.y - middle.y)))
         .collect();
     let (length, width) = arena.arena.size_mm();
+    let corners: Vec<(f64, f64)> = arena.outline.as_ref().map_or_else(Vec::new, |o| {
+        o.vertices().iter().map(|v| (v.x - middle.x, v.y - middle.y)).collect()
+    });
+    let outline = arena.outline.as_ref().map(|o| ChartOutline {
+        corners: &corners,
+        centre: (o.centre().x - middle.x, o.centre().y - middle.y),
+    });
     write_png(
         "path.png",
-        path_chart("PATH IN THE ARENA", &path, (length / 2.0, width / 2.0)),
+        path_chart("PATH IN THE ARENA", &path, (length / 2.0, width / 2.0), outline),
     )?;
     let speed: Vec<f64> = b.frames.iter().map(|f| nan(f.speed_mm_s)).collect();
     write_png(
@@ -549,7 +581,7 @@ pub fn report_with(run: &Path, out: &Path, force: bool, options: &ReportOptions)
             run,
             (&reported.behaviour, &reported.activity),
             (&config, &options.activity),
-            &arena,
+            &reported.arena,
             gait_unavailable,
         )
         .as_bytes(),
@@ -559,8 +591,8 @@ pub fn report_with(run: &Path, out: &Path, force: bool, options: &ReportOptions)
 }
 
 /// The summary of a report: every measure of the page.
-pub fn summary<'a>(run: &'a Path, options: &'a ReportOptions, r: &Reported) -> Summary<'a> {
-    let (config, arena, b, a) = (&options.config, r.arena, &r.behaviour, &r.activity);
+pub fn summary<'a>(run: &'a Path, options: &'a ReportOptions, r: &'a Reported) -> Summary<'a> {
+    let (config, arena, b, a) = (&options.config, &r.arena, &r.behaviour, &r.activity);
     Summary {
         run,
         config,

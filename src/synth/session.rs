@@ -43,10 +43,30 @@ pub struct SessionSpec {
     pub mice: Mice,
     /// What the mouse does (anything, stay in place, walk).
     pub activity: super::animate::Activity,
-    /// Render the mouse without its tail, as a depth camera that does not see a 3-5 mm tail
-    /// shows it (the truth keeps the tail's joints).
-    pub tail_hidden: bool,
+    /// How the depth camera shows the tail (the truth keeps the tail's joints).
+    pub tail: TailLook,
 }
+
+/// How a depth camera shows a mouse's tail: real ones show it in each of these ways.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TailLook {
+    /// As it is: 3-5 mm thick on the floor, 2-4 mm high (often lost in the noise).
+    #[default]
+    Visible,
+    /// Not at all, as a depth camera that does not see a 3-5 mm tail shows it.
+    Hidden,
+    /// Blurred and raised by mixed pixels: about 6 mm wide, its top reading
+    /// [`RAISED_TAIL_TOP_MM`] above the floor at its base falling to 10 mm at its tip (a real
+    /// Kinect's tail reads 10-30 mm while the back reads 30-40 mm).
+    Raised,
+}
+
+/// The raised tail's top at its base (mm above the floor); see [`TailLook::Raised`].
+pub const RAISED_TAIL_TOP_MM: f64 = 24.0;
+/// The raised tail's top at its tip (mm).
+const RAISED_TAIL_TIP_MM: f64 = 10.0;
+/// The raised tail's radius, at least (mm).
+const RAISED_TAIL_RADIUS_MM: f64 = 3.0;
 
 impl Default for SessionSpec {
     fn default() -> Self {
@@ -63,7 +83,7 @@ impl Default for SessionSpec {
             color: true,
             mice: Mice::Standard,
             activity: super::animate::Activity::Mixed,
-            tail_hidden: false,
+            tail: TailLook::Visible,
         }
     }
 }
@@ -252,7 +272,7 @@ fn depth_frame(
     shot: &Shot,
     noise: &DepthNoise,
     seed: u64,
-    tail_hidden: bool,
+    tail: TailLook,
 ) -> DepthFrame {
     let i = &rig.depth.intrinsics;
     let mut rng = item_rng(seed, STREAM_DEPTH, shot.stamp.seq);
@@ -260,23 +280,25 @@ fn depth_frame(
         stamp: shot.stamp,
         width: i.width,
         height: i.height,
-        data: render_top_frame(
-            &rig.depth,
-            background,
-            &seen_skin(&shot.mouse, tail_hidden),
-            noise,
-            &mut rng,
-        ),
+        data: render_top_frame(&rig.depth, background, &seen_skin(&shot.mouse, tail), noise, &mut rng),
     }
 }
 
-fn color_frame(rig: &Rig, shot: &Shot, format: PixelFormat, seed: u64, tail_hidden: bool) -> ColorFrame {
+fn color_frame(rig: &Rig, shot: &Shot, format: PixelFormat, seed: u64, tail: TailLook) -> ColorFrame {
     let i = &rig.color.intrinsics;
     let mut rng = item_rng(seed, STREAM_COLOR, shot.stamp.seq);
     let (data, _) = render_bottom_frame(
         &rig.color,
         &shot.mouse,
-        &seen_skin(&shot.mouse, tail_hidden),
+        // Seen from below, a raised tail is the tail as it is.
+        &seen_skin(
+            &shot.mouse,
+            if tail == TailLook::Raised {
+                TailLook::Visible
+            } else {
+                tail
+            },
+        ),
         format,
         &mut rng,
     );
@@ -344,8 +366,14 @@ pub fn write_session(
         let name = format!("{:?}", spec.activity).to_lowercase();
         table.insert("activity".into(), toml::Value::String(name));
     }
-    if spec.tail_hidden {
-        table.insert("tail_hidden".into(), toml::Value::Boolean(true));
+    match spec.tail {
+        TailLook::Visible => {}
+        TailLook::Hidden => {
+            table.insert("tail_hidden".into(), toml::Value::Boolean(true));
+        }
+        TailLook::Raised => {
+            table.insert("tail".into(), toml::Value::String("raised".into()));
+        }
     }
     meta.synthetic = Some(table);
 
@@ -375,16 +403,11 @@ pub fn write_session(
             .par_iter()
             .map(|shot| {
                 (!shot.dropped).then(|| match shot.role {
-                    CameraRole::Depth => Rendered::Depth(depth_frame(
-                        &rig,
-                        &background,
-                        shot,
-                        &spec.noise,
-                        spec.seed,
-                        spec.tail_hidden,
-                    )),
+                    CameraRole::Depth => {
+                        Rendered::Depth(depth_frame(&rig, &background, shot, &spec.noise, spec.seed, spec.tail))
+                    }
                     CameraRole::Color => {
-                        Rendered::Color(color_frame(&rig, shot, spec.color_format, spec.seed, spec.tail_hidden))
+                        Rendered::Color(color_frame(&rig, shot, spec.color_format, spec.seed, spec.tail))
                     }
                 })
             })
@@ -442,11 +465,28 @@ fn true_partner(colors: &[(f64, u64)], depth_time_s: f64, fps: f64) -> Option<u6
         .map(|(_, seq)| seq)
 }
 
-/// The skin the cameras see: without the tail's when `tail_hidden`.
-fn seen_skin(mouse: &MouseInstance, tail_hidden: bool) -> Vec<super::body::Primitive> {
+/// The skin the cameras see, its tail as `tail` says.
+pub fn seen_skin(mouse: &MouseInstance, tail: TailLook) -> Vec<super::body::Primitive> {
+    use super::body::{Labeller, Shape};
+    let is_tail = |p: &super::body::Primitive| p.labeller == Labeller::Fixed(crate::core::skeleton::Part::Tail);
     let mut skin = skin(mouse);
-    if tail_hidden {
-        skin.retain(|p| p.labeller != super::body::Labeller::Fixed(crate::core::skeleton::Part::Tail));
+    match tail {
+        TailLook::Visible => {}
+        TailLook::Hidden => skin.retain(|p| !is_tail(p)),
+        TailLook::Raised => {
+            let pieces = skin.iter().filter(|p| is_tail(p)).count().max(2);
+            for (k, p) in skin.iter_mut().filter(|p| is_tail(p)).enumerate() {
+                let Shape::Capsule { a, b, radius } = &mut p.shape else {
+                    continue;
+                };
+                let t = k as f64 / (pieces - 1) as f64;
+                *radius = radius.max(RAISED_TAIL_RADIUS_MM);
+                let top = RAISED_TAIL_TOP_MM + (RAISED_TAIL_TIP_MM - RAISED_TAIL_TOP_MM) * t;
+                let lift = (top - (a.z.max(b.z) + *radius)).max(0.0);
+                a.z += lift;
+                b.z += lift;
+            }
+        }
     }
     skin
 }

@@ -1,24 +1,38 @@
 //! The views the orientation model ([`crate::vision::body_shape`]) learns from and is
 //! evaluated on: each rendered mouse of a dataset segmented as the pipeline segments it, once
 //! with its tail hidden (its pixels given back to the floor, as a depth camera that does not
-//! see a 3-5 mm tail shows it) and once as rendered, each at the dataset's resolution and at
-//! half of it with 2 mm of depth noise added (about the 1.9 mm a pixel and the noise of real
-//! time-of-flight rigs).
+//! see a 3-5 mm tail shows it), once as rendered, and once with its tail raised (blurred a
+//! pixel wider and reading [`RAISED_TAIL_MM`] above the floor, as real Kinects show a tail
+//! through mixed pixels), each at the dataset's resolution and at half of it with 2 mm of depth
+//! noise added (about the 1.9 mm a pixel and the noise of real time-of-flight rigs). As in the
+//! pipeline, a tail found as one ([`crate::vision::tail`]) is taken out of the body before its
+//! shape is judged.
 
 use super::{MaskSource, segmented_image};
 use crate::core::geometry::Rig;
 use crate::core::rng::item_rng;
-use crate::core::skeleton::{Joint, Part};
+use crate::core::skeleton::{BACKGROUND_LABEL, Joint, Part};
 use crate::synth::dataset::Sample;
 use crate::synth::render::Cage;
 use crate::vision::body_shape::{Features, aligned};
 use crate::vision::segment::SegmentError;
+use crate::vision::tail::find_tail_in;
 use nalgebra::{Point2, Point3, Vector2};
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
 /// Depth noise (mm, one standard deviation) added to the half-resolution views.
 pub const COARSE_NOISE_MM: f64 = 2.0;
+/// A raised tail's height above the floor (mm), at least: what a real Kinect reads of a tail.
+pub const RAISED_TAIL_MM: f32 = 16.0;
+
+/// How a view shows the tail.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum TailCase {
+    Hidden,
+    AsRendered,
+    Raised,
+}
 
 /// One view of a rendered mouse.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -31,7 +45,7 @@ pub struct View {
     pub coarse: bool,
 }
 
-/// The four views of each sample (fewer where the mouse is not found or too small).
+/// The six views of each sample (fewer where the mouse is not found or too small).
 ///
 /// # Errors
 /// When the rig's cage gives the segmenter no background.
@@ -51,28 +65,47 @@ pub fn views(samples: &[Sample], rig: &Rig, seed: u64) -> Result<Vec<View>, Segm
                 let heading = Vector2::new(neck.x - base.x, neck.y - base.y);
                 let floor = cage.depth(s.top.region);
                 let mut rng = item_rng(seed, 0x0E1, s.index);
-                for tail_hidden in [true, false] {
-                    let depth: Vec<u16> = s
-                        .top
-                        .depth
-                        .iter()
-                        .zip(&s.top.label)
-                        .zip(&floor)
-                        .map(|((&d, &label), &f)| {
-                            if tail_hidden && label == Part::Tail.label() {
-                                f.round().clamp(0.0, 65535.0) as u16
-                            } else {
-                                d
+                let labels = &s.top.label;
+                let width = s.top.region.width as usize;
+                let tail_at = |x: usize, y: usize| x < width && labels.get(y * width + x) == Some(&Part::Tail.label());
+                for case in [TailCase::Hidden, TailCase::AsRendered, TailCase::Raised] {
+                    let depth: Vec<u16> = (0..s.top.depth.len())
+                        .map(|k| {
+                            let (d, f) = (s.top.depth[k], floor[k]);
+                            let floor_depth = f.round().clamp(0.0, 65535.0) as u16;
+                            match case {
+                                TailCase::Hidden if labels[k] == Part::Tail.label() => floor_depth,
+                                TailCase::Raised => {
+                                    // The tail, and the floor a pixel around it, read raised.
+                                    let (x, y) = (k % width, k / width);
+                                    let near_tail = tail_at(x, y)
+                                        || (labels[k] == BACKGROUND_LABEL
+                                            && (tail_at(x + 1, y)
+                                                || tail_at(x, y + 1)
+                                                || x.checked_sub(1).is_some_and(|x| tail_at(x, y))
+                                                || y.checked_sub(1).is_some_and(|y| tail_at(x, y))));
+                                    if near_tail {
+                                        d.min((f - RAISED_TAIL_MM).round().clamp(0.0, 65535.0) as u16)
+                                    } else {
+                                        d
+                                    }
+                                }
+                                _ => d,
                             }
                         })
                         .collect();
                     let Some(image) = segmented_image(&mut segmenter, &depth, s.top.region)? else {
                         continue;
                     };
+                    let mut tail = find_tail_in(&image, rig.depth.intrinsics.fx)
+                        .map(|(t, _)| t.pixels)
+                        .unwrap_or_default();
+                    tail.sort_unstable();
                     let r = image.region;
                     for coarse in [false, true] {
                         let points: Vec<Point3<f64>> = image
                             .on_mouse()
+                            .filter(|(k, _)| tail.binary_search(k).is_err())
                             .filter_map(|(k, d)| {
                                 let (x, y) = (
                                     r.x0 as usize + k % r.width as usize,
@@ -98,7 +131,7 @@ pub fn views(samples: &[Sample], rig: &Rig, seed: u64) -> Result<Vec<View>, Segm
                             out.push(View {
                                 features: a.features,
                                 head_plus: a.axis.dot(&heading) > 0.0,
-                                tail_hidden,
+                                tail_hidden: case == TailCase::Hidden,
                                 coarse,
                             });
                         }
@@ -108,7 +141,7 @@ pub fn views(samples: &[Sample], rig: &Rig, seed: u64) -> Result<Vec<View>, Segm
             Ok(out)
         })
         .collect();
-    let mut out = Vec::with_capacity(samples.len() * 4);
+    let mut out = Vec::with_capacity(samples.len() * 6);
     for chunk in chunks {
         out.extend(chunk?);
     }

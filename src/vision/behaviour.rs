@@ -277,15 +277,143 @@ impl Arena {
     }
 }
 
-/// The cage's zone of a centre (the cage centred on the origin, `cage_mm` its inside size).
-pub fn zone(p: Option<Point2<f64>>, cage_mm: (f64, f64), wall_band_mm: f64) -> Zone {
-    zone_in(p, &Arena::centred(cage_mm), wall_band_mm)
+/// Directions from its centre at which an [`Outline`] gives the floor's reach (every 5 degrees).
+pub const OUTLINE_RAYS: usize = 72;
+
+/// An arena's own outline on the floor, as seen from its centre: how far the floor reaches
+/// at [`OUTLINE_RAYS`] directions, counter-clockwise from the world's +x axis, so that a round
+/// arena is round. Exact for any arena whose centre sees all of its floor (a disc, a
+/// rectangle, a cross, a plus maze); a floor hidden behind a corner from the centre (an L or
+/// a T maze's arm's far corner) is cut off.
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct Outline {
+    /// The centre of the floor's points (world x, y, mm).
+    pub centre_mm: [f64; 2],
+    /// The floor's reach from the centre at each direction (mm).
+    pub reach_mm: Vec<f64>,
 }
 
-/// The zone of a centre in `arena`: the central rectangle of half its length and width, the
-/// band along its walls, or between.
-pub fn zone_in(p: Option<Point2<f64>>, arena: &Arena, wall_band_mm: f64) -> Zone {
+impl Outline {
+    /// The outline of the floor's points (world x, y, mm): at each direction, the 99th
+    /// percentile of their distances from their centre within that direction's 5 degrees (a
+    /// few stray points do not widen it); `None` for fewer than [`OUTLINE_RAYS`] points or a
+    /// direction that holds none.
+    pub fn of_points(points: &[Point2<f64>]) -> Option<Self> {
+        if points.len() < OUTLINE_RAYS {
+            return None;
+        }
+        let centre = points.iter().fold(Vector2::zeros(), |a, p| a + p.coords) / points.len() as f64;
+        let mut rays: Vec<Vec<f64>> = vec![Vec::new(); OUTLINE_RAYS];
+        for p in points {
+            let d = p.coords - centre;
+            rays[ray_of(d)].push(d.norm());
+        }
+        let reach_mm = rays
+            .into_iter()
+            .map(|mut r| {
+                r.sort_by(f64::total_cmp);
+                r.get(((r.len().max(1) - 1) as f64 * 0.99).round() as usize).copied()
+            })
+            .collect::<Option<Vec<f64>>>()?;
+        Some(Self {
+            centre_mm: [centre.x, centre.y],
+            reach_mm,
+        })
+    }
+
+    pub fn centre(&self) -> Point2<f64> {
+        Point2::new(self.centre_mm[0], self.centre_mm[1])
+    }
+
+    /// The outline's corners, one per direction (world x, y, mm), counter-clockwise.
+    pub fn vertices(&self) -> Vec<Point2<f64>> {
+        self.reach_mm
+            .iter()
+            .enumerate()
+            .map(|(k, r)| {
+                let a = (k as f64 + 0.5) * std::f64::consts::TAU / self.reach_mm.len() as f64;
+                self.centre() + Vector2::new(a.cos(), a.sin()) * *r
+            })
+            .collect()
+    }
+
+    /// The rectangle around it.
+    pub fn bounds(&self) -> Arena {
+        let v = self.vertices();
+        let (xs, ys) = (v.iter().map(|p| p.x), v.iter().map(|p| p.y));
+        Arena {
+            x_min_mm: xs.clone().fold(f64::INFINITY, f64::min),
+            y_min_mm: ys.clone().fold(f64::INFINITY, f64::min),
+            x_max_mm: xs.fold(f64::NEG_INFINITY, f64::max),
+            y_max_mm: ys.fold(f64::NEG_INFINITY, f64::max),
+        }
+    }
+
+    /// The zone of `p`: the centre (the outline shrunk to half its size about its centre, as
+    /// the central rectangle of a rectangular arena is), the band within `wall_band_mm` of
+    /// the outline (or outside it), or between.
+    fn zone(&self, p: Point2<f64>, wall_band_mm: f64) -> Zone {
+        let v = self.vertices();
+        let d = p - self.centre();
+        // The outline's reach toward p: where the ray from the centre meets the edge between
+        // the two corners either side of it.
+        let n = v.len();
+        let step = std::f64::consts::TAU / n as f64;
+        let theta = d.y.atan2(d.x).rem_euclid(std::f64::consts::TAU);
+        let k = ((theta / step - 0.5).floor() as isize).rem_euclid(n as isize) as usize;
+        let (a, e) = (v[k] - self.centre(), v[(k + 1) % n] - v[k]);
+        let u = Vector2::new(theta.cos(), theta.sin());
+        let reach = if cross(&u, &e).abs() < 1e-12 {
+            a.norm()
+        } else {
+            cross(&a, &e) / cross(&u, &e)
+        };
+        let to_edge = (0..v.len())
+            .map(|k| distance_to_segment(p, v[k], v[(k + 1) % v.len()]))
+            .fold(f64::INFINITY, f64::min);
+        if d.norm() >= reach || to_edge <= wall_band_mm {
+            Zone::Wall
+        } else if d.norm() <= reach / 2.0 {
+            Zone::Centre
+        } else {
+            Zone::Between
+        }
+    }
+}
+
+/// The outline's direction of `d`.
+fn ray_of(d: Vector2<f64>) -> usize {
+    let a = d.y.atan2(d.x).rem_euclid(std::f64::consts::TAU);
+    ((a / std::f64::consts::TAU * OUTLINE_RAYS as f64) as usize).min(OUTLINE_RAYS - 1)
+}
+
+fn cross(a: &Vector2<f64>, b: &Vector2<f64>) -> f64 {
+    a.x * b.y - a.y * b.x
+}
+
+fn distance_to_segment(p: Point2<f64>, a: Point2<f64>, b: Point2<f64>) -> f64 {
+    let e = b - a;
+    let t = if e.norm_squared() > 0.0 {
+        ((p - a).dot(&e) / e.norm_squared()).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + e * t)).norm()
+}
+
+/// The cage's zone of a centre (the cage centred on the origin, `cage_mm` its inside size).
+pub fn zone(p: Option<Point2<f64>>, cage_mm: (f64, f64), wall_band_mm: f64) -> Zone {
+    zone_in(p, &Arena::centred(cage_mm), None, wall_band_mm)
+}
+
+/// The zone of a centre in `arena`, or in its `outline` where the replay found one (see
+/// [`Outline::zone`]): the central rectangle of half its length and width, the band along its
+/// walls, or between.
+pub fn zone_in(p: Option<Point2<f64>>, arena: &Arena, outline: Option<&Outline>, wall_band_mm: f64) -> Zone {
     let Some(p) = p else { return Zone::Unknown };
+    if let Some(outline) = outline {
+        return outline.zone(p, wall_band_mm);
+    }
     let p = p - arena.centre().coords;
     let (hx, hy) = (arena.size_mm().0 / 2.0, arena.size_mm().1 / 2.0);
     if p.x.abs() <= hx / 2.0 && p.y.abs() <= hy / 2.0 {
@@ -300,11 +428,16 @@ pub fn zone_in(p: Option<Point2<f64>>, arena: &Arena, wall_band_mm: f64) -> Zone
 /// Analyses `frames` (in time order) in a cage of `cage_mm` inside size centred on the
 /// origin.
 pub fn analyse(frames: &[FrameInput], cage_mm: (f64, f64), config: &BehaviourConfig) -> Behaviour {
-    analyse_in(frames, &Arena::centred(cage_mm), config)
+    analyse_in(frames, &Arena::centred(cage_mm), None, config)
 }
 
-/// Analyses `frames` (in time order) in `arena`.
-pub fn analyse_in(frames: &[FrameInput], arena: &Arena, config: &BehaviourConfig) -> Behaviour {
+/// Analyses `frames` (in time order) in `arena`, zoned by its `outline` when there is one.
+pub fn analyse_in(
+    frames: &[FrameInput],
+    arena: &Arena,
+    outline: Option<&Outline>,
+    config: &BehaviourConfig,
+) -> Behaviour {
     let n = frames.len();
     let t: Vec<f64> = frames.iter().map(|f| f.t_s).collect();
     let dt = if n > 1 {
@@ -466,7 +599,7 @@ pub fn analyse_in(frames: &[FrameInput], arena: &Arena, config: &BehaviourConfig
     let mut zone_s = [0.0; 4];
     let frames_out: Vec<FrameResult> = (0..n)
         .map(|i| {
-            let z = zone_in(centres[i], arena, config.wall_band_mm);
+            let z = zone_in(centres[i], arena, outline, config.wall_band_mm);
             let slot = match z {
                 Zone::Centre => 0,
                 Zone::Wall => 1,
@@ -578,12 +711,51 @@ mod tests {
             x_max_mm: 400.0,
             y_max_mm: 250.0,
         };
-        assert_eq!(zone_in(Some(Point2::new(250.0, 100.0)), &arena, 40.0), Zone::Centre);
-        assert_eq!(zone_in(Some(Point2::new(0.0, 0.0)), &arena, 40.0), Zone::Wall);
-        assert_eq!(zone_in(Some(Point2::new(380.0, 100.0)), &arena, 40.0), Zone::Wall);
-        assert_eq!(zone_in(Some(Point2::new(330.0, 100.0)), &arena, 40.0), Zone::Between);
+        assert_eq!(
+            zone_in(Some(Point2::new(250.0, 100.0)), &arena, None, 40.0),
+            Zone::Centre
+        );
+        assert_eq!(zone_in(Some(Point2::new(0.0, 0.0)), &arena, None, 40.0), Zone::Wall);
+        assert_eq!(zone_in(Some(Point2::new(380.0, 100.0)), &arena, None, 40.0), Zone::Wall);
+        assert_eq!(
+            zone_in(Some(Point2::new(330.0, 100.0)), &arena, None, 40.0),
+            Zone::Between
+        );
         // The synthetic cage, as before.
         assert_eq!(zone(Some(Point2::new(240.0, 0.0)), (500.0, 450.0), 60.0), Zone::Wall);
+    }
+
+    #[test]
+    fn a_round_arena_is_zoned_by_its_own_outline_not_its_square() {
+        // The floor of a round arena 400 mm across, centred at (50, -20), seen every 4 mm.
+        let mut floor = Vec::new();
+        for i in -60..=60 {
+            for j in -60..=60 {
+                let p = Point2::new(50.0 + 4.0 * f64::from(i), -20.0 + 4.0 * f64::from(j));
+                if (p - Point2::new(50.0, -20.0)).norm() <= 200.0 {
+                    floor.push(p);
+                }
+            }
+        }
+        let outline = Outline::of_points(&floor).unwrap();
+        assert!((outline.centre() - Point2::new(50.0, -20.0)).norm() < 1.0);
+        assert!(
+            outline.reach_mm.iter().all(|r| (r - 200.0).abs() < 6.0),
+            "{:?}",
+            outline.reach_mm
+        );
+        let square = outline.bounds();
+        let at = |x: f64, y: f64| Some(Point2::new(50.0 + x, -20.0 + y));
+        // A corner of the square is outside the round arena: by the wall, not between.
+        assert_eq!(zone_in(at(130.0, 130.0), &square, None, 40.0), Zone::Between);
+        assert_eq!(zone_in(at(130.0, 130.0), &square, Some(&outline), 40.0), Zone::Wall);
+        // 20 mm from the wall along a diagonal; the centre disc is half the radius.
+        assert_eq!(zone_in(at(127.0, -127.0), &square, Some(&outline), 40.0), Zone::Wall);
+        assert_eq!(zone_in(at(0.0, 90.0), &square, Some(&outline), 40.0), Zone::Centre);
+        assert_eq!(zone_in(at(-120.0, 0.0), &square, Some(&outline), 40.0), Zone::Between);
+        assert_eq!(zone_in(at(-300.0, 0.0), &square, Some(&outline), 40.0), Zone::Wall);
+        // Too few points for an outline.
+        assert_eq!(Outline::of_points(&floor[..10]), None);
     }
 
     #[test]

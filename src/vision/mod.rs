@@ -12,3 +12,4 @@ pub mod movement;
 pub mod orientation;
 pub mod paws;
 pub mod segment;
+pub mod tail;

@@ -51,8 +51,9 @@ pub struct Activity {
     pub angular_speed_deg_s: Vec<Option<f64>>,
     /// Mean of the absolute angular speed over the frames that have one, degrees/s.
     pub mean_angular_speed_deg_s: Option<f64>,
-    /// The heading's changes added up: all of them (`turned_deg`) and with their signs
-    /// (`net_turn_deg`, counter-clockwise positive), degrees.
+    /// The heading's changes added up, the heading averaged over the smoothing window first:
+    /// all of them (`turned_deg`) and with their signs (`net_turn_deg`, counter-clockwise
+    /// positive), degrees.
     pub turned_deg: f64,
     pub net_turn_deg: f64,
     /// Per frame: immobile (in an immobility bout).
@@ -107,16 +108,10 @@ pub fn activity(frames: &[FrameInput], b: &Behaviour, smooth_s: f64, config: &Ac
     // The heading unwrapped along each run of frames that have one, so a turn through 180
     // degrees is not a jump of 360.
     let mut unwrapped: Vec<Option<f64>> = vec![None; n];
-    let (mut turned, mut net) = (0.0, 0.0);
     for (i, h) in heading.iter().enumerate() {
         let Some(h) = *h else { continue };
         unwrapped[i] = Some(match i.checked_sub(1).and_then(|p| unwrapped[p]) {
-            Some(prev) => {
-                let step = wrap_deg(h - prev);
-                turned += step.abs();
-                net += step;
-                prev + step
-            }
+            Some(prev) => prev + wrap_deg(h - prev),
             None => h,
         });
     }
@@ -125,6 +120,35 @@ pub fn activity(frames: &[FrameInput], b: &Behaviour, smooth_s: f64, config: &Ac
         crate::core::median(&mut steps).unwrap_or(1.0 / 30.0)
     };
     let half = ((smooth_s / dt / 2.0).round() as usize).max(1);
+    // Turned in all and net: the changes of the heading averaged over the smoothing window
+    // (within its run of frames), as the body turns; each frame's own estimate wobbles by a few
+    // degrees, and those wobbles added up frame by frame would count several times the real
+    // turning (on a real mouse, 3.6 times the turning of MoSeq's own angle).
+    let (mut turned, mut net) = (0.0, 0.0);
+    let mut previous: Option<f64> = None;
+    for i in 0..n {
+        if unwrapped[i].is_none() {
+            previous = None;
+            continue;
+        }
+        // The smoothing window's reach within the run of frames around this one that have a
+        // heading.
+        let lo = (i.saturating_sub(half)..=i)
+            .find(|&j| (j..=i).all(|k| unwrapped[k].is_some()))
+            .unwrap_or(i);
+        let hi = (i..=(i + half).min(n - 1))
+            .rev()
+            .find(|&j| (i..=j).all(|k| unwrapped[k].is_some()))
+            .unwrap_or(i);
+        // Centred on this frame, narrower toward the run's ends, so a steady turn counts in full.
+        let m = (i - lo).min(hi - i);
+        let mean = (i - m..=i + m).filter_map(|j| unwrapped[j]).sum::<f64>() / (2 * m + 1) as f64;
+        if let Some(p) = previous {
+            turned += (mean - p).abs();
+            net += mean - p;
+        }
+        previous = Some(mean);
+    }
     // Angular speed: the unwrapped heading's change across the smoothing window, over the
     // frames of the window that have a heading on both ends.
     let angular: Vec<Option<f64>> = (0..n)
@@ -243,6 +267,25 @@ mod tests {
         let total = 90.0 * (f.len() - 1) as f64 / 30.0;
         assert!((a.net_turn_deg - total).abs() < 1e-6, "{}", a.net_turn_deg);
         assert!((a.turned_deg - total).abs() < 1e-6);
+        // A heading that wobbles 5 degrees either way from frame to frame as it turns: what
+        // was turned is the steady turn, not the wobbles added up.
+        let wobbly = frames(
+            8.0,
+            |_| Point2::origin(),
+            |t| 170.0 + 90.0 * t + 5.0 * (t * 30.0 * std::f64::consts::PI).cos(),
+        );
+        let w = activity(
+            &wobbly,
+            &analyse(&wobbly, (500.0, 450.0), &config),
+            config.smooth_s,
+            &ActivityConfig::default(),
+        );
+        assert!((w.net_turn_deg - total).abs() < 10.0, "{}", w.net_turn_deg);
+        assert!(
+            (w.turned_deg - total).abs() < 0.1 * total,
+            "{} for {total}",
+            w.turned_deg
+        );
         // Still, but turning: not immobile.
         assert!(a.immobility.is_empty(), "{:?}", a.immobility);
     }

@@ -45,6 +45,10 @@ pub struct Headings {
     /// The learnt body-shape model's log-odds that the head lies toward `+axis` (0 without a
     /// model or when the mouse is too small to judge).
     pub shape: f64,
+    /// A visible tail's log-odds that the head lies toward `+axis`: negative when the tail
+    /// leaves the body at its `+axis` end, positive at its `-axis` end, 0 when no tail is
+    /// seen ([`crate::vision::tail`]).
+    pub tail: f64,
     /// The main-body joints with the head toward `+axis` (`[0]`) and toward `-axis` (`[1]`).
     pub joints: [BodyJoints; 2],
     /// Tail base to neck of the forest's own estimate (world x, y), when it has both.
@@ -58,6 +62,8 @@ pub struct TrackerConfig {
     /// Weight of the body-shape log-odds, clipped to `±shape_clip`.
     pub shape_weight: f64,
     pub shape_clip: f64,
+    /// Weight of a visible tail's log-odds.
+    pub tail_weight: f64,
     /// Weight of the body-shape log-odds on a tracker's first frame and while the mouse is
     /// still (slower than `min_speed_mm_s`): it starts the tracker and holds it.
     pub still_shape_weight: f64,
@@ -78,6 +84,7 @@ impl Default for TrackerConfig {
             votes_weight: 4.0,
             shape_weight: 1.0,
             shape_clip: 6.0,
+            tail_weight: 1.0,
             still_shape_weight: 2.0,
             motion_weight: 2.0,
             min_speed_mm_s: 40.0,
@@ -89,9 +96,9 @@ impl Default for TrackerConfig {
 }
 
 impl TrackerConfig {
-    /// The log-odds of the head toward `+axis` from the frame alone (votes and shape).
+    /// The log-odds of the head toward `+axis` from the frame alone (votes, shape and tail).
     pub fn frame_evidence(&self, h: &Headings) -> f64 {
-        self.votes_weight * h.votes + self.shape_weight * self.shape(h)
+        self.votes_weight * h.votes + self.shape_weight * self.shape(h) + self.tail_weight * h.tail
     }
 
     /// The frame's body-shape log-odds, clipped.
@@ -121,6 +128,8 @@ pub struct Orientation {
     pub forest: Option<Vector2<f64>>,
     /// The heading the body-shape model alone chooses, when it said anything.
     pub shape: Option<Vector2<f64>>,
+    /// The heading a visible tail alone chooses, when one was seen.
+    pub tail: Option<Vector2<f64>>,
 }
 
 /// Viterbi over head toward `+axis` / toward `-axis`, decided frame by frame.
@@ -213,6 +222,7 @@ mod tests {
             centre,
             votes,
             shape: 0.0,
+            tail: 0.0,
             joints: [[JointEstimate::default(); Joint::MAIN_BODY.len()]; 2],
             forest_heading: None,
         }

@@ -78,6 +78,10 @@ pub struct OrientationCheck {
     /// choice alone would have swapped.
     pub shape_frames: u64,
     pub flipped_shape: u64,
+    /// Of the frames where a visible tail was seen (`tail_frames`), how many its end alone
+    /// would have swapped.
+    pub tail_frames: u64,
+    pub flipped_tail: u64,
     /// Mean angle (degrees) between the tracked heading and the truth's, over frames not flipped.
     pub heading_error_deg: f64,
 }
@@ -100,6 +104,10 @@ impl OrientationCheck {
         if orientation.shape.is_some() {
             self.shape_frames += 1;
             self.flipped_shape += u64::from(flipped(orientation.shape));
+        }
+        if orientation.tail.is_some() {
+            self.tail_frames += 1;
+            self.flipped_tail += u64::from(flipped(orientation.tail));
         }
     }
 }
@@ -450,6 +458,7 @@ fn parse_row(record: &csv::StringRecord, orientation: bool) -> Result<PoseRecord
             frame_alone: None,
             forest: None,
             shape: None,
+            tail: None,
         }),
     })
 }

@@ -1,5 +1,6 @@
 //! The body stage: the body forest on the segmented mouse, joints 1-12 in the world frame, and
-//! the evidence of which end is the head (the forest's votes, the learnt body shape).
+//! the evidence of which end is the head (the forest's votes, the learnt body shape judged
+//! without the tail, and a visible tail found as one).
 
 use super::{PoseRecord, PoseStatus, Posed, Segmented};
 use crate::core::geometry::Camera;
@@ -10,6 +11,7 @@ use crate::vision::body_shape::{ShapeModel, aligned};
 use crate::vision::forest::depth::{BODY_JOINTS, DepthImage};
 use crate::vision::forest::infer::{BodyEstimator, JointGuess, Oriented, Pixel, sample_pixels};
 use crate::vision::orientation::{self, BodyJoints, Headings, TrackerConfig};
+use crate::vision::tail::{Tail, find_tail_in};
 use nalgebra::{Point2, Point3, Vector2, Vector3};
 
 /// Pixels of the mouse run through the forest per frame in the pipeline, at most. Fewer than
@@ -17,6 +19,14 @@ use nalgebra::{Point2, Point3, Vector2, Vector3};
 /// mean error goes from 2.81 mm to 2.92 mm while the stage runs about 4 times faster, which
 /// is what lets replay reach hundreds of pairs per second on two cores.
 pub const PIPELINE_VOTE_BUDGET: usize = 200;
+
+/// A visible tail's log-odds for the head at the body's other end, when the tail is at least
+/// [`FULL_TAIL_MM`] long (a shorter one counts in proportion). More than the votes and the
+/// body's shape together can say against it: a long thin piece leaving one end of the body is
+/// what a tail is, while the votes and the shape were learnt on rendered mice.
+pub const TAIL_LOG_ODDS: f64 = 16.0;
+/// See [`TAIL_LOG_ODDS`] (mm).
+pub const FULL_TAIL_MM: f64 = 40.0;
 
 /// Runs a [`BodyEstimator`] on each segmented mouse.
 #[derive(Debug, Clone)]
@@ -27,6 +37,8 @@ pub struct BodyStage {
     budget: usize,
     pixels: Vec<Pixel>,
     mask: Vec<bool>,
+    /// The region's pixels that are a tail found as one.
+    tail: Vec<bool>,
     crop: Vec<u16>,
     points: Vec<Point3<f64>>,
 }
@@ -43,30 +55,75 @@ impl BodyStage {
             budget: budget.max(1),
             pixels: Vec::new(),
             mask: Vec::new(),
+            tail: Vec::new(),
             crop: Vec::new(),
             points: Vec::new(),
         }
     }
 
     /// The body-shape model's log-odds that the head lies toward `axis` (world x, y), from
-    /// every mouse pixel of `image` in the world frame; 0 without a model or features.
+    /// every mouse pixel of `image` not on its tail, in the world frame; 0 without a model or
+    /// features.
     fn shape(&mut self, image: &DepthImage, axis: &Vector2<f64>) -> f64 {
         let Some(model) = &self.orientation else {
             return 0.0;
         };
         let r = image.region;
         let (intrinsics, world) = (&self.camera.intrinsics, &self.camera.world_from_camera);
+        let tail = &self.tail;
         self.points.clear();
-        self.points.extend(image.on_mouse().map(|(k, d)| {
-            let pixel = Point2::new(
-                f64::from(r.x0) + (k % r.width as usize) as f64,
-                f64::from(r.y0) + (k / r.width as usize) as f64,
-            );
-            world * intrinsics.unproject(&pixel, f64::from(d))
-        }));
+        self.points.extend(
+            image
+                .on_mouse()
+                .filter(|(k, _)| !tail.get(*k).copied().unwrap_or(false))
+                .map(|(k, d)| {
+                    let pixel = Point2::new(
+                        f64::from(r.x0) + (k % r.width as usize) as f64,
+                        f64::from(r.y0) + (k / r.width as usize) as f64,
+                    );
+                    world * intrinsics.unproject(&pixel, f64::from(d))
+                }),
+        );
         // The model's axis and the forest's may differ a little: its evidence counts as much
         // as they agree.
         aligned(&self.points).map_or(0.0, |a| model.log_odds(&a.features) * a.axis.dot(axis))
+    }
+
+    /// Looks for a visible tail on the mouse of `image`, marks its pixels in `self.tail`, and
+    /// returns it with the millimetres a pixel spans at the mouse.
+    fn find_tail(&mut self, image: &DepthImage) -> Option<(Tail, f64)> {
+        self.tail.clear();
+        self.tail.resize(image.depth.len(), false);
+        let found = find_tail_in(image, self.camera.intrinsics.fx)?;
+        for &k in &found.0.pixels {
+            self.tail[k] = true;
+        }
+        Some(found)
+    }
+
+    /// A visible tail's log-odds that the head lies toward `+axis` of `headings` (see
+    /// [`Headings::tail`]): where the tail leaves the body, against the body's centre.
+    fn tail_evidence(&self, image: &DepthImage, tail: &Tail, mm_per_px: f64, headings: &Headings) -> f64 {
+        let r = image.region;
+        let (bx, by) = (tail.base.0.round() as usize, tail.base.1.round() as usize);
+        // The base's depth: the nearest of the tail's pixels to it that reads.
+        let Some(depth) = tail
+            .pixels
+            .iter()
+            .filter_map(|&k| image.mouse_depth(k).map(|d| (k, d)))
+            .min_by_key(|(k, _)| {
+                let (x, y) = (k % r.width as usize, k / r.width as usize);
+                x.abs_diff(bx).pow(2) + y.abs_diff(by).pow(2)
+            })
+            .map(|(_, d)| f64::from(d))
+        else {
+            return 0.0;
+        };
+        let pixel = Point2::new(f64::from(r.x0) + tail.base.0, f64::from(r.y0) + tail.base.1);
+        let base = self.camera.world_from_camera * self.camera.intrinsics.unproject(&pixel, depth);
+        let side = (Vector2::new(base.x, base.y) - headings.centre.coords).dot(&headings.axis);
+        let strength = TAIL_LOG_ODDS * (tail.length_px * mm_per_px / FULL_TAIL_MM).min(1.0);
+        -side.signum() * strength
     }
 
     /// The world-frame joints and evidence of a frame's [`Oriented`] estimate.
@@ -89,6 +146,7 @@ impl BodyStage {
             centre: Point2::new(centre.x, centre.y),
             votes: f64::from(oriented.votes),
             shape: 0.0,
+            tail: 0.0,
             joints: oriented.ahead.each_ref().map(to_world),
             forest_heading: orientation::heading(&to_world(&oriented.raw)),
         }
@@ -133,13 +191,17 @@ impl Map for BodyStage {
             self.mask.extend(mouse.mask.iter().map(|&m| m != 0));
             if self.crop.len() == self.mask.len() {
                 let image = DepthImage::from_mask(r, &self.crop, &self.mask);
+                let tail = self.find_tail(&image);
                 sample_pixels(&image, self.budget, &mut self.pixels);
                 let up = (self.camera.world_from_camera.rotation.inverse() * Vector3::z()).cast::<f32>();
-                let oriented = self
-                    .estimator
-                    .estimate_oriented(&image, &self.pixels, &self.camera.intrinsics, &up);
+                let oriented =
+                    self.estimator
+                        .estimate_oriented(&image, &self.pixels, &self.camera.intrinsics, &up, &self.tail);
                 let mut headings = self.headings(&oriented);
                 headings.shape = self.shape(&image, &headings.axis);
+                if let Some((tail, mm_per_px)) = &tail {
+                    headings.tail = self.tail_evidence(&image, tail, *mm_per_px, &headings);
+                }
                 let alone = TrackerConfig::default().frame_evidence(&headings) < 0.0;
                 for (joint, estimate) in Joint::MAIN_BODY.iter().zip(headings.joints[usize::from(alone)]) {
                     *record.pose.joint_mut(*joint) = estimate;

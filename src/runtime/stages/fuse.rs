@@ -51,6 +51,9 @@ impl Map for FuseStage {
                 shape: (headings.shape != 0.0)
                     .then(|| orientation::heading(&headings.joints[usize::from(headings.shape < 0.0)]))
                     .flatten(),
+                tail: (headings.tail != 0.0)
+                    .then(|| orientation::heading(&headings.joints[usize::from(headings.tail < 0.0)]))
+                    .flatten(),
             });
         }
         // Depth-only pairs keep joints 1-12 (the paper's single depth image mode).

@@ -96,6 +96,8 @@ pub struct BodyEstimator {
     doubtful: Vec<VoteCloud>,
     /// Each pixel's 3D point (camera frame).
     points: Vec<Vector3<f32>>,
+    /// The points of `points` not on a tail found as one (the body's long axis).
+    body_points: Vec<Vector3<f32>>,
     /// Each pixel's leaf in the tree being read ([`SparseLeaves::locate`]).
     located: Vec<Located>,
     router: Router,
@@ -208,6 +210,7 @@ impl BodyEstimator {
             confident: vec![VoteCloud::default(); BODY_JOINTS],
             doubtful: vec![VoteCloud::default(); BODY_JOINTS],
             points: Vec::new(),
+            body_points: Vec::new(),
             located: Vec::new(),
             router,
             tail_end: TailEnd::default(),
@@ -378,15 +381,45 @@ impl BodyEstimator {
     /// forest put all of them at the wrong end), the joint is the forest's estimate mirrored
     /// across the centre, scored by the votes near it. Last, the joints off the mouse are
     /// judged ([`judge_placement`]): a tail tip off it is `None`.
+    ///
+    /// `tail` marks the region's pixels that are a tail found as one
+    /// ([`crate::vision::tail::find_tail`]; empty when none is): they vote like every other
+    /// pixel, but the long axis and its centre are the body's alone, as a long tail would
+    /// swing them toward itself.
     pub fn estimate_oriented(
         &mut self,
         image: &DepthImage,
         pixels: &[Pixel],
         intrinsics: &Intrinsics,
         up: &Vector3<f32>,
+        tail: &[bool],
     ) -> Oriented {
         let (raw, all_modes) = self.estimate_votes(image, pixels, intrinsics);
-        let (centre, axis) = long_axis(&self.points, up);
+        let r = image.region;
+        let on_tail = |px: &Pixel| {
+            let (x, y) = (px.x as i64 - i64::from(r.x0), px.y as i64 - i64::from(r.y0));
+            x >= 0
+                && y >= 0
+                && (x as u32) < r.width
+                && tail
+                    .get(y as usize * r.width as usize + x as usize)
+                    .copied()
+                    .unwrap_or(false)
+        };
+        self.body_points.clear();
+        self.body_points.extend(
+            pixels
+                .iter()
+                .zip(&self.points)
+                .filter(|(px, _)| !on_tail(px))
+                .map(|(_, p)| *p),
+        );
+        let body = if self.body_points.is_empty() {
+            &self.points
+        } else {
+            &self.body_points
+        };
+        let (centre, axis) = long_axis(body, up);
         let side = |p: &Vector3<f32>| (p - centre).dot(&axis);
         let mut oriented = Oriented {
             raw,

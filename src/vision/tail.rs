@@ -1,0 +1,410 @@
+//! A visible tail found as a tail: a thin appendage that leaves one end of the segmented mouse.
+//!
+//! Real depth cameras show a mouse's tail in every way: not at all, faint, or blurred and raised
+//! by mixed pixels to half the height of the back (a strip a few pixels wide reading 10-30 mm
+//! above the floor while the back reads 30-40 mm). A shape judged with its tail in it reads the
+//! tail's end as the narrow, low end of the body, which is what a head looks like from above;
+//! so the tail is taken out of the body first, by what it is whatever height it reads: what a
+//! morphological opening of the mask (a disc a little wider than a tail) removes, where that is
+//! a long, thin piece joined to the body near one of its ends. MoSeq's extractor removes the
+//! tail by an opening too (an ellipse of 9 x 9 pixels); here the disc is sized in millimetres,
+//! and the piece removed is kept, since where it leaves the body says which end is the rear.
+//!
+//! Pure code over a region's mask (or a segmented depth image).
+
+use crate::vision::forest::depth::DepthImage;
+use std::collections::{BinaryHeap, VecDeque};
+
+/// How the tail is looked for, in pixels of the mask.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TailSearch {
+    /// Radius of the opening's disc: a strip narrower than its diameter is not body.
+    pub radius_px: f64,
+    /// The shortest tail (along itself, from where it leaves the body).
+    pub min_length_px: f64,
+    /// The widest mean width a tail may have (its area over its length).
+    pub max_width_px: f64,
+}
+
+impl TailSearch {
+    /// The search for a mouse seen at `mm_per_px` millimetres a pixel: an opening of
+    /// [`OPENING_RADIUS_MM`] (at least 1.5 pixels), tails of at least [`MIN_TAIL_MM`] and at
+    /// most [`MAX_TAIL_WIDTH_MM`] wide.
+    pub fn at_scale(mm_per_px: f64) -> Self {
+        let mm_per_px = mm_per_px.max(1e-3);
+        Self {
+            radius_px: (OPENING_RADIUS_MM / mm_per_px).max(1.5),
+            min_length_px: MIN_TAIL_MM / mm_per_px,
+            max_width_px: (MAX_TAIL_WIDTH_MM / mm_per_px).max(2.0),
+        }
+    }
+}
+
+/// The opening's disc radius (mm): it removes strips up to about 8 mm wide (a tail of 3-5 mm,
+/// blurred by a pixel each side), and keeps the muzzle's 9 mm and everything wider.
+pub const OPENING_RADIUS_MM: f64 = 4.0;
+/// A thin piece shorter than this (mm) is a paw, an ear's rim or noise, not a tail.
+pub const MIN_TAIL_MM: f64 = 20.0;
+/// A tail's mean width is at most this (mm).
+pub const MAX_TAIL_WIDTH_MM: f64 = 9.0;
+/// The tail leaves the body within this share of the body's half-length from one of its ends.
+const END_SHARE: f64 = 0.5;
+
+/// A tail found in a mask.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tail {
+    /// Its pixels: indices into the region's mask (row-major).
+    pub pixels: Vec<usize>,
+    /// Where it leaves the body (the mean of its pixels next to the body) and its far end,
+    /// region pixels (x, y).
+    pub base: (f64, f64),
+    pub tip: (f64, f64),
+    /// Its length along itself from where it leaves the body, pixels.
+    pub length_px: f64,
+}
+
+/// The tail of the segmented mouse of `image`, seen by a camera of focal length `fx` pixels,
+/// searched at the scale of its mean depth; with the millimetres a pixel spans there.
+pub fn find_tail_in(image: &DepthImage, fx: f64) -> Option<(Tail, f64)> {
+    let mask: Vec<bool> = (0..image.depth.len()).map(|k| image.mouse_depth(k).is_some()).collect();
+    let (sum, n) = image
+        .on_mouse()
+        .fold((0.0, 0usize), |(s, n), (_, d)| (s + f64::from(d), n + 1));
+    if n == 0 || fx <= 0.0 {
+        return None;
+    }
+    let mm_per_px = sum / n as f64 / fx;
+    let r = image.region;
+    let tail = find_tail(
+        &mask,
+        r.width as usize,
+        r.height as usize,
+        &TailSearch::at_scale(mm_per_px),
+    )?;
+    Some((tail, mm_per_px))
+}
+
+/// The tail of the mouse in `mask` (`width` x `height`, row-major), or `None` when no thin
+/// piece of it is long enough, or it does not leave the body near an end.
+pub fn find_tail(mask: &[bool], width: usize, height: usize, search: &TailSearch) -> Option<Tail> {
+    if width == 0 || mask.len() != width * height {
+        return None;
+    }
+    let body = opening(mask, width, height, search.radius_px);
+    if !body.iter().any(|&b| b) {
+        return None;
+    }
+    let neighbours = |k: usize| {
+        let (x, y) = ((k % width) as isize, (k / width) as isize);
+        NEIGHBOURS.iter().filter_map(move |&(dx, dy, step)| {
+            let (nx, ny) = (x + dx, y + dy);
+            (nx >= 0 && ny >= 0 && (nx as usize) < width && (ny as usize) < height)
+                .then(|| (ny as usize * width + nx as usize, step))
+        })
+    };
+    let body_axis = body_axis(&body, width)?;
+    let mut seen = vec![false; mask.len()];
+    let mut best: Option<Tail> = None;
+    for start in 0..mask.len() {
+        if !mask[start] || body[start] || seen[start] {
+            continue;
+        }
+        // One piece of what the opening removed.
+        let mut piece = Vec::new();
+        let mut queue = VecDeque::from([start]);
+        seen[start] = true;
+        while let Some(k) = queue.pop_front() {
+            piece.push(k);
+            for (n, _) in neighbours(k) {
+                if mask[n] && !body[n] && !seen[n] {
+                    seen[n] = true;
+                    queue.push_back(n);
+                }
+            }
+        }
+        // Its length along itself from the pixels that touch the body (Dijkstra, steps of 1
+        // and sqrt 2); a piece that does not touch the body is not a tail of this mouse.
+        let mut distance = vec![f64::INFINITY; piece.len()];
+        let index: std::collections::HashMap<usize, usize> = piece.iter().enumerate().map(|(i, &k)| (k, i)).collect();
+        let mut heap = BinaryHeap::new();
+        let mut base = (0.0, 0.0, 0usize);
+        for (i, &k) in piece.iter().enumerate() {
+            if neighbours(k).any(|(n, _)| body[n]) {
+                distance[i] = 0.0;
+                heap.push(Reverse(0.0, i));
+                base = (base.0 + (k % width) as f64, base.1 + (k / width) as f64, base.2 + 1);
+            }
+        }
+        if base.2 == 0 {
+            continue;
+        }
+        while let Some(Reverse(d, i)) = heap.pop() {
+            if d > distance[i] {
+                continue;
+            }
+            for (n, step) in neighbours(piece[i]) {
+                if let Some(&j) = index.get(&n)
+                    && d + step < distance[j]
+                {
+                    distance[j] = d + step;
+                    heap.push(Reverse(d + step, j));
+                }
+            }
+        }
+        let Some((far, length)) = distance
+            .iter()
+            .enumerate()
+            .filter(|(_, d)| d.is_finite())
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, d)| (piece[i], *d))
+        else {
+            continue;
+        };
+        let width_px = piece.len() as f64 / length.max(1.0);
+        if length < search.min_length_px || width_px > search.max_width_px {
+            continue;
+        }
+        let base_xy = (base.0 / base.2 as f64, base.1 / base.2 as f64);
+        // It must leave the body near one of its ends, not from its side.
+        let (c, a) = (body_axis.centre, body_axis.axis);
+        let along = (base_xy.0 - c.0) * a.0 + (base_xy.1 - c.1) * a.1;
+        if along.abs() < (1.0 - END_SHARE) * body_axis.half_length {
+            continue;
+        }
+        if best.as_ref().is_none_or(|b| length > b.length_px) {
+            best = Some(Tail {
+                pixels: piece,
+                base: base_xy,
+                tip: ((far % width) as f64, (far / width) as f64),
+                length_px: length,
+            });
+        }
+    }
+    best
+}
+
+/// The 8 neighbours of a pixel and the length of the step to each.
+const NEIGHBOURS: [(isize, isize, f64); 8] = [
+    (-1, 0, 1.0),
+    (1, 0, 1.0),
+    (0, -1, 1.0),
+    (0, 1, 1.0),
+    (-1, -1, std::f64::consts::SQRT_2),
+    (1, -1, std::f64::consts::SQRT_2),
+    (-1, 1, std::f64::consts::SQRT_2),
+    (1, 1, std::f64::consts::SQRT_2),
+];
+
+/// A heap entry ordered by its distance, smallest first.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Reverse(f64, usize);
+
+impl Eq for Reverse {}
+
+impl PartialOrd for Reverse {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Reverse {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        other.0.total_cmp(&self.0).then(other.1.cmp(&self.1))
+    }
+}
+
+/// The body's centre (x, y, pixels), its long axis (unit) and its half-length along it.
+struct BodyAxis {
+    centre: (f64, f64),
+    axis: (f64, f64),
+    half_length: f64,
+}
+
+/// The [`BodyAxis`] of the pixels of `body`, `None` when it has none.
+fn body_axis(body: &[bool], width: usize) -> Option<BodyAxis> {
+    let points: Vec<(f64, f64)> = body
+        .iter()
+        .enumerate()
+        .filter(|&(_, &b)| b)
+        .map(|(k, _)| ((k % width) as f64, (k / width) as f64))
+        .collect();
+    let n = points.len() as f64;
+    if n < 1.0 {
+        return None;
+    }
+    let (cx, cy) = points.iter().fold((0.0, 0.0), |a, p| (a.0 + p.0 / n, a.1 + p.1 / n));
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for (x, y) in &points {
+        sxx += (x - cx) * (x - cx);
+        sxy += (x - cx) * (y - cy);
+        syy += (y - cy) * (y - cy);
+    }
+    let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let axis = (angle.cos(), angle.sin());
+    let half = points
+        .iter()
+        .map(|(x, y)| ((x - cx) * axis.0 + (y - cy) * axis.1).abs())
+        .fold(0.0, f64::max);
+    Some(BodyAxis {
+        centre: (cx, cy),
+        axis,
+        half_length: half.max(1.0),
+    })
+}
+
+/// The morphological opening of `mask` by a disc of `radius` pixels: the union of the discs
+/// that fit inside it.
+pub fn opening(mask: &[bool], width: usize, height: usize, radius: f64) -> Vec<bool> {
+    // Erosion: pixels farther than `radius` from everything outside the mask (the region's
+    // edge counts as outside); dilation: pixels within `radius` of what the erosion kept.
+    let inside = distance_to(mask, width, height, |m| !m, true);
+    let core: Vec<bool> = inside.iter().map(|&d| d > radius).collect();
+    let near = distance_to(&core, width, height, |c| c, false);
+    near.iter().zip(mask).map(|(&d, &m)| m && d <= radius).collect()
+}
+
+/// Each pixel's Euclidean distance (pixels) to the nearest pixel where `target` holds (with
+/// `edge`, the region's border counts as such a pixel just outside it); infinite when there is
+/// none. Exact, by Felzenszwalb and Huttenlocher's lower envelope of parabolas, row then column.
+fn distance_to(values: &[bool], width: usize, height: usize, target: impl Fn(bool) -> bool, edge: bool) -> Vec<f64> {
+    let far = ((width + height) * (width + height)) as f64 * 4.0;
+    let mut squared: Vec<f64> = values.iter().map(|&v| if target(v) { 0.0 } else { far }).collect();
+    let pad = usize::from(edge);
+    let mut line = Vec::new();
+    let mut out = Vec::new();
+    for y in 0..height {
+        line.clear();
+        line.extend(std::iter::repeat_n(0.0, pad));
+        line.extend_from_slice(&squared[y * width..(y + 1) * width]);
+        line.extend(std::iter::repeat_n(0.0, pad));
+        envelope(&line, &mut out);
+        squared[y * width..(y + 1) * width].copy_from_slice(&out[pad..pad + width]);
+    }
+    for x in 0..width {
+        line.clear();
+        line.extend(std::iter::repeat_n(0.0, pad));
+        line.extend((0..height).map(|y| squared[y * width + x]));
+        line.extend(std::iter::repeat_n(0.0, pad));
+        envelope(&line, &mut out);
+        for y in 0..height {
+            squared[y * width + x] = out[pad + y];
+        }
+    }
+    squared
+        .into_iter()
+        .map(|d| if d >= far { f64::INFINITY } else { d.sqrt() })
+        .collect()
+}
+
+/// The 1-D squared distance transform of `f` (sampled costs) into `out`.
+fn envelope(f: &[f64], out: &mut Vec<f64>) {
+    let n = f.len();
+    out.clear();
+    out.resize(n, 0.0);
+    if n == 0 {
+        return;
+    }
+    let mut v = vec![0usize; n];
+    let mut z = vec![0.0f64; n + 1];
+    let mut k = 0;
+    z[0] = f64::NEG_INFINITY;
+    z[1] = f64::INFINITY;
+    let meet = |q: usize, p: usize| {
+        let (qf, pf) = (q as f64, p as f64);
+        ((f[q] + qf * qf) - (f[p] + pf * pf)) / (2.0 * (qf - pf))
+    };
+    for q in 1..n {
+        // z[0] is minus infinity, so this stops at k = 0 at the latest.
+        let mut s = meet(q, v[k]);
+        while s <= z[k] {
+            k -= 1;
+            s = meet(q, v[k]);
+        }
+        k += 1;
+        v[k] = q;
+        z[k] = s;
+        z[k + 1] = f64::INFINITY;
+    }
+    let mut k = 0;
+    for (q, o) in out.iter_mut().enumerate() {
+        while z[k + 1] < q as f64 {
+            k += 1;
+        }
+        let d = q as f64 - v[k] as f64;
+        *o = d * d + f[v[k]];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A body: an ellipse of semi-axes `a` x `b` pixels centred at (cx, cy), with a strip
+    /// `thick` pixels wide and `length` long leaving its end at +x (when `length` > 0).
+    fn mouse(width: usize, height: usize, a: f64, b: f64, length: usize, thick: usize) -> Vec<bool> {
+        let (cx, cy) = (width as f64 / 3.0, height as f64 / 2.0);
+        let mut mask = vec![false; width * height];
+        for y in 0..height {
+            for x in 0..width {
+                let (dx, dy) = ((x as f64 - cx) / a, (y as f64 - cy) / b);
+                mask[y * width + x] = dx * dx + dy * dy <= 1.0;
+            }
+        }
+        let x0 = (cx + a - 1.0) as usize;
+        for x in x0..(x0 + length).min(width) {
+            for t in 0..thick {
+                mask[(cy as usize - thick / 2 + t) * width + x] = true;
+            }
+        }
+        mask
+    }
+
+    #[test]
+    fn the_distance_transform_is_exact() {
+        let (w, h) = (13, 9);
+        let mut mask = vec![true; w * h];
+        mask[4 * w + 6] = false;
+        let d = distance_to(&mask, w, h, |m| !m, false);
+        for y in 0..h {
+            for x in 0..w {
+                let want = ((x as f64 - 6.0).powi(2) + (y as f64 - 4.0).powi(2)).sqrt();
+                assert!(
+                    (d[y * w + x] - want).abs() < 1e-9,
+                    "({x}, {y}): {} vs {want}",
+                    d[y * w + x]
+                );
+            }
+        }
+        // With the edge: a pixel in a corner is 1 from the border.
+        let e = distance_to(&vec![true; w * h], w, h, |m| !m, true);
+        assert_eq!(e[0], 1.0);
+        assert_eq!(e[4 * w + 6], 5.0);
+    }
+
+    #[test]
+    fn a_thin_strip_leaving_one_end_is_the_tail_and_nothing_else_is() {
+        let (w, h) = (140, 60);
+        let search = TailSearch::at_scale(1.6);
+        // A mouse 56 x 22 px (about 90 x 35 mm at 1.6 mm a pixel) with a tail 4 px wide and
+        // 60 px long.
+        let with = mouse(w, h, 28.0, 11.0, 60, 4);
+        let tail = find_tail(&with, w, h, &search).expect("the tail");
+        let (cx, a) = (w as f64 / 3.0, 28.0);
+        assert!(
+            tail.base.0 > cx + a - 4.0 && tail.base.0 < cx + a + 4.0,
+            "{:?}",
+            tail.base
+        );
+        assert!(tail.tip.0 > cx + a + 55.0, "{:?}", tail.tip);
+        assert!((tail.length_px - 60.0).abs() < 6.0, "{}", tail.length_px);
+        // No tail, a tail too short to tell from the body's rim, and a strip as wide as a body.
+        assert_eq!(find_tail(&mouse(w, h, 28.0, 11.0, 0, 4), w, h, &search), None);
+        assert_eq!(find_tail(&mouse(w, h, 28.0, 11.0, 8, 4), w, h, &search), None);
+        assert_eq!(find_tail(&mouse(w, h, 28.0, 11.0, 60, 12), w, h, &search), None);
+        // The opening keeps the body whole.
+        let body = opening(&mouse(w, h, 28.0, 11.0, 0, 4), w, h, search.radius_px);
+        let kept = body.iter().filter(|&&b| b).count() as f64;
+        let all = mouse(w, h, 28.0, 11.0, 0, 4).iter().filter(|&&b| b).count() as f64;
+        assert!(kept / all > 0.95, "{kept} of {all}");
+    }
+}

@@ -1,0 +1,106 @@
+//! A real mouse in the suite: the MoSeq project's test session (a real mouse on a real round
+//! arena, seen from above by a Kinect v2 in 2017; moseq2-extract's results file), rebuilt into
+//! a whole recording by `scripts/real-moseq-session build` (each of MoSeq's crops pasted back,
+//! rotated, into its background at its centroid), replayed with the bundled models, and
+//! compared with MoSeq's own tracker by `scripts/real-moseq-session compare`.
+//!
+//! The data is not ours and is not in the repository: it is read from `../shared/realdata/`
+//! beside the repository, or from `$MOUSEPOSE_REALDATA`. Its licence allows research use only,
+//! so no bundled model learns from it; it is only judged on. Without it, the test says so and
+//! passes without judging.
+#![allow(clippy::unwrap_used)] // test code
+
+use crate::util::{mousepose, replay_options, repo_root};
+use mousepose::engine::replay::replay;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// moseq2-extract's results file of the real session, when it is there.
+fn moseq_results() -> Option<PathBuf> {
+    let dir = std::env::var_os("MOUSEPOSE_REALDATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo_root().join("../shared/realdata"));
+    let file = dir.join("moseq2-viz/results_00.h5");
+    if file.is_file() {
+        Some(file)
+    } else {
+        eprintln!("skipped: no real data at {} (set MOUSEPOSE_REALDATA)", file.display());
+        None
+    }
+}
+
+/// The Python with numpy and h5py: the one `export nwb` uses, which `scripts/setup.sh` makes.
+fn python() -> PathBuf {
+    std::env::var_os("MOUSEPOSE_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(mousepose::engine::export::nwb::DEFAULT_PYTHON))
+}
+
+/// Runs `scripts/real-moseq-session` with `args`; its stdout.
+fn script(args: &[&std::ffi::OsStr]) -> String {
+    let out = Command::new(python())
+        .arg(repo_root().join("scripts/real-moseq-session"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "real-moseq-session {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    eprint!("{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// The figures of the real session rebuilt with the background's pixels without a reading
+/// kept (`keep`, as the Kinect gave them) or filled (`fill`), replayed and reported.
+fn figures(results: &Path, no_reading: &str, dir: &Path) -> serde_json::Value {
+    let (recording, run, report) = (dir.join("rec"), dir.join("run"), dir.join("report"));
+    script(&[
+        "build".as_ref(),
+        results.as_os_str(),
+        recording.as_os_str(),
+        "--no-reading".as_ref(),
+        no_reading.as_ref(),
+    ]);
+    replay(&replay_options(&recording, &run, 2)).unwrap();
+    let status = mousepose()
+        .arg("report")
+        .arg(&run)
+        .arg("--out")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    let line = script(&[
+        "compare".as_ref(),
+        recording.as_os_str(),
+        run.as_os_str(),
+        report.as_os_str(),
+    ]);
+    serde_json::from_str(line.trim()).unwrap()
+}
+
+/// Issue 41, item 2, on the recording as the Kinect gave it (no reading outside the arena).
+/// Goals met: found in every frame; body axis within 6 degrees of MoSeq's at the median, 20 at
+/// the 95th percentile; the head leading in 98 % of the frames where the mouse travels faster
+/// than 100 mm/s; the report's turning within 20 % of MoSeq's. Not met: the centre (the
+/// replay's `mid_back` against MoSeq's centroid) is 1.9 px off at the median and 4.1 at the
+/// 95th percentile against goals of 1.5 and 3: checked here only against falling back past
+/// 2.0 and 4.5 (see docs/FIGURES.md).
+#[test]
+fn a_real_mouse_is_found_in_every_frame_along_moseqs_axis_and_its_head_leads_its_travel() {
+    let Some(results) = moseq_results() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let f = figures(&results, "keep", tmp.path());
+    let get = |key: &str| f[key].as_f64().unwrap_or_else(|| panic!("{key} in {f}"));
+    assert_eq!(get("found"), get("frames"), "{f}");
+    assert!(get("axis_deg_median") <= 6.0, "{f}");
+    assert!(get("axis_deg_p95") <= 20.0, "{f}");
+    assert!(get("moving_frames") >= 100.0, "{f}");
+    assert!(get("head_leading") >= 0.98 * get("moving_frames"), "{f}");
+    let turned = get("report_turned_deg") / get("moseq_turned_deg");
+    assert!((0.8..=1.2).contains(&turned), "turned {turned:.2}x MoSeq's: {f}");
+    assert!(get("centre_px_median") <= 2.0, "{f}");
+    assert!(get("centre_px_p95") <= 4.5, "{f}");
+}
