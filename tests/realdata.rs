@@ -54,7 +54,7 @@ fn script(args: &[&std::ffi::OsStr]) -> String {
 
 /// The figures of the real session rebuilt with the background's pixels without a reading
 /// kept (`keep`, as the Kinect gave them) or filled (`fill`), replayed and reported.
-fn figures(results: &Path, no_reading: &str, dir: &Path) -> serde_json::Value {
+fn figures(results: &Path, no_reading: &str, dir: &Path) -> (serde_json::Value, serde_json::Value) {
     let (recording, run, report) = (dir.join("rec"), dir.join("run"), dir.join("report"));
     script(&[
         "build".as_ref(),
@@ -92,7 +92,7 @@ fn figures(results: &Path, no_reading: &str, dir: &Path) -> serde_json::Value {
 fn a_real_mouse_is_found_in_every_frame_along_moseqs_axis_and_its_head_leads_its_travel() {
     let Some(results) = moseq_results() else { return };
     let tmp = tempfile::tempdir().unwrap();
-    let f = figures(&results, "keep", tmp.path());
+    let (f, report) = figures(&results, "keep", tmp.path());
     let get = |key: &str| f[key].as_f64().unwrap_or_else(|| panic!("{key} in {f}"));
     assert_eq!(get("found"), get("frames"), "{f}");
     assert!(get("axis_deg_median") <= 6.0, "{f}");
@@ -103,4 +103,16 @@ fn a_real_mouse_is_found_in_every_frame_along_moseqs_axis_and_its_head_leads_its
     assert!((0.8..=1.2).contains(&turned), "turned {turned:.2}x MoSeq's: {f}");
     assert!(get("centre_px_median") <= 2.0, "{f}");
     assert!(get("centre_px_p95") <= 4.5, "{f}");
+    // Item 4: the round arena is zoned by its own outline, which is round (a square's corners
+    // reach 1.41 times as far as its sides).
+    let reach: Vec<f64> = report["arena"]["outline"]["reach_mm"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no outline: {}", report["arena"]))
+        .iter()
+        .filter_map(serde_json::Value::as_f64)
+        .collect();
+    let (low, high) = reach
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(l, h), &r| (l.min(r), h.max(r)));
+    assert!(high / low < 1.1, "{reach:?}");
 }

@@ -863,8 +863,11 @@ fn a_mouse_outside_the_arena_is_reported() {
 }
 
 /// Issue 41, item 3: a mouse against a wall 200 mm high (the wall's face seen by a camera
-/// tilted toward it, its mixed pixels and noise beside the mouse): no joint takes the wall's
-/// height; each lies within the mouse's own height.
+/// tilted toward it, time-of-flight noise with its flying pixels across the wall's edge): no
+/// joint takes the wall's height; each lies within the mouse's own height. A guard: on these
+/// renders the build before this round kept its joints on the mouse too (highest 63 mm for
+/// mice up to about 60 mm high); the real cross-shaped arena where joints took the wall's
+/// depth is not among the recordings we have.
 #[test]
 fn a_mouse_against_a_wall_keeps_its_joints_on_itself() {
     use std::f64::consts::FRAC_PI_2;
@@ -940,7 +943,6 @@ fn a_mouse_against_a_wall_keeps_its_joints_on_itself() {
             let Ok(z) = f[col(&format!("{}_z", joint.name()))].parse::<f64>() else {
                 continue;
             };
-            eprintln!("{}: {} at {z:.0} mm, the mouse's top {top:.0} mm", f[0], joint.name());
             assert!(
                 z <= top + 15.0,
                 "{}: {} at {z:.0} mm, the mouse's top {top:.0} mm",
