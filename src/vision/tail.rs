@@ -104,6 +104,8 @@ pub fn find_tail(mask: &[bool], width: usize, height: usize, search: &TailSearch
     };
     let body_axis = body_axis(&body, width)?;
     let mut seen = vec![false; mask.len()];
+    // Each pixel's place in the piece being measured (usize::MAX: not in it).
+    let mut place = vec![usize::MAX; mask.len()];
     let mut best: Option<Tail> = None;
     for start in 0..mask.len() {
         if !mask[start] || body[start] || seen[start] {
@@ -122,10 +124,19 @@ pub fn find_tail(mask: &[bool], width: usize, height: usize, search: &TailSearch
                 }
             }
         }
+        // A piece as long as the shortest tail has at least that length over sqrt 2 pixels
+        // (all steps diagonal): most pieces (the rim's noise) have far fewer.
+        if piece.len() as f64 * std::f64::consts::SQRT_2 < search.min_length_px {
+            continue;
+        }
         // Its length along itself from the pixels that touch the body (Dijkstra, steps of 1
         // and sqrt 2); a piece that does not touch the body is not a tail of this mouse.
         let mut distance = vec![f64::INFINITY; piece.len()];
-        let index: std::collections::HashMap<usize, usize> = piece.iter().enumerate().map(|(i, &k)| (k, i)).collect();
+        // (A pixel of an earlier piece keeps its place, but is never a neighbour of this
+        // one's: the pieces are 8-connected components.)
+        for (i, &k) in piece.iter().enumerate() {
+            place[k] = i;
+        }
         let mut heap = BinaryHeap::new();
         let mut base = (0.0, 0.0, 0usize);
         for (i, &k) in piece.iter().enumerate() {
@@ -143,9 +154,8 @@ pub fn find_tail(mask: &[bool], width: usize, height: usize, search: &TailSearch
                 continue;
             }
             for (n, step) in neighbours(piece[i]) {
-                if let Some(&j) = index.get(&n)
-                    && d + step < distance[j]
-                {
+                let j = place[n];
+                if j != usize::MAX && d + step < distance[j] {
                     distance[j] = d + step;
                     heap.push(Reverse(d + step, j));
                 }
@@ -253,86 +263,31 @@ fn body_axis(body: &[bool], width: usize) -> Option<BodyAxis> {
 }
 
 /// The morphological opening of `mask` by a disc of `radius` pixels: the union of the discs
-/// that fit inside it.
+/// that fit inside it (the region's edge counts as outside).
 pub fn opening(mask: &[bool], width: usize, height: usize, radius: f64) -> Vec<bool> {
-    // Erosion: pixels farther than `radius` from everything outside the mask (the region's
-    // edge counts as outside); dilation: pixels within `radius` of what the erosion kept.
-    let inside = distance_to(mask, width, height, |m| !m, true);
-    let core: Vec<bool> = inside.iter().map(|&d| d > radius).collect();
-    let near = distance_to(&core, width, height, |c| c, false);
-    near.iter().zip(mask).map(|(&d, &m)| m && d <= radius).collect()
-}
-
-/// Each pixel's Euclidean distance (pixels) to the nearest pixel where `target` holds (with
-/// `edge`, the region's border counts as such a pixel just outside it); infinite when there is
-/// none. Exact, by Felzenszwalb and Huttenlocher's lower envelope of parabolas, row then column.
-fn distance_to(values: &[bool], width: usize, height: usize, target: impl Fn(bool) -> bool, edge: bool) -> Vec<f64> {
-    let far = ((width + height) * (width + height)) as f64 * 4.0;
-    let mut squared: Vec<f64> = values.iter().map(|&v| if target(v) { 0.0 } else { far }).collect();
-    let pad = usize::from(edge);
-    let mut line = Vec::new();
-    let mut out = Vec::new();
-    for y in 0..height {
-        line.clear();
-        line.extend(std::iter::repeat_n(0.0, pad));
-        line.extend_from_slice(&squared[y * width..(y + 1) * width]);
-        line.extend(std::iter::repeat_n(0.0, pad));
-        envelope(&line, &mut out);
-        squared[y * width..(y + 1) * width].copy_from_slice(&out[pad..pad + width]);
-    }
-    for x in 0..width {
-        line.clear();
-        line.extend(std::iter::repeat_n(0.0, pad));
-        line.extend((0..height).map(|y| squared[y * width + x]));
-        line.extend(std::iter::repeat_n(0.0, pad));
-        envelope(&line, &mut out);
-        for y in 0..height {
-            squared[y * width + x] = out[pad + y];
-        }
-    }
-    squared
-        .into_iter()
-        .map(|d| if d >= far { f64::INFINITY } else { d.sqrt() })
-        .collect()
-}
-
-/// The 1-D squared distance transform of `f` (sampled costs) into `out`.
-fn envelope(f: &[f64], out: &mut Vec<f64>) {
-    let n = f.len();
-    out.clear();
-    out.resize(n, 0.0);
-    if n == 0 {
-        return;
-    }
-    let mut v = vec![0usize; n];
-    let mut z = vec![0.0f64; n + 1];
-    let mut k = 0;
-    z[0] = f64::NEG_INFINITY;
-    z[1] = f64::INFINITY;
-    let meet = |q: usize, p: usize| {
-        let (qf, pf) = (q as f64, p as f64);
-        ((f[q] + qf * qf) - (f[p] + pf * pf)) / (2.0 * (qf - pf))
+    // The disc's offsets, nearest first (an erosion test fails soonest near the mask's edge).
+    let reach = radius.floor() as isize;
+    let mut disc: Vec<(isize, isize)> = (-reach..=reach)
+        .flat_map(|dy| (-reach..=reach).map(move |dx| (dx, dy)))
+        .filter(|&(dx, dy)| ((dx * dx + dy * dy) as f64) <= radius * radius)
+        .collect();
+    disc.sort_by_key(|&(dx, dy)| dx * dx + dy * dy);
+    let at = |values: &[bool], x: usize, y: usize, (dx, dy): (isize, isize)| {
+        let (nx, ny) = (x as isize + dx, y as isize + dy);
+        nx >= 0
+            && ny >= 0
+            && (nx as usize) < width
+            && (ny as usize) < height
+            && values[ny as usize * width + nx as usize]
     };
-    for q in 1..n {
-        // z[0] is minus infinity, so this stops at k = 0 at the latest.
-        let mut s = meet(q, v[k]);
-        while s <= z[k] {
-            k -= 1;
-            s = meet(q, v[k]);
-        }
-        k += 1;
-        v[k] = q;
-        z[k] = s;
-        z[k + 1] = f64::INFINITY;
-    }
-    let mut k = 0;
-    for (q, o) in out.iter_mut().enumerate() {
-        while z[k + 1] < q as f64 {
-            k += 1;
-        }
-        let d = q as f64 - v[k] as f64;
-        *o = d * d + f[v[k]];
-    }
+    // Erosion: the pixels whose whole disc is in the mask; dilation: the mask's pixels with
+    // such a pixel within the disc.
+    let core: Vec<bool> = (0..mask.len())
+        .map(|k| mask[k] && disc.iter().all(|&d| at(mask, k % width, k / width, d)))
+        .collect();
+    (0..mask.len())
+        .map(|k| mask[k] && disc.iter().any(|&d| at(&core, k % width, k / width, d)))
+        .collect()
 }
 
 #[cfg(test)]
@@ -360,28 +315,6 @@ mod tests {
     }
 
     #[test]
-    fn the_distance_transform_is_exact() {
-        let (w, h) = (13, 9);
-        let mut mask = vec![true; w * h];
-        mask[4 * w + 6] = false;
-        let d = distance_to(&mask, w, h, |m| !m, false);
-        for y in 0..h {
-            for x in 0..w {
-                let want = ((x as f64 - 6.0).powi(2) + (y as f64 - 4.0).powi(2)).sqrt();
-                assert!(
-                    (d[y * w + x] - want).abs() < 1e-9,
-                    "({x}, {y}): {} vs {want}",
-                    d[y * w + x]
-                );
-            }
-        }
-        // With the edge: a pixel in a corner is 1 from the border.
-        let e = distance_to(&vec![true; w * h], w, h, |m| !m, true);
-        assert_eq!(e[0], 1.0);
-        assert_eq!(e[4 * w + 6], 5.0);
-    }
-
-    #[test]
     fn a_thin_strip_leaving_one_end_is_the_tail_and_nothing_else_is() {
         let (w, h) = (140, 60);
         let search = TailSearch::at_scale(1.6);
@@ -401,6 +334,13 @@ mod tests {
         assert_eq!(find_tail(&mouse(w, h, 28.0, 11.0, 0, 4), w, h, &search), None);
         assert_eq!(find_tail(&mouse(w, h, 28.0, 11.0, 8, 4), w, h, &search), None);
         assert_eq!(find_tail(&mouse(w, h, 28.0, 11.0, 60, 12), w, h, &search), None);
+        // The opening keeps exactly the discs that fit: a square of 5 x 5 pixels holds one disc
+        // of radius 2 (13 pixels), none of radius 3.
+        let square: Vec<bool> = (0..81)
+            .map(|k| (2..7).contains(&(k % 9)) && (2..7).contains(&(k / 9)))
+            .collect();
+        assert_eq!(opening(&square, 9, 9, 2.0).iter().filter(|&&b| b).count(), 13);
+        assert!(!opening(&square, 9, 9, 3.0).iter().any(|&b| b));
         // The opening keeps the body whole.
         let body = opening(&mouse(w, h, 28.0, 11.0, 0, 4), w, h, search.radius_px);
         let kept = body.iter().filter(|&&b| b).count() as f64;

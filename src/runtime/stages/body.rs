@@ -122,6 +122,9 @@ impl BodyStage {
         let pixel = Point2::new(f64::from(r.x0) + tail.base.0, f64::from(r.y0) + tail.base.1);
         let base = self.camera.world_from_camera * self.camera.intrinsics.unproject(&pixel, depth);
         let side = (Vector2::new(base.x, base.y) - headings.centre.coords).dot(&headings.axis);
+        if side.abs() < 1e-6 {
+            return 0.0;
+        }
         let strength = TAIL_LOG_ODDS * (tail.length_px * mm_per_px / FULL_TAIL_MM).min(1.0);
         -side.signum() * strength
     }
