@@ -280,7 +280,8 @@ mod tests {
             config.smooth_s,
             &ActivityConfig::default(),
         );
-        assert!((w.net_turn_deg - total).abs() < 10.0, "{}", w.net_turn_deg);
+        // The runs' end frames keep their own wobble (5 degrees each way at either end).
+        assert!((w.net_turn_deg - total).abs() < 15.0, "{}", w.net_turn_deg);
         assert!(
             (w.turned_deg - total).abs() < 0.1 * total,
             "{} for {total}",

@@ -263,31 +263,98 @@ fn body_axis(body: &[bool], width: usize) -> Option<BodyAxis> {
 }
 
 /// The morphological opening of `mask` by a disc of `radius` pixels: the union of the discs
-/// that fit inside it (the region's edge counts as outside).
+/// that fit inside it (the region's edge counts as outside). Row by row: the disc is a stack
+/// of horizontal spans, and each row's runs say at once whether a span lies in the mask
+/// (erosion) or holds a pixel of the eroded mask (dilation).
 pub fn opening(mask: &[bool], width: usize, height: usize, radius: f64) -> Vec<bool> {
-    // The disc's offsets, nearest first (an erosion test fails soonest near the mask's edge).
-    let reach = radius.floor() as isize;
-    let mut disc: Vec<(isize, isize)> = (-reach..=reach)
-        .flat_map(|dy| (-reach..=reach).map(move |dx| (dx, dy)))
-        .filter(|&(dx, dy)| ((dx * dx + dy * dy) as f64) <= radius * radius)
+    let reach = radius.max(0.0).floor() as usize;
+    // The disc's half-width at each row offset 0..=reach.
+    let spans: Vec<usize> = (0..=reach)
+        .map(|dy| (radius * radius - (dy * dy) as f64).max(0.0).sqrt().floor() as usize)
         .collect();
-    disc.sort_by_key(|&(dx, dy)| dx * dx + dy * dy);
-    let at = |values: &[bool], x: usize, y: usize, (dx, dy): (isize, isize)| {
-        let (nx, ny) = (x as isize + dx, y as isize + dy);
-        nx >= 0
-            && ny >= 0
-            && (nx as usize) < width
-            && (ny as usize) < height
-            && values[ny as usize * width + nx as usize]
+    let rows = |y: usize| {
+        (y.saturating_sub(reach)..=(y + reach).min(height.saturating_sub(1))).map(move |r| (r, r.abs_diff(y)))
     };
-    // Erosion: the pixels whose whole disc is in the mask; dilation: the mask's pixels with
-    // such a pixel within the disc.
+    // Erosion: every span of the disc inside the mask (the mask's runs through the pixel reach
+    // the span's ends), and no span off the region.
+    let (left, right) = runs(mask, width, |m| m);
     let core: Vec<bool> = (0..mask.len())
-        .map(|k| mask[k] && disc.iter().all(|&d| at(mask, k % width, k / width, d)))
+        .map(|k| {
+            let (x, y) = (k % width, k / width);
+            mask[k]
+                && y >= reach
+                && y + reach < height
+                && rows(y).all(|(r, dy)| {
+                    let i = r * width + x;
+                    left[i] > spans[dy] && right[i] > spans[dy]
+                })
+        })
         .collect();
+    // Dilation: a mask pixel with an eroded pixel within a span of the disc (the nearest one
+    // of its row on either side).
+    let (before, after) = nearest(&core, width);
     (0..mask.len())
-        .map(|k| mask[k] && disc.iter().any(|&d| at(&core, k % width, k / width, d)))
+        .map(|k| {
+            let (x, y) = (k % width, k / width);
+            mask[k]
+                && rows(y).any(|(r, dy)| {
+                    let i = r * width + x;
+                    before[i] <= spans[dy] || after[i] <= spans[dy]
+                })
+        })
         .collect()
+}
+
+/// Per pixel, how many pixels in a row where `keep` holds end at it from the left and from the
+/// right (itself included; 0 where it does not hold).
+fn runs(values: &[bool], width: usize, keep: impl Fn(bool) -> bool) -> (Vec<usize>, Vec<usize>) {
+    let (mut left, mut right) = (vec![0; values.len()], vec![0; values.len()]);
+    for row in 0..values.len() / width.max(1) {
+        let base = row * width;
+        for x in 0..width {
+            let i = base + x;
+            left[i] = if keep(values[i]) {
+                1 + if x > 0 { left[i - 1] } else { 0 }
+            } else {
+                0
+            };
+            let j = base + width - 1 - x;
+            right[j] = if keep(values[j]) {
+                1 + if x > 0 { right[j + 1] } else { 0 }
+            } else {
+                0
+            };
+        }
+    }
+    (left, right)
+}
+
+/// Per pixel, the distance along its row to the nearest pixel that is set, on its left and on
+/// its right (itself included; `usize::MAX` where there is none).
+fn nearest(values: &[bool], width: usize) -> (Vec<usize>, Vec<usize>) {
+    let (mut before, mut after) = (vec![usize::MAX; values.len()], vec![usize::MAX; values.len()]);
+    for row in 0..values.len() / width.max(1) {
+        let base = row * width;
+        for x in 0..width {
+            let i = base + x;
+            before[i] = if values[i] {
+                0
+            } else if x > 0 {
+                before[i - 1].saturating_add(1)
+            } else {
+                usize::MAX
+            };
+            let j = base + width - 1 - x;
+            after[j] = if values[j] {
+                0
+            } else if x > 0 {
+                after[j + 1].saturating_add(1)
+            } else {
+                usize::MAX
+            };
+        }
+    }
+    (before, after)
 }
 
 #[cfg(test)]
@@ -312,6 +379,44 @@ mod tests {
             }
         }
         mask
+    }
+
+    /// The opening by its definition: every offset of the disc checked.
+    fn opening_by_offsets(mask: &[bool], width: usize, height: usize, radius: f64) -> Vec<bool> {
+        let reach = radius.floor() as isize;
+        let disc: Vec<(isize, isize)> = (-reach..=reach)
+            .flat_map(|dy| (-reach..=reach).map(move |dx| (dx, dy)))
+            .filter(|&(dx, dy)| ((dx * dx + dy * dy) as f64) <= radius * radius)
+            .collect();
+        let at = |values: &[bool], k: usize, (dx, dy): (isize, isize)| {
+            let (nx, ny) = ((k % width) as isize + dx, (k / width) as isize + dy);
+            nx >= 0
+                && ny >= 0
+                && (nx as usize) < width
+                && (ny as usize) < height
+                && values[ny as usize * width + nx as usize]
+        };
+        let core: Vec<bool> = (0..mask.len()).map(|k| disc.iter().all(|&d| at(mask, k, d))).collect();
+        (0..mask.len())
+            .map(|k| mask[k] && disc.iter().any(|&d| at(&core, k, d)))
+            .collect()
+    }
+
+    #[test]
+    fn the_opening_by_rows_is_the_opening_by_offsets() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for round in 0..200 {
+            let (w, h) = (rng.gen_range(1..40), rng.gen_range(1..40));
+            let fill = rng.gen_range(0.3..0.95);
+            let mask: Vec<bool> = (0..w * h).map(|_| rng.gen_bool(fill)).collect();
+            let radius = rng.gen_range(0.0..4.5);
+            assert_eq!(
+                opening(&mask, w, h, radius),
+                opening_by_offsets(&mask, w, h, radius),
+                "round {round}: {w}x{h}, radius {radius}"
+            );
+        }
     }
 
     #[test]
