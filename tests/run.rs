@@ -83,16 +83,20 @@ fn chunks(out: &Path) -> Vec<PathBuf> {
     chunks
 }
 
-/// Sends SIGTERM and waits (at most `limit`) for the exit; returns its status and stdout.
-pub(crate) fn terminate(mut child: ChildGuard, limit: Duration) -> (std::process::ExitStatus, String, String) {
-    let pid = child.0.id().to_string();
-    assert!(
-        Command::new("kill")
-            .args(["-TERM", &pid])
-            .status()
-            .expect("test set-up")
-            .success()
-    );
+/// Sends SIGTERM and waits (at most `limit`) for the exit; returns its status, stdout and
+/// stderr.
+pub(crate) fn terminate(child: ChildGuard, limit: Duration) -> (std::process::ExitStatus, String, String) {
+    stop_with(child, "TERM", limit)
+}
+
+/// Sends `signal` (`TERM`, `HUP`...) and waits (at most `limit`) for the exit; returns its
+/// status, stdout and stderr.
+pub(crate) fn stop_with(
+    mut child: ChildGuard,
+    signal: &str,
+    limit: Duration,
+) -> (std::process::ExitStatus, String, String) {
+    self::signal(&child, signal);
     let deadline = Instant::now() + limit;
     loop {
         if let Some(status) = child.0.try_wait().expect("test set-up") {
@@ -117,7 +121,7 @@ pub(crate) fn terminate(mut child: ChildGuard, limit: Duration) -> (std::process
         }
         assert!(
             Instant::now() < deadline,
-            "the daemon did not stop within {limit:?} of SIGTERM"
+            "the process did not stop within {limit:?} of SIG{signal}"
         );
         std::thread::sleep(Duration::from_millis(50));
     }
@@ -203,6 +207,59 @@ fn the_daemon_rides_out_a_colour_camera_restart_and_stops_cleanly_on_sigterm() {
     }
     assert!(events.contains("camera_disconnected"), "{events}");
     assert!(events.contains("camera_reconnected"), "{events}");
+}
+
+/// Reads systemd's notifications from `socket` into `said` until `done` holds of them (at most
+/// `limit`).
+fn read_notes_until(socket: &UnixDatagram, said: &mut String, limit: Duration, done: impl Fn(&str) -> bool) {
+    let deadline = Instant::now() + limit;
+    let mut buf = [0u8; 4096];
+    while !done(said) {
+        assert!(Instant::now() < deadline, "systemd was not told: {said}");
+        if let Ok(n) = socket.recv(&mut buf) {
+            said.push_str(&String::from_utf8_lossy(&buf[..n]));
+            said.push('\n');
+        }
+    }
+}
+
+/// Issue 37 item 1: SIGHUP does not stop the daemon (there is nothing to reload: it says so,
+/// tells systemd of the reload, and goes on); another signal that would end it stops it as
+/// SIGTERM does (every chunk closed with its summary, the report printed), then fails, so that
+/// systemd restarts it.
+#[test]
+fn issue37_sighup_leaves_the_daemon_running_and_other_signals_leave_a_report() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = rig(tmp.path(), false);
+    let socket_path = tmp.path().join("notify");
+    let socket = UnixDatagram::bind(&socket_path).unwrap();
+    socket.set_read_timeout(Some(Duration::from_millis(200))).unwrap();
+    let daemon = daemon(&rig, Some(&socket_path));
+    let mut said = String::new();
+    read_notes_until(&socket, &mut said, Duration::from_secs(60), |s| s.contains("READY=1"));
+    signal(&daemon, "HUP");
+    // The reload, then ready again.
+    read_notes_until(&socket, &mut said, Duration::from_secs(30), |s| {
+        s.split_once("RELOADING=1")
+            .is_some_and(|(_, after)| after.contains("READY=1"))
+    });
+    // Still at work: a watchdog ping after the reload.
+    let reloaded = said.len();
+    read_notes_until(&socket, &mut said, Duration::from_secs(30), |s| {
+        s[reloaded..].contains("WATCHDOG=1")
+    });
+    let (status, out, err) = stop_with(daemon, "USR1", Duration::from_secs(30));
+    assert_eq!(status.code(), Some(2), "{status}: {err}");
+    assert!(err.contains("SIGHUP"), "{err}");
+    assert!(err.contains("stopped by SIGUSR1"), "{err}");
+    let report = report(&out);
+    assert!(report["poses"].as_u64().unwrap() > 0, "{report:#}");
+    assert_accounted(&report["cameras"]["depth"]);
+    for chunk in chunks(&tmp.path().join("out")) {
+        let session = SessionReader::open(&chunk).unwrap_or_else(|e| panic!("{chunk:?}: {e}"));
+        assert!(session.complete(), "{chunk:?} was not closed");
+        assert!(chunk.join("summary.json").is_file(), "{chunk:?}");
+    }
 }
 
 #[test]
