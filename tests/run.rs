@@ -854,6 +854,51 @@ fn issue37_a_run_directory_removed_under_the_daemon_is_counted_as_lost_and_recor
     }
 }
 
+/// Issue 37 item 5: a configuration that can never work is refused at start in one sentence
+/// (exit 1): a depth mode the camera does not have, a trigger line the colour camera does not
+/// have. A camera absent now is not refused: the daemon runs without it (exit 0).
+#[test]
+fn issue37_a_camera_configured_as_it_can_never_work_is_refused_at_start_but_an_absent_one_is_not() {
+    let _port = take_port();
+    let tmp = tempfile::tempdir().unwrap();
+    let run = |rig: &Path| {
+        mousepose()
+            .args(["run", "--seconds", "2", "--config"])
+            .arg(rig)
+            .env("MOUSEPOSE_MODELS", repo_root().join("fixtures/models"))
+            .output()
+            .unwrap()
+    };
+    let no_mode = "backend = \"openni2\"\nuri = \"Dummy\"\nwidth = 1234\nheight = 1000\nfps = 30\n";
+    let out = run(&rig_with(tmp.path(), no_mode, false, ""));
+    let err = String::from_utf8_lossy(&out.stderr);
+    let last = err.lines().last().unwrap_or("");
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        last.starts_with("error: the depth camera cannot work as") && last.contains("1234x1000"),
+        "{err}"
+    );
+    // The colour camera absent (no fake camera runs): the daemon runs without it.
+    let out = run(&rig(tmp.path(), true));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(err.contains("cannot open the camera"), "{err}");
+    // There, with a trigger line it does not have.
+    let camera = fake_camera();
+    let rig = rig(tmp.path(), true);
+    let text = std::fs::read_to_string(&rig).unwrap() + "trigger = \"line:Line9\"\n";
+    std::fs::write(&rig, text).unwrap();
+    let out = run(&rig);
+    drop(camera);
+    let err = String::from_utf8_lossy(&out.stderr);
+    let last = err.lines().last().unwrap_or("");
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        last.starts_with("error: the color camera cannot work as") && last.contains("Line9"),
+        "{err}"
+    );
+}
+
 /// The `events.jsonl` lines of every chunk, and their kinds.
 fn event_kinds(chunks: &[PathBuf]) -> Vec<String> {
     chunks

@@ -142,6 +142,18 @@ fn reference_background(dir: &std::path::Path, depth: &DepthCamera, rig: &Rig) -
         .with_world(rig.depth.world_from_camera))
 }
 
+/// A camera whose configuration can never work (a setting it does not have, an unreadable
+/// recording): refused at start, the user's to fix; a camera absent now is not one (the daemon
+/// runs without it, and takes it when it comes).
+#[derive(Debug, thiserror::Error)]
+#[error("the {role} camera cannot work as {config:?} configures it")]
+pub struct CameraUnusable {
+    role: CameraRole,
+    config: PathBuf,
+    #[source]
+    source: CaptureError,
+}
+
 /// Runs the daemon until `stop` (a signal), `seconds`, or a failure of the pipeline itself;
 /// `signals`, when given, are the process's (SIGHUP is answered, the stop signal named).
 ///
@@ -190,9 +202,24 @@ pub fn run(
     // session holds both: a colour camera opening a moment after depth frames began to flow
     // would end that chunk at once (a chunk holds the cameras open when it began).
     let clock = Clock::Monotonic;
-    depth.start(&clock)?;
-    if let Some(color) = &mut color {
-        color.start(&clock)?;
+    let unusable = |role, source| CameraUnusable {
+        role,
+        config: config.path.clone(),
+        source,
+    };
+    let started = depth
+        .start(&clock)
+        .map_err(|e| unusable(CameraRole::Depth, e))
+        .and_then(|()| match &mut color {
+            Some(color) => color.start(&clock).map_err(|e| unusable(CameraRole::Color, e)),
+            None => Ok(()),
+        });
+    if let Err(e) = started {
+        // Nothing was recorded: the run's directory goes (removed only while empty).
+        if let Err(cleanup) = std::fs::remove_dir(&root) {
+            tracing::debug!("cannot remove the run directory {root:?}: {cleanup}");
+        }
+        return Err(e.into());
     }
     // The cameras' states are taken from these, in this thread, whatever the capture threads
     // are doing.
@@ -373,6 +400,7 @@ pub fn daemon(options: &DaemonOptions) -> Result<(RunReport, Option<String>), Fa
     let segment = segment_stage(&config, &rig).map_err(Failure::usage)?;
     let stop = Shutdown::default();
     let signals = Signals::install(&stop, false).context("installing the signal handlers")?;
-    let report = run(&config, models, rig, segment, options.seconds, &stop, Some(&signals))?;
+    let report = run(&config, models, rig, segment, options.seconds, &stop, Some(&signals))
+        .map_err(|e| Failure::classed(e.is::<CameraUnusable>(), e))?;
     Ok((report, signals.unexpected_stop()))
 }

@@ -289,8 +289,9 @@ where
         }
     }
 
-    /// Tries to open and start the camera now; on failure it is away until the next try.
-    fn try_open(&mut self, clock: &Clock) {
+    /// Tries to open and start the camera now; on failure it is away until the next try, and
+    /// the error is returned.
+    fn try_open(&mut self, clock: &Clock) -> Option<CaptureError> {
         let opened = (self.open)().and_then(|mut s| s.start(clock).map(|()| s));
         let now = Instant::now();
         let host_ns = clock.now_ns();
@@ -315,6 +316,7 @@ where
                 self.current = Some(source);
                 self.last_frame = now;
                 self.wait = self.policy.first_wait;
+                None
             }
             Err(e) => {
                 let reason = error_chain(&e);
@@ -330,6 +332,7 @@ where
                 }
                 self.next_try = now + self.wait;
                 self.wait = (self.wait * 2).min(self.policy.max_wait);
+                Some(e)
             }
         }
     }
@@ -434,7 +437,9 @@ where
     }
 
     /// Tries the camera once (unless it came [`Supervised::opened`]); a camera that cannot be
-    /// opened is not an error here, it is away.
+    /// opened is not an error here, it is away (it may come later), unless the configuration
+    /// itself is at fault ([`CaptureError::never_works`]: a setting the camera does not have,
+    /// an unreadable recording), which is returned.
     /// A second call (the daemon tries its cameras before its pipeline starts them) does
     /// nothing.
     fn start(&mut self, clock: &Clock) -> Result<(), CaptureError> {
@@ -442,8 +447,11 @@ where
             return Ok(());
         }
         self.clock = Some(clock.clone());
-        if self.current.is_none() {
-            self.try_open(clock);
+        if self.current.is_none()
+            && let Some(e) = self.try_open(clock)
+            && e.never_works()
+        {
+            return Err(e);
         }
         Ok(())
     }
@@ -459,7 +467,8 @@ where
                 std::thread::sleep(timeout.min(self.next_try - now));
                 return Ok(None);
             }
-            self.try_open(&clock);
+            // A failure leaves the camera away until the next try; its reason is in its state.
+            drop(self.try_open(&clock));
             return Ok(None);
         };
         match source.next_frame(timeout) {
