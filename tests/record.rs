@@ -80,6 +80,47 @@ fn a_recorder_killed_with_sigkill_leaves_a_readable_session() {
     assert_eq!(r.meta().camera(CameraRole::Depth).unwrap().backend, Backend::Openni2);
 }
 
+/// Issue 37 item 1: a terminal's hang-up (SIGHUP) ends a recording as Ctrl-C does: the session
+/// closed (its `session_ended` event), the summary printed, exit 0; another signal that would
+/// end the process does the same, then fails naming it.
+#[test]
+fn issue37_sighup_and_other_signals_close_the_recording_with_its_summary() {
+    for (signal, code) in [("HUP", 0), ("USR1", 2)] {
+        let tmp = tempfile::tempdir().unwrap();
+        let rig = tmp.path().join("rig.toml");
+        std::fs::write(&rig, DUMMY_DEPTH).unwrap();
+        let out = tmp.path().join("session");
+        let child = mousepose()
+            .args(["record", "--seconds", "60", "--json", "--config"])
+            .arg(&rig)
+            .arg("--out")
+            .arg(&out)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let child = crate::capture_aravis::ChildGuard(child);
+        let start = Instant::now();
+        let timestamps = out.join("depth/timestamps.csv");
+        while std::fs::read_to_string(&timestamps).map_or(0, |t| t.lines().count()) < 30 {
+            assert!(start.elapsed() < Duration::from_secs(30), "the recorder wrote nothing");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        let (status, stdout, err) = crate::run::stop_with(child, signal, Duration::from_secs(30));
+        assert_eq!(status.code(), Some(code), "SIG{signal}: {status}: {err}");
+        let summary: serde_json::Value =
+            serde_json::from_str(&stdout).unwrap_or_else(|e| panic!("SIG{signal}: {e}: {stdout}\n{err}"));
+        let r = SessionReader::open(&out).unwrap();
+        assert!(r.complete(), "SIG{signal}: the session was not closed\n{err}");
+        assert_eq!(
+            summary["depth_frames"].as_u64(),
+            Some(r.depth_count() as u64),
+            "{summary:#}"
+        );
+        assert!(err.contains(&format!("SIG{signal}")), "SIG{signal}: {err}");
+    }
+}
+
 #[test]
 fn bad_configs_and_missing_cameras_are_clear_errors() {
     let tmp = tempfile::tempdir().unwrap();

@@ -83,16 +83,20 @@ fn chunks(out: &Path) -> Vec<PathBuf> {
     chunks
 }
 
-/// Sends SIGTERM and waits (at most `limit`) for the exit; returns its status and stdout.
-pub(crate) fn terminate(mut child: ChildGuard, limit: Duration) -> (std::process::ExitStatus, String, String) {
-    let pid = child.0.id().to_string();
-    assert!(
-        Command::new("kill")
-            .args(["-TERM", &pid])
-            .status()
-            .expect("test set-up")
-            .success()
-    );
+/// Sends SIGTERM and waits (at most `limit`) for the exit; returns its status, stdout and
+/// stderr.
+pub(crate) fn terminate(child: ChildGuard, limit: Duration) -> (std::process::ExitStatus, String, String) {
+    stop_with(child, "TERM", limit)
+}
+
+/// Sends `signal` (`TERM`, `HUP`...) and waits (at most `limit`) for the exit; returns its
+/// status, stdout and stderr.
+pub(crate) fn stop_with(
+    mut child: ChildGuard,
+    signal: &str,
+    limit: Duration,
+) -> (std::process::ExitStatus, String, String) {
+    self::signal(&child, signal);
     let deadline = Instant::now() + limit;
     loop {
         if let Some(status) = child.0.try_wait().expect("test set-up") {
@@ -117,7 +121,7 @@ pub(crate) fn terminate(mut child: ChildGuard, limit: Duration) -> (std::process
         }
         assert!(
             Instant::now() < deadline,
-            "the daemon did not stop within {limit:?} of SIGTERM"
+            "the process did not stop within {limit:?} of SIG{signal}"
         );
         std::thread::sleep(Duration::from_millis(50));
     }
@@ -203,6 +207,59 @@ fn the_daemon_rides_out_a_colour_camera_restart_and_stops_cleanly_on_sigterm() {
     }
     assert!(events.contains("camera_disconnected"), "{events}");
     assert!(events.contains("camera_reconnected"), "{events}");
+}
+
+/// Reads systemd's notifications from `socket` into `said` until `done` holds of them (at most
+/// `limit`).
+fn read_notes_until(socket: &UnixDatagram, said: &mut String, limit: Duration, done: impl Fn(&str) -> bool) {
+    let deadline = Instant::now() + limit;
+    let mut buf = [0u8; 4096];
+    while !done(said) {
+        assert!(Instant::now() < deadline, "systemd was not told: {said}");
+        if let Ok(n) = socket.recv(&mut buf) {
+            said.push_str(&String::from_utf8_lossy(&buf[..n]));
+            said.push('\n');
+        }
+    }
+}
+
+/// Issue 37 item 1: SIGHUP does not stop the daemon (there is nothing to reload: it says so,
+/// tells systemd of the reload, and goes on); another signal that would end it stops it as
+/// SIGTERM does (every chunk closed with its summary, the report printed), then fails, so that
+/// systemd restarts it.
+#[test]
+fn issue37_sighup_leaves_the_daemon_running_and_other_signals_leave_a_report() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = rig(tmp.path(), false);
+    let socket_path = tmp.path().join("notify");
+    let socket = UnixDatagram::bind(&socket_path).unwrap();
+    socket.set_read_timeout(Some(Duration::from_millis(200))).unwrap();
+    let daemon = daemon(&rig, Some(&socket_path));
+    let mut said = String::new();
+    read_notes_until(&socket, &mut said, Duration::from_secs(60), |s| s.contains("READY=1"));
+    signal(&daemon, "HUP");
+    // The reload, then ready again.
+    read_notes_until(&socket, &mut said, Duration::from_secs(30), |s| {
+        s.split_once("RELOADING=1")
+            .is_some_and(|(_, after)| after.contains("READY=1"))
+    });
+    // Still at work: a watchdog ping after the reload.
+    let reloaded = said.len();
+    read_notes_until(&socket, &mut said, Duration::from_secs(30), |s| {
+        s[reloaded..].contains("WATCHDOG=1")
+    });
+    let (status, out, err) = stop_with(daemon, "USR1", Duration::from_secs(30));
+    assert_eq!(status.code(), Some(2), "{status}: {err}");
+    assert!(err.contains("SIGHUP"), "{err}");
+    assert!(err.contains("stopped by SIGUSR1"), "{err}");
+    let report = report(&out);
+    assert!(report["poses"].as_u64().unwrap() > 0, "{report:#}");
+    assert_accounted(&report["cameras"]["depth"]);
+    for chunk in chunks(&tmp.path().join("out")) {
+        let session = SessionReader::open(&chunk).unwrap_or_else(|e| panic!("{chunk:?}: {e}"));
+        assert!(session.complete(), "{chunk:?} was not closed");
+        assert!(chunk.join("summary.json").is_file(), "{chunk:?}");
+    }
 }
 
 #[test]
@@ -720,4 +777,231 @@ fn issue31_poses_are_written_again_soon_after_a_full_disk() {
         serde_json::from_slice(&std::fs::read(chunks[0].join("summary.json")).expect("summary.json"))
             .expect("a whole summary");
     assert!(summary["rows_lost"].as_u64().unwrap_or(0) > 0, "{summary:#}");
+}
+
+/// The rows of a `poses.csv` (its header not counted), 0 when it is missing.
+fn pose_rows(chunk: &Path) -> usize {
+    std::fs::read_to_string(chunk.join("poses.csv")).map_or(0, |t| t.lines().count().saturating_sub(1))
+}
+
+/// Issue 37 item 2: a run directory deleted under the daemon is not reported as recorded: the
+/// frames and poses of the chunk removed are counted as not recorded (`write_error`) and not
+/// written, and recording goes on at once in a new chunk. What the report says was recorded is
+/// what is on the disk.
+#[test]
+fn issue37_a_run_directory_removed_under_the_daemon_is_counted_as_lost_and_recording_goes_on() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let rig = tmp.path().join("rig.toml");
+    std::fs::write(
+        &rig,
+        format!(
+            "[depth]\n{}[output]\ndir = {out:?}\nchunk_minutes = 60\nmin_free_gb = 0\nmin_free_percent = 0\n\
+             [http]\naddress = \"127.0.0.1:0\"\n",
+            session_depth()
+        ),
+    )
+    .unwrap();
+    let daemon = daemon(&rig, None);
+    let start = Instant::now();
+    while !out.is_dir() || chunks(&out).is_empty() || pose_rows(&chunks(&out)[0]) < 30 {
+        assert!(start.elapsed() < Duration::from_secs(60), "the daemon wrote no poses");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let run = std::fs::read_dir(&out).unwrap().next().unwrap().unwrap().path();
+    // Out of the daemon's way first, so that the new chunk it makes is not deleted too.
+    let gone = tmp.path().join("gone");
+    std::fs::rename(&run, &gone).unwrap();
+    std::fs::remove_dir_all(&gone).unwrap();
+    // Recording and poses go on in a new chunk, in the run directory made again.
+    let start = Instant::now();
+    while !run.is_dir() || chunks(&out).is_empty() || pose_rows(&chunks(&out)[0]) < 30 || {
+        SessionReader::open(&chunks(&out)[0]).map_or(0, |s| s.depth_count()) < 30
+    } {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "nothing written after the removal"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let (status, stdout, err) = terminate(daemon, Duration::from_secs(30));
+    assert!(status.success(), "{status}: {err}");
+    assert!(err.contains("removed from the disk"), "{err}");
+    let report = report(&stdout);
+    let depth = &report["cameras"]["depth"];
+    assert_accounted(depth);
+    let lost = depth["not_recorded"]["write_error"].as_u64().unwrap_or(0);
+    assert!(lost >= 30, "{report:#}");
+    // Recorded is what is on the disk, frame for frame and row for row.
+    let chunks = chunks(&out);
+    let on_disk: usize = chunks
+        .iter()
+        .map(|c| {
+            SessionReader::open(c)
+                .unwrap_or_else(|e| panic!("{c:?}: {e}"))
+                .depth_count()
+        })
+        .sum();
+    assert_eq!(depth["recorded"].as_u64(), Some(on_disk as u64), "{report:#}");
+    let rows: usize = chunks.iter().map(|c| pose_rows(c)).sum();
+    let written = report["poses"].as_u64().unwrap() - report["poses_not_written"].as_u64().unwrap();
+    assert_eq!(written, rows as u64, "{report:#}");
+    assert!(report["poses_not_written"].as_u64().unwrap() >= 30, "{report:#}");
+    for chunk in &chunks {
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(chunk.join("summary.json")).unwrap()).unwrap();
+        assert_eq!(summary["rows"].as_u64(), Some(pose_rows(chunk) as u64), "{chunk:?}");
+    }
+}
+
+/// Issue 37 item 5: a configuration that can never work is refused at start in one sentence
+/// (exit 1): a depth mode the camera does not have, a trigger line the colour camera does not
+/// have. A camera absent now is not refused: the daemon runs without it (exit 0).
+#[test]
+fn issue37_a_camera_configured_as_it_can_never_work_is_refused_at_start_but_an_absent_one_is_not() {
+    let _port = take_port();
+    let tmp = tempfile::tempdir().unwrap();
+    let run = |rig: &Path| {
+        mousepose()
+            .args(["run", "--seconds", "2", "--config"])
+            .arg(rig)
+            .env("MOUSEPOSE_MODELS", repo_root().join("fixtures/models"))
+            .output()
+            .unwrap()
+    };
+    let no_mode = "backend = \"openni2\"\nuri = \"Dummy\"\nwidth = 1234\nheight = 1000\nfps = 30\n";
+    let out = run(&rig_with(tmp.path(), no_mode, false, ""));
+    let err = String::from_utf8_lossy(&out.stderr);
+    let last = err.lines().last().unwrap_or("");
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        last.starts_with("error: the depth camera cannot work as") && last.contains("1234x1000"),
+        "{err}"
+    );
+    // The colour camera absent (no fake camera runs): the daemon runs without it.
+    let out = run(&rig(tmp.path(), true));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(err.contains("cannot open the camera"), "{err}");
+    // There, with a trigger line it does not have.
+    let camera = fake_camera();
+    let rig = rig(tmp.path(), true);
+    let text = std::fs::read_to_string(&rig).unwrap() + "trigger = \"line:Line9\"\n";
+    std::fs::write(&rig, text).unwrap();
+    let out = run(&rig);
+    drop(camera);
+    let err = String::from_utf8_lossy(&out.stderr);
+    let last = err.lines().last().unwrap_or("");
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        last.starts_with("error: the color camera cannot work as") && last.contains("Line9"),
+        "{err}"
+    );
+}
+
+/// The `events.jsonl` lines of every chunk, and their kinds.
+fn event_kinds(chunks: &[PathBuf]) -> Vec<String> {
+    chunks
+        .iter()
+        .flat_map(|c| {
+            let text = std::fs::read_to_string(c.join("events.jsonl")).unwrap_or_default();
+            text.lines()
+                .map(|l| {
+                    let e: serde_json::Value = serde_json::from_str(l).unwrap_or_else(|e| panic!("{c:?}: {e}: {l}"));
+                    e["kind"].as_str().unwrap_or("").to_owned()
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// Runs the daemon (depth from the fixture session, recording) on a 32 MB tmpfs holding a
+/// file of `filler_mb`, removed after `full_s` seconds; stops it `after_s` seconds later.
+/// Returns its report, its log, the chunks, and the disk and directory that hold them (kept
+/// while the guard lives).
+fn run_on_a_disk_freed_later(
+    filler_mb: usize,
+    full_s: u64,
+    after_s: u64,
+) -> (serde_json::Value, String, Vec<PathBuf>, (Tmpfs, tempfile::TempDir)) {
+    let tmp = tempfile::tempdir().expect("test set-up");
+    let out = tmp.path().join("out");
+    let disk = Tmpfs::mount(&out, "32m");
+    let filler = out.join("filler");
+    // Written until the disk is full when it is larger than the disk.
+    drop(std::fs::write(&filler, vec![1u8; filler_mb << 20]));
+    let rig = tmp.path().join("rig.toml");
+    std::fs::write(
+        &rig,
+        format!(
+            "[depth]\n{}[output]\ndir = {out:?}\nchunk_minutes = 60\nmin_free_gb = 0\nmin_free_percent = 0\n\
+             [http]\naddress = \"127.0.0.1:0\"\n",
+            session_depth()
+        ),
+    )
+    .expect("test set-up");
+    let daemon = daemon(&rig, None);
+    std::thread::sleep(Duration::from_secs(full_s));
+    std::fs::remove_file(&filler).expect("test set-up");
+    std::thread::sleep(Duration::from_secs(after_s));
+    let (status, stdout, err) = terminate(daemon, Duration::from_secs(30));
+    assert!(status.success(), "{status}: {err}");
+    let chunks = chunks(&out);
+    (report(&stdout), err, chunks, (disk, tmp))
+}
+
+/// Issue 37 item 4: on a disk that fills up while poses and frames are written, every
+/// `poses.csv` holds whole rows only and its `summary.json` counts exactly those; every pause
+/// of recording has its resume, in the log and in `events.jsonl`.
+#[test]
+fn issue37_on_a_full_disk_rows_counted_are_whole_rows_and_every_pause_has_its_resume() {
+    if !is_root() {
+        eprintln!("skipped: mounting a small tmpfs needs root");
+        return;
+    }
+    let (report, err, chunks, _disk) = run_on_a_disk_freed_later(26, 16, 10);
+    assert_accounted(&report["cameras"]["depth"]);
+    assert!(err.contains("recording paused"), "{err}");
+    for chunk in &chunks {
+        let Ok(text) = std::fs::read_to_string(chunk.join("poses.csv")) else {
+            continue;
+        };
+        assert!(text.is_empty() || text.ends_with('\n'), "{chunk:?} ends with a cut row");
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(chunk.join("summary.json")).expect("summary.json")).expect("whole");
+        assert_eq!(
+            summary["rows"].as_u64(),
+            Some(pose_rows(chunk) as u64),
+            "{chunk:?}: {summary:#}"
+        );
+    }
+    let kinds = event_kinds(&chunks);
+    let paused = kinds.iter().filter(|k| *k == "recording_paused").count();
+    let resumed = kinds.iter().filter(|k| *k == "recording_resumed").count();
+    assert!(paused >= 1 && paused == resumed, "{kinds:?}");
+    assert_eq!(
+        err.matches("recording paused").count(),
+        err.matches("recording resumed").count(),
+        "{err}"
+    );
+}
+
+/// Issue 37 item 4: a chunk whose session begins only once a disk full from the start has
+/// room gets the cameras' `camera_opened` events (they wait for a session to go into).
+#[test]
+fn issue37_a_chunk_begun_on_a_full_disk_gets_its_camera_events() {
+    if !is_root() {
+        eprintln!("skipped: mounting a small tmpfs needs root");
+        return;
+    }
+    let (report, err, chunks, _disk) = run_on_a_disk_freed_later(40, 4, 9);
+    assert_accounted(&report["cameras"]["depth"]);
+    let recorded = report["cameras"]["depth"]["recorded"].as_u64().unwrap_or(0);
+    assert!(
+        recorded > 0,
+        "nothing recorded once the disk had room: {report:#}\n{err}"
+    );
+    let kinds = event_kinds(&chunks);
+    assert!(kinds.iter().any(|k| k == "camera_opened"), "{kinds:?}");
+    assert!(kinds.iter().any(|k| k == "recording_resumed"), "{kinds:?}");
 }

@@ -29,7 +29,7 @@ pub struct RecordArgs {
 
 /// `mousepose record`.
 pub fn command(args: &RecordArgs) -> Outcome {
-    let summary = record_until_signal(&RecordOptions {
+    let (summary, unexpected) = record_until_signal(&RecordOptions {
         config: args.config.clone(),
         out: args.out.clone(),
         seconds: args.seconds,
@@ -39,6 +39,9 @@ pub fn command(args: &RecordArgs) -> Outcome {
         print_json(&summary)?;
     } else {
         print(&summary_text(&summary))?;
+    }
+    if let Some(why) = unexpected {
+        return Err(Failure::classed(false, anyhow::anyhow!(why)));
     }
     let silent = summary.silent_cameras();
     if !silent.is_empty() {

@@ -2,6 +2,7 @@
 
 use crate::app::Outcome;
 use crate::app::output::{print, print_json};
+use crate::engine::Failure;
 use crate::engine::daemon::{DaemonOptions, daemon};
 use clap::Args;
 use std::path::PathBuf;
@@ -25,13 +26,18 @@ pub struct RunArgs {
 
 /// `mousepose run`.
 pub fn command(args: &RunArgs) -> Outcome {
-    let report = daemon(&DaemonOptions {
+    let (report, unexpected) = daemon(&DaemonOptions {
         config: args.config.clone(),
         seconds: args.seconds,
         background: args.background.clone(),
     })?;
     if args.json {
-        return Ok(print_json(&report)?);
+        print_json(&report)?;
+    } else {
+        print(&format!("ran {}", report.text()))?;
     }
-    Ok(print(&format!("ran {}", report.text()))?)
+    match unexpected {
+        Some(why) => Err(Failure::classed(false, anyhow::anyhow!(why))),
+        None => Ok(()),
+    }
 }

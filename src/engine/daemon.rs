@@ -1,12 +1,14 @@
 //! The daemon (`mousepose run`). Opens the configured cameras, processes live, records, and
 //! keeps going through camera faults and a full disk until SIGTERM (or `--seconds`).
+//! SIGHUP does not stop it (there is nothing it could reload: it says so); any other signal
+//! that would end the process stops it cleanly, with its report.
 //!
 //! Under systemd (`Type=notify`) it says READY=1 once the cameras were tried (running degraded
 //! when one cannot be opened, with STATUS= saying why), WATCHDOG=1 only while the pipeline
 //! makes progress, and STATUS= with the frame rate and counts every few seconds.
 
 use crate::core::geometry::Rig;
-use crate::engine::Failure;
+use crate::engine::{Failure, Signals, signal_name};
 use crate::io::session::CameraRole;
 use crate::runtime::capture::rig::{ColorSource, open_color, open_depth};
 use crate::runtime::capture::supervise::{CameraState, SharedHealth, Supervised, lock};
@@ -140,7 +142,20 @@ fn reference_background(dir: &std::path::Path, depth: &DepthCamera, rig: &Rig) -
         .with_world(rig.depth.world_from_camera))
 }
 
-/// Runs the daemon until `stop` (a signal), `seconds`, or a failure of the pipeline itself.
+/// A camera whose configuration can never work (a setting it does not have, an unreadable
+/// recording): refused at start, the user's to fix; a camera absent now is not one (the daemon
+/// runs without it, and takes it when it comes).
+#[derive(Debug, thiserror::Error)]
+#[error("the {role} camera cannot work as {config:?} configures it")]
+pub struct CameraUnusable {
+    role: CameraRole,
+    config: PathBuf,
+    #[source]
+    source: CaptureError,
+}
+
+/// Runs the daemon until `stop` (a signal), `seconds`, or a failure of the pipeline itself;
+/// `signals`, when given, are the process's (SIGHUP is answered, the stop signal named).
 ///
 /// # Errors
 /// The output directory cannot be made, or a pipeline component failed (the report is still
@@ -152,6 +167,7 @@ pub fn run(
     segment: SegmentStage,
     seconds: Option<f64>,
     stop: &Shutdown,
+    signals: Option<&Signals>,
 ) -> anyhow::Result<RunReport> {
     let listener = config.http.address.map(HttpServer::bind).transpose()?;
     let root = create_run_dir(&config.output_dir)?;
@@ -186,9 +202,24 @@ pub fn run(
     // session holds both: a colour camera opening a moment after depth frames began to flow
     // would end that chunk at once (a chunk holds the cameras open when it began).
     let clock = Clock::Monotonic;
-    depth.start(&clock)?;
-    if let Some(color) = &mut color {
-        color.start(&clock)?;
+    let unusable = |role, source| CameraUnusable {
+        role,
+        config: config.path.clone(),
+        source,
+    };
+    let started = depth
+        .start(&clock)
+        .map_err(|e| unusable(CameraRole::Depth, e))
+        .and_then(|()| match &mut color {
+            Some(color) => color.start(&clock).map_err(|e| unusable(CameraRole::Color, e)),
+            None => Ok(()),
+        });
+    if let Err(e) = started {
+        // Nothing was recorded: the run's directory goes (removed only while empty).
+        if let Err(cleanup) = std::fs::remove_dir(&root) {
+            tracing::debug!("cannot remove the run directory {root:?}: {cleanup}");
+        }
+        return Err(e.into());
     }
     // The cameras' states are taken from these, in this thread, whatever the capture threads
     // are doing.
@@ -283,6 +314,15 @@ pub fn run(
         for watch in &stall_watches {
             watch.check();
         }
+        if signals.is_some_and(Signals::take_hangup) {
+            // What systemd expects of a reload, though nothing is reloaded: the configuration
+            // is read at start only.
+            notify(&[sd_notify::NotifyState::Reloading]);
+            tracing::info!(
+                "SIGHUP: nothing to reload (the configuration is read at start; restart the daemon to apply a change); the run goes on"
+            );
+            notify(&[sd_notify::NotifyState::Ready]);
+        }
         if last_tick.elapsed() < Duration::from_secs(1) {
             continue;
         }
@@ -307,7 +347,13 @@ pub fn run(
         }
     }
     notify(&[sd_notify::NotifyState::Stopping]);
-    tracing::info!(last = %last_line, "stopping");
+    let why = match signals.and_then(Signals::caught) {
+        Some(signal) => signal_name(signal),
+        None if stop.requested() => "a signal".to_owned(),
+        None if shutdown.requested() => "a failure of the pipeline".to_owned(),
+        None => "the time given".to_owned(),
+    };
+    tracing::info!(last = %last_line, "stopping: {why}");
     shutdown.request();
     let finished = running.join();
     if let Some(recorder) = finished.recorder {
@@ -337,12 +383,14 @@ pub struct DaemonOptions {
 }
 
 /// Loads the configuration, the models, the rig and the background, then runs the daemon
-/// until SIGINT, SIGTERM or `seconds`.
+/// until a stop signal (SIGTERM, SIGINT, ...: [`crate::engine::stop_signals`]) or `seconds`.
+/// Returns its report and, when a signal other than SIGTERM or SIGINT stopped it, the
+/// sentence that says so (the run then fails, after its report).
 ///
 /// # Errors
 /// The configuration, models, rig or background cannot be used (the user's), or the run
 /// failed.
-pub fn daemon(options: &DaemonOptions) -> Result<RunReport, Failure> {
+pub fn daemon(options: &DaemonOptions) -> Result<(RunReport, Option<String>), Failure> {
     let mut config = Config::load(&options.config).map_err(Failure::usage)?;
     if let Some(dir) = &options.background {
         config.background = Some(dir.clone());
@@ -351,8 +399,8 @@ pub fn daemon(options: &DaemonOptions) -> Result<RunReport, Failure> {
     let rig = live_rig(&config).map_err(Failure::usage)?;
     let segment = segment_stage(&config, &rig).map_err(Failure::usage)?;
     let stop = Shutdown::default();
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(signal, stop.flag()).context("installing the signal handlers")?;
-    }
-    Ok(run(&config, models, rig, segment, options.seconds, &stop)?)
+    let signals = Signals::install(&stop, false).context("installing the signal handlers")?;
+    let report = run(&config, models, rig, segment, options.seconds, &stop, Some(&signals))
+        .map_err(|e| Failure::classed(e.is::<CameraUnusable>(), e))?;
+    Ok((report, signals.unexpected_stop()))
 }

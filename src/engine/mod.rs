@@ -106,8 +106,116 @@ pub fn report_dir(dir: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating report directory {dir:?}"))
 }
 
-/// SIGINT and SIGTERM seen by an offline command (`replay`, a batch), so that it stops its
-/// work cleanly (removing what it had not finished) instead of dying mid-write.
+/// The signals that stop a command cleanly (its output closed, its report written): every
+/// signal whose default action ends the process and that a handler may catch, SIGHUP among
+/// them when `hangup` (a command in a terminal that hung up; the daemon takes SIGHUP apart).
+/// Not among them: SIGPIPE (ignored by Rust's runtime: a broken pipe is an error where it is
+/// written), SIGXFSZ (see [`Signals::install`]), and the signals of a fault of the process
+/// itself (SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT, SIGSYS, SIGTRAP), whose handler could not
+/// go on.
+pub fn stop_signals(hangup: bool) -> Vec<std::ffi::c_int> {
+    use rustix::process::Signal;
+    use signal_hook::consts::signal::{
+        SIGALRM, SIGHUP, SIGINT, SIGIO, SIGPROF, SIGQUIT, SIGTERM, SIGUSR1, SIGUSR2, SIGVTALRM, SIGXCPU,
+    };
+    let mut signals = vec![
+        SIGINT,
+        SIGTERM,
+        SIGQUIT,
+        SIGUSR1,
+        SIGUSR2,
+        SIGALRM,
+        SIGVTALRM,
+        SIGPROF,
+        SIGXCPU,
+        SIGIO,
+        Signal::POWER.as_raw(),
+        Signal::STKFLT.as_raw(),
+    ];
+    if hangup {
+        signals.push(SIGHUP);
+    }
+    signals
+}
+
+/// The name of signal `signal` (`SIGTERM`), or its number.
+pub fn signal_name(signal: std::ffi::c_int) -> String {
+    match signal_hook::low_level::signal_name(signal) {
+        Some(name) => name.to_owned(),
+        None => format!("signal {signal}"),
+    }
+}
+
+/// The signals caught by a long-running command (`record`, the daemon): each of
+/// [`stop_signals`] sets its stop flag and is remembered; SIGHUP is one of them or, for the
+/// daemon, a request of its own ([`Signals::take_hangup`]).
+#[derive(Debug, Clone)]
+pub struct Signals {
+    caught: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+    hangup: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    hangup_stops: bool,
+}
+
+impl Signals {
+    /// Catches the signals from now on, for the life of the process: each stop signal sets
+    /// `stop`; SIGHUP does too when `hangup_stops`, else only [`Signals::take_hangup`]. SIGXFSZ
+    /// is caught and left alone, so that a write past the process's file size limit fails
+    /// (and is counted as a write error) instead of ending the process.
+    ///
+    /// # Errors
+    /// The handlers cannot be installed.
+    pub fn install(stop: &crate::runtime::pipeline::Shutdown, hangup_stops: bool) -> std::io::Result<Self> {
+        use std::sync::Arc;
+        let signals = Self {
+            caught: Arc::default(),
+            hangup: Arc::default(),
+            hangup_stops,
+        };
+        for signal in stop_signals(hangup_stops) {
+            let number = usize::try_from(signal).unwrap_or(usize::MAX);
+            signal_hook::flag::register_usize(signal, Arc::clone(&signals.caught), number)?;
+            signal_hook::flag::register(signal, stop.flag())?;
+        }
+        if !hangup_stops {
+            signal_hook::flag::register(signal_hook::consts::SIGHUP, Arc::clone(&signals.hangup))?;
+        }
+        signal_hook::flag::register(signal_hook::consts::SIGXFSZ, Arc::default())?;
+        Ok(signals)
+    }
+
+    /// Whether SIGHUP came since the last call (only when it does not stop the command).
+    pub fn take_hangup(&self) -> bool {
+        self.hangup.swap(false, std::sync::atomic::Ordering::AcqRel)
+    }
+
+    /// The last stop signal that came, if any.
+    pub fn caught(&self) -> Option<std::ffi::c_int> {
+        match self.caught.load(std::sync::atomic::Ordering::Acquire) {
+            0 => None,
+            n => std::ffi::c_int::try_from(n).ok(),
+        }
+    }
+
+    /// A command stopped by a signal that is not one of the ordinary requests to stop
+    /// (SIGINT, SIGTERM, and SIGHUP where it stops) stopped cleanly, yet was not asked to by
+    /// its operator or service manager: it fails (exit 2), so that systemd's
+    /// `Restart=on-failure` brings a daemon back. The sentence to say so.
+    pub fn unexpected_stop(&self) -> Option<String> {
+        use signal_hook::consts::signal::{SIGHUP, SIGINT, SIGTERM};
+        let signal = self.caught()?;
+        let ordinary = signal == SIGINT || signal == SIGTERM || (self.hangup_stops && signal == SIGHUP);
+        (!ordinary).then(|| {
+            format!(
+                "stopped by {} (its output closed and its report written)",
+                signal_name(signal)
+            )
+        })
+    }
+}
+
+/// The stop signals ([`stop_signals`], SIGHUP among them) seen by an offline command
+/// (`replay`, a batch), so that it stops its work cleanly (removing what it had not finished)
+/// instead of dying mid-write.
 #[derive(Debug, Clone, Default)]
 pub struct Interrupt {
     flag: std::sync::Arc<std::sync::atomic::AtomicBool>,
@@ -116,13 +224,13 @@ pub struct Interrupt {
 }
 
 impl Interrupt {
-    /// Catches SIGINT and SIGTERM from now on, for the life of the process.
+    /// Catches the stop signals from now on, for the life of the process.
     ///
     /// # Errors
     /// The handlers cannot be installed.
     pub fn install() -> std::io::Result<Self> {
         let flag = std::sync::Arc::<std::sync::atomic::AtomicBool>::default();
-        for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        for signal in stop_signals(true) {
             signal_hook::flag::register(signal, std::sync::Arc::clone(&flag))?;
         }
         Ok(Self { flag, installed: true })
@@ -141,7 +249,7 @@ impl Interrupt {
     pub fn forward_to(&self, other: &std::sync::Arc<std::sync::atomic::AtomicBool>) -> std::io::Result<Forwarded> {
         let mut ids = Vec::new();
         if self.installed {
-            for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+            for signal in stop_signals(true) {
                 ids.push(signal_hook::flag::register(signal, std::sync::Arc::clone(other))?);
             }
             if self.requested() {

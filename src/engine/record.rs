@@ -5,7 +5,7 @@
 //! system as it is written, so a recorder killed at any moment leaves a session that reads up
 //! to its last complete frame (without the `session_ended` event that marks it complete).
 
-use crate::engine::Failure;
+use crate::engine::{Failure, Signals, signal_name};
 use crate::io::output::Staging;
 use crate::io::session::{
     CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionSummary, SessionWriter,
@@ -325,18 +325,23 @@ pub struct RecordOptions {
     pub force: bool,
 }
 
-/// Loads the configuration and records its cameras until `seconds` or SIGINT/SIGTERM.
+/// Loads the configuration and records its cameras until `seconds` or a stop signal
+/// (SIGINT, SIGTERM, SIGHUP: [`crate::engine::stop_signals`]), then closes the session.
+/// Returns its summary and, when a signal other than SIGINT, SIGTERM or SIGHUP stopped it, the
+/// sentence that says so (the command then fails, after its summary).
 ///
 /// # Errors
 /// The configuration or the request cannot work (the user's), or the recording failed.
-pub fn record_until_signal(options: &RecordOptions) -> Result<RecordSummary, Failure> {
+pub fn record_until_signal(options: &RecordOptions) -> Result<(RecordSummary, Option<String>), Failure> {
     let config = Config::load(&options.config).map_err(Failure::usage)?;
     let stop = Shutdown::default();
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(signal, stop.flag()).context("installing the signal handlers")?;
+    let signals = Signals::install(&stop, true).context("installing the signal handlers")?;
+    let summary = record(&config, &options.out, options.seconds, options.force, &stop)
+        .map_err(|e| Failure::classed(e.is_usage(), e).context(format!("recording to {:?}", options.out)))?;
+    if let Some(signal) = signals.caught() {
+        tracing::info!(dir = ?options.out, "recording stopped by {}: session closed", signal_name(signal));
     }
-    record(&config, &options.out, options.seconds, options.force, &stop)
-        .map_err(|e| Failure::classed(e.is_usage(), e).context(format!("recording to {:?}", options.out)))
+    Ok((summary, signals.unexpected_stop()))
 }
 
 impl RecordSummary {

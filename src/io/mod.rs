@@ -23,6 +23,14 @@ pub fn u16_samples(bytes: &[u8]) -> Vec<u16> {
     samples
 }
 
+/// Whether `file`, open for writing, was removed from the file system (no name is left: what
+/// is written to it is lost when it is closed). A file whose state cannot be read counts as
+/// still there.
+pub fn unlinked(file: &std::fs::File) -> bool {
+    use std::os::unix::fs::MetadataExt as _;
+    file.metadata().is_ok_and(|m| m.nlink() == 0)
+}
+
 /// The bytes of a regular file of at most `max` bytes: a device (`/dev/zero`), a FIFO or a
 /// directory is refused before anything is read (opening a FIFO waits for a writer, a device
 /// never ends), and a larger file after `max` bytes. Every reader of a file a user names goes

@@ -385,10 +385,17 @@ impl Config {
     pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
         let raw: RawConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
             path: path.to_owned(),
-            message: e.message().to_owned() + &span_note(text, e.span()),
+            message: one_line(e.message()) + &span_note(text, e.span()),
         })?;
         Checker { path }.check(raw)
     }
+}
+
+/// A parser's message on one line: some of TOML's span lines (a duplicated table: "invalid
+/// table header" then "duplicate key ..."), and an error is one sentence.
+fn one_line(message: &str) -> String {
+    let lines: Vec<&str> = message.lines().map(str::trim).filter(|l| !l.is_empty()).collect();
+    lines.join(": ")
 }
 
 /// ` (line N)` for a parse error's position.
@@ -446,6 +453,14 @@ impl Checker<'_> {
             "openni2" => {
                 if d.uri.is_none() && d.serial.is_none() {
                     return Err(self.bad("depth", "needs `uri` or `serial` to say which camera"));
+                }
+                // A recording played as the camera cannot come later, as a camera can.
+                if let Some(uri) = &d.uri {
+                    let path = Path::new(uri);
+                    let recording = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("oni"));
+                    if recording && !path.is_file() {
+                        return Err(self.bad("depth.uri", format!("names the recording {uri:?}, which is not a file")));
+                    }
                 }
                 if !(1..=4096).contains(&d.width) || !(1..=4096).contains(&d.height) {
                     return Err(self.bad(
@@ -772,6 +787,26 @@ mod tests {
 
     fn parse(text: &str) -> Result<Config, ConfigError> {
         Config::parse(text, Path::new("rig.toml"))
+    }
+
+    /// Issue 37 item 5: a missing `.oni` recording named as the depth camera is refused (it
+    /// cannot come later, as a camera can).
+    #[test]
+    fn issue37_a_missing_oni_recording_is_refused() {
+        let e = parse("[depth]\nbackend = \"openni2\"\nuri = \"/nonexistent/issue37.oni\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("depth.uri") && e.contains("issue37.oni"), "{e}");
+    }
+
+    /// Issue 37 item 5: a duplicated table is refused in one line, naming the table and where.
+    #[test]
+    fn issue37_a_duplicated_table_is_refused_in_one_line() {
+        let e = parse("[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n[depth]\nfps = 30\n")
+            .unwrap_err()
+            .to_string();
+        assert!(!e.contains('\n'), "{e}");
+        assert!(e.contains("depth") && e.contains("line 4"), "{e}");
     }
 
     #[test]

@@ -34,6 +34,12 @@ pub enum SessionEvent {
     },
     /// A disconnected camera delivers frames again.
     CameraReconnected { host_ns: u64, role: CameraRole },
+    /// Recording paused at `host_ns` (its first frame not recorded), for `reason` (`disk_low`,
+    /// `write_error`): logged, with its [`SessionEvent::RecordingResumed`], in the session
+    /// recording resumes in.
+    RecordingPaused { host_ns: u64, reason: String },
+    /// Recording resumed: `host_ns` is the first frame recorded again.
+    RecordingResumed { host_ns: u64 },
     /// A free-form remark (an operator's note, a warning worth keeping with the data).
     Note { host_ns: u64, message: String },
     /// The writer finished cleanly; the counts are the frames in the files.
@@ -57,6 +63,8 @@ impl SessionEvent {
             | SessionEvent::FramesDropped { host_ns, .. }
             | SessionEvent::CameraDisconnected { host_ns, .. }
             | SessionEvent::CameraReconnected { host_ns, .. }
+            | SessionEvent::RecordingPaused { host_ns, .. }
+            | SessionEvent::RecordingResumed { host_ns }
             | SessionEvent::Note { host_ns, .. }
             | SessionEvent::SessionEnded { host_ns, .. } => Some(host_ns),
             SessionEvent::Unknown => None,

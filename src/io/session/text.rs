@@ -61,6 +61,11 @@ impl LineWriter {
         Ok(())
     }
 
+    /// Whether the file was removed while being written ([`crate::io::unlinked`]).
+    pub fn unlinked(&self) -> bool {
+        crate::io::unlinked(self.out.get_ref())
+    }
+
     /// Lines written, the header not counted.
     pub fn lines(&self) -> u64 {
         self.lines

@@ -274,6 +274,18 @@ impl SessionWriter {
         self.frame_bytes
     }
 
+    /// Whether the session's files were removed while it was written (its directory deleted
+    /// under the writer): whatever it holds, and whatever is written to it from now on, is
+    /// lost.
+    pub fn removed(&self) -> bool {
+        self.events.unlinked()
+            || self
+                .depth
+                .iter()
+                .chain(self.color.iter())
+                .any(|s| s.store.unlinked() || s.timestamps.unlinked())
+    }
+
     /// Whether the session has frames of `role` (its metadata declares the camera).
     pub fn has_camera(&self, role: CameraRole) -> bool {
         match role {

@@ -128,6 +128,11 @@ impl RecordWriter {
         &self.path
     }
 
+    /// Whether the file was removed while being written ([`crate::io::unlinked`]).
+    pub fn unlinked(&self) -> bool {
+        crate::io::unlinked(self.out.get_ref())
+    }
+
     pub fn kind(&self) -> Kind {
         self.kind
     }

@@ -268,16 +268,18 @@ impl AravisColor {
     }
 
     fn count_loss(&mut self, reason: &'static str) {
-        if let Some(entry) = self.losses.iter_mut().find(|(r, _)| *r == reason) {
-            entry.1 += 1;
-            tracing::trace!(message = "Aravis buffer dropped.", camera = %self.id, reason);
-        } else {
-            self.losses.push((reason, 1));
+        match self.losses.iter_mut().find(|(r, _)| *r == reason) {
+            Some(entry) => entry.1 += 1,
+            None => self.losses.push((reason, 1)),
+        }
+        if first_loss(&self.id, reason) {
             tracing::warn!(
                 message = "Aravis buffer dropped (logged once per reason, counted in losses).",
                 camera = %self.id,
                 reason,
             );
+        } else {
+            tracing::trace!(message = "Aravis buffer dropped.", camera = %self.id, reason);
         }
     }
 
@@ -706,9 +708,31 @@ pub fn list_devices(addresses: &[String]) -> Vec<DeviceInfo> {
     devices
 }
 
+/// Whether buffers of camera `id` were not dropped for `reason` before in this process: a
+/// reason is logged once per camera for the life of the process, however often the camera is
+/// reopened (each opening counts its losses afresh).
+fn first_loss(id: &str, reason: &'static str) -> bool {
+    static LOGGED: std::sync::Mutex<std::collections::BTreeSet<(String, &'static str)>> =
+        std::sync::Mutex::new(std::collections::BTreeSet::new());
+    LOGGED
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .insert((id.to_owned(), reason))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 37 item 5: a reason buffers are dropped for is logged once per camera, not once
+    /// per opening (a camera reopened after each outage logged it again each time).
+    #[test]
+    fn issue37_a_loss_reason_is_logged_once_per_camera_whatever_the_reopenings() {
+        assert!(first_loss("issue37-a", "missing_packets"));
+        assert!(!first_loss("issue37-a", "missing_packets"));
+        assert!(first_loss("issue37-a", "timeout"));
+        assert!(first_loss("issue37-b", "missing_packets"));
+    }
 
     #[test]
     fn frame_ids_extend_across_the_16_bit_wrap() {

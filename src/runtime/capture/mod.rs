@@ -70,6 +70,16 @@ pub enum CaptureError {
     },
 }
 
+impl CaptureError {
+    /// Whether the configuration itself is at fault, so that trying again cannot help: the
+    /// camera is there and refuses a setting it does not have (a mode, a trigger line, a
+    /// range), or a recording played as the camera cannot be read. A camera absent, held or
+    /// failing may come back; these never do.
+    pub fn never_works(&self) -> bool {
+        matches!(self, CaptureError::Refused { .. } | CaptureError::Recording { .. })
+    }
+}
+
 pub use crate::core::error_chain;
 
 /// Frames missing from one camera's sequence numbers (the camera's own drops, or frames lost

@@ -93,8 +93,9 @@ pub fn lock(health: &SharedHealth) -> std::sync::MutexGuard<'_, CameraHealth> {
     health.lock().unwrap_or_else(PoisonError::into_inner)
 }
 
-/// A camera (re)opened at `host_ns`: its event, metadata and state, and its opening as its
-/// last sign of life.
+/// A camera (re)opened at `host_ns`: its event and metadata, and its opening as its last sign
+/// of life. Its state stays as it was (opening, or away) until its first frame
+/// ([`Supervised::accept`]): a camera that opens is not yet one that delivers.
 fn mark_open(h: &mut CameraHealth, role: CameraRole, meta: CameraMeta, host_ns: u64) {
     h.events.push(SessionEvent::CameraOpened {
         host_ns,
@@ -103,7 +104,6 @@ fn mark_open(h: &mut CameraHealth, role: CameraRole, meta: CameraMeta, host_ns: 
         serial: meta.serial.clone(),
     });
     h.meta = Some(meta);
-    h.state = Some(CameraState::Streaming);
     h.last_sign = Some((Instant::now(), host_ns));
 }
 
@@ -139,10 +139,11 @@ pub struct StallWatch {
 }
 
 impl StallWatch {
-    /// Checks the camera now; true when this check took it for gone.
+    /// Checks the camera now; true when this check took it for gone. A camera opened that
+    /// has not delivered its first frame yet is checked too (from its opening).
     pub fn check(&self) -> bool {
         let mut h = lock(&self.health);
-        if h.state != Some(CameraState::Streaming) {
+        if !matches!(h.state, Some(CameraState::Streaming | CameraState::Opening)) {
             return false;
         }
         let Some((at, host_ns)) = h.last_sign else {
@@ -288,8 +289,9 @@ where
         }
     }
 
-    /// Tries to open and start the camera now; on failure it is away until the next try.
-    fn try_open(&mut self, clock: &Clock) {
+    /// Tries to open and start the camera now; on failure it is away until the next try, and
+    /// the error is returned.
+    fn try_open(&mut self, clock: &Clock) -> Option<CaptureError> {
         let opened = (self.open)().and_then(|mut s| s.start(clock).map(|()| s));
         let now = Instant::now();
         let host_ns = clock.now_ns();
@@ -297,19 +299,14 @@ where
         match opened {
             Ok(source) => {
                 let meta = source.meta();
-                // Back: it was open before (not merely failing to open the first time).
-                let back = h.meta.is_some();
-                // The outage ends with the first frame back (`accept`), not with the opening.
+                // The outage ends with the first frame back (`accept`), not with the opening,
+                // and so do the camera's state and its `camera_reconnected` event: a reopened
+                // camera may yet deliver nothing.
                 if let Some(outage) = h.outages.last_mut().filter(|o| o.end_ns.is_none()) {
                     outage.attempts += 1;
                 }
-                if back {
-                    tracing::info!(camera = %self.role, "camera back: reopened after an outage");
-                    h.events.push(SessionEvent::CameraReconnected {
-                        host_ns,
-                        role: self.role,
-                    });
-                    self.epoch.fetch_add(1, Ordering::Release);
+                if h.meta.is_some() {
+                    tracing::debug!(camera = %self.role, "camera reopened after an outage: waiting for its first frame");
                 } else {
                     tracing::info!(camera = %self.role, model = %meta.model, serial = %meta.serial, "camera open");
                 }
@@ -319,6 +316,7 @@ where
                 self.current = Some(source);
                 self.last_frame = now;
                 self.wait = self.policy.first_wait;
+                None
             }
             Err(e) => {
                 let reason = error_chain(&e);
@@ -334,6 +332,7 @@ where
                 }
                 self.next_try = now + self.wait;
                 self.wait = (self.wait * 2).min(self.policy.max_wait);
+                Some(e)
             }
         }
     }
@@ -382,21 +381,24 @@ where
         self.next_seq = stamp.seq + 1;
         let host_ns = stamp.host_ns;
         let mut h = lock(&self.health);
+        // Back: it had delivered frames before an outage (not merely failing to open at first).
+        let back = h.frames > 0 && matches!(h.state, Some(CameraState::Away(_)));
         h.frames += 1;
         h.last_sign = Some((Instant::now(), host_ns));
         if let Some(outage) = h.outages.last_mut().filter(|o| o.end_ns.is_none()) {
             outage.end_ns = Some(host_ns);
         }
-        if matches!(h.state, Some(CameraState::Away(_))) {
-            // Taken for gone by the stall watch, and back on the same stream without a reopen.
-            tracing::info!(camera = %self.role, "camera back: frames again after a silence");
+        if back {
+            // Its first frame after an outage (reopened, or on the same stream after a silence
+            // the stall watch took for gone): only now is it back.
+            tracing::info!(camera = %self.role, "camera back: frames again after an outage");
             h.events.push(SessionEvent::CameraReconnected {
                 host_ns,
                 role: self.role,
             });
-            h.state = Some(CameraState::Streaming);
             self.epoch.fetch_add(1, Ordering::Release);
         }
+        h.state = Some(CameraState::Streaming);
         drop(h);
         Some(frame)
     }
@@ -435,7 +437,9 @@ where
     }
 
     /// Tries the camera once (unless it came [`Supervised::opened`]); a camera that cannot be
-    /// opened is not an error here, it is away.
+    /// opened is not an error here, it is away (it may come later), unless the configuration
+    /// itself is at fault ([`CaptureError::never_works`]: a setting the camera does not have,
+    /// an unreadable recording), which is returned.
     /// A second call (the daemon tries its cameras before its pipeline starts them) does
     /// nothing.
     fn start(&mut self, clock: &Clock) -> Result<(), CaptureError> {
@@ -443,8 +447,11 @@ where
             return Ok(());
         }
         self.clock = Some(clock.clone());
-        if self.current.is_none() {
-            self.try_open(clock);
+        if self.current.is_none()
+            && let Some(e) = self.try_open(clock)
+            && e.never_works()
+        {
+            return Err(e);
         }
         Ok(())
     }
@@ -460,7 +467,8 @@ where
                 std::thread::sleep(timeout.min(self.next_try - now));
                 return Ok(None);
             }
-            self.try_open(&clock);
+            // A failure leaves the camera away until the next try; its reason is in its state.
+            drop(self.try_open(&clock));
             return Ok(None);
         };
         match source.next_frame(timeout) {
@@ -660,10 +668,71 @@ mod tests {
             [
                 "camera_opened",
                 "camera_disconnected",
-                "camera_reconnected",
-                "camera_opened"
+                "camera_opened",
+                "camera_reconnected"
             ]
         );
+    }
+
+    /// The kinds of the events a camera gathered so far.
+    fn event_kinds(health: &SharedHealth) -> Vec<String> {
+        lock(health)
+            .events
+            .iter()
+            .map(|e| serde_json::to_value(e).unwrap()["kind"].as_str().unwrap().to_owned())
+            .collect()
+    }
+
+    /// Issue 37 item 3: a camera reopened after an outage is back (`streaming`,
+    /// `camera_reconnected`, the synchroniser told) only with its first frame: a reopening that
+    /// delivers nothing leaves it away, in the same outage, until one that does.
+    #[test]
+    fn issue37_a_reopened_camera_is_back_only_once_a_frame_arrives() {
+        use Step::{Fail, Frame};
+        let (mut s, epoch) = supervised(vec![
+            Some(vec![Frame(4, 5), Fail]),
+            Some(Vec::new()),
+            Some(vec![Frame(4, 0)]),
+        ]);
+        s.start(&Clock::replay(0)).unwrap();
+        assert_eq!(read(&mut s, 1), vec![5]);
+        let health = s.health();
+        let opened = |h: &SharedHealth| event_kinds(h).iter().filter(|k| *k == "camera_opened").count();
+        let deadline = Instant::now() + Duration::from_secs(1);
+        while opened(&health) < 2 {
+            assert!(Instant::now() < deadline, "never reopened: {:?}", event_kinds(&health));
+            assert!(s.next_frame(Duration::from_millis(1)).unwrap().is_none());
+        }
+        // Reopened, no frame yet.
+        assert!(
+            matches!(lock(&health).state, Some(CameraState::Away(_))),
+            "{:?}",
+            lock(&health).state
+        );
+        assert_eq!(
+            event_kinds(&health),
+            ["camera_opened", "camera_disconnected", "camera_opened"]
+        );
+        assert_eq!(epoch.load(Ordering::Acquire), 0);
+        assert_eq!(lock(&health).outages[0].end_ns, None);
+        // That opening goes silent and is closed; the next one delivers.
+        assert_eq!(read(&mut s, 1), vec![6]);
+        let h = lock(&health);
+        assert_eq!(h.state, Some(CameraState::Streaming));
+        assert_eq!(h.outages.len(), 1, "{:?}", h.outages);
+        assert_eq!((h.outages[0].attempts, h.outages[0].end_ns), (2, Some(0)));
+        drop(h);
+        assert_eq!(
+            event_kinds(&health),
+            [
+                "camera_opened",
+                "camera_disconnected",
+                "camera_opened",
+                "camera_opened",
+                "camera_reconnected"
+            ]
+        );
+        assert_eq!(epoch.load(Ordering::Acquire), 1);
     }
 
     #[test]

@@ -100,6 +100,17 @@ impl Chunks {
         opened.starts.len() - 1
     }
 
+    /// A chunk in place of chunk `index`, whose files were removed under the run: begun at
+    /// `host_ns` now (its directory, and the run's, created again), unless a chunk was begun
+    /// after `index` already (the other writer found the removal first); returns its index.
+    pub fn replace(&self, index: usize, host_ns: u64) -> usize {
+        let mut opened = self.opened.lock().unwrap_or_else(PoisonError::into_inner);
+        if opened.starts.len() <= index + 1 {
+            self.begin(&mut opened, host_ns);
+        }
+        opened.starts.len() - 1
+    }
+
     /// The session created for chunk `index`, for the recorder to take.
     pub fn take_writer(&self, index: usize) -> Option<SessionWriter> {
         self.opened
@@ -254,8 +265,14 @@ pub struct ChunkRecorder {
     /// The session broke after frames were written in it: the next try begins a new chunk.
     /// Otherwise (no session, or one without a frame) it starts a session in this chunk.
     broken: bool,
-    /// Tries to start a session that failed since the last one that worked (logged once).
-    failed_starts: u64,
+    /// While recording is paused: the host time of the first frame not recorded, and why.
+    /// A pause is logged once when it begins and once when it ends, and both go into the
+    /// `events.jsonl` of the session recording resumes in (`recording_paused`,
+    /// `recording_resumed`): the one it paused in may not be writable.
+    paused: Option<(u64, &'static str)>,
+    /// Frames (depth, colour) counted as recorded in a session whose files were removed since,
+    /// not yet handed to the accounting ([`FrameRecorder::take_lost`]).
+    lost: [u64; 2],
     cameras: Vec<SharedHealth>,
     gauges: Arc<RecorderGauges>,
 }
@@ -270,7 +287,8 @@ impl ChunkRecorder {
             disk,
             paused_until: None,
             broken: false,
-            failed_starts: 0,
+            paused: None,
+            lost: [0, 0],
             cameras,
             gauges,
         }
@@ -281,28 +299,57 @@ impl ChunkRecorder {
     fn start_here(&mut self, host_ns: u64) -> bool {
         match self.chunks.new_session(self.index, host_ns) {
             Ok(w) => {
-                if self.failed_starts > 0 {
-                    tracing::info!(chunk = self.index, "recording resumed");
-                }
-                self.failed_starts = 0;
                 self.writer = Some(w);
                 self.counted = 0;
                 true
             }
             Err(e) => {
-                if self.failed_starts == 0 {
-                    tracing::error!(
-                        chunk = self.index,
-                        retry_s = WRITE_RETRY.as_secs(),
-                        "recording paused: cannot start the chunk's session: {}",
-                        error_chain(&e)
-                    );
-                }
-                self.failed_starts += 1;
-                self.paused_until = Some(Instant::now() + WRITE_RETRY);
+                self.pause_on_error(
+                    host_ns,
+                    &format!("cannot start the chunk's session: {}", error_chain(&e)),
+                );
                 false
             }
         }
+    }
+
+    /// Pauses recording after a write error for [`WRITE_RETRY`]; logs the pause when it
+    /// begins (later errors of the same pause at debug level).
+    fn pause_on_error(&mut self, host_ns: u64, why: &str) {
+        if self.paused.is_none() {
+            tracing::error!(
+                chunk = self.index,
+                retry_s = WRITE_RETRY.as_secs(),
+                "recording paused: {why}"
+            );
+            self.paused = Some((host_ns, "write_error"));
+        } else {
+            tracing::debug!(chunk = self.index, "recording still paused: {why}");
+        }
+        self.paused_until = Some(Instant::now() + WRITE_RETRY);
+    }
+
+    /// The frame at `host_ns` is the first recorded after a pause: the pause and its end go
+    /// into the session, and the end into the log (a pause for low disk space is logged by
+    /// [`DiskWatch`]).
+    fn log_resume(&mut self, host_ns: u64) -> Result<(), SessionError> {
+        let (Some((since_ns, reason)), Some(w)) = (self.paused, &mut self.writer) else {
+            return Ok(());
+        };
+        w.log_event(&SessionEvent::RecordingPaused {
+            host_ns: since_ns,
+            reason: reason.to_owned(),
+        })?;
+        w.log_event(&SessionEvent::RecordingResumed { host_ns })?;
+        if reason != "disk_low" {
+            tracing::info!(
+                chunk = self.index,
+                paused_s = host_ns.saturating_sub(since_ns) as f64 * 1e-9,
+                "recording resumed"
+            );
+        }
+        self.paused = None;
+        Ok(())
     }
 
     /// Brings the gauges up to date after a frame was offered.
@@ -345,13 +392,38 @@ impl ChunkRecorder {
         self.broken = false;
     }
 
-    /// The cameras' events (outages, reopenings) into the session.
+    /// The cameras' events (openings, outages) into the session; without one (recording
+    /// paused) they wait for the next, so that a chunk begun on a full disk still gets them.
     fn log_camera_events(&mut self) -> Result<(), SessionError> {
-        let writer = &mut self.writer;
-        crate::runtime::capture::supervise::log_camera_events(&self.cameras, |e| match writer {
-            Some(w) => w.log_event(e),
-            None => Ok(()),
-        })
+        let Some(writer) = &mut self.writer else {
+            return Ok(());
+        };
+        crate::runtime::capture::supervise::log_camera_events(&self.cameras, |e| writer.log_event(e))
+    }
+
+    /// When the current session's files were removed under the recorder (its chunk's
+    /// directory deleted): its frames are lost, so counted as not recorded; recording goes on
+    /// in a new chunk at once (or pauses if that cannot be created).
+    fn check_removed(&mut self, host_ns: u64) {
+        let Some(w) = self.writer.take_if(|w| w.removed()) else {
+            return;
+        };
+        let (depth, color) = (w.depth_frames(), w.color_frames());
+        tracing::error!(
+            chunk = self.index,
+            depth_frames = depth,
+            color_frames = color,
+            "recording paused: the chunk's session was removed from the disk; its frames are lost \
+             (counted as not recorded: write_error); recording goes on in a new chunk"
+        );
+        drop(w);
+        self.paused.get_or_insert((host_ns, "write_error"));
+        self.lost[0] += depth;
+        self.lost[1] += color;
+        self.gauges.frame_bytes.fetch_sub(self.counted, Ordering::Relaxed);
+        self.counted = 0;
+        let index = self.chunks.replace(self.index, host_ns);
+        self.switch(index);
     }
 
     /// Writes `frame` into its chunk's session, or says why not.
@@ -374,6 +446,9 @@ impl ChunkRecorder {
             }
             self.paused_until = None;
         }
+        if self.index != usize::MAX {
+            self.check_removed(host_ns);
+        }
         let mut index = self.chunks.at(host_ns);
         // A chunk begun while recording was paused serves as the new chunk.
         let broken = retry && std::mem::take(&mut self.broken) && index <= self.index;
@@ -391,7 +466,9 @@ impl ChunkRecorder {
         if self.writer.is_none() && !self.start_here(host_ns) {
             return Ok(Some("write_error"));
         }
-        let result = self.log_camera_events().and_then(|()| match &mut self.writer {
+        let result = self.log_camera_events();
+        let result = result.and_then(|()| self.log_resume(host_ns));
+        let result = result.and_then(|()| match &mut self.writer {
             Some(w) => crate::runtime::sink::session::FrameRecorder::write(w, frame).map(|_| true),
             None => Ok(false),
         });
@@ -403,12 +480,7 @@ impl ChunkRecorder {
                 // A session without a frame is removed (its chunk gets a session again when
                 // the disk has room); one with frames is kept and the next try begins a new
                 // chunk.
-                tracing::error!(
-                    chunk = self.index,
-                    retry_s = WRITE_RETRY.as_secs(),
-                    "recording paused: {}",
-                    error_chain(&e)
-                );
+                self.pause_on_error(host_ns, &error_chain(&e));
                 if let Some(w) = self.writer.take() {
                     if w.depth_frames() + w.color_frames() == 0 {
                         if let Err(e) = w.abandon() {
@@ -422,7 +494,6 @@ impl ChunkRecorder {
                         self.broken = true;
                     }
                 }
-                self.paused_until = Some(Instant::now() + WRITE_RETRY);
                 Ok(Some("write_error"))
             }
         }
@@ -432,6 +503,9 @@ impl ChunkRecorder {
 impl crate::runtime::sink::session::FrameRecorder for ChunkRecorder {
     fn write(&mut self, frame: &Captured) -> Result<Option<&'static str>, SessionError> {
         let outcome = self.write_frame(frame);
+        if let Ok(Some(reason)) = &outcome {
+            self.paused.get_or_insert((frame.stamp().host_ns, reason));
+        }
         self.update_gauges(matches!(outcome, Ok(Some(_))));
         outcome
     }
@@ -441,6 +515,10 @@ impl crate::runtime::sink::session::FrameRecorder for ChunkRecorder {
             Some(w) => w.log_event(event),
             None => Ok(()),
         }
+    }
+
+    fn take_lost(&mut self) -> [u64; 2] {
+        std::mem::take(&mut self.lost)
     }
 
     fn finish(mut self: Box<Self>) -> Result<Option<SessionSummary>, SessionError> {
@@ -592,7 +670,7 @@ impl ChunkPoses {
 
     /// Finishes the current chunk's `poses.csv` and writes its `summary.json`.
     fn close(&mut self) {
-        if self.index == usize::MAX {
+        if self.index == usize::MAX || self.forget_removed() {
             return;
         }
         if let Some(mut w) = self.writer.take() {
@@ -644,7 +722,7 @@ impl ChunkPoses {
     /// failure, tries again later.
     fn create(&mut self) {
         let dir = self.chunks.dir(self.index);
-        match PoseWriter::create(&dir, HashMap::new(), u64::MAX) {
+        match PoseWriter::create(&dir, HashMap::new(), u64::MAX).and_then(PoseWriter::handing_over_each_row) {
             Ok(w) => {
                 if self.retry_at.take().is_some() || self.rows_lost > 0 {
                     tracing::info!(chunk = self.index, "poses written again");
@@ -683,6 +761,40 @@ impl ChunkPoses {
     }
 }
 
+impl ChunkPoses {
+    /// When the current chunk's `poses.csv` was removed under the run (its directory
+    /// deleted): its rows are lost, so counted as not written, and the chunk (whose summary
+    /// could only lie) is left without one; poses go on in a new chunk at once (or are tried
+    /// again later if it cannot be created).
+    fn check_removed(&mut self, host_ns: u64) {
+        if self.forget_removed() {
+            self.index = self.chunks.replace(self.index, host_ns);
+            self.create();
+        }
+    }
+
+    /// Whether the current chunk's `poses.csv` was removed under the run; if so its rows are
+    /// counted as not written and the chunk is forgotten (no summary: it could only lie).
+    fn forget_removed(&mut self) -> bool {
+        if !self.writer.as_ref().is_some_and(PoseWriter::removed) {
+            return false;
+        }
+        self.writer = None;
+        let rows = self
+            .tally
+            .take()
+            .map_or(0, |t| t.lock().unwrap_or_else(PoisonError::into_inner).rows);
+        tracing::error!(
+            chunk = self.index,
+            rows,
+            "poses.csv was removed from the disk: its rows are lost (counted as not written); poses go on in a new chunk"
+        );
+        self.live.lock().unwrap_or_else(PoisonError::into_inner).rows_lost += rows;
+        (self.first_ns, self.last_ns, self.rows_lost, self.retry_at) = (None, None, 0, None);
+        true
+    }
+}
+
 /// Whether the `poses.csv` at `path` holds a row after its header (looking at its start only).
 fn holds_rows(path: &Path) -> bool {
     use std::io::Read as _;
@@ -697,6 +809,7 @@ impl Sink for ChunkPoses {
     fn write(&mut self, item: Fused) -> Result<(), StageError> {
         self.write_unwritten(false);
         let host_ns = item.record.depth.host_ns;
+        self.check_removed(host_ns);
         let index = self.chunks.at(host_ns);
         if self.index == usize::MAX || index > self.index {
             self.open(index);
@@ -707,7 +820,7 @@ impl Sink for ChunkPoses {
         let record = item.record.clone();
         let frames = item.frames.clone();
         let written = match &mut self.writer {
-            Some(w) => w.write(item).and_then(|()| w.hand_over().map_err(Into::into)),
+            Some(w) => w.write(item),
             None => Err("no poses.csv open".into()),
         };
         if let Err(e) = written {

@@ -219,6 +219,9 @@ pub struct PoseWriter {
     truth: HashMap<u64, JointPositions>,
     snapshot_row: u64,
     tally: Arc<Mutex<PoseTally>>,
+    /// When each row is handed to the operating system as it is written
+    /// ([`PoseWriter::handing_over_each_row`]): the file's length after its last whole row.
+    whole_len: Option<u64>,
 }
 
 impl PoseWriter {
@@ -237,16 +240,28 @@ impl PoseWriter {
             truth,
             snapshot_row,
             tally: Arc::default(),
+            whole_len: None,
         })
     }
 
-    /// Hands the rows written so far to the operating system (without waiting for the disk),
-    /// so that a process killed next leaves them in the file.
+    /// Hands each row to the operating system as it is written (a live run's rows, which a
+    /// process killed next must not lose), and counts it only then: a row cut by a write error
+    /// (a full disk) is cut off the file again, so that the file holds whole rows only and the
+    /// tally counts exactly those.
     ///
     /// # Errors
-    /// The rows cannot be written.
-    pub fn hand_over(&mut self) -> std::io::Result<()> {
-        self.out.flush()
+    /// The header cannot be written.
+    pub fn handing_over_each_row(mut self) -> std::io::Result<Self> {
+        use std::io::Seek as _;
+        self.out.flush()?;
+        self.whole_len = Some(self.out.get_ref().stream_position()?);
+        Ok(self)
+    }
+
+    /// Whether `poses.csv` was removed while being written ([`crate::io::unlinked`]): its rows
+    /// are lost.
+    pub fn removed(&self) -> bool {
+        crate::io::unlinked(self.out.get_ref())
     }
 
     /// The tally, readable while and after the writer runs.
@@ -270,6 +285,18 @@ impl Sink for PoseWriter {
             frame: tally.rows,
             record: &r,
         })?;
+        if let Some(len) = self.whole_len {
+            use std::io::Seek as _;
+            let handed = self.out.flush().and_then(|()| self.out.get_ref().stream_position());
+            match handed {
+                Ok(end) => self.whole_len = Some(end),
+                Err(e) => {
+                    // Best effort: the error to report is the write's.
+                    let _ = self.out.get_ref().set_len(len);
+                    return Err(e.into());
+                }
+            }
+        }
         let truth = self.truth.get(&r.depth.seq);
         for (k, j) in r.pose.joints.iter().enumerate() {
             let Some(t) = truth

@@ -22,6 +22,13 @@ pub trait FrameRecorder: Send + std::fmt::Debug + 'static {
     /// The event cannot be written.
     fn log_event(&mut self, event: &SessionEvent) -> Result<(), SessionError>;
 
+    /// Frames (depth, colour) counted as recorded that were lost since the last call (a
+    /// session whose files were removed under the recorder): the caller counts them as not
+    /// recorded (`write_error`) instead.
+    fn take_lost(&mut self) -> [u64; 2] {
+        [0, 0]
+    }
+
     /// Closes the (last) session cleanly and says what it holds (`None`: no session was open).
     ///
     /// # Errors
@@ -72,7 +79,18 @@ pub fn write_frames(
             })?;
         }
         let counters = acct.camera(role);
-        match writer.write(&captured)? {
+        let outcome = writer.write(&captured)?;
+        for (role, n) in [CameraRole::Depth, CameraRole::Color]
+            .into_iter()
+            .zip(writer.take_lost())
+        {
+            if n > 0 {
+                let counters = acct.camera(role);
+                counters.recorded.fetch_sub(n, std::sync::atomic::Ordering::Relaxed);
+                bump(&counters.not_recorded, "write_error", n);
+            }
+        }
+        match outcome {
             None => {
                 counters.recorded.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             }
