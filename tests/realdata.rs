@@ -53,7 +53,8 @@ fn script(args: &[&std::ffi::OsStr]) -> String {
 }
 
 /// The figures of the real session rebuilt with the background's pixels without a reading
-/// kept (`keep`, as the Kinect gave them) or filled (`fill`), replayed and reported.
+/// kept (`keep`, as the Kinect gave them) or filled (`fill`), replayed and reported; and the
+/// report's `summary.json`.
 fn figures(results: &Path, no_reading: &str, dir: &Path) -> (serde_json::Value, serde_json::Value) {
     let (recording, run, report) = (dir.join("rec"), dir.join("run"), dir.join("report"));
     script(&[
@@ -78,7 +79,9 @@ fn figures(results: &Path, no_reading: &str, dir: &Path) -> (serde_json::Value, 
         run.as_os_str(),
         report.as_os_str(),
     ]);
-    serde_json::from_str(line.trim()).unwrap()
+    let reported: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(report.join("summary.json")).unwrap()).unwrap();
+    (serde_json::from_str(line.trim()).unwrap(), reported)
 }
 
 /// Issue 41, item 2, on the recording as the Kinect gave it (no reading outside the arena).

@@ -47,7 +47,7 @@ pub struct Headings {
     pub shape: f64,
     /// A visible tail's log-odds that the head lies toward `+axis`: negative when the tail
     /// leaves the body at its `+axis` end, positive at its `-axis` end, 0 when no tail is
-    /// seen ([`crate::vision::tail`]).
+    /// seen (`vision::tail`).
     pub tail: f64,
     /// The main-body joints with the head toward `+axis` (`[0]`) and toward `-axis` (`[1]`).
     pub joints: [BodyJoints; 2],

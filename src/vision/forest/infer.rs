@@ -383,7 +383,7 @@ impl BodyEstimator {
     /// judged ([`judge_placement`]): a tail tip off it is `None`.
     ///
     /// `tail` marks the region's pixels that are a tail found as one
-    /// ([`crate::vision::tail::find_tail`]; empty when none is): they vote like every other
+    /// (`vision::tail::find_tail`; empty when none is): they vote like every other
     /// pixel, but the long axis and its centre are the body's alone, as a long tail would
     /// swing them toward itself.
     pub fn estimate_oriented(
