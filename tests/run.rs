@@ -677,33 +677,11 @@ fn issue31_recording_resumes_soon_after_a_full_disk_and_every_chunk_reads_back()
         eprintln!("skipped: mounting a small tmpfs needs root");
         return;
     }
-    let tmp = tempfile::tempdir().expect("test set-up");
-    let out = tmp.path().join("out");
-    let _disk = Tmpfs::mount(&out, "32m");
-    // About 6 MB left: full within two seconds of frames.
-    let filler = out.join("filler");
-    std::fs::write(&filler, vec![1u8; 26 << 20]).expect("test set-up");
-    let rig = tmp.path().join("rig.toml");
-    std::fs::write(
-        &rig,
-        format!(
-            "[depth]\n{}[output]\ndir = {out:?}\nchunk_minutes = 60\nmin_free_gb = 0\nmin_free_percent = 0\n\
-             [http]\naddress = \"127.0.0.1:0\"\n",
-            session_depth()
-        ),
-    )
-    .expect("test set-up");
-    let daemon = daemon(&rig, None);
-    // Full for long enough that recording tries again (and fails) while it is.
-    std::thread::sleep(Duration::from_secs(16));
-    std::fs::remove_file(&filler).expect("test set-up");
-    std::thread::sleep(Duration::from_secs(10));
-    let (status, stdout, err) = terminate(daemon, Duration::from_secs(30));
-    assert!(status.success(), "{status}: {err}");
+    // About 6 MB left: full within two seconds of frames; full for long enough that recording
+    // tries again (and fails) while it is.
+    let (report, err, chunks, _disk) = run_on_a_disk_freed_later(26, 16, 10);
     assert!(err.contains("recording paused"), "{err}");
-    let report = report(&stdout);
     assert_accounted(&report["cameras"]["depth"]);
-    let chunks = chunks(&out);
     // Recording went on after the space came back, in a chunk of its own.
     let later: usize = chunks[1..]
         .iter()
