@@ -162,7 +162,7 @@ fn arena_on_floor(
     Option<crate::vision::behaviour::Outline>,
 )> {
     let width = region.width.max(1);
-    let (mut xs, mut ys, mut points) = (Vec::new(), Vec::new(), Vec::new());
+    let mut points = Vec::new();
     for (k, (&m, &z)) in mask.iter().zip(depth).enumerate() {
         if m == 0 || z <= 0.0 {
             continue;
@@ -171,14 +171,14 @@ fn arena_on_floor(
         let pixel = nalgebra::Point2::new(f64::from(region.x0 + x), f64::from(region.y0 + y));
         let p = camera.world_from_camera * camera.intrinsics.unproject(&pixel, f64::from(z));
         if p.z.abs() <= FLOOR_BAND_MM {
-            xs.push(p.x);
-            ys.push(p.y);
             points.push(nalgebra::Point2::new(p.x, p.y));
         }
     }
-    if xs.is_empty() {
+    if points.is_empty() {
         return None;
     }
+    let mut xs: Vec<f64> = points.iter().map(|p| p.x).collect();
+    let mut ys: Vec<f64> = points.iter().map(|p| p.y).collect();
     xs.sort_by(f64::total_cmp);
     ys.sort_by(f64::total_cmp);
     let at = |v: &[f64], q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
