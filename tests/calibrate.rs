@@ -5,7 +5,7 @@
 use crate::util::mousepose;
 use mousepose::core::frame::PixelFormat;
 use mousepose::core::geometry::Rig;
-use mousepose::io::session::{Backend, CameraMeta, CameraRole, FrameFormat, SessionMeta, SessionSource};
+use mousepose::io::session::{BackendName, CameraMeta, CameraRole, FrameFormat, SessionMeta, SessionSource};
 use mousepose::vision::calibrate::extrinsics::pose_difference;
 use mousepose::vision::calibrate::{CalibrationError, RigCalibration, load_intrinsics};
 use std::path::{Path, PathBuf};
@@ -275,7 +275,7 @@ fn too_few_views_and_views_without_a_board_are_named() {
 fn camera(role: CameraRole, width: u32, height: u32, serial: &str) -> CameraMeta {
     CameraMeta {
         role,
-        backend: Backend::Synthetic,
+        backend: BackendName::SYNTHETIC,
         model: format!("synthetic {role}"),
         serial: serial.to_owned(),
         firmware: String::new(),

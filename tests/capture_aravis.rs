@@ -7,7 +7,7 @@
 
 use mousepose::core::frame::{ColorFrame, PixelFormat};
 use mousepose::io::session::codec::FrameFormat;
-use mousepose::io::session::meta::{Backend, CameraRole};
+use mousepose::io::session::meta::CameraRole;
 use mousepose::runtime::capture::aravis::{AravisColor, AravisConfig, Trigger, list_devices};
 use mousepose::runtime::capture::{CaptureError, Clock, FrameSource};
 use std::net::UdpSocket;
@@ -92,7 +92,7 @@ fn frames_from_the_in_process_fake_camera_keep_their_content_and_order() {
     let mut source = AravisColor::open(&config(Some((0, 0, 64, 48)))).unwrap();
     let meta = source.meta();
     assert_eq!(meta.role, CameraRole::Color);
-    assert_eq!(meta.backend, Backend::Aravis);
+    assert_eq!(meta.backend, "aravis");
     assert_eq!(meta.serial, "MP-COLOR-1");
     assert!(!meta.model.is_empty());
     assert_eq!((meta.width, meta.height), (64, 48));

@@ -4,7 +4,6 @@
 
 mod moseq {
     use mousepose::core::frame::DepthFrame;
-    use mousepose::io::session::meta::Backend;
     use mousepose::runtime::capture::moseq::{MoseqConfig, MoseqDepth, MoseqError, MoseqKind};
     use mousepose::runtime::capture::{CaptureError, Clock, FrameSource};
     use std::path::Path;
@@ -98,7 +97,7 @@ mod moseq {
         assert_eq!(source.kind(), MoseqKind::Raw);
         assert_eq!(source.frame_count(), FRAMES);
         let meta = source.meta();
-        assert_eq!(meta.backend, Backend::Moseq);
+        assert_eq!(meta.backend, "moseq");
         assert_eq!((meta.width, meta.height), (W, H));
         assert!((meta.fps - 30.0).abs() < 0.01, "{}", meta.fps);
         check_frames(&read_all(&mut source));

@@ -5,7 +5,7 @@ use mousepose::core::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
 use mousepose::core::geometry::Rig;
 use mousepose::core::pose::JointPositions;
 use mousepose::io::session::{
-    Backend, CameraMeta, CameraRole, FrameFormat, SessionError, SessionEvent, SessionMeta, SessionReader,
+    BackendName, CameraMeta, CameraRole, FrameFormat, SessionError, SessionEvent, SessionMeta, SessionReader,
     SessionSource, SessionSummary, SessionWriter, Truth,
 };
 use mousepose::io::store::{self, HeaderFault, IndexStatus, Kind, RecordReader, RecordWriter, SkipReason, StoreError};
@@ -89,7 +89,7 @@ fn joints(seq: u64) -> JointPositions {
 fn camera(role: CameraRole, width: u32, height: u32, pixel_format: FrameFormat) -> CameraMeta {
     CameraMeta {
         role,
-        backend: Backend::Synthetic,
+        backend: BackendName::SYNTHETIC,
         model: format!("synthetic {role}"),
         serial: format!("SYN-{role}-0001"),
         firmware: String::new(),

@@ -10,9 +10,9 @@
 use crate::core::geometry::Rig;
 use crate::engine::{Failure, Signals, signal_name};
 use crate::io::session::CameraRole;
-use crate::runtime::capture::rig::{ColorSource, open_color, open_depth};
-use crate::runtime::capture::supervise::{CameraState, SharedHealth, Supervised, lock};
-use crate::runtime::capture::{CaptureError, Clock, FrameSource};
+use crate::runtime::capture::rig::RigCameras;
+use crate::runtime::capture::supervise::{CameraState, SharedHealth, StallWatch, lock};
+use crate::runtime::capture::{CaptureError, Clock};
 use crate::runtime::config::{Config, DepthCamera};
 use crate::runtime::http::HttpServer;
 use crate::runtime::models::Models;
@@ -21,10 +21,11 @@ use crate::runtime::playback::Recording;
 use crate::runtime::sink::chunks::{
     ChunkPlan, ChunkPoses, ChunkRecorder, Chunks, DiskWatch, Live, RecorderGauges, chunk_meta,
 };
+use crate::runtime::sink::session::FrameRecorder;
 use crate::runtime::stages::PoseStatus;
 use crate::runtime::stages::segment::{FloorSlot, SegmentStage};
 use crate::runtime::status::{RunInfo, RunReport, Watch, Watched};
-use crate::runtime::topology::{Edges, Epochs, Processing, Sources, Topology};
+use crate::runtime::topology::{Edges, Processing, Topology};
 use crate::vision::calibrate::RigCalibration;
 use crate::vision::segment::{Segmenter, SegmenterConfig};
 use anyhow::Context as _;
@@ -40,8 +41,8 @@ fn live_rig(config: &Config) -> anyhow::Result<Rig> {
             .with_context(|| format!("the calibration named by {:?}", config.path))?
             .rig());
     }
-    if let DepthCamera::Session { rig: Some(rig), .. } = &config.depth {
-        return Ok(**rig);
+    if let Some(rig) = config.depth.rig() {
+        return Ok(rig);
     }
     let mut rig = Rig::default_rig();
     let (width, height, _) = config.depth.mode();
@@ -154,13 +155,163 @@ pub struct CameraUnusable {
     source: CaptureError,
 }
 
+/// What a running daemon keeps an eye on from its own thread: the cameras' health and stall
+/// watches, the live pose, and the pipeline's watch.
+struct Lookout<'a> {
+    healths: &'a [(&'static str, SharedHealth)],
+    stall_watches: &'a [StallWatch],
+    live: &'a Mutex<Live>,
+    watch: &'a Watch,
+}
+
+impl Lookout<'_> {
+    fn snapshot(&self) -> Live {
+        self.live.lock().unwrap_or_else(PoisonError::into_inner).clone()
+    }
+
+    fn status_line(&self, fps: f64) -> String {
+        status_line(self.healths, &self.snapshot(), fps)
+    }
+
+    /// Ready once every camera was tried (opened, or known to be away).
+    fn wait_ready(&self, stop: &Shutdown) {
+        while !stop.requested()
+            && self
+                .healths
+                .iter()
+                .any(|(_, h)| lock(h).state == Some(CameraState::Opening))
+        {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let status = self.status_line(0.0);
+        notify(&[sd_notify::NotifyState::Ready, sd_notify::NotifyState::Status(&status)]);
+        tracing::info!("ready: {status}");
+    }
+
+    /// Watches the run until a stop, a failure, or the time given: the cameras' stalls,
+    /// SIGHUP, the watchdog and STATUS=. Returns the last status line sent.
+    fn keep_watch(
+        &self,
+        stop: &Shutdown,
+        shutdown: &Shutdown,
+        until: Option<Instant>,
+        signals: Option<&Signals>,
+    ) -> String {
+        let (mut last_rows, mut last_captured, mut last_tick) = (0u64, 0u64, Instant::now());
+        let mut last_status = Instant::now();
+        let mut last_line = String::new();
+        while !stop.requested() && !shutdown.requested() && until.is_none_or(|u| Instant::now() < u) {
+            std::thread::sleep(Duration::from_millis(100));
+            for watch in self.stall_watches {
+                watch.check();
+            }
+            if signals.is_some_and(Signals::take_hangup) {
+                answer_hangup();
+            }
+            if last_tick.elapsed() < Duration::from_secs(1) {
+                continue;
+            }
+            let now = self.snapshot();
+            let depth = lock(&self.healths[0].1);
+            let captured = depth.frames;
+            let capture_alive = depth.alive.is_some_and(|t| t.elapsed() < Duration::from_secs(5));
+            drop(depth);
+            // Alive: poses came out, or no depth frame went in (camera away; the capture thread
+            // itself still comes by). Frames going in without poses coming out is a stuck stage:
+            // no ping, and systemd restarts the daemon.
+            if now.rows > last_rows || (captured == last_captured && capture_alive) {
+                notify(&[sd_notify::NotifyState::Watchdog]);
+            }
+            let fps = self.watch.sample().poses_per_s;
+            (last_rows, last_captured, last_tick) = (now.rows, captured, Instant::now());
+            if last_status.elapsed() >= Duration::from_secs(5) {
+                let line = status_line(self.healths, &now, fps);
+                notify(&[sd_notify::NotifyState::Status(&line)]);
+                last_line = line;
+                last_status = Instant::now();
+            }
+        }
+        last_line
+    }
+}
+
+/// What systemd expects of a reload, though nothing is reloaded: the configuration is read at
+/// start only.
+fn answer_hangup() {
+    notify(&[sd_notify::NotifyState::Reloading]);
+    tracing::info!(
+        "SIGHUP: nothing to reload (the configuration is read at start; restart the daemon to apply a change); the run goes on"
+    );
+    notify(&[sd_notify::NotifyState::Ready]);
+}
+
+/// The rig's cameras, supervised and each tried once before the pipeline starts them, so that
+/// the first chunk's session holds both: a colour camera opening a moment after depth frames
+/// began to flow would end that chunk at once (a chunk holds the cameras open when it
+/// began). A camera that can never work removes the (empty) run directory.
+fn start_cameras(config: &Config, root: &std::path::Path) -> Result<RigCameras, CameraUnusable> {
+    let mut cameras = RigCameras::supervised(&config.depth, config.color.as_ref(), config.reconnect);
+    if let Err((role, source)) = cameras.try_start(&Clock::Monotonic) {
+        // Nothing was recorded: the run's directory goes (removed only while empty).
+        if let Err(cleanup) = std::fs::remove_dir(root) {
+            tracing::debug!("cannot remove the run directory {root:?}: {cleanup}");
+        }
+        return Err(CameraUnusable {
+            role,
+            config: config.path.clone(),
+            source,
+        });
+    }
+    Ok(cameras)
+}
+
+/// Where a live run's poses and frames go: chunk after chunk under `root`.
+struct ChunkSinks {
+    chunks: Arc<Chunks>,
+    live: Arc<Mutex<Live>>,
+    gauges: Option<Arc<RecorderGauges>>,
+    recorder: Option<Box<dyn FrameRecorder>>,
+}
+
+impl ChunkSinks {
+    fn new(config: &Config, models: &Models, rig: Rig, root: &std::path::Path, cameras: &[SharedHealth]) -> Self {
+        let notes = format!("recorded by `mousepose run` with rig config {:?}", config.path);
+        let latency = config.color.as_ref().map(|_| config.sync.color_latency_ns);
+        let chunks = Chunks::new(ChunkPlan {
+            root: root.to_owned(),
+            period: config.chunk,
+            record: config.record,
+            cameras: cameras.to_vec(),
+            meta: chunk_meta(notes, config.calibration.as_ref().map(|_| rig), latency),
+            body_model: models.body_path(),
+            paw_model: models.paws_path(),
+        });
+        let gauges = config.record.then(|| Arc::new(RecorderGauges::default()));
+        let recorder = gauges.as_ref().map(|gauges| {
+            let disk = DiskWatch::new(root, config.min_free_bytes, config.min_free_share);
+            Box::new(ChunkRecorder::new(
+                Arc::clone(&chunks),
+                disk,
+                cameras.to_vec(),
+                Arc::clone(gauges),
+            )) as Box<dyn FrameRecorder>
+        });
+        Self {
+            chunks,
+            live: Arc::new(Mutex::new(Live::default())),
+            gauges,
+            recorder,
+        }
+    }
+}
+
 /// Runs the daemon until `stop` (a signal), `seconds`, or a failure of the pipeline itself;
 /// `signals`, when given, are the process's (SIGHUP is answered, the stop signal named).
 ///
 /// # Errors
 /// The output directory cannot be made, or a pipeline component failed (the report is still
 /// logged).
-pub fn run(
+pub fn serve(
     config: &Config,
     models: Models,
     rig: Rig,
@@ -180,84 +331,15 @@ pub fn run(
         paw_model: models.paws.is_some(),
         calibration: config.calibration.clone(),
     };
-
-    let epochs = Epochs::default();
-    let depth_config = config.depth.clone();
-    let mut depth = Supervised::new(
-        CameraRole::Depth,
-        Box::new(move || open_depth(&depth_config)),
-        config.reconnect,
-        Arc::clone(&epochs[0]),
-    );
-    let mut color = config.color.clone().map(|color_config| {
-        let open = move || -> Result<ColorSource, CaptureError> { open_color(&color_config) };
-        Supervised::new(
-            CameraRole::Color,
-            Box::new(open),
-            config.reconnect,
-            Arc::clone(&epochs[1]),
-        )
-    });
-    // Both cameras are tried before the pipeline starts them, so that the first chunk's
-    // session holds both: a colour camera opening a moment after depth frames began to flow
-    // would end that chunk at once (a chunk holds the cameras open when it began).
-    let clock = Clock::Monotonic;
-    let unusable = |role, source| CameraUnusable {
-        role,
-        config: config.path.clone(),
-        source,
-    };
-    let started = depth
-        .start(&clock)
-        .map_err(|e| unusable(CameraRole::Depth, e))
-        .and_then(|()| match &mut color {
-            Some(color) => color.start(&clock).map_err(|e| unusable(CameraRole::Color, e)),
-            None => Ok(()),
-        });
-    if let Err(e) = started {
-        // Nothing was recorded: the run's directory goes (removed only while empty).
-        if let Err(cleanup) = std::fs::remove_dir(&root) {
-            tracing::debug!("cannot remove the run directory {root:?}: {cleanup}");
-        }
-        return Err(e.into());
-    }
+    let cameras = start_cameras(config, &root)?;
     // The cameras' states are taken from these, in this thread, whatever the capture threads
     // are doing.
-    let mut stall_watches = vec![depth.stall_watch()];
-    stall_watches.extend(color.as_ref().map(Supervised::stall_watch));
-    let mut healths = vec![("depth", depth.health())];
-    healths.extend(color.as_ref().map(|c| ("color", c.health())));
+    let (stall_watches, healths) = (cameras.stall_watches(), cameras.healths());
     let shared: Vec<SharedHealth> = healths.iter().map(|(_, h)| Arc::clone(h)).collect();
-
-    let notes = format!("recorded by `mousepose run` with rig config {:?}", config.path);
-    let latency = config.color.as_ref().map(|_| config.sync.color_latency_ns);
-    let chunks = Chunks::new(ChunkPlan {
-        root: root.clone(),
-        period: config.chunk,
-        record: config.record,
-        cameras: shared.clone(),
-        meta: chunk_meta(notes, config.calibration.as_ref().map(|_| rig), latency),
-        body_model: models.body_path(),
-        paw_model: models.paws_path(),
-    });
-    let live = Arc::new(Mutex::new(Live::default()));
+    let sinks = ChunkSinks::new(config, &models, rig, &root, &shared);
     let floor = FloorSlot::default();
-    let gauges = config.record.then(|| Arc::new(RecorderGauges::default()));
-    let recorder = gauges.as_ref().map(|gauges| {
-        let disk = DiskWatch::new(&root, config.min_free_bytes, config.min_free_share);
-        Box::new(ChunkRecorder::new(
-            Arc::clone(&chunks),
-            disk,
-            shared.clone(),
-            Arc::clone(gauges),
-        )) as Box<_>
-    });
     let topology = Topology {
-        sources: Sources::Cameras {
-            depth: Box::new(depth),
-            color: color.map(|c| Box::new(c) as Box<dyn FrameSource<Frame = _>>),
-            epochs,
-        },
+        sources: cameras.into(),
         sync: config.sync,
         edges: Edges {
             capture: config.capture_edge,
@@ -269,9 +351,9 @@ pub fn run(
             rig,
             workers: config.body_workers,
             overlays: None,
-            poses: Box::new(ChunkPoses::new(Arc::clone(&chunks), Arc::clone(&live))),
+            poses: Box::new(ChunkPoses::new(Arc::clone(&sinks.chunks), Arc::clone(&sinks.live))),
         }),
-        recorder,
+        recorder: sinks.recorder,
     };
     let started = Instant::now();
     let running = topology.start()?;
@@ -281,9 +363,9 @@ pub fn run(
         info,
         pipeline: running.watch(),
         cameras: healths.clone(),
-        live: Arc::clone(&live),
-        chunks: Arc::clone(&chunks),
-        recorder: gauges,
+        live: Arc::clone(&sinks.live),
+        chunks: Arc::clone(&sinks.chunks),
+        recorder: sinks.gauges,
         floor,
     }));
     let server = match listener.map(|l| HttpServer::start(l, config.http.token.clone(), Arc::clone(&watch), rig)) {
@@ -295,57 +377,15 @@ pub fn run(
         Some(Ok(server)) => Some(server),
         None => None,
     };
-
-    // Ready once every camera was tried (opened, or known to be away).
-    while !stop.requested() && healths.iter().any(|(_, h)| lock(h).state == Some(CameraState::Opening)) {
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let snapshot = || live.lock().unwrap_or_else(PoisonError::into_inner).clone();
-    let status = status_line(&healths, &snapshot(), 0.0);
-    notify(&[sd_notify::NotifyState::Ready, sd_notify::NotifyState::Status(&status)]);
-    tracing::info!("ready: {status}");
-
-    let limit = seconds.map(Duration::from_secs_f64);
-    let (mut last_rows, mut last_captured, mut last_tick) = (0u64, 0u64, Instant::now());
-    let mut last_status = Instant::now();
-    let mut last_line = String::new();
-    while !stop.requested() && !shutdown.requested() && limit.is_none_or(|l| started.elapsed() < l) {
-        std::thread::sleep(Duration::from_millis(100));
-        for watch in &stall_watches {
-            watch.check();
-        }
-        if signals.is_some_and(Signals::take_hangup) {
-            // What systemd expects of a reload, though nothing is reloaded: the configuration
-            // is read at start only.
-            notify(&[sd_notify::NotifyState::Reloading]);
-            tracing::info!(
-                "SIGHUP: nothing to reload (the configuration is read at start; restart the daemon to apply a change); the run goes on"
-            );
-            notify(&[sd_notify::NotifyState::Ready]);
-        }
-        if last_tick.elapsed() < Duration::from_secs(1) {
-            continue;
-        }
-        let now = snapshot();
-        let captured = lock(&healths[0].1).frames;
-        let capture_alive = lock(&healths[0].1)
-            .alive
-            .is_some_and(|t| t.elapsed() < Duration::from_secs(5));
-        // Alive: poses came out, or no depth frame went in (camera away; the capture thread
-        // itself still comes by). Frames going in without poses coming out is a stuck stage:
-        // no ping, and systemd restarts the daemon.
-        if now.rows > last_rows || (captured == last_captured && capture_alive) {
-            notify(&[sd_notify::NotifyState::Watchdog]);
-        }
-        let fps = watch.sample().poses_per_s;
-        (last_rows, last_captured, last_tick) = (now.rows, captured, Instant::now());
-        if last_status.elapsed() >= Duration::from_secs(5) {
-            let line = status_line(&healths, &now, fps);
-            notify(&[sd_notify::NotifyState::Status(&line)]);
-            last_line = line;
-            last_status = Instant::now();
-        }
-    }
+    let lookout = Lookout {
+        healths: &healths,
+        stall_watches: &stall_watches,
+        live: &sinks.live,
+        watch: &watch,
+    };
+    lookout.wait_ready(stop);
+    let until = seconds.map(|s| started + Duration::from_secs_f64(s));
+    let last_line = lookout.keep_watch(stop, &shutdown, until, signals);
     notify(&[sd_notify::NotifyState::Stopping]);
     let why = match signals.and_then(Signals::caught) {
         Some(signal) => signal_name(signal),
@@ -400,7 +440,7 @@ pub fn daemon(options: &DaemonOptions) -> Result<(RunReport, Option<String>), Fa
     let segment = segment_stage(&config, &rig).map_err(Failure::usage)?;
     let stop = Shutdown::default();
     let signals = Signals::install(&stop, false).context("installing the signal handlers")?;
-    let report = run(&config, models, rig, segment, options.seconds, &stop, Some(&signals))
+    let report = serve(&config, models, rig, segment, options.seconds, &stop, Some(&signals))
         .map_err(|e| Failure::classed(e.is::<CameraUnusable>(), e))?;
     Ok((report, signals.unexpected_stop()))
 }

@@ -8,22 +8,21 @@
 use crate::engine::{Failure, Signals, signal_name};
 use crate::io::output::Staging;
 use crate::io::session::{
-    CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionSummary, SessionWriter,
+    CameraMeta, CameraRole, SessionError, SessionEvent, SessionMeta, SessionSource, SessionSummary, SessionWriter,
 };
 use crate::runtime::accounting::CameraSummary;
-use crate::runtime::capture::rig::{open_color, open_depth};
-use crate::runtime::capture::supervise::{SharedHealth, Supervised, lock, log_camera_events};
-use crate::runtime::capture::{CaptureError, Captured, Clock, FrameSource};
-use crate::runtime::config::{ColorCamera, Config};
+use crate::runtime::capture::rig::RigCameras;
+use crate::runtime::capture::supervise::{SharedHealth, lock, log_camera_events};
+use crate::runtime::capture::{CaptureError, Captured, Clock};
+use crate::runtime::config::Config;
 use crate::runtime::pipeline::{PipelineError, Shutdown};
 use crate::runtime::sink::session::FrameRecorder;
-use crate::runtime::topology::{Edges, Epochs, Sources, Topology, TopologyError};
+use crate::runtime::topology::{Edges, Topology, TopologyError};
 use crate::vision::calibrate::RigCalibration;
 use anyhow::Context as _;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Why recording failed.
@@ -105,75 +104,17 @@ pub fn record(
     // frames were recorded: a camera that fails to open leaves the old session as it was.
     let staging = prepare_output(out, force)?;
     let dir = staging.as_ref().map_or(out, Staging::path);
-    let camera = |role| move |source| RecordError::Camera { role, source };
-    // Both cameras must open now; once recording, they are supervised as the daemon's are
-    // (closed, reopened, their outages logged in the session) and recording rides out their
-    // outages.
-    let mut depth = open_depth(&config.depth).map_err(camera(CameraRole::Depth))?;
-    let color = config
-        .color
-        .as_ref()
-        .map(open_color)
-        .transpose()
-        .map_err(camera(CameraRole::Color))?;
     let clock = Clock::Monotonic;
-    // Start the depth camera here so that its metadata (model, serial, mode) is known.
-    depth.start(&clock).map_err(camera(CameraRole::Depth))?;
-    let mut cameras = vec![depth.meta()];
-    cameras.extend(color.as_ref().map(FrameSource::meta));
-    let mut meta = SessionMeta::new(
-        crate::runtime::capture::clock::utc_now(),
-        SessionSource::Recorded,
-        cameras,
-    );
-    meta.notes = format!("recorded with rig config {:?}", config.path);
-    if meta.camera(CameraRole::Color).is_some() {
-        meta.color_latency_ns = Some(config.sync.color_latency_ns);
-    }
-    if let Some(calibration) = &calibration {
-        // The modes and serials the cameras actually opened with.
-        calibration.check_matches(&meta)?;
-        meta.rig = Some(calibration.rig());
-    }
-    let mut writer = SessionWriter::create(dir, &meta)?;
-    writer.log_event(&SessionEvent::SessionStarted {
-        host_ns: clock.now_ns(),
-    })?;
-
-    let epochs = Epochs::default();
-    let depth_config = config.depth.clone();
-    let depth = Supervised::new(
-        CameraRole::Depth,
-        Box::new(move || open_depth(&depth_config)),
-        config.reconnect,
-        Arc::clone(&epochs[0]),
-    )
-    .opened(depth, &clock);
-    let color = color.zip(config.color.clone()).map(|(first, color_config)| {
-        // The first opening is the camera opened above; later ones open it again.
-        let mut first = Some(first);
-        let open = move || match first.take() {
-            Some(c) => Ok(c),
-            None => open_color(&color_config),
-        };
-        Supervised::new(
-            CameraRole::Color,
-            Box::new(open),
-            config.reconnect,
-            Arc::clone(&epochs[1]),
-        )
-    });
-    let mut stall_watches = vec![depth.stall_watch()];
-    stall_watches.extend(color.as_ref().map(Supervised::stall_watch));
-    let mut healths = vec![depth.health()];
-    healths.extend(color.as_ref().map(Supervised::health));
-
+    // Both cameras must open now (the depth camera started, so that its metadata is known);
+    // once recording, they are supervised as the daemon's are (closed, reopened, their
+    // outages logged in the session) and recording rides out their outages.
+    let (cameras, metas) = RigCameras::opened(&config.depth, config.color.as_ref(), config.reconnect, &clock)
+        .map_err(|(role, source)| RecordError::Camera { role, source })?;
+    let writer = create_session(config, calibration.as_ref(), dir, metas, &clock)?;
+    let stall_watches = cameras.stall_watches();
+    let healths: Vec<SharedHealth> = cameras.healths().into_iter().map(|(_, h)| h).collect();
     let topology = Topology {
-        sources: Sources::Cameras {
-            depth: Box::new(depth),
-            color: color.map(|c| Box::new(c) as Box<dyn FrameSource<Frame = _>>),
-            epochs,
-        },
+        sources: cameras.into(),
         sync: config.sync,
         edges: Edges {
             capture: config.capture_edge,
@@ -244,6 +185,36 @@ pub fn record(
     })
 }
 
+/// The session of a recording, begun: the cameras as they opened, the configuration's notes
+/// and colour latency, the calibration checked against the cameras (the modes and serials
+/// they actually opened with).
+fn create_session(
+    config: &Config,
+    calibration: Option<&RigCalibration>,
+    dir: &Path,
+    cameras: Vec<CameraMeta>,
+    clock: &Clock,
+) -> Result<SessionWriter, RecordError> {
+    let mut meta = SessionMeta::new(
+        crate::runtime::capture::clock::utc_now(),
+        SessionSource::Recorded,
+        cameras,
+    );
+    meta.notes = format!("recorded with rig config {:?}", config.path);
+    if meta.camera(CameraRole::Color).is_some() {
+        meta.color_latency_ns = Some(config.sync.color_latency_ns);
+    }
+    if let Some(calibration) = calibration {
+        calibration.check_matches(&meta)?;
+        meta.rig = Some(calibration.rig());
+    }
+    let mut writer = SessionWriter::create(dir, &meta)?;
+    writer.log_event(&SessionEvent::SessionStarted {
+        host_ns: clock.now_ns(),
+    })?;
+    Ok(writer)
+}
+
 /// The session being recorded, with the supervised cameras' events (outages, reopenings)
 /// logged into it before each frame.
 #[derive(Debug)]
@@ -280,11 +251,7 @@ fn load_calibration(config: &Config) -> Result<Option<RigCalibration>, RecordErr
     let target = format!("rig config {:?}", config.path);
     let (width, height, _) = config.depth.mode();
     calibration.check_camera(CameraRole::Depth, width, height, None, &target)?;
-    let color_size = match &config.color {
-        Some(ColorCamera::V4l2 { width, height, .. }) => Some((*width, *height)),
-        Some(ColorCamera::Aravis { region, .. }) => region.map(|(_, _, w, h)| (w, h)),
-        None => None,
-    };
+    let color_size = config.color.as_ref().and_then(|c| c.frame_size());
     if let Some((width, height)) = color_size {
         calibration.check_camera(CameraRole::Color, width, height, None, &target)?;
     }

@@ -4,11 +4,14 @@
 //!
 //! `docs/rig.example.toml` is a commented example of every key.
 
-use crate::core::frame::PixelFormat;
 use crate::io::read_bounded;
+use crate::runtime::capture::backend::{Backend, COLOR_BACKENDS, DEPTH_BACKENDS, read_table};
+pub use crate::runtime::capture::backend::{ColorCamera, DepthCamera};
+pub use crate::runtime::capture::supervise::Reconnect;
 use crate::runtime::pipeline::{EdgeConfig, WhenFull};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// What is wrong with a configuration file.
 #[derive(Debug, thiserror::Error)]
@@ -35,8 +38,10 @@ const MAX_CONFIG_BYTES: u64 = 1 << 20;
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawConfig {
-    depth: RawDepth,
-    color: Option<RawColor>,
+    /// Each camera's table, read by the backend its `backend` key names
+    /// (`capture::backend`).
+    depth: toml::Spanned<toml::Table>,
+    color: Option<toml::Spanned<toml::Table>>,
     /// Read by earlier versions and never used: an empty table is taken (with a warning), a
     /// list of interfaces refused.
     aravis: Option<RawAravis>,
@@ -56,71 +61,6 @@ struct RawConfig {
     reconnect: RawReconnect,
     #[serde(default)]
     http: RawHttp,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawDepth {
-    backend: String,
-    uri: Option<String>,
-    serial: Option<String>,
-    /// The session directory of the `session` backend.
-    path: Option<PathBuf>,
-    #[serde(default = "default_depth_width")]
-    width: u32,
-    #[serde(default = "default_depth_height")]
-    height: u32,
-    #[serde(default = "default_fps")]
-    fps: f64,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawColor {
-    backend: String,
-    address: Option<String>,
-    serial: Option<String>,
-    device: Option<PathBuf>,
-    pixel_format: Option<String>,
-    width: Option<u32>,
-    height: Option<u32>,
-    region: Option<[u32; 4]>,
-    exposure_us: Option<f64>,
-    gain_db: Option<f64>,
-    fps: Option<f64>,
-    trigger: Option<String>,
-    buffers: Option<usize>,
-}
-
-impl RawColor {
-    /// The keys given that belong to the other backend than `backend`.
-    fn foreign_keys(&self, backend: &str) -> Vec<&'static str> {
-        let aravis_only = [
-            ("address", self.address.is_some()),
-            ("serial", self.serial.is_some()),
-            ("pixel_format", self.pixel_format.is_some()),
-            ("region", self.region.is_some()),
-            ("exposure_us", self.exposure_us.is_some()),
-            ("gain_db", self.gain_db.is_some()),
-            ("trigger", self.trigger.is_some()),
-            ("buffers", self.buffers.is_some()),
-        ];
-        let v4l2_only = [
-            ("device", self.device.is_some()),
-            ("width", self.width.is_some()),
-            ("height", self.height.is_some()),
-        ];
-        let foreign: &[(&'static str, bool)] = match backend {
-            "aravis" => &v4l2_only,
-            "v4l2" => &aravis_only,
-            _ => &[],
-        };
-        foreign
-            .iter()
-            .filter(|(_, given)| *given)
-            .map(|(key, _)| *key)
-            .collect()
-    }
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -198,124 +138,10 @@ struct RawReconnect {
     max_wait_ms: Option<f64>,
 }
 
-fn default_depth_width() -> u32 {
-    640
-}
-fn default_depth_height() -> u32 {
-    480
-}
-fn default_fps() -> f64 {
-    30.0
-}
-fn default_pixel_format() -> String {
-    "bayer_rg8".to_owned()
-}
-/// The largest sensor side a colour region may reach, pixels.
-const MAX_SENSOR_PX: u64 = 16_384;
-/// The longest exposure, µs.
-const MAX_EXPOSURE_US: f64 = 10_000_000.0;
-/// The highest analogue gain a GenICam camera offers, dB (Basler's and FLIR's reach 24-48).
-const MAX_GAIN_DB: f64 = 48.0;
-
-fn default_trigger() -> String {
-    "free_run".to_owned()
-}
-fn default_buffers() -> usize {
-    16
-}
-
 // ---- the checked form -----------------------------------------------------------------------
 
-/// When a camera counts as gone, and how often to try it again.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Reconnect {
-    /// No frame for this long: the camera is closed and opened again.
-    pub stall: std::time::Duration,
-    /// The first wait before opening again; doubled after each failure...
-    pub first_wait: std::time::Duration,
-    /// ...up to this.
-    pub max_wait: std::time::Duration,
-}
-
-impl Default for Reconnect {
-    fn default() -> Self {
-        Self {
-            stall: std::time::Duration::from_secs(2),
-            first_wait: std::time::Duration::from_millis(250),
-            max_wait: std::time::Duration::from_secs(10),
-        }
-    }
-}
-
-/// The depth camera.
-#[derive(Clone, Debug, PartialEq)]
-pub enum DepthCamera {
-    /// An OpenNI2 device by URI (a `.oni` file is a URI too) or serial, in a depth mode.
-    Openni2 {
-        uri: Option<String>,
-        serial: Option<String>,
-        width: u32,
-        height: u32,
-        fps: f64,
-    },
-    /// The depth frames of a recorded session, played at their recorded pace and looped: a rig
-    /// without a depth camera, for trying the daemon and for benchmarks. The mode is the
-    /// session's.
-    Session {
-        path: PathBuf,
-        width: u32,
-        height: u32,
-        fps: f64,
-        /// The rig the session was recorded or rendered with, if it says.
-        rig: Option<Box<crate::core::geometry::Rig>>,
-    },
-}
-
-impl DepthCamera {
-    /// The depth mode: width, height, frames per second.
-    pub fn mode(&self) -> (u32, u32, f64) {
-        match self {
-            DepthCamera::Openni2 { width, height, fps, .. } | DepthCamera::Session { width, height, fps, .. } => {
-                (*width, *height, *fps)
-            }
-        }
-    }
-}
-
-/// How the colour camera is triggered.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub enum TriggerMode {
-    FreeRun,
-    /// A hardware trigger on the named input line (e.g. `Line1`).
-    Line(String),
-}
-
-/// The colour camera.
-#[derive(Clone, Debug, PartialEq)]
-pub enum ColorCamera {
-    /// A GenICam camera through Aravis, opened by address (unicast) or serial.
-    Aravis {
-        address: Option<String>,
-        serial: Option<String>,
-        pixel_format: PixelFormat,
-        region: Option<(u32, u32, u32, u32)>,
-        exposure_us: Option<f64>,
-        gain_db: Option<f64>,
-        fps: Option<f64>,
-        trigger: TriggerMode,
-        buffers: usize,
-    },
-    /// A UVC camera through V4L2.
-    V4l2 {
-        device: PathBuf,
-        width: u32,
-        height: u32,
-        fps: f64,
-    },
-}
-
 /// The checked configuration.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct Config {
     /// The file it was read from.
     pub path: PathBuf,
@@ -387,7 +213,7 @@ impl Config {
             path: path.to_owned(),
             message: one_line(e.message()) + &span_note(text, e.span()),
         })?;
-        Checker { path }.check(raw)
+        Checker { path, text }.check(raw)
     }
 }
 
@@ -411,6 +237,8 @@ fn span_note(text: &str, span: Option<std::ops::Range<usize>>) -> String {
 
 struct Checker<'a> {
     path: &'a Path,
+    /// The file's text, to say on which line a key is.
+    text: &'a str,
 }
 
 impl Checker<'_> {
@@ -430,13 +258,32 @@ impl Checker<'_> {
         }
     }
 
-    /// A camera frame rate: whole frames per second, at least 1 (a camera mode has one).
-    fn frame_rate(&self, key: &str, v: f64) -> Result<f64, ConfigError> {
-        if v.is_finite() && (1.0..=1000.0).contains(&v) {
-            Ok(v)
-        } else {
-            Err(self.bad(key, format!("must be from 1 to 1000 frames per second, not {v}")))
+    /// A camera's table (`[depth]`, `[color]`), read by the backend it names.
+    fn camera<C: ?Sized>(
+        &self,
+        name: &str,
+        backends: &[Backend<C>],
+        table: toml::Spanned<toml::Table>,
+    ) -> Result<Arc<C>, ConfigError> {
+        let span = table.span();
+        read_table(backends, table.into_inner()).map_err(|e| match e.key.as_str() {
+            "" => self.bad(name, e.reason),
+            key => self.bad(&format!("{name}.{key}"), e.reason + &self.line_of(key, span)),
+        })
+    }
+
+    /// ` (line N)` for the line where `key` is set in the table spanning `span`, if found.
+    fn line_of(&self, key: &str, span: std::ops::Range<usize>) -> String {
+        let table = self.text.get(span.clone()).unwrap_or("");
+        let mut at = 0;
+        for line in table.split_inclusive('\n') {
+            let rest = line.trim_start().strip_prefix(key).unwrap_or("");
+            if rest.trim_start().starts_with('=') {
+                return span_note(self.text, Some(span.start + at..span.start + at));
+            }
+            at += line.len();
         }
+        String::new()
     }
 
     fn capacity(&self, key: &str, v: usize) -> Result<usize, ConfigError> {
@@ -448,63 +295,8 @@ impl Checker<'_> {
     }
 
     fn check(&self, raw: RawConfig) -> Result<Config, ConfigError> {
-        let d = raw.depth;
-        let depth = match d.backend.as_str() {
-            "openni2" => {
-                if d.uri.is_none() && d.serial.is_none() {
-                    return Err(self.bad("depth", "needs `uri` or `serial` to say which camera"));
-                }
-                // A recording played as the camera cannot come later, as a camera can.
-                if let Some(uri) = &d.uri {
-                    let path = Path::new(uri);
-                    let recording = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("oni"));
-                    if recording && !path.is_file() {
-                        return Err(self.bad("depth.uri", format!("names the recording {uri:?}, which is not a file")));
-                    }
-                }
-                if !(1..=4096).contains(&d.width) || !(1..=4096).contains(&d.height) {
-                    return Err(self.bad(
-                        "depth.width/height",
-                        format!("must be from 1 to 4096, not {}x{}", d.width, d.height),
-                    ));
-                }
-                DepthCamera::Openni2 {
-                    uri: d.uri,
-                    serial: d.serial,
-                    width: d.width,
-                    height: d.height,
-                    fps: self.frame_rate("depth.fps", d.fps)?,
-                }
-            }
-            "session" => {
-                let Some(path) = d.path else {
-                    return Err(self.bad("depth", "needs `path`: the recorded session to play"));
-                };
-                let reader = crate::io::session::SessionReader::open(&path).map_err(|e| {
-                    self.bad(
-                        "depth.path",
-                        format!("is not a readable session: {}", crate::core::error_chain(&e)),
-                    )
-                })?;
-                let Some(camera) = reader.meta().camera(crate::io::session::CameraRole::Depth) else {
-                    return Err(self.bad("depth.path", format!("{path:?} has no depth camera")));
-                };
-                DepthCamera::Session {
-                    width: camera.width,
-                    height: camera.height,
-                    fps: camera.fps,
-                    rig: reader.meta().rig.map(Box::new),
-                    path,
-                }
-            }
-            other => {
-                return Err(self.bad(
-                    "depth.backend",
-                    format!("must be \"openni2\" or \"session\", not {other:?}"),
-                ));
-            }
-        };
-        let color = raw.color.map(|c| self.color(c)).transpose()?;
+        let depth = self.camera("depth", DEPTH_BACKENDS, raw.depth)?;
+        let color = raw.color.map(|c| self.camera("color", COLOR_BACKENDS, c)).transpose()?;
         let (_, _, fps) = depth.mode();
         let ms = |key: &str, v: Option<f64>| -> Result<Option<f64>, ConfigError> {
             v.map(|v| self.positive(key, v, 10_000.0)).transpose()
@@ -662,123 +454,6 @@ impl Checker<'_> {
         }
         Ok(token.to_owned())
     }
-
-    fn color(&self, c: RawColor) -> Result<ColorCamera, ConfigError> {
-        let fps = c.fps.map(|f| self.positive("color.fps", f, 1000.0)).transpose()?;
-        if let Some(key) = c.foreign_keys(&c.backend).first() {
-            let other = if c.backend == "aravis" { "v4l2" } else { "aravis" };
-            return Err(self.bad(
-                &format!("color.{key}"),
-                format!("is a setting of the {other} backend, not of {:?}", c.backend),
-            ));
-        }
-        match c.backend.as_str() {
-            "aravis" => {
-                if c.address.is_none() && c.serial.is_none() {
-                    return Err(self.bad("color", "needs `address` or `serial` to say which camera"));
-                }
-                if let Some(a) = &c.address {
-                    if a.parse::<std::net::Ipv4Addr>().is_err() {
-                        return Err(self.bad("color.address", format!("must be an IPv4 address, not {a:?}")));
-                    }
-                }
-                let pixel_format_name = c.pixel_format.unwrap_or_else(default_pixel_format);
-                let pixel_format = PixelFormat::ALL
-                    .into_iter()
-                    .find(|f| f.name() == pixel_format_name)
-                    .ok_or_else(|| {
-                        let names: Vec<&str> = PixelFormat::ALL.iter().map(|f| f.name()).collect();
-                        self.bad(
-                            "color.pixel_format",
-                            format!("must be one of {}, not {pixel_format_name:?}", names.join(", ")),
-                        )
-                    })?;
-                if let Some([x, y, w, h]) = c.region {
-                    if w == 0 || h == 0 {
-                        return Err(self.bad("color.region", "must have a width and height above 0"));
-                    }
-                    if u64::from(x) + u64::from(w) > MAX_SENSOR_PX || u64::from(y) + u64::from(h) > MAX_SENSOR_PX {
-                        return Err(self.bad(
-                            "color.region",
-                            format!("must lie within {MAX_SENSOR_PX}x{MAX_SENSOR_PX} pixels, not [{x}, {y}, {w}, {h}]"),
-                        ));
-                    }
-                }
-                let trigger = c.trigger.unwrap_or_else(default_trigger);
-                let trigger = match trigger.as_str() {
-                    "free_run" => TriggerMode::FreeRun,
-                    t => match t.strip_prefix("line:") {
-                        Some(line)
-                            if !line.is_empty()
-                                && line.len() <= 32
-                                && line.chars().all(|ch| ch.is_ascii_alphanumeric() || ch == '_') =>
-                        {
-                            TriggerMode::Line(line.to_owned())
-                        }
-                        _ => {
-                            return Err(self.bad(
-                                "color.trigger",
-                                format!(
-                                    "must be \"free_run\" or \"line:<LINE>\" with a GenICam line name of letters, digits and _ (e.g. \"line:Line1\"), not {t:?}"
-                                ),
-                            ));
-                        }
-                    },
-                };
-                if let Some(e) = c.exposure_us {
-                    if !(e.is_finite() && e > 0.0 && e <= MAX_EXPOSURE_US) {
-                        return Err(self.bad(
-                            "color.exposure_us",
-                            format!("must be above 0 and at most {MAX_EXPOSURE_US} (10 s), not {e}"),
-                        ));
-                    }
-                }
-                if let Some(g) = c.gain_db {
-                    if !(g.is_finite() && (0.0..=MAX_GAIN_DB).contains(&g)) {
-                        return Err(self.bad("color.gain_db", format!("must be from 0 to {MAX_GAIN_DB} dB, not {g}")));
-                    }
-                }
-                let buffers = c.buffers.unwrap_or_else(default_buffers);
-                if !(1..=256).contains(&buffers) {
-                    return Err(self.bad("color.buffers", format!("must be from 1 to 256, not {buffers}")));
-                }
-                Ok(ColorCamera::Aravis {
-                    address: c.address,
-                    serial: c.serial,
-                    pixel_format,
-                    region: c.region.map(|[x, y, w, h]| (x, y, w, h)),
-                    exposure_us: c.exposure_us,
-                    gain_db: c.gain_db,
-                    fps,
-                    trigger,
-                    buffers,
-                })
-            }
-            "v4l2" => {
-                let device = c
-                    .device
-                    .ok_or_else(|| self.bad("color.device", "is needed for a v4l2 camera (e.g. /dev/video0)"))?;
-                let (width, height) = (c.width.unwrap_or(640), c.height.unwrap_or(480));
-                if !(1..=MAX_SENSOR_PX).contains(&u64::from(width)) || !(1..=MAX_SENSOR_PX).contains(&u64::from(height))
-                {
-                    return Err(self.bad(
-                        "color.width",
-                        format!("width and height must be from 1 to {MAX_SENSOR_PX}, not {width}x{height}"),
-                    ));
-                }
-                Ok(ColorCamera::V4l2 {
-                    device,
-                    width,
-                    height,
-                    fps: fps.unwrap_or(30.0),
-                })
-            }
-            other => Err(self.bad(
-                "color.backend",
-                format!("must be \"aravis\" or \"v4l2\", not {other:?}"),
-            )),
-        }
-    }
 }
 
 #[cfg(test)]
@@ -813,7 +488,7 @@ mod tests {
     fn the_example_config_is_valid() {
         let text = include_str!("../../docs/rig.example.toml");
         let c = parse(text).unwrap();
-        assert!(matches!(c.color, Some(ColorCamera::Aravis { .. })));
+        assert_eq!(c.color.as_ref().map(|c| c.backend()), Some("aravis"));
         assert_eq!(c.capture_edge.when_full, WhenFull::DropNewest);
         assert_eq!(c.chunk, std::time::Duration::from_secs(3600));
         assert_eq!(c.reconnect.stall, std::time::Duration::from_secs(2));
@@ -846,15 +521,7 @@ mod tests {
             "{base}{aravis}gain_db = 12.0\ntrigger = \"line:Line1\"\n[aravis]\n"
         ))
         .unwrap();
-        assert!(matches!(
-            c.color,
-            Some(ColorCamera::Aravis {
-                gain_db: Some(12.0),
-                trigger: TriggerMode::Line(_),
-                buffers: 16,
-                ..
-            })
-        ));
+        assert_eq!(c.color.as_ref().map(|c| c.backend()), Some("aravis"));
     }
 
     #[test]

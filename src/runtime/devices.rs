@@ -1,61 +1,39 @@
-//! `mousepose devices`: the cameras each backend can see.
+//! `mousepose devices`: the cameras each registered backend can see (`capture::backend`).
 //!
 //! OpenNI2 and V4L2 list local devices (USB, device nodes). Aravis never broadcasts: GigE
 //! Vision cameras are looked for only at the addresses a rig config names (Aravis 0.8 cannot
 //! limit its discovery to one network interface, so no discovery is run at all).
 
-use crate::runtime::capture::{DeviceInfo, error_chain};
-use crate::runtime::config::{ColorCamera, Config};
-use serde::Serialize;
+pub use crate::runtime::capture::backend::BackendDevices;
+use crate::runtime::capture::backend::{Backend, COLOR_BACKENDS, DEPTH_BACKENDS};
+use crate::runtime::config::Config;
 
-/// What one backend reported.
-#[derive(Debug, Serialize)]
-pub struct BackendDevices {
-    pub backend: &'static str,
-    pub devices: Vec<DeviceInfo>,
-    /// Why the backend could not list its devices, if it could not.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub error: Option<String>,
-    /// What the listing covers (e.g. which addresses were probed).
-    pub scope: String,
+/// Lists every backend's cameras, each backend as the camera `config` gives it sees it (GigE
+/// cameras only at the address it names).
+pub fn list(config: Option<&Config>) -> Vec<BackendDevices> {
+    // The configured cameras' backends, and their own listings.
+    let depth = config.map(|c| (c.depth.backend(), c.depth.devices()));
+    let color = config
+        .and_then(|c| c.color.as_ref())
+        .map(|c| (c.backend(), c.devices()));
+    let mut found = listings(DEPTH_BACKENDS, depth);
+    found.extend(listings(COLOR_BACKENDS, color));
+    found
 }
 
-/// Lists every backend's cameras; GigE cameras only at the addresses `config` names.
-pub fn list(config: Option<&Config>) -> Vec<BackendDevices> {
-    let openni = crate::runtime::capture::openni::list_devices();
-    let addresses: Vec<String> = config
-        .and_then(|c| c.color.as_ref())
-        .and_then(|c| match c {
-            ColorCamera::Aravis { address, .. } => address.clone(),
-            ColorCamera::V4l2 { .. } => None,
+/// Each backend's listing: the configured camera's own when it is of that backend and has one.
+fn listings<C: ?Sized>(
+    backends: &[Backend<C>],
+    mut configured: Option<(&'static str, Option<BackendDevices>)>,
+) -> Vec<BackendDevices> {
+    backends
+        .iter()
+        .filter_map(|b| {
+            let own = configured
+                .as_mut()
+                .filter(|(name, _)| *name == b.name)
+                .and_then(|(_, d)| d.take());
+            own.or_else(|| b.list.map(|list| list()))
         })
-        .into_iter()
-        .collect();
-    let aravis = crate::runtime::capture::aravis::list_devices(&addresses);
-    vec![
-        BackendDevices {
-            backend: "openni2",
-            error: openni.as_ref().err().map(|e| error_chain(e)),
-            devices: openni.unwrap_or_default(),
-            scope: "USB depth cameras and the drivers' virtual devices".to_owned(),
-        },
-        BackendDevices {
-            backend: "aravis",
-            devices: aravis,
-            error: None,
-            scope: if addresses.is_empty() {
-                "no GigE Vision address configured (no broadcast discovery is ever sent; name the \
-                 camera's address in the rig config's [color] table and pass --config)"
-                    .to_owned()
-            } else {
-                format!("GigE Vision cameras at {}", addresses.join(", "))
-            },
-        },
-        BackendDevices {
-            backend: "v4l2",
-            devices: crate::runtime::capture::v4l2::list_devices(),
-            error: None,
-            scope: "video capture nodes under /dev".to_owned(),
-        },
-    ]
+        .collect()
 }

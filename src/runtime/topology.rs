@@ -21,11 +21,13 @@
 //! deliver and the gaps in their frame counters, the edges what they drop, the sync thread
 //! what it pairs, leaves unpaired or rejects.
 
-use crate::core::frame::{ColorFrame, DepthFrame, FramePair};
+use crate::core::frame::FramePair;
 use crate::core::geometry::Rig;
 use crate::io::session::CameraRole;
-use crate::runtime::accounting::{Accounting, CameraSummary, EdgeSummary, bump};
+use crate::runtime::accounting::{Accounting, CameraCounters, CameraSummary, EdgeSummary, bump};
+use crate::runtime::capture::rig::{ColorSource, DepthSource, RigCameras};
 use crate::runtime::capture::session::SessionPlayer;
+pub use crate::runtime::capture::supervise::Epochs;
 use crate::runtime::capture::{Captured, Clock, FrameSource, SeqGaps, Stamped};
 use crate::runtime::models::Models;
 use crate::runtime::pipeline::{
@@ -39,7 +41,6 @@ use crate::runtime::stages::body::{BodyStage, PIPELINE_VOTE_BUDGET};
 use crate::runtime::stages::fuse::FuseStage;
 use crate::runtime::stages::paws::PawStage;
 use crate::runtime::stages::segment::SegmentStage;
-pub use crate::runtime::stages::sync::Epochs;
 use crate::runtime::stages::sync::SyncStage;
 use crate::runtime::sync::SyncConfig;
 use crate::vision::fusion::{Fuser, FusionConfig};
@@ -55,8 +56,8 @@ pub enum Sources<'a> {
     /// The rig's cameras, both supervised (`capture::supervise`): for `record` opened (and the
     /// depth camera started, so that its metadata is known) before the pipeline starts.
     Cameras {
-        depth: Box<dyn FrameSource<Frame = DepthFrame>>,
-        color: Option<Box<dyn FrameSource<Frame = ColorFrame>>>,
+        depth: DepthSource,
+        color: Option<ColorSource>,
         /// Per camera (depth, colour): goes up each time the camera is reopened, so that the
         /// synchroniser learns its clock again (see `capture::supervise`).
         epochs: Epochs,
@@ -204,12 +205,8 @@ pub struct Finished {
     pub recorder: Option<Box<dyn FrameRecorder>>,
 }
 
-/// One capture thread's outputs: each edge, and whether it feeds the recorder (whose drops
-/// are counted as not recorded) rather than processing (dropped).
-type Outputs = Vec<(EdgeSender<Captured>, bool)>;
-
 impl Topology<'_> {
-    /// Starts every thread, sources first.
+    /// Starts every thread: the sources first, then the recorder and the processing chain.
     ///
     /// # Errors
     /// A thread cannot be created, or the recording cannot be opened for reading.
@@ -226,104 +223,18 @@ impl Topology<'_> {
         let mut runner = Runner::new();
         let acct = Arc::new(Accounting::default());
         let end_to_end = Arc::new(Histogram::default());
-        let mut edge_stats = Vec::new();
-        let mut outputs: Outputs = Vec::new();
-        let mut recorder_done = None;
         let branches = (processing.is_some(), recorder.is_some());
-
-        let mut processing_input = None;
-        if processing.is_some() {
-            let (tx, rx, stats) = edge::<Captured>(edges.capture);
-            edge_stats.push(("capture".to_owned(), edges.capture, stats));
-            outputs.push((tx, false));
-            processing_input = Some(rx);
+        let (tee, mut edge_stats, frames, recorded) = Tee::declare(edges.capture, branches);
+        let (capture, color, epochs) = sources.declare(sync.color)?;
+        for thread in capture {
+            thread.spawn(&mut runner, &tee, &acct).map_err(threads)?;
         }
-        let mut recorder_branch = None;
-        if let Some(writer) = recorder {
-            let (tx, rx, stats) = edge::<Captured>(edges.capture);
-            edge_stats.push(("recorder".to_owned(), edges.capture, stats));
-            outputs.push((tx, true));
-            recorder_branch = Some((writer, rx));
-        }
-
-        let mut epochs = Epochs::default();
-        let color = match sources {
-            Sources::Cameras {
-                depth,
-                color,
-                epochs: reopened,
-            } => {
-                epochs = reopened;
-                let has_color = color.is_some();
-                let clock = Clock::Monotonic;
-                spawn_source(
-                    &mut runner,
-                    "cap-depth",
-                    depth,
-                    &clock,
-                    |f| Captured::Depth(Arc::new(f)),
-                    &outputs,
-                    &acct,
-                )
-                .map_err(threads)?;
-                if let Some(color) = color {
-                    spawn_source(
-                        &mut runner,
-                        "cap-color",
-                        color,
-                        &clock,
-                        |f| Captured::Color(Arc::new(f)),
-                        &outputs,
-                        &acct,
-                    )
-                    .map_err(threads)?;
-                }
-                has_color
-            }
-            Sources::Recording {
-                recording,
-                realtime,
-                depth_size,
-            } => {
-                let clock = Clock::replay(0);
-                match recording {
-                    Recording::Session(reader) => {
-                        let player = SessionPlayer::new(reader, realtime).with_depth_size(depth_size);
-                        spawn_source(&mut runner, "replay", player, &clock, |c| c, &outputs, &acct)
-                    }
-                    Recording::Moseq { config, .. } => {
-                        let source = Recording::moseq(config)?;
-                        spawn_source(
-                            &mut runner,
-                            "replay",
-                            source,
-                            &clock,
-                            |f| Captured::Depth(Arc::new(f)),
-                            &outputs,
-                            &acct,
-                        )
-                    }
-                }
-                .map_err(threads)?;
-                sync.color
-            }
+        drop(tee);
+        let recorder = match recorder.zip(recorded) {
+            Some((writer, rx)) => Some(spawn_recorder(&mut runner, writer, rx, &acct).map_err(threads)?),
+            None => None,
         };
-        drop(outputs);
-        if let Some((mut writer, rx)) = recorder_branch {
-            let acct = Arc::clone(&acct);
-            let (done_tx, done_rx) = crossbeam_channel::bounded(1);
-            recorder_done = Some(done_rx);
-            runner
-                .spawn("recorder", move || {
-                    let result = write_frames(writer.as_mut(), &rx, &acct);
-                    // Hand the writer back to finish it, whatever happened.
-                    let _ = done_tx.send(writer);
-                    result
-                })
-                .map_err(threads)?;
-        }
-
-        if let (Some(p), Some(frames)) = (processing, processing_input) {
+        if let (Some(p), Some(frames)) = (processing, frames) {
             let sync = SyncStage::new(sync, Arc::clone(&acct), epochs);
             let chain = Chain::head(&mut runner, edges.stage, p.workers(), sync, frames);
             edge_stats.extend(declare_processing(chain, p, Arc::clone(&end_to_end)).map_err(threads)?);
@@ -340,9 +251,153 @@ impl Topology<'_> {
         Ok(Running {
             runner,
             watch,
-            recorder: recorder_done,
+            recorder,
         })
     }
+}
+
+impl Sources<'_> {
+    /// The capture threads these sources run, whether a colour camera feeds the pipeline, and
+    /// the cameras' reopen counters. `color` is the configuration's word for a recording.
+    fn declare(self, color: bool) -> Result<(Vec<CaptureThread>, bool, Epochs), RecordingError> {
+        Ok(match self {
+            Sources::Cameras { depth, color, epochs } => {
+                let clock = Clock::Monotonic;
+                let has_color = color.is_some();
+                let mut threads = vec![CaptureThread::new("cap-depth", depth, &clock, Captured::depth)];
+                threads.extend(color.map(|c| CaptureThread::new("cap-color", c, &clock, Captured::color)));
+                (threads, has_color, epochs)
+            }
+            Sources::Recording {
+                recording,
+                realtime,
+                depth_size,
+            } => {
+                let clock = Clock::replay(0);
+                let thread = match recording {
+                    Recording::Session(reader) => {
+                        let player = SessionPlayer::new(reader, realtime).with_depth_size(depth_size);
+                        CaptureThread::new("replay", player, &clock, |c| c)
+                    }
+                    Recording::Moseq { config, .. } => {
+                        CaptureThread::new("replay", Recording::moseq(config)?, &clock, Captured::depth)
+                    }
+                };
+                (vec![thread], color, Epochs::default())
+            }
+        })
+    }
+}
+
+impl From<RigCameras> for Sources<'_> {
+    fn from(cameras: RigCameras) -> Self {
+        Sources::Cameras {
+            depth: Box::new(cameras.depth),
+            color: cameras.color.map(|c| Box::new(c) as ColorSource),
+            epochs: cameras.epochs,
+        }
+    }
+}
+
+/// Where the capture threads send each frame: the processing branch (a full edge drops the
+/// frame, counted `dropped`) and the recorder (a full edge: counted `not_recorded`).
+#[derive(Clone)]
+struct Tee {
+    processing: Option<EdgeSender<Captured>>,
+    recorder: Option<EdgeSender<Captured>>,
+}
+
+/// A tee, its edges, and their receiving ends (processing, recorder).
+type Declared = (
+    Tee,
+    Vec<NamedEdge>,
+    Option<Receiver<Captured>>,
+    Option<Receiver<Captured>>,
+);
+
+impl Tee {
+    /// The capture edges of the branches a run has (processing, recording).
+    fn declare(config: EdgeConfig, (processing, recording): (bool, bool)) -> Declared {
+        let mut named = Vec::new();
+        let mut branch = |wanted: bool, name: &str| {
+            wanted.then(|| {
+                let (tx, rx, stats) = edge::<Captured>(config);
+                named.push((name.to_owned(), config, stats));
+                (tx, rx)
+            })
+        };
+        let (processing, frames) = branch(processing, "capture").unzip();
+        let (recorder, recorded) = branch(recording, "recorder").unzip();
+        (Tee { processing, recorder }, named, frames, recorded)
+    }
+
+    /// Sends `frame` to each branch, counting what a full edge drops; false once a branch
+    /// has closed (the pipeline is ending).
+    fn send(&self, frame: Captured, counters: &CameraCounters) -> bool {
+        let branches = [
+            self.processing.as_ref().map(|tx| (tx, &counters.dropped)),
+            self.recorder.as_ref().map(|tx| (tx, &counters.not_recorded)),
+        ];
+        let mut branches = branches.into_iter().flatten().peekable();
+        let mut frame = Some(frame);
+        while let Some((tx, dropped)) = branches.next() {
+            let item = if branches.peek().is_none() {
+                frame.take()
+            } else {
+                frame.clone()
+            };
+            let Some(item) = item else { break };
+            match tx.send(item) {
+                Sent::Delivered => {}
+                Sent::DroppedFull => bump(dropped, "queue_full", 1),
+                Sent::Closed => return false,
+            }
+        }
+        true
+    }
+}
+
+/// The body of a capture thread: the source run into the tee.
+type CaptureBody = Box<dyn FnOnce(&Tee, &Accounting, &Shutdown) -> Result<(), StageError> + Send>;
+
+/// One capture thread, declared: its name and the source it runs.
+struct CaptureThread {
+    name: &'static str,
+    run: CaptureBody,
+}
+
+impl CaptureThread {
+    /// A thread running `source` on `clock`, each frame made a [`Captured`] by `wrap`.
+    fn new<S: FrameSource>(name: &'static str, source: S, clock: &Clock, wrap: fn(S::Frame) -> Captured) -> Self {
+        let clock = clock.clone();
+        Self {
+            name,
+            run: Box::new(move |tee, acct, shutdown| run_source(source, &clock, wrap, tee, acct, shutdown)),
+        }
+    }
+
+    fn spawn(self, runner: &mut Runner, tee: &Tee, acct: &Arc<Accounting>) -> std::io::Result<()> {
+        let (tee, acct, shutdown, run) = (tee.clone(), Arc::clone(acct), runner.shutdown(), self.run);
+        runner.spawn(self.name, move || run(&tee, &acct, &shutdown))
+    }
+}
+
+/// The recorder thread: writes every frame it is sent, then hands the writer back (to be
+/// finished) on the channel returned, whatever happened.
+fn spawn_recorder(
+    runner: &mut Runner,
+    mut writer: Box<dyn FrameRecorder>,
+    frames: Receiver<Captured>,
+    acct: &Arc<Accounting>,
+) -> std::io::Result<Receiver<Box<dyn FrameRecorder>>> {
+    let acct = Arc::clone(acct);
+    let (done_tx, done_rx) = crossbeam_channel::bounded(1);
+    runner.spawn("recorder", move || {
+        let result = write_frames(writer.as_mut(), &frames, &acct);
+        let _ = done_tx.send(writer);
+        result
+    })?;
+    Ok(done_rx)
 }
 
 impl Processing {
@@ -412,21 +467,6 @@ impl Running {
     }
 }
 
-fn spawn_source<S: FrameSource>(
-    runner: &mut Runner,
-    name: &str,
-    source: S,
-    clock: &Clock,
-    wrap: fn(S::Frame) -> Captured,
-    outputs: &Outputs,
-    acct: &Arc<Accounting>,
-) -> std::io::Result<()> {
-    let (outputs, acct, clock, shutdown) = (outputs.clone(), Arc::clone(acct), clock.clone(), runner.shutdown());
-    runner.spawn(name, move || {
-        run_source(source, &clock, wrap, &outputs, &acct, &shutdown)
-    })
-}
-
 /// The camera and reason of a source's loss: `depth_corrupt` is the depth camera's
 /// `corrupt` (a recording reports both cameras'), anything else the source's own camera's.
 fn loss_of(reason: &'static str, own_role: CameraRole) -> (CameraRole, &'static str) {
@@ -445,13 +485,13 @@ fn role_of(c: &Captured) -> CameraRole {
 }
 
 /// The body of a capture thread: runs `source` until it ends, fails or `shutdown` is
-/// requested, sending each frame (as `wrap` makes it) to every output and counting what
+/// requested, sending each frame (as `wrap` makes it) to every branch and counting what
 /// happens to it.
 fn run_source<S: FrameSource>(
     mut source: S,
     clock: &Clock,
     wrap: fn(S::Frame) -> Captured,
-    outputs: &Outputs,
+    tee: &Tee,
     acct: &Accounting,
     shutdown: &Shutdown,
 ) -> Result<(), StageError> {
@@ -464,7 +504,7 @@ fn run_source<S: FrameSource>(
     let mut accounted = [0u64; 2];
     let mut not_frames = [0u64; 2];
     let mut seen = [false; 2];
-    'frames: while !shutdown.requested() && !source.finished() {
+    while !shutdown.requested() && !source.finished() {
         let Some(frame) = source.next_frame(Duration::from_millis(100))? else {
             continue;
         };
@@ -489,20 +529,8 @@ fn run_source<S: FrameSource>(
         if std::mem::replace(&mut seen[slot], true) {
             not_frames[slot] += explained.saturating_sub(missing);
         }
-        let mut frame = Some(frame);
-        for (k, (tx, recorder)) in outputs.iter().enumerate() {
-            let item = if k + 1 == outputs.len() {
-                frame.take()
-            } else {
-                frame.clone()
-            };
-            let Some(item) = item else { break };
-            match tx.send(item) {
-                Sent::Delivered => {}
-                Sent::DroppedFull if *recorder => bump(&counters.not_recorded, "queue_full", 1),
-                Sent::DroppedFull => bump(&counters.dropped, "queue_full", 1),
-                Sent::Closed => break 'frames,
-            }
+        if !tee.send(frame, counters) {
+            break;
         }
     }
     for (reason, n) in source.losses() {
@@ -523,7 +551,7 @@ fn run_source<S: FrameSource>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::frame::Stamp;
+    use crate::core::frame::{DepthFrame, Stamp};
     use crate::io::session::CameraMeta;
     use crate::runtime::capture::CaptureError;
 
@@ -542,7 +570,7 @@ mod tests {
         fn meta(&self) -> CameraMeta {
             CameraMeta {
                 role: CameraRole::Depth,
-                backend: crate::io::session::Backend::Synthetic,
+                backend: crate::io::session::BackendName::SYNTHETIC,
                 model: String::new(),
                 serial: String::new(),
                 firmware: String::new(),
@@ -623,6 +651,44 @@ mod tests {
         });
         assert_eq!(lost.get("incomplete"), None, "{lost:?}");
         assert_eq!(lost.get("camera_gap"), Some(&1), "{lost:?}");
+    }
+
+    /// A new camera backend is one module and one registration line: the test-only
+    /// `test_pattern` colour backend, named in a rig config, is read by its own table, opened
+    /// and run by the topology like any camera.
+    #[test]
+    fn a_registered_backend_is_configured_opened_and_captured() {
+        let text = "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n\
+                    [color]\nbackend = \"test_pattern\"\nwidth = 8\nheight = 6\nframes = 5\n";
+        let config = crate::runtime::config::Config::parse(text, std::path::Path::new("rig.toml")).unwrap();
+        let color = config.color.as_ref().expect("a colour camera");
+        assert_eq!((color.backend(), color.frame_size()), ("test_pattern", Some((8, 6))));
+        let bad = "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n\
+                   [color]\nbackend = \"test_pattern\"\nwidth = 8\nheight = 6\nframes = 5\naddress = \"x\"\n";
+        let e = crate::runtime::config::Config::parse(bad, std::path::Path::new("rig.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("color.address") && e.contains("test_pattern"), "{e}");
+        let topology = Topology {
+            sources: Sources::Cameras {
+                depth: Box::new(Numbered {
+                    seqs: vec![0, 1, 2],
+                    delivered: 0,
+                    damaged: 0,
+                    damaged_from: 0,
+                }),
+                color: Some(color.open().unwrap()),
+                epochs: Epochs::default(),
+            },
+            sync: SyncConfig::default(),
+            edges: Edges::replay(),
+            processing: None,
+            recorder: None,
+        };
+        let finished = topology.start().unwrap().join();
+        assert!(finished.outcome.is_ok());
+        assert_eq!(finished.cameras["color"].captured, 5);
+        assert_eq!(finished.cameras["depth"].captured, 3);
     }
 
     /// The frames `depth` lost before capture, by reason, once the pipeline has run it.

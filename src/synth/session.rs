@@ -14,7 +14,7 @@ use crate::core::geometry::Rig;
 use crate::core::image::Region;
 use crate::core::noise::DepthNoise;
 use crate::io::session::{
-    Backend, CameraMeta, CameraRole, FrameFormat, SessionError, SessionEvent, SessionMeta, SessionSource,
+    BackendName, CameraMeta, CameraRole, FrameFormat, SessionError, SessionEvent, SessionMeta, SessionSource,
     SessionSummary, SessionWriter,
 };
 use rand::Rng;
@@ -165,7 +165,7 @@ struct Shot {
 fn cameras(rig: &Rig, spec: &SessionSpec) -> Vec<CameraMeta> {
     let mut out = vec![CameraMeta {
         role: CameraRole::Depth,
-        backend: Backend::Synthetic,
+        backend: BackendName::SYNTHETIC,
         model: "synthetic structured-light depth camera".to_owned(),
         serial: format!("SYN-D-{}", spec.seed),
         firmware: format!("engine {ENGINE_VERSION}"),
@@ -177,7 +177,7 @@ fn cameras(rig: &Rig, spec: &SessionSpec) -> Vec<CameraMeta> {
     if spec.color {
         out.push(CameraMeta {
             role: CameraRole::Color,
-            backend: Backend::Synthetic,
+            backend: BackendName::SYNTHETIC,
             model: "synthetic GigE colour camera".to_owned(),
             serial: format!("SYN-C-{}", spec.seed),
             firmware: format!("engine {ENGINE_VERSION}"),

@@ -13,7 +13,7 @@ use mousepose::core::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
 use mousepose::core::geometry::Rig;
 use mousepose::core::image::Region;
 use mousepose::io::session::{
-    Backend, CameraMeta, CameraRole, FrameFormat, SessionEvent, SessionMeta, SessionReader, SessionSource,
+    BackendName, CameraMeta, CameraRole, FrameFormat, SessionEvent, SessionMeta, SessionReader, SessionSource,
     SessionWriter,
 };
 use mousepose::io::store::{self, Kind, RecordReader, RecordWriter};
@@ -318,7 +318,7 @@ fn stamp(seq: u64, base_ns: u64) -> Stamp {
 fn camera(role: CameraRole, pixel_format: FrameFormat) -> CameraMeta {
     CameraMeta {
         role,
-        backend: Backend::Synthetic,
+        backend: BackendName::SYNTHETIC,
         model: format!("synthetic {role}"),
         serial: format!("SYN-{role}"),
         firmware: String::new(),

@@ -53,16 +53,37 @@ impl fmt::Display for CameraRole {
     }
 }
 
-/// The driver a camera was read through.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Backend {
-    Openni2,
-    Aravis,
-    V4l2,
-    Synthetic,
-    /// A MoSeq-layout depth recording (`depth.dat` or `depth.avi` with `depth_ts.txt`) read as a camera.
-    Moseq,
+/// The driver a camera was read through, by the name its backend gives itself (`openni2`,
+/// `aravis`, `v4l2`, `moseq`, ...; `synthetic` for rendered frames). Sessions name it; the
+/// backends themselves are registered in the runtime (`runtime::capture::backend`), so a
+/// session written through a backend this build lacks still reads.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct BackendName(std::borrow::Cow<'static, str>);
+
+impl BackendName {
+    /// Rendered frames (`synth`).
+    pub const SYNTHETIC: Self = Self::new("synthetic");
+
+    pub const fn new(name: &'static str) -> Self {
+        Self(std::borrow::Cow::Borrowed(name))
+    }
+
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl PartialEq<&str> for BackendName {
+    fn eq(&self, other: &&str) -> bool {
+        self.0 == *other
+    }
+}
+
+impl fmt::Display for BackendName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
 }
 
 /// Whether a session was generated or recorded from cameras.
@@ -78,7 +99,7 @@ pub enum SessionSource {
 #[serde(deny_unknown_fields)]
 pub struct CameraMeta {
     pub role: CameraRole,
-    pub backend: Backend,
+    pub backend: BackendName,
     pub model: String,
     pub serial: String,
     #[serde(default)]
@@ -281,7 +302,7 @@ mod tests {
     fn meta() -> SessionMeta {
         let depth = CameraMeta {
             role: CameraRole::Depth,
-            backend: Backend::Synthetic,
+            backend: BackendName::SYNTHETIC,
             model: "synthetic depth".into(),
             serial: "0".into(),
             firmware: String::new(),

@@ -26,7 +26,7 @@ mod writer;
 
 pub use codec::{Codec, CodecError, FrameEncoder, FrameFormat, FrameHeader};
 pub use events::SessionEvent;
-pub use meta::{Backend, CameraMeta, CameraRole, FORMAT_NAME, FORMAT_VERSION, SessionMeta, SessionSource};
+pub use meta::{BackendName, CameraMeta, CameraRole, FORMAT_NAME, FORMAT_VERSION, SessionMeta, SessionSource};
 pub use reader::{ColorFrames, DepthFrames, Frames, SessionReader};
 pub use writer::{SessionWriter, WriterOptions};
 

@@ -15,10 +15,11 @@
 //! into a [`ColorFrame`] and pushed back. Buffers Aravis hands back damaged (missing packets,
 //! timeout, wrong size) are counted by reason in [`FrameSource::losses`] and never returned.
 
+use super::backend::{self, Backend, BackendDevices, CameraConfig, ColorBackend, TableError};
 use super::{CaptureError, Clock, DeviceInfo, FrameSource};
 use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
 use crate::io::session::codec::FrameFormat;
-use crate::io::session::meta::{Backend, CameraMeta, CameraRole};
+use crate::io::session::meta::{BackendName, CameraMeta, CameraRole};
 use aravis_ext::aravis;
 use aravis_ext::aravis::prelude::*;
 use aravis_ext::aravis::{BufferStatus, Camera, Stream};
@@ -512,7 +513,7 @@ fn read_meta(camera: &Camera, id: &str, format: PixelFormat) -> Result<CameraMet
     };
     Ok(CameraMeta {
         role: CameraRole::Color,
-        backend: Backend::Aravis,
+        backend: BackendName::new(BACKEND),
         model: model.to_string(),
         serial: serial.to_string(),
         firmware,
@@ -720,8 +721,206 @@ fn first_loss(id: &str, reason: &'static str) -> bool {
         .insert((id.to_owned(), reason))
 }
 
+// ---- its table in the rig config ------------------------------------------------------------
+
+/// The longest exposure, µs.
+const MAX_EXPOSURE_US: f64 = 10_000_000.0;
+/// The highest analogue gain a GenICam camera offers, dB (Basler's and FLIR's reach 24-48).
+const MAX_GAIN_DB: f64 = 48.0;
+
+/// The backend, registered in `capture::backend`.
+pub const REGISTERED: ColorBackend = Backend {
+    name: BACKEND,
+    table: read_table,
+    list: Some(list_unconfigured),
+};
+
+/// `[color] backend = "aravis"`, as written.
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAravis {
+    address: Option<String>,
+    serial: Option<String>,
+    #[serde(default = "default_pixel_format")]
+    pixel_format: String,
+    region: Option<[u32; 4]>,
+    exposure_us: Option<f64>,
+    gain_db: Option<f64>,
+    fps: Option<f64>,
+    #[serde(default = "default_trigger")]
+    trigger: String,
+    #[serde(default = "default_buffers")]
+    buffers: usize,
+}
+
+fn default_pixel_format() -> String {
+    "bayer_rg8".to_owned()
+}
+fn default_trigger() -> String {
+    "free_run".to_owned()
+}
+fn default_buffers() -> usize {
+    16
+}
+
+fn read_table(table: toml::Table) -> Result<Arc<dyn CameraConfig<Frame = ColorFrame>>, TableError> {
+    Ok(Arc::new(check_table(table)?))
+}
+
+fn check_table(table: toml::Table) -> Result<AravisConfig, TableError> {
+    let c: RawAravis = backend::deserialize(BACKEND, table)?;
+    let fps = c.fps.map(|f| backend::positive("fps", f, 1000.0)).transpose()?;
+    if c.address.is_none() && c.serial.is_none() {
+        return Err(TableError::new("", "needs `address` or `serial` to say which camera"));
+    }
+    if let Some(a) = &c.address {
+        if a.parse::<Ipv4Addr>().is_err() {
+            return Err(TableError::new(
+                "address",
+                format!("must be an IPv4 address, not {a:?}"),
+            ));
+        }
+    }
+    let pixel_format = PixelFormat::ALL
+        .into_iter()
+        .find(|f| f.name() == c.pixel_format)
+        .ok_or_else(|| {
+            let names: Vec<&str> = PixelFormat::ALL.iter().map(|f| f.name()).collect();
+            TableError::new(
+                "pixel_format",
+                format!("must be one of {}, not {:?}", names.join(", "), c.pixel_format),
+            )
+        })?;
+    if let Some(region) = c.region {
+        check_region(region)?;
+    }
+    if let Some(e) = c.exposure_us {
+        if !(e.is_finite() && e > 0.0 && e <= MAX_EXPOSURE_US) {
+            return Err(TableError::new(
+                "exposure_us",
+                format!("must be above 0 and at most {MAX_EXPOSURE_US} (10 s), not {e}"),
+            ));
+        }
+    }
+    if let Some(g) = c.gain_db {
+        if !(g.is_finite() && (0.0..=MAX_GAIN_DB).contains(&g)) {
+            return Err(TableError::new(
+                "gain_db",
+                format!("must be from 0 to {MAX_GAIN_DB} dB, not {g}"),
+            ));
+        }
+    }
+    if !(1..=256).contains(&c.buffers) {
+        return Err(TableError::new(
+            "buffers",
+            format!("must be from 1 to 256, not {}", c.buffers),
+        ));
+    }
+    Ok(AravisConfig {
+        address: c.address,
+        serial: c.serial,
+        pixel_format,
+        region: c.region.map(|[x, y, w, h]| (x, y, w, h)),
+        exposure_us: c.exposure_us,
+        gain_db: c.gain_db,
+        fps,
+        trigger: parse_trigger(&c.trigger)?,
+        buffers: c.buffers,
+    })
+}
+
+/// A region of the sensor: not empty, within the largest sensor.
+fn check_region([x, y, w, h]: [u32; 4]) -> Result<(), TableError> {
+    if w == 0 || h == 0 {
+        return Err(TableError::new("region", "must have a width and height above 0"));
+    }
+    let max = backend::MAX_SENSOR_PX;
+    if u64::from(x) + u64::from(w) > max || u64::from(y) + u64::from(h) > max {
+        return Err(TableError::new(
+            "region",
+            format!("must lie within {max}x{max} pixels, not [{x}, {y}, {w}, {h}]"),
+        ));
+    }
+    Ok(())
+}
+
+/// `free_run`, or `line:<LINE>` with a GenICam line name.
+fn parse_trigger(text: &str) -> Result<Trigger, TableError> {
+    if text == "free_run" {
+        return Ok(Trigger::FreeRun);
+    }
+    match text.strip_prefix("line:") {
+        Some(line)
+            if !line.is_empty()
+                && line.len() <= 32
+                && line.chars().all(|ch| ch.is_ascii_alphanumeric() || ch == '_') =>
+        {
+            Ok(Trigger::Line(line.to_owned()))
+        }
+        _ => Err(TableError::new(
+            "trigger",
+            format!(
+                "must be \"free_run\" or \"line:<LINE>\" with a GenICam line name of letters, digits and _ (e.g. \"line:Line1\"), not {text:?}"
+            ),
+        )),
+    }
+}
+
+impl CameraConfig for AravisConfig {
+    type Frame = ColorFrame;
+
+    fn backend(&self) -> &'static str {
+        BACKEND
+    }
+
+    fn open(&self) -> Result<Box<dyn FrameSource<Frame = ColorFrame>>, CaptureError> {
+        Ok(Box::new(AravisColor::open(self)?))
+    }
+
+    fn frame_size(&self) -> Option<(u32, u32)> {
+        self.region.map(|(_, _, w, h)| (w, h))
+    }
+
+    fn devices(&self) -> Option<BackendDevices> {
+        Some(listing(self.address.as_slice()))
+    }
+}
+
+fn list_unconfigured() -> BackendDevices {
+    listing(&[])
+}
+
+/// The cameras at `addresses`: GigE Vision cameras are looked for nowhere else.
+fn listing(addresses: &[String]) -> BackendDevices {
+    BackendDevices {
+        backend: BACKEND,
+        devices: list_devices(addresses),
+        error: None,
+        scope: if addresses.is_empty() {
+            "no GigE Vision address configured (no broadcast discovery is ever sent; name the \
+             camera's address in the rig config's [color] table and pass --config)"
+                .to_owned()
+        } else {
+            format!("GigE Vision cameras at {}", addresses.join(", "))
+        },
+    }
+}
+
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn the_table_defaults_and_reads_its_settings() {
+        let table: toml::Table =
+            toml::from_str("address = \"127.0.0.1\"\ngain_db = 12.0\ntrigger = \"line:Line1\"\n").unwrap();
+        let c = check_table(table).unwrap();
+        assert_eq!(
+            (c.gain_db, c.trigger, c.buffers),
+            (Some(12.0), Trigger::Line("Line1".into()), 16)
+        );
+        assert_eq!(c.pixel_format, PixelFormat::BayerRg8);
+    }
+
     use super::*;
 
     /// Issue 37 item 5: a reason buffers are dropped for is logged once per camera, not once

@@ -7,12 +7,15 @@
 //! device counter are counted by the runner, not here.
 
 pub mod aravis;
+pub mod backend;
 pub mod clock;
 pub mod moseq;
 pub mod openni;
 pub mod rig;
 pub mod session;
 pub mod supervise;
+#[cfg(test)]
+mod test_pattern;
 pub mod v4l2;
 
 pub use clock::Clock;
@@ -165,6 +168,18 @@ impl SeqGaps {
 pub enum Captured {
     Depth(Arc<DepthFrame>),
     Color(Arc<ColorFrame>),
+}
+
+impl Captured {
+    /// A depth camera's frame.
+    pub fn depth(frame: DepthFrame) -> Self {
+        Captured::Depth(Arc::new(frame))
+    }
+
+    /// A colour camera's frame.
+    pub fn color(frame: ColorFrame) -> Self {
+        Captured::Color(Arc::new(frame))
+    }
 }
 
 impl Stamped for Captured {

@@ -17,13 +17,15 @@
 //! last frame. OpenNI2's recorder numbers a file's frames from 1 and starts its clock at 0, so a
 //! recording's `seq` and `device_ns` are the camera's shifted by constants.
 
+use super::backend::{self, Backend, BackendDevices, CameraConfig, DepthBackend, DepthConfig, TableError};
 use super::{CaptureError, DeviceInfo, FrameSource};
 use crate::core::frame::{DepthFrame, Stamp};
-use crate::io::session::{Backend, CameraMeta, CameraRole, FrameFormat};
+use crate::io::session::{BackendName, CameraMeta, CameraRole, FrameFormat};
 use crate::runtime::capture::Clock;
 use crate::vision::calibrate::field_of_view::{FieldOfViewIntrinsics, from_field_of_view};
 use openni2 as ni;
 use std::path::Path;
+use std::sync::Arc;
 use std::time::Duration;
 
 /// The backend name in errors and device lists.
@@ -89,7 +91,7 @@ impl OpenNiDepth {
     pub fn new(config: OpenNiConfig) -> Self {
         let meta = CameraMeta {
             role: CameraRole::Depth,
-            backend: Backend::Openni2,
+            backend: BackendName::new(BACKEND),
             model: String::new(),
             serial: config.serial.clone().unwrap_or_default(),
             firmware: String::new(),
@@ -217,7 +219,7 @@ impl OpenNiDepth {
             .unwrap_or_default();
         self.meta = CameraMeta {
             role: CameraRole::Depth,
-            backend: Backend::Openni2,
+            backend: BackendName::new(BACKEND),
             model,
             serial: device.serial().unwrap_or_default(),
             firmware: device.firmware().unwrap_or_default(),
@@ -494,4 +496,113 @@ pub fn depth_intrinsics(uri: &str) -> Result<FieldOfViewIntrinsics, OpenNiIntrin
         hfov_deg: f64::from(h).to_degrees(),
         vfov_deg: f64::from(v).to_degrees(),
     })
+}
+
+// ---- its table in the rig config ------------------------------------------------------------
+
+/// The backend, registered in `capture::backend`.
+pub const REGISTERED: DepthBackend = Backend {
+    name: BACKEND,
+    table: read_table,
+    list: Some(listing),
+};
+
+/// `[depth] backend = "openni2"`, as written.
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawOpenNi {
+    uri: Option<String>,
+    serial: Option<String>,
+    #[serde(default = "default_width")]
+    width: u32,
+    #[serde(default = "default_height")]
+    height: u32,
+    #[serde(default = "default_fps")]
+    fps: f64,
+}
+
+fn default_width() -> u32 {
+    640
+}
+fn default_height() -> u32 {
+    480
+}
+fn default_fps() -> f64 {
+    30.0
+}
+
+/// An OpenNI2 depth camera as the rig config names it: the driver's config, and the frame rate
+/// as configured (the driver is asked for the nearest whole rate).
+#[derive(Clone, Debug, PartialEq)]
+pub struct OpenNiCamera {
+    pub config: OpenNiConfig,
+    pub fps: f64,
+}
+
+fn read_table(table: toml::Table) -> Result<Arc<dyn DepthConfig>, TableError> {
+    let d: RawOpenNi = backend::deserialize(BACKEND, table)?;
+    if d.uri.is_none() && d.serial.is_none() {
+        return Err(TableError::new("", "needs `uri` or `serial` to say which camera"));
+    }
+    // A recording played as the camera cannot come later, as a camera can.
+    if let Some(uri) = &d.uri {
+        let path = Path::new(uri);
+        let recording = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("oni"));
+        if recording && !path.is_file() {
+            return Err(TableError::new(
+                "uri",
+                format!("names the recording {uri:?}, which is not a file"),
+            ));
+        }
+    }
+    if !(1..=4096).contains(&d.width) || !(1..=4096).contains(&d.height) {
+        return Err(TableError::new(
+            "width/height",
+            format!("must be from 1 to 4096, not {}x{}", d.width, d.height),
+        ));
+    }
+    let fps = backend::frame_rate("fps", d.fps)?;
+    Ok(Arc::new(OpenNiCamera {
+        config: OpenNiConfig {
+            uri: d.uri,
+            serial: d.serial,
+            width: d.width,
+            height: d.height,
+            fps: fps.round() as u32,
+        },
+        fps,
+    }))
+}
+
+impl CameraConfig for OpenNiCamera {
+    type Frame = DepthFrame;
+
+    fn backend(&self) -> &'static str {
+        BACKEND
+    }
+
+    /// The camera is opened by `start`.
+    fn open(&self) -> Result<Box<dyn FrameSource<Frame = DepthFrame>>, CaptureError> {
+        Ok(Box::new(OpenNiDepth::new(self.config.clone())))
+    }
+
+    fn frame_size(&self) -> Option<(u32, u32)> {
+        Some((self.config.width, self.config.height))
+    }
+}
+
+impl DepthConfig for OpenNiCamera {
+    fn mode(&self) -> (u32, u32, f64) {
+        (self.config.width, self.config.height, self.fps)
+    }
+}
+
+fn listing() -> BackendDevices {
+    let devices = list_devices();
+    BackendDevices {
+        backend: BACKEND,
+        error: devices.as_ref().err().map(|e| super::error_chain(e)),
+        devices: devices.unwrap_or_default(),
+        scope: "USB depth cameras and the drivers' virtual devices".to_owned(),
+    }
 }

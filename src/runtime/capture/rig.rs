@@ -1,128 +1,113 @@
-//! The cameras a rig config names, opened through their drivers: the depth camera (OpenNI2)
-//! and the colour camera (Aravis or V4L2), as [`FrameSource`]s.
+//! The cameras of a rig, supervised: the one constructor of every command that runs cameras
+//! (`run`, `record`). Each camera is opened through its backend (`capture::backend`) and
+//! reopened by its [`Supervised`] wrapper whenever it fails.
 
 use crate::core::frame::{ColorFrame, DepthFrame};
-use crate::io::session::CameraMeta;
-use crate::runtime::capture::aravis::{AravisColor, AravisConfig, Trigger};
-use crate::runtime::capture::openni::{OpenNiConfig, OpenNiDepth};
-use crate::runtime::capture::session::LoopedDepth;
-use crate::runtime::capture::v4l2::{V4l2Color, V4l2Config};
+use crate::io::session::{CameraMeta, CameraRole};
+use crate::runtime::capture::backend::{ColorCamera, DepthCamera};
+use crate::runtime::capture::supervise::{Epochs, Reconnect, SharedHealth, StallWatch, Supervised};
 use crate::runtime::capture::{CaptureError, Clock, FrameSource};
-use crate::runtime::config::{ColorCamera, DepthCamera, TriggerMode};
-use std::time::Duration;
+use std::sync::Arc;
 
-/// The colour camera of a rig, whichever its driver.
+/// A depth camera of any backend.
+pub type DepthSource = Box<dyn FrameSource<Frame = DepthFrame>>;
+/// A colour camera of any backend.
+pub type ColorSource = Box<dyn FrameSource<Frame = ColorFrame>>;
+
+/// The rig's cameras, each supervised; they start on their capture threads.
 #[derive(Debug)]
-pub enum ColorSource {
-    Aravis(AravisColor),
-    V4l2(V4l2Color),
+pub struct RigCameras {
+    pub depth: Supervised<DepthSource>,
+    pub color: Option<Supervised<ColorSource>>,
+    /// Per camera (depth, colour): goes up each time the camera is reopened, so that the
+    /// synchroniser learns its clock again.
+    pub epochs: Epochs,
 }
 
-impl FrameSource for ColorSource {
-    type Frame = ColorFrame;
+/// A camera that failed, and which.
+pub type CameraFailure = (CameraRole, CaptureError);
 
-    fn meta(&self) -> CameraMeta {
-        match self {
-            ColorSource::Aravis(s) => s.meta(),
-            ColorSource::V4l2(s) => s.meta(),
-        }
+impl RigCameras {
+    /// The cameras `depth` and `color` configure, none opened yet: each opens when started,
+    /// and again after each failure, as `policy` says.
+    pub fn supervised(depth: &DepthCamera, color: Option<&ColorCamera>, policy: Reconnect) -> Self {
+        let epochs = Epochs::default();
+        let depth = Arc::clone(depth);
+        let depth = Supervised::new(
+            CameraRole::Depth,
+            Box::new(move || depth.open()),
+            policy,
+            Arc::clone(&epochs[0]),
+        );
+        let color = color.map(|color| {
+            let color = Arc::clone(color);
+            Supervised::new(
+                CameraRole::Color,
+                Box::new(move || color.open()),
+                policy,
+                Arc::clone(&epochs[1]),
+            )
+        });
+        Self { depth, color, epochs }
     }
 
-    fn start(&mut self, clock: &Clock) -> Result<(), CaptureError> {
-        match self {
-            ColorSource::Aravis(s) => s.start(clock),
-            ColorSource::V4l2(s) => s.start(clock),
-        }
+    /// The cameras opened now, both of them (a recording needs both from its start), the depth
+    /// camera started so that its metadata is known; later openings go through the config.
+    /// Returns the cameras' metadata as opened.
+    ///
+    /// # Errors
+    /// A camera cannot be opened (or the depth camera started).
+    pub fn opened(
+        depth: &DepthCamera,
+        color: Option<&ColorCamera>,
+        policy: Reconnect,
+        clock: &Clock,
+    ) -> Result<(Self, Vec<CameraMeta>), CameraFailure> {
+        let failed = |role| move |e| (role, e);
+        let mut first_depth = depth.open().map_err(failed(CameraRole::Depth))?;
+        let first_color = color.map(|c| c.open()).transpose().map_err(failed(CameraRole::Color))?;
+        first_depth.start(clock).map_err(failed(CameraRole::Depth))?;
+        let mut metas = vec![first_depth.meta()];
+        metas.extend(first_color.as_ref().map(FrameSource::meta));
+        let mut cameras = Self::supervised(depth, None, policy);
+        cameras.depth = cameras.depth.opened(first_depth, clock);
+        cameras.color = first_color.zip(color).map(|(first, color)| {
+            // The first opening is the camera opened above; later ones open it again.
+            let (mut first, color) = (Some(first), Arc::clone(color));
+            Supervised::new(
+                CameraRole::Color,
+                Box::new(move || first.take().map_or_else(|| color.open(), Ok)),
+                policy,
+                Arc::clone(&cameras.epochs[1]),
+            )
+        });
+        Ok((cameras, metas))
     }
 
-    fn next_frame(&mut self, timeout: Duration) -> Result<Option<ColorFrame>, CaptureError> {
-        match self {
-            ColorSource::Aravis(s) => s.next_frame(timeout),
-            ColorSource::V4l2(s) => s.next_frame(timeout),
+    /// Tries each camera once, before the pipeline starts them (a camera absent now is away,
+    /// and taken when it comes).
+    ///
+    /// # Errors
+    /// A camera whose configuration can never work ([`CaptureError::never_works`]).
+    pub fn try_start(&mut self, clock: &Clock) -> Result<(), CameraFailure> {
+        self.depth.start(clock).map_err(|e| (CameraRole::Depth, e))?;
+        if let Some(color) = &mut self.color {
+            color.start(clock).map_err(|e| (CameraRole::Color, e))?;
         }
+        Ok(())
     }
 
-    fn losses(&self) -> Vec<(&'static str, u64)> {
-        match self {
-            ColorSource::Aravis(s) => s.losses(),
-            ColorSource::V4l2(s) => s.losses(),
-        }
+    /// The watches that take a silent camera for away, checked by the command's own loop.
+    pub fn stall_watches(&self) -> Vec<StallWatch> {
+        let mut watches = vec![self.depth.stall_watch()];
+        watches.extend(self.color.as_ref().map(Supervised::stall_watch));
+        watches
     }
 
-    fn stop(&mut self) -> Result<(), CaptureError> {
-        match self {
-            ColorSource::Aravis(s) => s.stop(),
-            ColorSource::V4l2(s) => s.stop(),
-        }
-    }
-}
-
-/// The depth camera a config names, ready to start (an OpenNI2 camera is opened by `start`).
-///
-/// # Errors
-/// A recorded session named as the depth camera cannot be read.
-pub fn open_depth(camera: &DepthCamera) -> Result<Box<dyn FrameSource<Frame = DepthFrame>>, CaptureError> {
-    Ok(match camera {
-        DepthCamera::Openni2 {
-            uri,
-            serial,
-            width,
-            height,
-            fps,
-        } => Box::new(OpenNiDepth::new(OpenNiConfig {
-            uri: uri.clone(),
-            serial: serial.clone(),
-            width: *width,
-            height: *height,
-            fps: fps.round() as u32,
-        })),
-        DepthCamera::Session { path, .. } => Box::new(LoopedDepth::open(path)?),
-    })
-}
-
-/// Opens the colour camera a config names (settings are checked against the camera here).
-///
-/// # Errors
-/// The camera cannot be found, opened or configured.
-pub fn open_color(camera: &ColorCamera) -> Result<ColorSource, CaptureError> {
-    match camera {
-        ColorCamera::Aravis {
-            address,
-            serial,
-            pixel_format,
-            region,
-            exposure_us,
-            gain_db,
-            fps,
-            trigger,
-            buffers,
-        } => AravisColor::open(&AravisConfig {
-            address: address.clone(),
-            serial: serial.clone(),
-            pixel_format: *pixel_format,
-            region: *region,
-            exposure_us: *exposure_us,
-            gain_db: *gain_db,
-            fps: *fps,
-            trigger: match trigger {
-                TriggerMode::FreeRun => Trigger::FreeRun,
-                TriggerMode::Line(l) => Trigger::Line(l.clone()),
-            },
-            buffers: *buffers,
-        })
-        .map(ColorSource::Aravis),
-        ColorCamera::V4l2 {
-            device,
-            width,
-            height,
-            fps,
-        } => V4l2Color::open(V4l2Config {
-            device: device.clone(),
-            width: *width,
-            height: *height,
-            fps: *fps,
-            format: None,
-        })
-        .map(ColorSource::V4l2),
+    /// Each camera's health, by name (`depth`, `color`).
+    pub fn healths(&self) -> Vec<(&'static str, SharedHealth)> {
+        let mut healths = vec![("depth", self.depth.health())];
+        healths.extend(self.color.as_ref().map(|c| ("color", c.health())));
+        healths
     }
 }

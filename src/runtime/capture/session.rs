@@ -4,6 +4,7 @@
 //! Deterministic: the frames come out in the same order on every run, and the replay clock
 //! is moved to each frame's recorded host time as it is delivered.
 
+use super::backend::{self, Backend, CameraConfig, DepthBackend, DepthConfig, TableError};
 use super::{CaptureError, Captured, Clock, FrameSource};
 use crate::core::frame::{ColorFrame, DepthFrame};
 use crate::io::session::meta::{CameraMeta, CameraRole};
@@ -369,6 +370,84 @@ impl FrameSource for LoopedDepth {
         self.frames = None;
         self.pending = None;
         Ok(())
+    }
+}
+
+// ---- its table in the rig config ------------------------------------------------------------
+
+/// The backend, registered in `capture::backend`: a recorded session's depth frames as the
+/// depth camera.
+pub const REGISTERED: DepthBackend = Backend {
+    name: "session",
+    table: read_table,
+    list: None,
+};
+
+/// `[depth] backend = "session"`, as written.
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSession {
+    /// The session directory to play.
+    path: Option<PathBuf>,
+}
+
+/// A recorded session played as the depth camera; its mode and rig are the session's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SessionCamera {
+    pub path: PathBuf,
+    pub width: u32,
+    pub height: u32,
+    pub fps: f64,
+    /// The rig the session was recorded or rendered with, if it says.
+    pub rig: Option<crate::core::geometry::Rig>,
+}
+
+fn read_table(table: toml::Table) -> Result<Arc<dyn DepthConfig>, TableError> {
+    let d: RawSession = backend::deserialize("session", table)?;
+    let Some(path) = d.path else {
+        return Err(TableError::new("", "needs `path`: the recorded session to play"));
+    };
+    let reader = SessionReader::open(&path).map_err(|e| {
+        TableError::new(
+            "path",
+            format!("is not a readable session: {}", crate::core::error_chain(&e)),
+        )
+    })?;
+    let Some(camera) = reader.meta().camera(CameraRole::Depth) else {
+        return Err(TableError::new("path", format!("{path:?} has no depth camera")));
+    };
+    Ok(Arc::new(SessionCamera {
+        width: camera.width,
+        height: camera.height,
+        fps: camera.fps,
+        rig: reader.meta().rig,
+        path,
+    }))
+}
+
+impl CameraConfig for SessionCamera {
+    type Frame = DepthFrame;
+
+    fn backend(&self) -> &'static str {
+        "session"
+    }
+
+    fn open(&self) -> Result<Box<dyn FrameSource<Frame = DepthFrame>>, CaptureError> {
+        Ok(Box::new(LoopedDepth::open(&self.path)?))
+    }
+
+    fn frame_size(&self) -> Option<(u32, u32)> {
+        Some((self.width, self.height))
+    }
+}
+
+impl DepthConfig for SessionCamera {
+    fn mode(&self) -> (u32, u32, f64) {
+        (self.width, self.height, self.fps)
+    }
+
+    fn rig(&self) -> Option<crate::core::geometry::Rig> {
+        self.rig
     }
 }
 

@@ -17,7 +17,30 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
-pub use crate::runtime::config::Reconnect;
+/// When a camera counts as gone, and how often to try it again.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Reconnect {
+    /// No frame for this long: the camera is closed and opened again.
+    pub stall: Duration,
+    /// The first wait before opening again; doubled after each failure...
+    pub first_wait: Duration,
+    /// ...up to this.
+    pub max_wait: Duration,
+}
+
+impl Default for Reconnect {
+    fn default() -> Self {
+        Self {
+            stall: Duration::from_secs(2),
+            first_wait: Duration::from_millis(250),
+            max_wait: Duration::from_secs(10),
+        }
+    }
+}
+
+/// Reopen counters of the two cameras (depth, colour): each goes up when its camera is
+/// reopened, so that the synchroniser learns its clock again.
+pub type Epochs = [Arc<AtomicU64>; 2];
 
 /// A camera's state, as the status shows it.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize)]
@@ -419,7 +442,7 @@ where
             (None, Some(m)) => m.clone(),
             (None, None) => CameraMeta {
                 role: self.role,
-                backend: crate::io::session::Backend::Synthetic,
+                backend: crate::io::session::BackendName::SYNTHETIC,
                 model: String::new(),
                 serial: String::new(),
                 firmware: String::new(),
@@ -548,7 +571,7 @@ mod tests {
         fn meta(&self) -> CameraMeta {
             CameraMeta {
                 role: CameraRole::Depth,
-                backend: crate::io::session::Backend::Synthetic,
+                backend: crate::io::session::BackendName::SYNTHETIC,
                 model: "scripted".into(),
                 serial: String::new(),
                 firmware: String::new(),

@@ -10,11 +10,9 @@ use crate::runtime::capture::Captured;
 use crate::runtime::pipeline::{FlatMap, StageError};
 use crate::runtime::sync::{Role, SyncConfig, SyncOutput, Synchronizer};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 
-/// Reopen counters of the two cameras (depth, colour): each goes up when its camera is
-/// reopened (see `capture::supervise`), so that the synchroniser learns its clock again.
-pub type Epochs = [Arc<AtomicU64>; 2];
+use crate::runtime::capture::supervise::Epochs;
 
 /// Runs a [`Synchronizer`] on the captured frames.
 #[derive(Debug)]

@@ -48,7 +48,7 @@ use reader::{Reader, probe, read_raw_frame, read_samples, read_video_frame};
 use super::{CaptureError, Clock, FrameSource};
 use crate::core::frame::{DepthFrame, Stamp};
 use crate::io::session::codec::FrameFormat;
-use crate::io::session::meta::{Backend, CameraMeta, CameraRole};
+use crate::io::session::meta::{BackendName, CameraMeta, CameraRole};
 use std::fs::File;
 use std::io;
 use std::path::PathBuf;
@@ -456,7 +456,7 @@ impl FrameSource for MoseqDepth {
     fn meta(&self) -> CameraMeta {
         CameraMeta {
             role: CameraRole::Depth,
-            backend: Backend::Moseq,
+            backend: BackendName::new("moseq"),
             model: match self.kind {
                 MoseqKind::Raw => format!("MoSeq recording ({DEPTH_DAT})"),
                 MoseqKind::Video => format!("MoSeq recording ({DEPTH_AVI})"),

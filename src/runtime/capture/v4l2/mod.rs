@@ -36,14 +36,16 @@ pub use negotiate::{
 
 use negotiate::{fps_of, rate_matches};
 
+use super::backend::{self, Backend, BackendDevices, CameraConfig, ColorBackend, TableError};
 use super::{CaptureError, Clock, DeviceInfo, FrameSource};
 use crate::core::frame::ColorFrame;
 use crate::io::session::codec::FrameFormat;
-use crate::io::session::meta::{Backend, CameraMeta, CameraRole};
+use crate::io::session::meta::{BackendName, CameraMeta, CameraRole};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::io;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Duration;
 use v4l::buffer::Type as BufferType;
 use v4l::frameinterval::FrameIntervalEnum;
@@ -322,7 +324,7 @@ impl FrameSource for V4l2Color {
         let chosen = self.decoder.chosen();
         CameraMeta {
             role: CameraRole::Color,
-            backend: Backend::V4l2,
+            backend: BackendName::new(BACKEND),
             model: self.card.clone(),
             serial: self.bus.clone(),
             firmware: String::new(),
@@ -399,5 +401,81 @@ impl FrameSource for V4l2Color {
                 .map_err(|e| self.driver_error("VIDIOC_STREAMOFF failed", e))?;
         }
         Ok(())
+    }
+}
+
+// ---- its table in the rig config ------------------------------------------------------------
+
+/// The backend, registered in `capture::backend`.
+pub const REGISTERED: ColorBackend = Backend {
+    name: BACKEND,
+    table: read_table,
+    list: Some(listing),
+};
+
+/// `[color] backend = "v4l2"`, as written.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawV4l2 {
+    device: Option<PathBuf>,
+    #[serde(default = "default_width")]
+    width: u32,
+    #[serde(default = "default_height")]
+    height: u32,
+    fps: Option<f64>,
+}
+
+fn default_width() -> u32 {
+    640
+}
+fn default_height() -> u32 {
+    480
+}
+
+fn read_table(table: toml::Table) -> Result<Arc<dyn CameraConfig<Frame = ColorFrame>>, TableError> {
+    let c: RawV4l2 = backend::deserialize(BACKEND, table)?;
+    let fps = c.fps.map(|f| backend::positive("fps", f, 1000.0)).transpose()?;
+    let device = c
+        .device
+        .ok_or_else(|| TableError::new("device", "is needed for a v4l2 camera (e.g. /dev/video0)"))?;
+    let (width, height) = (c.width, c.height);
+    let max = backend::MAX_SENSOR_PX;
+    if !(1..=max).contains(&u64::from(width)) || !(1..=max).contains(&u64::from(height)) {
+        return Err(TableError::new(
+            "width",
+            format!("width and height must be from 1 to {max}, not {width}x{height}"),
+        ));
+    }
+    Ok(Arc::new(V4l2Config {
+        device,
+        width,
+        height,
+        fps: fps.unwrap_or(30.0),
+        format: None,
+    }))
+}
+
+impl CameraConfig for V4l2Config {
+    type Frame = ColorFrame;
+
+    fn backend(&self) -> &'static str {
+        BACKEND
+    }
+
+    fn open(&self) -> Result<Box<dyn FrameSource<Frame = ColorFrame>>, CaptureError> {
+        Ok(Box::new(V4l2Color::open(self.clone())?))
+    }
+
+    fn frame_size(&self) -> Option<(u32, u32)> {
+        Some((self.width, self.height))
+    }
+}
+
+fn listing() -> BackendDevices {
+    BackendDevices {
+        backend: BACKEND,
+        devices: list_devices(),
+        error: None,
+        scope: "video capture nodes under /dev".to_owned(),
     }
 }
