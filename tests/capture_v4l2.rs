@@ -4,8 +4,8 @@
 
 mod moseq {
     use mousepose::core::frame::DepthFrame;
-    use mousepose::runtime::capture::moseq::{MoseqConfig, MoseqDepth, MoseqError, MoseqKind};
     use mousepose::runtime::capture::{CaptureError, Clock, FrameSource};
+    use mousepose::runtime::recording::moseq::{MoseqConfig, MoseqDepth, MoseqError, MoseqKind};
     use std::path::Path;
     use std::process::Command;
     use std::time::Duration;

@@ -6,10 +6,10 @@ use crate::util::{mousepose, repo_root};
 use mousepose::engine::export::moseq::{COLOR_AVI, PROVENANCE_FILE, RIG_FILE, export_moseq};
 use mousepose::engine::replay::{ReplayOptions, replay};
 use mousepose::io::session::SessionReader;
-use mousepose::runtime::capture::moseq::{
+use mousepose::runtime::capture::{Clock, FrameSource};
+use mousepose::runtime::recording::moseq::{
     DEPTH_DAT, DEPTH_TS, METADATA, MoseqConfig, MoseqDepth, metadata_resolution, parse_timestamps,
 };
-use mousepose::runtime::capture::{Clock, FrameSource};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
@@ -594,11 +594,11 @@ fn video_frames_keep_the_cameras_times_and_their_panels_stay_in_place() {
         let d = depth.iter().find(|f| f.stamp.seq == row.depth.seq).unwrap();
         let c = row.color.and_then(|s| color.iter().find(|f| f.stamp.seq == s.seq));
         if c.is_some() {
-            let picture = mousepose::runtime::stages::overlay::draw(&rig, d, c, row);
+            let picture = mousepose::runtime::overlay::draw(&rig, d, c, row);
             with_colour.insert((picture.width, picture.height));
         }
         // A pair without its colour frame keeps an empty bottom view in its place.
-        let picture = mousepose::runtime::stages::overlay::draw_panels(&rig, d, c, row, true, None);
+        let picture = mousepose::runtime::overlay::draw_panels(&rig, d, c, row, true, None);
         slotted.insert((picture.width, picture.height));
     }
     assert_eq!(with_colour.len(), 1, "{with_colour:?}");

@@ -2,7 +2,7 @@
 //! `/dev/zero` (reading one never ends) where a reader expects a file is refused at once.
 
 use mousepose::io::session::{CameraRole, SessionReader};
-use mousepose::runtime::capture::moseq::{MoseqConfig, MoseqDepth};
+use mousepose::runtime::recording::moseq::{MoseqConfig, MoseqDepth};
 use mousepose::vision::calibrate::{RigCalibration, load_intrinsics};
 use mousepose::vision::forest::model;
 use mousepose::vision::paws::xml;

@@ -857,7 +857,7 @@ fn a_mouse_outside_the_arena_is_reported() {
     let picture = read_png(&out.join("frame.png"));
     let outline = picture
         .iter()
-        .filter(|p| **p == mousepose::runtime::stages::overlay::ARENA_OUTLINE)
+        .filter(|p| **p == mousepose::runtime::overlay::ARENA_OUTLINE)
         .count();
     assert!(outline > 100, "{outline} pixels of the arena's outline");
 }

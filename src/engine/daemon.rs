@@ -17,12 +17,12 @@ use crate::runtime::config::{Config, DepthCamera};
 use crate::runtime::http::HttpServer;
 use crate::runtime::models::Models;
 use crate::runtime::pipeline::Shutdown;
-use crate::runtime::playback::Recording;
+use crate::runtime::pose_record::PoseStatus;
+use crate::runtime::recording::Recording;
 use crate::runtime::sink::chunks::{
     ChunkPlan, ChunkPoses, ChunkRecorder, Chunks, DiskWatch, Live, RecorderGauges, chunk_meta,
 };
 use crate::runtime::sink::session::FrameRecorder;
-use crate::runtime::stages::PoseStatus;
 use crate::runtime::stages::segment::{FloorSlot, SegmentStage};
 use crate::runtime::status::{RunInfo, RunReport, Watch, Watched};
 use crate::runtime::topology::{Edges, Processing, Topology};

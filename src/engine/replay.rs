@@ -16,9 +16,9 @@ use crate::io::session::SessionSource;
 use crate::runtime::accounting::{CameraSummary, EdgeSummary};
 use crate::runtime::models::{Models, ModelsError};
 use crate::runtime::pipeline::{LatencySummary, PipelineError, StageReport};
-use crate::runtime::playback::{Recording, RecordingError, RecordingRig};
+use crate::runtime::pose_record::PoseRecord;
+use crate::runtime::recording::{Recording, RecordingError, RecordingRig};
 use crate::runtime::sink::poses::{POSES_FILE, PoseTally, PoseWriter};
-use crate::runtime::stages::PoseRecord;
 use crate::runtime::stages::segment::SegmentStage;
 use crate::runtime::topology::{Edges, Processing, Sources, Topology, TopologyError};
 use crate::vision::segment::{ArenaCheck, Background, SegmentError, SegmenterConfig};
@@ -246,12 +246,12 @@ pub struct ReplaySummary {
     pub picture_error: Option<String>,
 }
 
-/// The picture of the frame pair of `pose` (see [`crate::runtime::stages::overlay`]) with
+/// The picture of the frame pair of `pose` (see [`crate::runtime::overlay`]) with
 /// the arena's outline; `None` when its frames cannot be read again.
 fn picture(recording: &Recording, rig: &Rig, pose: &PoseRecord, arena: &[u8]) -> Option<RgbImage> {
     let depth = recording.depth_frame(pose.depth.seq)?;
     let color = pose.color.and_then(|c| recording.color_frame(c.seq));
-    Some(crate::runtime::stages::overlay::draw_in_arena(
+    Some(crate::runtime::overlay::draw_in_arena(
         rig,
         &depth,
         color.as_ref(),
@@ -272,12 +272,7 @@ fn picture_without_mouse(recording: &Recording, rig: &Rig, arena: &[u8], outside
     } else {
         "no mouse found in any frame (arena outlined)"
     };
-    Some(crate::runtime::stages::overlay::draw_note(
-        rig,
-        depth,
-        note,
-        Some(arena),
-    ))
+    Some(crate::runtime::overlay::draw_note(rig, depth, note, Some(arena)))
 }
 
 /// The warnings of a replay: something of a mouse's size outside the arena as often as

@@ -26,8 +26,8 @@ use crate::engine::chart::{ChartOutline, Series, bar_chart, path_chart, raster_c
 use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
 use crate::io::table::{Fixed, table};
+use crate::runtime::pose_record::{PoseRecord, PoseStatus};
 use crate::runtime::sink::poses::{POSES_FILE, read_poses};
-use crate::runtime::stages::{PoseRecord, PoseStatus};
 use crate::vision::behaviour::{
     Arena, Behaviour, BehaviourConfig, FrameInput, OUTLINE_RAYS, Outline, PAW_NAMES, analyse_in,
 };

@@ -147,7 +147,7 @@ pub struct Config {
     pub path: PathBuf,
     pub depth: DepthCamera,
     pub color: Option<ColorCamera>,
-    pub sync: crate::runtime::sync::SyncConfig,
+    pub sync: crate::runtime::pairing::SyncConfig,
     /// Edges out of the capture threads.
     pub capture_edge: EdgeConfig,
     /// Edges between stages.
@@ -319,7 +319,7 @@ impl Checker<'_> {
         }
         let r = raw.reconnect;
         let stall_ms = self.positive("reconnect.stall_ms", r.stall_ms.unwrap_or(2000.0), 600_000.0)?;
-        let sync = crate::runtime::sync::SyncConfig {
+        let sync = crate::runtime::pairing::SyncConfig {
             tolerance_ns: tolerance.map(|t| (t * 1e6) as u64),
             color: color.is_some(),
             max_wait_ns: (ms("sync.max_wait_ms", raw.sync.max_wait_ms)?.unwrap_or(stall_ms) * 1e6) as u64,

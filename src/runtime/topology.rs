@@ -26,15 +26,16 @@ use crate::core::geometry::Rig;
 use crate::io::session::CameraRole;
 use crate::runtime::accounting::{Accounting, CameraCounters, CameraSummary, EdgeSummary, bump};
 use crate::runtime::capture::rig::{ColorSource, DepthSource, RigCameras};
-use crate::runtime::capture::session::SessionPlayer;
 pub use crate::runtime::capture::supervise::Epochs;
 use crate::runtime::capture::{Captured, Clock, FrameSource, SeqGaps, Stamped};
 use crate::runtime::models::Models;
+use crate::runtime::pairing::SyncConfig;
 use crate::runtime::pipeline::{
     Chain, EdgeConfig, EdgeSender, Histogram, LatencySummary, NamedEdge, PipelineError, Runner, Sent, Shutdown, Sink,
     StageError, StageReport, StageStats, edge,
 };
-use crate::runtime::playback::{Recording, RecordingError};
+use crate::runtime::recording::session::SessionPlayer;
+use crate::runtime::recording::{Recording, RecordingError};
 use crate::runtime::sink::session::{FrameRecorder, write_frames};
 use crate::runtime::stages::Fused;
 use crate::runtime::stages::body::{BodyStage, PIPELINE_VOTE_BUDGET};
@@ -42,7 +43,6 @@ use crate::runtime::stages::fuse::FuseStage;
 use crate::runtime::stages::paws::PawStage;
 use crate::runtime::stages::segment::SegmentStage;
 use crate::runtime::stages::sync::SyncStage;
-use crate::runtime::sync::SyncConfig;
 use crate::vision::fusion::{Fuser, FusionConfig};
 use crossbeam_channel::Receiver;
 use std::collections::BTreeMap;

@@ -24,7 +24,7 @@ use std::path::Path;
 
 /// The true camera, beside the recording (`replay DIR --calibration DIR/rig.yaml`).
 pub const RIG_FILE: &str = "rig.yaml";
-/// MoSeq's file names, as `runtime::capture::moseq` reads them (named here again: the
+/// MoSeq's file names, as `runtime::recording::moseq` reads them (named here again: the
 /// synthesis engine does not import the runtime; the unit test below reads the recording
 /// back with the runtime's reader).
 const DEPTH_DAT: &str = "depth.dat";
@@ -172,7 +172,7 @@ pub fn write_moseq(dir: &Path, spec: &MoseqSpec, mut progress: impl FnMut(u64, u
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::runtime::capture::moseq::{MoseqConfig, MoseqDepth};
+    use crate::runtime::recording::moseq::{MoseqConfig, MoseqDepth};
 
     #[test]
     fn a_synthetic_moseq_recording_reads_back_at_its_size_and_count() {

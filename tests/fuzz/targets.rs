@@ -17,10 +17,10 @@ use mousepose::io::session::{
     SessionWriter,
 };
 use mousepose::io::store::{self, Kind, RecordReader, RecordWriter};
-use mousepose::runtime::capture::moseq::{MoseqConfig, MoseqDepth};
-use mousepose::runtime::capture::session::SessionPlayer;
 use mousepose::runtime::capture::{Clock, FrameSource};
 use mousepose::runtime::config::Config;
+use mousepose::runtime::recording::moseq::{MoseqConfig, MoseqDepth};
+use mousepose::runtime::recording::session::SessionPlayer;
 use mousepose::vision::calibrate::{Board, IntrinsicsCalibration, RigCalibration, load_intrinsics};
 use mousepose::vision::forest::depth::{BODY_JOINTS, DepthImage, JointLeaf, JointVote};
 use mousepose::vision::forest::infer::{BodyEstimator, Pixel, VoteSettings};

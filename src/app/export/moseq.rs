@@ -3,7 +3,7 @@
 
 use crate::app::output::print;
 use crate::engine::export::moseq::{COLOR_AVI, MoseqOptions};
-use crate::runtime::capture::moseq::DEPTH_AVI;
+use crate::runtime::recording::moseq::DEPTH_AVI;
 use clap::Args;
 use std::fmt::Write as _;
 use std::path::PathBuf;

@@ -18,7 +18,7 @@ use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
 use crate::io::session::{CameraMeta, CameraRole, SessionReader};
 use crate::io::video::{Encoder, EncoderSpec};
-use crate::runtime::capture::moseq::{DEPTH_AVI, DEPTH_TS, METADATA};
+use crate::runtime::recording::moseq::{DEPTH_AVI, DEPTH_TS, METADATA};
 use crate::vision::calibrate::RigCalibration;
 use anyhow::Context as _;
 use serde::Serialize;
@@ -381,7 +381,7 @@ mod tests {
     fn milliseconds_keep_every_nanosecond() {
         assert_eq!(ms(0), "0.000000");
         assert_eq!(ms(1_234_567_891), "1234.567891");
-        let back = crate::runtime::capture::moseq::ns_from_ms(&ms(987_654_321_012));
+        let back = crate::runtime::recording::moseq::ns_from_ms(&ms(987_654_321_012));
         assert_eq!(back, Some(987_654_321_012));
     }
 }

@@ -1,6 +1,6 @@
 //! The engine of `mousepose export video RUN --out FILE.mp4`: every frame pair of a run drawn as `replay`
 //! draws its pictures (the depth view with the skeleton, the bottom view with the paws, a side
-//! view; [`crate::runtime::stages::overlay`]) under a line of frame counters, encoded by
+//! view; [`crate::runtime::overlay`]) under a line of frame counters, encoded by
 //! ffmpeg with libx264.
 //!
 //! The frames are read again from the run's session, in order, and matched to the rows of
@@ -18,9 +18,9 @@ use crate::engine::chart::{draw_text, text_width};
 use crate::engine::export::{Run, check_file_out};
 use crate::io::session::{CameraRole, SessionReader};
 use crate::io::video::{Encoder, EncoderSpec};
+use crate::runtime::overlay;
+use crate::runtime::pose_record::PoseRecord;
 use crate::runtime::sink::poses::{POSES_FILE, read_poses};
-use crate::runtime::stages::PoseRecord;
-use crate::runtime::stages::overlay;
 use crate::vision::calibrate::RigCalibration;
 use std::path::PathBuf;
 

@@ -9,7 +9,6 @@
 pub mod aravis;
 pub mod backend;
 pub mod clock;
-pub mod moseq;
 pub mod openni;
 pub mod rig;
 pub mod session;

@@ -7,7 +7,7 @@ use crate::runtime::accounting::{CameraSummary, DROPPED_REASONS, LOST_REASONS, N
 use crate::runtime::capture::clock::monotonic_ns;
 use crate::runtime::capture::supervise::{CameraState, lock};
 use crate::runtime::pipeline::Histogram;
-use crate::runtime::stages::PoseStatus;
+use crate::runtime::pose_record::PoseStatus;
 use crate::runtime::status::Watch;
 use crate::runtime::usage::{process_cpu_s, process_resident_bytes};
 use prometheus_client::collector::Collector;

@@ -16,7 +16,7 @@ pub mod conn;
 pub mod metrics;
 
 use crate::core::geometry::Rig;
-use crate::runtime::stages::overlay;
+use crate::runtime::overlay;
 use crate::runtime::status::Watch;
 use crate::runtime::status::events::EventLog;
 use crate::vision::segment::FloorPlane;

@@ -19,8 +19,9 @@ use crate::io::session::{
 use crate::runtime::capture::supervise::{SharedHealth, lock};
 use crate::runtime::capture::{Captured, Stamped, error_chain};
 use crate::runtime::pipeline::{Sink, StageError};
+use crate::runtime::pose_record::PoseRecord;
 use crate::runtime::sink::poses::{PoseTally, PoseWriter};
-use crate::runtime::stages::{Fused, PoseRecord};
+use crate::runtime::stages::Fused;
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
@@ -869,7 +870,7 @@ mod tests {
     use super::*;
     use crate::core::frame::{ColorFrame, DepthFrame, PixelFormat, Stamp};
     use crate::core::pose::Pose;
-    use crate::runtime::stages::PoseStatus;
+    use crate::runtime::pose_record::PoseStatus;
 
     /// Pose `seq` and its frames, with a colour frame when `color`.
     fn pose(seq: u64, color: bool) -> (PoseRecord, FramePair) {

@@ -2,11 +2,12 @@
 //! the evidence of which end is the head (the forest's votes, the learnt body shape judged
 //! without the tail, and a visible tail found as one).
 
-use super::{PoseRecord, PoseStatus, Posed, Segmented};
+use super::{Posed, Segmented};
 use crate::core::geometry::Camera;
 use crate::core::pose::{JointEstimate, JointSource, Pose};
 use crate::core::skeleton::Joint;
 use crate::runtime::pipeline::{Map, StageError};
+use crate::runtime::pose_record::{PoseRecord, PoseStatus};
 use crate::vision::body_shape::{ShapeModel, aligned};
 use crate::vision::forest::depth::{BODY_JOINTS, DepthImage};
 use crate::vision::forest::infer::{BodyEstimator, JointGuess, Oriented, Pixel, sample_pixels};

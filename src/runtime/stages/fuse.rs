@@ -3,11 +3,12 @@
 //! [`crate::vision::fusion`]), and the picture of every n-th frame. It carries the tracker's
 //! and the legs' memory from frame to frame, so the runner gives it its frames in order.
 
-use super::{Fused, PoseStatus, Posed};
+use super::{Fused, Posed};
 use crate::core::geometry::Rig;
 use crate::core::skeleton::Joint;
+use crate::runtime::overlay;
 use crate::runtime::pipeline::{Map, StageError};
-use crate::runtime::stages::overlay;
+use crate::runtime::pose_record::PoseStatus;
 use crate::vision::fusion::Fuser;
 use crate::vision::orientation::{self, Orientation, Tracker, TrackerConfig};
 

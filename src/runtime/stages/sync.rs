@@ -7,8 +7,8 @@
 use crate::core::frame::FramePair;
 use crate::runtime::accounting::{Accounting, bump};
 use crate::runtime::capture::Captured;
+use crate::runtime::pairing::{Role, SyncConfig, SyncOutput, Synchronizer};
 use crate::runtime::pipeline::{FlatMap, StageError};
-use crate::runtime::sync::{Role, SyncConfig, SyncOutput, Synchronizer};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 

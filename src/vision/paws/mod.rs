@@ -13,6 +13,7 @@
 pub mod boost;
 pub mod cascade;
 pub mod detect;
+pub mod footprint;
 pub mod grey;
 pub mod haar;
 pub mod integral;
@@ -21,6 +22,7 @@ pub mod xml;
 
 pub use cascade::Cascade;
 pub use detect::PawDetector;
+pub use footprint::{FOOTPRINT_MARGIN_MM, footprint};
 
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;

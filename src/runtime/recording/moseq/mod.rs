@@ -45,10 +45,10 @@ pub use timestamps::{MoseqTimestamp, ns_from_ms, parse_timestamps};
 
 use reader::{Reader, probe, read_raw_frame, read_samples, read_video_frame};
 
-use super::{CaptureError, Clock, FrameSource};
 use crate::core::frame::{DepthFrame, Stamp};
 use crate::io::session::codec::FrameFormat;
 use crate::io::session::meta::{BackendName, CameraMeta, CameraRole};
+use crate::runtime::capture::{CaptureError, Clock, FrameSource};
 use std::fs::File;
 use std::io;
 use std::path::PathBuf;

@@ -8,13 +8,16 @@
 //! replay then poses the camera on the floor it fits
 //! ([`crate::vision::segment::FloorPlane::world_from_camera`]).
 
+pub mod moseq;
+pub mod session;
+
 use crate::core::cameras::{CameraModelError, depth_camera};
 use crate::core::frame::{ColorFrame, DepthFrame};
 use crate::core::geometry::{Intrinsics, Rig};
 use crate::io::session::{CameraRole, SessionError, SessionReader, Truth};
 use crate::runtime::capture::CaptureError;
-use crate::runtime::capture::moseq::{MoseqConfig, MoseqDepth};
-use crate::runtime::sync::SyncConfig;
+use crate::runtime::pairing::SyncConfig;
+use crate::runtime::recording::moseq::{MoseqConfig, MoseqDepth};
 use crate::vision::calibrate::{CalibrationError, RigCalibration};
 use std::path::{Path, PathBuf};
 

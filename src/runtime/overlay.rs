@@ -8,9 +8,9 @@ use crate::core::geometry::Rig;
 use crate::core::image::{Region, RgbImage};
 use crate::core::pose::JointSource;
 use crate::core::skeleton::{JOINT_COUNT, Joint};
-use crate::runtime::stages::PoseRecord;
-use crate::runtime::stages::paws::{FOOTPRINT_MARGIN_MM, footprint};
+use crate::runtime::pose_record::PoseRecord;
 use crate::vision::fusion::BodyAxes;
+use crate::vision::paws::{FOOTPRINT_MARGIN_MM, footprint};
 use crate::vision::segment::{FloorPlane, caption, frame_picture, height_picture};
 use nalgebra::{Point3, Vector3};
 
@@ -344,7 +344,7 @@ mod tests {
     use super::*;
     use crate::core::frame::Stamp;
     use crate::core::pose::Pose;
-    use crate::runtime::stages::PoseStatus;
+    use crate::runtime::pose_record::PoseStatus;
 
     #[test]
     fn the_bottom_view_of_an_uncalibrated_camera_is_its_whole_frame_in_its_own_aspect() {
