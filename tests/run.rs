@@ -238,11 +238,23 @@ fn issue37_sighup_leaves_the_daemon_running_and_other_signals_leave_a_report() {
     let mut said = String::new();
     read_notes_until(&socket, &mut said, Duration::from_secs(60), |s| s.contains("READY=1"));
     signal(&daemon, "HUP");
-    // The reload, then ready again.
+    // The reload, then ready again; the reload says when it began (MONOTONIC_USEC=, in the
+    // same message: systemd 253 and later require it of `Type=notify-reload`).
     read_notes_until(&socket, &mut said, Duration::from_secs(30), |s| {
         s.split_once("RELOADING=1")
             .is_some_and(|(_, after)| after.contains("READY=1"))
     });
+    let (_, after) = said.split_once("RELOADING=1").unwrap();
+    let usec = after.trim_start().strip_prefix("MONOTONIC_USEC=").map(|rest| {
+        rest.split(|c: char| !c.is_ascii_digit())
+            .next()
+            .unwrap_or("")
+            .parse::<u64>()
+    });
+    assert!(
+        matches!(usec, Some(Ok(n)) if n > 0),
+        "no MONOTONIC_USEC= with RELOADING=1: {said:?}"
+    );
     // Still at work: a watchdog ping after the reload.
     let reloaded = said.len();
     read_notes_until(&socket, &mut said, Duration::from_secs(30), |s| {

@@ -236,9 +236,16 @@ impl Lookout<'_> {
 }
 
 /// What systemd expects of a reload, though nothing is reloaded: the configuration is read at
-/// start only.
+/// start only. `RELOADING=1` comes with `MONOTONIC_USEC=` in the same message, as systemd 253
+/// and later require of a `Type=notify-reload` service.
 fn answer_hangup() {
-    notify(&[sd_notify::NotifyState::Reloading]);
+    match sd_notify::NotifyState::monotonic_usec_now() {
+        Ok(now) => notify(&[sd_notify::NotifyState::Reloading, now]),
+        Err(e) => {
+            tracing::debug!("cannot read the monotonic clock for MONOTONIC_USEC: {e}");
+            notify(&[sd_notify::NotifyState::Reloading]);
+        }
+    }
     tracing::info!(
         "SIGHUP: nothing to reload (the configuration is read at start; restart the daemon to apply a change); the run goes on"
     );
