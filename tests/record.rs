@@ -130,10 +130,17 @@ fn bad_configs_and_missing_cameras_are_clear_errors() {
     let rig = tmp.path().join("rig.toml");
     let cases = [
         (format!("{DUMMY_DEPTH}exposure = 3\n"), 1, "exposure"),
+        // A URI no driver can ever open is refused before any camera opens (issue 48); a
+        // well-formed one of a camera not there fails the recording.
         (
             "[depth]\nbackend = \"openni2\"\nuri = \"no-such-camera\"\n".to_owned(),
-            2,
+            1,
             "no-such-camera",
+        ),
+        (
+            "[depth]\nbackend = \"openni2\"\nuri = \"1d27/0601@250/250\"\n".to_owned(),
+            2,
+            "1d27/0601@250/250",
         ),
         (
             format!("{DUMMY_DEPTH}[color]\nbackend = \"v4l2\"\ndevice = \"/dev/video99\"\n"),

@@ -464,6 +464,31 @@ mod tests {
         Config::parse(text, Path::new("rig.toml"))
     }
 
+    /// Issue 48 item 4: a URI no OpenNI2 driver can take is refused at start (OpenNI2 says
+    /// "no device" for it as for a camera merely absent); well-formed ones are taken.
+    #[test]
+    fn openni2_uris_that_can_never_open_are_refused() {
+        for bad in [
+            "no-such-camera",
+            "/dev/video0",
+            "1d27/0601",
+            "1d27/0601@x/1",
+            "://x",
+            "",
+        ] {
+            let e = parse(&format!("[depth]\nbackend = \"openni2\"\nuri = {bad:?}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("depth.uri") && e.contains("no OpenNI2 device URI"),
+                "{bad}: {e}"
+            );
+        }
+        for good in ["Dummy", "1d27/0601@3/7", "2bc5/0401@1/12", "freenect://0"] {
+            parse(&format!("[depth]\nbackend = \"openni2\"\nuri = {good:?}\n")).unwrap();
+        }
+    }
+
     /// Issue 37 item 5: a missing `.oni` recording named as the depth camera is refused (it
     /// cannot come later, as a camera can).
     #[test]
@@ -601,23 +626,24 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("depth.backend") && e.contains("kinect"), "{e}");
-        let e = parse("[depth]\nbackend = \"openni2\"\nuri = \"x\"\nfps = -3\n")
+        let e = parse("[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\nfps = -3\n")
             .unwrap_err()
             .to_string();
         assert!(e.contains("depth.fps"), "{e}");
-        let e = parse("[depth]\nbackend = \"openni2\"\nuri = \"x\"\n[sync]\ntolerance_ms = 40\n")
+        let e = parse("[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n[sync]\ntolerance_ms = 40\n")
             .unwrap_err()
             .to_string();
         assert!(e.contains("sync.tolerance_ms") && e.contains("16.7"), "{e}");
-        let e =
-            parse("[depth]\nbackend = \"openni2\"\nuri = \"x\"\n[color]\nbackend = \"aravis\"\naddress = \"cam\"\n")
-                .unwrap_err()
-                .to_string();
+        let e = parse(
+            "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n[color]\nbackend = \"aravis\"\naddress = \"cam\"\n",
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("color.address"), "{e}");
         let e = parse("[depth]\nbackend = \"openni2\"\n").unwrap_err().to_string();
         assert!(e.contains("uri"), "{e}");
         // Below one frame a second is no camera mode (it used to mean "any mode").
-        let e = parse("[depth]\nbackend = \"openni2\"\nuri = \"x\"\nfps = 0.4\n")
+        let e = parse("[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\nfps = 0.4\n")
             .unwrap_err()
             .to_string();
         assert!(e.contains("depth.fps") && e.contains("0.4"), "{e}");

@@ -619,7 +619,10 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(1024))]
+        // PROPTEST_CASES runs more (a long search for rare cases); 1024 by default.
+        #![proptest_config(ProptestConfig::with_cases(
+            std::env::var("PROPTEST_CASES").ok().and_then(|n| n.parse().ok()).unwrap_or(1024)
+        ))]
 
         #[test]
         fn pairs_follow_the_truth_and_account_for_every_frame(

@@ -544,16 +544,8 @@ fn read_table(table: toml::Table) -> Result<Arc<dyn DepthConfig>, TableError> {
     if d.uri.is_none() && d.serial.is_none() {
         return Err(TableError::new("", "needs `uri` or `serial` to say which camera"));
     }
-    // A recording played as the camera cannot come later, as a camera can.
     if let Some(uri) = &d.uri {
-        let path = Path::new(uri);
-        let recording = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("oni"));
-        if recording && !path.is_file() {
-            return Err(TableError::new(
-                "uri",
-                format!("names the recording {uri:?}, which is not a file"),
-            ));
-        }
+        check_uri(uri)?;
     }
     if !(1..=4096).contains(&d.width) || !(1..=4096).contains(&d.height) {
         return Err(TableError::new(
@@ -572,6 +564,45 @@ fn read_table(table: toml::Table) -> Result<Arc<dyn DepthConfig>, TableError> {
         },
         fps,
     }))
+}
+
+/// A URI OpenNI2 could open, told apart before opening (OpenNI2 says "no device" both for a
+/// camera absent now and for a URI no driver can ever take): a recording (`.oni`, which must
+/// be there: it cannot come later, as a camera can), Debian's test device (`Dummy`), a USB
+/// camera as the PrimeSense and Orbbec drivers name it (`VID/PID@BUS/ADDRESS`, as
+/// `mousepose devices` lists it), or another driver's `scheme://...`.
+fn check_uri(uri: &str) -> Result<(), TableError> {
+    let path = Path::new(uri);
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("oni")) {
+        if !path.is_file() {
+            return Err(TableError::new(
+                "uri",
+                format!("names the recording {uri:?}, which is not a file"),
+            ));
+        }
+        return Ok(());
+    }
+    let hex = |s: &str| (1..=4).contains(&s.len()) && s.chars().all(|c| c.is_ascii_hexdigit());
+    let number = |s: &str| (1..=3).contains(&s.len()) && s.chars().all(|c| c.is_ascii_digit());
+    let usb = uri.split_once('@').is_some_and(|(ids, place)| {
+        ids.split_once('/').is_some_and(|(v, p)| hex(v) && hex(p))
+            && place.split_once('/').is_some_and(|(b, a)| number(b) && number(a))
+    });
+    let scheme = uri.split_once("://").is_some_and(|(scheme, _)| {
+        !scheme.is_empty()
+            && scheme
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '+' || c == '-')
+    });
+    if uri == "Dummy" || usb || scheme {
+        return Ok(());
+    }
+    Err(TableError::new(
+        "uri",
+        format!(
+            "{uri:?} is no OpenNI2 device URI: give a camera's VID/PID@BUS/ADDRESS as `mousepose devices` lists it, \"Dummy\", a driver's scheme://..., or a .oni recording (or `serial` instead)"
+        ),
+    ))
 }
 
 impl CameraConfig for OpenNiCamera {

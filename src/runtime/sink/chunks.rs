@@ -715,8 +715,21 @@ impl ChunkPoses {
 
     fn open(&mut self, index: usize) {
         self.close();
+        self.close_empty_until(index);
         self.index = index;
         self.create();
+    }
+
+    /// Gives each chunk begun before `index` that no pose reached (begun by the recorder, as
+    /// when a camera came back, and ended before a pose of its time came out) its empty
+    /// `poses.csv` and its `summary.json`: a chunk without a pose is a complete chunk too.
+    fn close_empty_until(&mut self, index: usize) {
+        let first = self.index.wrapping_add(1);
+        for empty in first..index {
+            self.index = empty;
+            self.create();
+            self.close();
+        }
     }
 
     /// Creates the current chunk's `poses.csv` (anew: what was there holds no row); on
@@ -846,6 +859,7 @@ impl Sink for ChunkPoses {
 
     fn flush(&mut self) -> Result<(), StageError> {
         self.close();
+        self.close_empty_until(self.chunks.count());
         self.write_unwritten(true);
         Ok(())
     }
@@ -929,5 +943,51 @@ mod tests {
         let (r, f) = pose(7, true);
         live.set_latest(r, f);
         assert!(live.with_color.is_none());
+    }
+
+    /// Issue 48: a chunk that no pose reached (begun by the recorder, as when a camera came
+    /// back, and over before a pose of its time came out) is complete with an empty
+    /// `poses.csv` and its `summary.json`, in the middle of a run and at its end.
+    #[test]
+    fn a_chunk_no_pose_reached_is_complete_with_its_summary() {
+        let tmp = tempfile::tempdir().unwrap();
+        let chunks = Chunks::new(ChunkPlan {
+            root: tmp.path().to_owned(),
+            period: Duration::from_secs(3600),
+            record: false,
+            cameras: Vec::new(),
+            meta: chunk_meta(String::new(), None, None),
+            body_model: PathBuf::from("body.forest"),
+            paw_model: None,
+        });
+        let mut sink = ChunkPoses::new(Arc::clone(&chunks), Arc::default());
+        let write = |sink: &mut ChunkPoses, seq| {
+            let (record, frames) = pose(seq, false);
+            sink.write(Fused {
+                record,
+                frames,
+                overlay: None,
+            })
+            .unwrap();
+        };
+        write(&mut sink, 10);
+        // The recorder begins chunks 1 and 2 (a camera back twice); poses go on in chunk 2.
+        assert_eq!(chunks.split(20), 1);
+        assert_eq!(chunks.split(30), 2);
+        write(&mut sink, 31);
+        // And chunk 3, just before the end.
+        assert_eq!(chunks.split(40), 3);
+        sink.flush().unwrap();
+        let rows: Vec<u64> = (0..4)
+            .map(|k| {
+                let dir = chunks.dir(k);
+                let lines = std::fs::read_to_string(dir.join("poses.csv")).unwrap().lines().count() as u64;
+                let summary: serde_json::Value =
+                    serde_json::from_slice(&std::fs::read(dir.join(CHUNK_SUMMARY_FILE)).unwrap()).unwrap();
+                assert_eq!(summary["rows"].as_u64(), Some(lines - 1), "chunk {k}");
+                lines - 1
+            })
+            .collect();
+        assert_eq!(rows, [1, 0, 1, 0]);
     }
 }
