@@ -130,6 +130,14 @@ const LATE_RELEARN_NS: u64 = 5_000_000_000;
 const BLOCK_NS: u64 = 1_000_000_000;
 /// Blocks the line is fitted over (the recent past only, so that the fit follows changes).
 const BLOCKS: usize = 30;
+/// The least device time between two blocks' minima for their slope to count: each minimum
+/// lies anywhere in its block, and two of them a tenth of a second apart, one of them a few
+/// hundred microseconds above the envelope (its block had no frame as little delayed), made a
+/// slope of thousands of ppm that moved frames seconds later by a third of a frame interval.
+const MIN_SLOPE_SPAN_NS: f64 = 2e9;
+/// The largest drift a camera clock has (crystals are within about 100 ppm): a steeper slope
+/// is the fit's error, not the clock's.
+const MAX_DRIFT: f64 = 1e-3;
 
 impl ClockModel {
     /// Adds a frame's stamp.
@@ -199,12 +207,19 @@ impl ClockModel {
         let mut slopes: Vec<f64> = Vec::with_capacity(pts.len() * pts.len() / 2);
         for (i, a) in pts.iter().enumerate() {
             for b in &pts[i + 1..] {
-                if b.0 > a.0 {
+                if b.0 - a.0 >= MIN_SLOPE_SPAN_NS {
                     slopes.push((b.1 - a.1) / (b.0 - a.0));
                 }
             }
         }
-        let slope = crate::core::median(&mut slopes).unwrap_or(0.0);
+        // Until the blocks span enough time to tell a drift, the clocks are taken not to drift
+        // (tens of ppm are microseconds over a few seconds) and the line is the lower envelope.
+        let Some(slope) = crate::core::median(&mut slopes) else {
+            let lowest = pts.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+            self.line = Some((lowest, 0.0, t0));
+            return;
+        };
+        let slope = slope.clamp(-MAX_DRIFT, MAX_DRIFT);
         let mut intercepts: Vec<f64> = pts.iter().map(|p| p.1 - slope * p.0).collect();
         self.line = crate::core::median(&mut intercepts).map(|a| (a, slope, t0));
     }
@@ -686,6 +701,55 @@ mod tests {
                 .sum();
             prop_assert_eq!(count, seqs.len());
             prop_assert_eq!(sync.pending(), (0, 0));
+        }
+    }
+
+    /// Issue 48: a case the property test above once failed on (depth frame 83 paired with
+    /// colour frame 82, where its true partner is 83), kept.
+    #[test]
+    fn regression_a_depth_frame_near_the_end_pairs_with_its_true_partner() {
+        let period = 1.0 / 30.0;
+        let jitter = [
+            0.46740479232607735,
+            0.18436038780135208,
+            0.2712741735085043,
+            0.3718709961186295,
+            0.11832275962176089,
+            0.486469745144515,
+            0.4006914570965276,
+            0.12636602710925002,
+            0.24463809696867694,
+            0.3568617876862545,
+            0.0912866105220433,
+            0.39509950030310587,
+            0.19231297501986797,
+            0.0,
+            0.24894670788143167,
+            0.0,
+            0.4432292628056722,
+        ];
+        let depth_drops = [false, false, true, false, false, true, false, true];
+        let d = stream(87, period, 0.0, 1_000_000_000, 0.0, 6.0, &jitter, &depth_drops);
+        let c = stream(
+            87,
+            period,
+            0.3048763248237374 * period,
+            1_000_000_000,
+            0.0,
+            3.0,
+            &jitter,
+            &[false],
+        );
+        for o in &run(SyncConfig::default(), &d, &c) {
+            if let SyncOutput::Pair(p) = o {
+                let t = d.iter().find(|x| x.1.seq == p.depth.stamp.seq).unwrap().0;
+                assert_eq!(
+                    p.color.as_ref().map(|f| f.stamp.seq),
+                    true_partner(&c, t, period),
+                    "depth frame {}",
+                    p.depth.stamp.seq
+                );
+            }
         }
     }
 
