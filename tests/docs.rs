@@ -1,9 +1,10 @@
 //! The README and the pages under `docs/`: a README a newcomer can follow (short, in short
-//! paragraphs, its measurements, design notes and test method on the pages it links), and no
-//! document or source file naming a file the repository does not hold.
+//! paragraphs, its measurements, design notes and test method on the pages it links), no
+//! document or source file naming a file the repository does not hold, and no document citing
+//! a module or item of the crate that `src/` does not hold.
 
 use crate::util::repo_root;
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
 use std::path::Path;
 
@@ -302,6 +303,209 @@ fn no_document_names_a_file_that_is_not_in_the_repository() {
     );
 }
 
+/// The crate's modules with a file under `src/` (`a::b` for `a/b.rs` and `a/b/mod.rs`, the
+/// root for `lib.rs`), each with the text of the files a cited item may be defined in: its own
+/// file, and for a folder's `mod.rs` every file under the folder too (it re-exports them).
+fn crate_modules() -> BTreeMap<Vec<String>, String> {
+    let files: Vec<String> = files_under("src").into_iter().filter(|f| f.ends_with(".rs")).collect();
+    let mut modules = BTreeMap::new();
+    for file in &files {
+        let rel = file.trim_start_matches("src/").trim_end_matches(".rs");
+        if rel == "main" {
+            continue;
+        }
+        let mut path: Vec<String> = rel.split('/').map(str::to_owned).collect();
+        let folder = path.last().is_some_and(|p| p == "mod") || rel == "lib";
+        if folder {
+            path.pop();
+        }
+        let dir = Path::new(file)
+            .parent()
+            .expect("a file under src/")
+            .to_string_lossy()
+            .into_owned();
+        let text: String = files
+            .iter()
+            .filter(|f| *f == file || (folder && f.starts_with(&format!("{dir}/"))))
+            .map(|f| read(f))
+            .collect();
+        modules.insert(path, text);
+    }
+    modules
+}
+
+/// Whether `text` defines an item `name` (a function, type, constant, static or module).
+fn defines(text: &str, name: &str) -> bool {
+    [
+        "fn",
+        "struct",
+        "enum",
+        "trait",
+        "type",
+        "const",
+        "static",
+        "mod",
+        "union",
+        "macro_rules!",
+    ]
+    .iter()
+    .any(|kind| mentions(text, &format!("{kind} {name}")))
+}
+
+/// Whether `text` holds `word` between non-identifier characters.
+fn mentions(text: &str, word: &str) -> bool {
+    let ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    text.match_indices(word)
+        .any(|(at, _)| !text[..at].ends_with(ident) && !text[at + word.len()..].starts_with(ident))
+}
+
+/// The names a document cites as code paths (`a::b`, `a::b::C`, `Type::method`) in its
+/// backticks outside fenced code blocks (those hold pictures and examples), with their lines;
+/// command lines in backticks (`cargo ...`) left out.
+fn cited_paths(text: &str) -> Vec<(usize, String)> {
+    let ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    let starts = |c: char| c.is_ascii_alphabetic() || c == '_';
+    let mut out = Vec::new();
+    for (number, line) in prose(text) {
+        for span in line.split('`').skip(1).step_by(2) {
+            if span.starts_with("cargo ") {
+                continue;
+            }
+            let chars: Vec<char> = span.chars().collect();
+            let mut i = 0;
+            while i < chars.len() {
+                if !starts(chars[i]) || (i > 0 && (ident(chars[i - 1]) || chars[i - 1] == ':')) {
+                    i += 1;
+                    continue;
+                }
+                let mut segments = Vec::new();
+                loop {
+                    let from = i;
+                    while i < chars.len() && ident(chars[i]) {
+                        i += 1;
+                    }
+                    segments.push(chars[from..i].iter().collect::<String>());
+                    let more = chars.get(i) == Some(&':')
+                        && chars.get(i + 1) == Some(&':')
+                        && chars.get(i + 2).is_some_and(|&c| starts(c));
+                    if !more {
+                        break;
+                    }
+                    i += 2;
+                }
+                if segments.len() > 1 {
+                    out.push((number, segments.join("::")));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Why `path` names nothing the crate holds, if it does not: a path from a layer (or from
+/// `crate::` or `mousepose::`) or from any module's name must lead through modules of `src/`
+/// to an item defined there (and a name after the item must appear in the same files); a
+/// path from a type (`Type::name`) needs the type defined in `src/` and the name in its files.
+/// Paths from external crates, `std`, and the integration tests' modules are left alone.
+fn unknown_code_name(
+    path: &str,
+    modules: &BTreeMap<Vec<String>, String>,
+    external: &BTreeSet<String>,
+) -> Option<String> {
+    let segments: Vec<String> = path.split("::").map(str::to_owned).collect();
+    let first = segments[0].as_str();
+    if first.starts_with(|c: char| c.is_ascii_uppercase()) {
+        let holders: Vec<&String> = modules.values().filter(|t| defines(t, first)).collect();
+        return match segments.get(1) {
+            _ if holders.is_empty() => Some(format!("no type `{first}` under src/")),
+            Some(name) if !holders.iter().any(|t| mentions(t, name)) => {
+                Some(format!("the files defining `{first}` do not name `{name}`"))
+            }
+            _ => None,
+        };
+    }
+    let (anchors, rest): (Vec<Vec<String>>, &[String]) = if first == "crate" || first == "mousepose" {
+        (vec![Vec::new()], &segments[1..])
+    } else if modules.contains_key(&segments[..1]) {
+        (vec![segments[..1].to_vec()], &segments[1..])
+    } else {
+        let ending: Vec<Vec<String>> = modules
+            .keys()
+            .filter(|m| m.last().is_some_and(|l| l == first))
+            .cloned()
+            .collect();
+        if ending.is_empty() {
+            let test = repo_root().join("tests").join(format!("{first}.rs"));
+            if external.contains(first) || test.exists() {
+                return None;
+            }
+            return Some(format!("no module `{first}` under src/"));
+        }
+        (ending, &segments[1..])
+    };
+    let mut why = Vec::new();
+    for mut module in anchors {
+        let mut at = 0;
+        while at < rest.len() && modules.contains_key(&[module.clone(), vec![rest[at].clone()]].concat()) {
+            module.push(rest[at].clone());
+            at += 1;
+        }
+        // A path of modules alone names a module that is there.
+        let item = rest.get(at)?;
+        let text = &modules[&module];
+        let name = module.join("::");
+        if !defines(text, item) {
+            why.push(format!("`{name}` defines no `{item}`"));
+        } else if let Some(next) = rest.get(at + 1).filter(|n| !mentions(text, n)) {
+            why.push(format!("`{name}` does not name `{next}`"));
+        } else {
+            return None;
+        }
+    }
+    Some(why.join("; "))
+}
+
+/// The names external code is reached by in Rust paths: the package's dependencies of every
+/// kind, `std` and its parts, and the C++ libraries the documents quote.
+fn external_names() -> BTreeSet<String> {
+    let manifest: toml::Table = read("Cargo.toml").parse().expect("Cargo.toml parses");
+    let mut tables = Vec::new();
+    for kind in ["dependencies", "dev-dependencies", "build-dependencies"] {
+        tables.push(manifest.get(kind));
+        if let Some(targets) = manifest.get("target").and_then(toml::Value::as_table) {
+            tables.extend(targets.values().map(|t| t.get(kind)));
+        }
+    }
+    let mut names: BTreeSet<String> = tables
+        .into_iter()
+        .flatten()
+        .filter_map(toml::Value::as_table)
+        .flat_map(|t| t.keys())
+        .map(|k| k.replace('-', "_"))
+        .collect();
+    names.extend(["std", "alloc", "cv", "clippy", "rustdoc"].map(str::to_owned));
+    names
+}
+
+#[test]
+fn no_document_cites_a_code_name_that_is_not_in_src() {
+    let modules = crate_modules();
+    let external = external_names();
+    let mut unknown = Vec::new();
+    for doc in documents() {
+        for (line, path) in cited_paths(&read(&doc)) {
+            if let Some(why) = unknown_code_name(&path, &modules, &external) {
+                unknown.push(format!("{doc}:{line}: `{path}`: {why}"));
+            }
+        }
+    }
+    assert!(
+        unknown.is_empty(),
+        "code names cited but not in src/:\n{}",
+        unknown.join("\n")
+    );
+}
+
 #[test]
 fn the_checks_of_this_module_see_what_they_look_for() {
     let names = markdown_names("see `docs/FORMATS.md`, README.md. and README.mdx");
@@ -317,5 +521,50 @@ fn the_checks_of_this_module_see_what_they_look_for() {
     assert_eq!(
         link_targets("[a](FIGURES.md#c) and [d](e)"),
         [(1, "FIGURES.md#c".to_owned()), (1, "e".to_owned())]
+    );
+    assert_eq!(
+        cited_paths("`engine::Failure`, `a::b(c)` and `cargo test x::y` `::std` `x::`\n```\n`p::q`\n```\n"),
+        [(1, "engine::Failure".to_owned()), (1, "a::b".to_owned())]
+    );
+    // Each kind of cited name, found and not found, in a small crate of three modules.
+    let modules: BTreeMap<Vec<String>, String> = [
+        (vec![], "pub mod engine;\n".to_owned()),
+        (
+            vec!["engine".to_owned()],
+            "pub enum Failure { User }\npub mod replay;\npub fn replay_with() {}\n".to_owned(),
+        ),
+        (
+            vec!["engine".to_owned(), "replay".to_owned()],
+            "pub fn replay_with() {}\n".to_owned(),
+        ),
+    ]
+    .into();
+    let external: BTreeSet<String> = ["serde".to_owned()].into();
+    let unknown = |p: &str| unknown_code_name(p, &modules, &external);
+    for known in [
+        "engine::replay",
+        "engine::Failure::User",
+        "replay::replay_with",
+        "crate::engine",
+        "Failure::User",
+        "serde::Serialize",
+    ] {
+        assert_eq!(unknown(known), None, "{known}");
+    }
+    assert_eq!(
+        unknown("watch::events").as_deref(),
+        Some("no module `watch` under src/")
+    );
+    assert_eq!(
+        unknown("engine::Failures").as_deref(),
+        Some("`engine` defines no `Failures`")
+    );
+    assert_eq!(
+        unknown("engine::Failure::Work").as_deref(),
+        Some("`engine` does not name `Work`")
+    );
+    assert_eq!(
+        unknown("Failures::User").as_deref(),
+        Some("no type `Failures` under src/")
     );
 }

@@ -1,10 +1,12 @@
 //! The layers of `src/` (see `src/lib.rs` and docs/ARCHITECTURE.md): imports only point
-//! down, modules form no cycle, and each external crate is used only in the layers its table
-//! row names (camera drivers in `src/runtime/` alone, clap in `src/app/` alone).
+//! down, neither modules nor files import each other in a circle, and each external crate is
+//! used only in the layers or modules its table row names (camera drivers in
+//! `src/runtime/capture/` alone, clap in `src/app/` alone).
 //!
-//! Read from the source text: every `crate::layer::module` path, and every path or `use` that
-//! starts with an external crate's name, outside a file's `#[cfg(test)]` module (unit tests may
-//! build their scenes with the synthesis engine).
+//! Read from the source text, outside a file's `#[cfg(test)]` module (unit tests may build
+//! their scenes with the synthesis engine): every `crate::layer::module` path; for the files,
+//! every `use` and path from `crate::`, `super::` or `self::`, resolved to the file it leads
+//! into; and every path or `use` that starts with an external crate's name.
 
 use crate::util::repo_root;
 use std::collections::{BTreeMap, BTreeSet};
@@ -148,11 +150,9 @@ fn imports_only_point_down_the_layers() {
     assert!(upward.is_empty(), "imports that do not point down: {upward:#?}");
 }
 
-#[test]
-fn modules_import_each_other_in_no_cycle() {
-    let graph = import_graph();
-    // Depth-first search for a back edge, over the modules (`layer::module`) and the layers'
-    // own `mod.rs` files.
+/// A cycle in `graph` (its nodes in order, the first repeated at the end), if it has one:
+/// depth-first search for a back edge. Edges to nodes that are not keys are left out.
+fn cycle_in(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
     fn visit(
         node: &str,
         graph: &BTreeMap<String, BTreeSet<String>>,
@@ -187,11 +187,266 @@ fn modules_import_each_other_in_no_cycle() {
     let mut state = BTreeMap::new();
     for node in graph.keys() {
         if !state.contains_key(node) {
-            if let Some(cycle) = visit(node, &graph, &mut state, &mut Vec::new()) {
-                panic!("modules import each other in a cycle: {}", cycle.join(" -> "));
+            if let Some(cycle) = visit(node, graph, &mut state, &mut Vec::new()) {
+                return Some(cycle);
             }
         }
     }
+    None
+}
+
+#[test]
+fn modules_import_each_other_in_no_cycle() {
+    // Over the modules (`layer::module`) and the layers' own `mod.rs` files.
+    if let Some(cycle) = cycle_in(&import_graph()) {
+        panic!("modules import each other in a cycle: {}", cycle.join(" -> "));
+    }
+}
+
+/// A file's module path from its place under `src/`: `a/b.rs` and `a/b/mod.rs` are `a::b`,
+/// `lib.rs` is the crate's root (no segment); `main.rs` is no module of the library.
+fn module_path(rel: &str) -> Option<Vec<String>> {
+    let rel = rel.strip_suffix(".rs")?;
+    if rel == "main" {
+        return None;
+    }
+    let mut parts: Vec<String> = rel.split('/').map(str::to_owned).collect();
+    if parts.last().is_some_and(|p| p == "mod") || rel == "lib" {
+        parts.pop();
+    }
+    Some(parts)
+}
+
+/// Whether `line` (trimmed) starts a `use` declaration, and whether it is a re-export
+/// (`pub use`, `pub(crate) use`, ...).
+fn use_declaration(line: &str) -> Option<bool> {
+    if line.starts_with("use ") {
+        return Some(false);
+    }
+    let rest = line.strip_prefix("pub")?;
+    let rest = match rest.strip_prefix('(') {
+        Some(scoped) => &scoped[scoped.find(')')? + 1..],
+        None => rest,
+    };
+    rest.starts_with(" use ").then_some(true)
+}
+
+/// `tree` (the text of a `use` declaration after `use`) as the paths it names:
+/// `a::{b, c::{d as e, self}}` gives `a::b`, `a::c::d` and `a::c::self`.
+fn use_tree_paths(prefix: &str, tree: &str, out: &mut Vec<String>) {
+    let mut depth = 0;
+    let mut start = 0;
+    let mut items = Vec::new();
+    for (at, c) in tree.char_indices() {
+        match c {
+            '{' => depth += 1,
+            '}' => depth -= 1,
+            ',' if depth == 0 => {
+                items.push(&tree[start..at]);
+                start = at + 1;
+            }
+            _ => {}
+        }
+    }
+    items.push(&tree[start..]);
+    for item in items.into_iter().map(str::trim).filter(|i| !i.is_empty()) {
+        match item.split_once('{') {
+            Some((head, group)) => {
+                let group = group.rsplit_once('}').map_or(group, |(g, _)| g);
+                use_tree_paths(&format!("{prefix}{head}"), group, out);
+            }
+            None => {
+                let path = item.split(" as ").next().unwrap_or(item).trim();
+                out.push(format!("{prefix}{path}"));
+            }
+        }
+    }
+}
+
+/// The paths a file's code names, each as its segments: every path of its `use` declarations
+/// (re-exports left out: a folder's `mod.rs` re-exporting its files' items is their index,
+/// not code of its own that uses them) and every other path (`x::y`) in its code. Unit-test
+/// modules and comment lines are left out.
+fn named_paths(code: &str) -> Vec<Vec<String>> {
+    let mut found = Vec::new();
+    let mut rest = String::new();
+    let mut lines = code.lines().map(str::trim).filter(|l| !l.starts_with("//"));
+    while let Some(line) = lines.next() {
+        let Some(reexport) = use_declaration(line) else {
+            rest.push_str(line);
+            rest.push('\n');
+            continue;
+        };
+        let mut declaration = line.to_owned();
+        while !declaration.contains(';') {
+            let Some(next) = lines.next() else { break };
+            declaration.push(' ');
+            declaration.push_str(next);
+        }
+        let (tree, after) = declaration.split_once(';').unwrap_or((&declaration, ""));
+        if !reexport {
+            let tree = &tree[tree.find("use ").unwrap_or(0) + "use ".len()..];
+            let mut paths = Vec::new();
+            use_tree_paths("", tree, &mut paths);
+            found.extend(paths);
+        }
+        rest.push_str(after);
+        rest.push('\n');
+    }
+    let ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    let chars: Vec<(usize, char)> = rest.char_indices().collect();
+    let mut i = 0;
+    while i < chars.len() {
+        let (at, c) = chars[i];
+        let starts =
+            (c.is_ascii_alphabetic() || c == '_') && (i == 0 || !(ident(chars[i - 1].1) || chars[i - 1].1 == ':'));
+        if !starts {
+            i += 1;
+            continue;
+        }
+        let mut end = i;
+        while end < chars.len() && (ident(chars[end].1) || chars[end].1 == ':') {
+            end += 1;
+        }
+        let stop = chars.get(end).map_or(rest.len(), |&(e, _)| e);
+        let path = rest[at..stop].trim_end_matches(':');
+        if path.contains("::") {
+            found.push(path.to_owned());
+        }
+        i = end;
+    }
+    found
+        .into_iter()
+        .map(|p| p.split("::").map(|s| s.trim().to_owned()).collect())
+        .collect()
+}
+
+/// The module a path named in module `from` leads into, as far as the modules with a file
+/// (`modules`) go: a path from `crate::`, `super::` or `self::`. `None` for any other path
+/// (an external crate, a type, a variable, or a child module named without `self::`: see
+/// [`file_graph`]).
+fn resolve(from: &[String], path: &[String], modules: &BTreeSet<Vec<String>>) -> Option<Vec<String>> {
+    let (mut at, rest) = match path.first()?.as_str() {
+        "crate" => (Vec::new(), &path[1..]),
+        "super" | "self" => {
+            let mut at = from.to_vec();
+            let mut rest = path;
+            while let Some(first) = rest.first() {
+                match first.as_str() {
+                    "super" => {
+                        at.pop()?;
+                    }
+                    "self" => {}
+                    _ => break,
+                }
+                rest = &rest[1..];
+            }
+            (at, rest)
+        }
+        _ => return None,
+    };
+    for segment in rest.iter().filter(|s| *s != "self") {
+        at.push(segment.clone());
+        if !modules.contains(&at) {
+            at.pop();
+            break;
+        }
+    }
+    Some(at)
+}
+
+/// Which file imports which: `files` are the files under `src/` (path relative to it, product
+/// code), the graph's nodes their paths. A folder's `mod.rs` naming a file inside the folder
+/// is not an import: the folder holds its files (its error type wraps theirs, it re-exports
+/// their items, and they use its items), so a circle is between files side by side or in
+/// different folders.
+fn file_graph(files: &[(String, String)]) -> BTreeMap<String, BTreeSet<String>> {
+    let file_of: BTreeMap<Vec<String>, &str> = files
+        .iter()
+        .filter_map(|(rel, _)| module_path(rel).map(|m| (m, rel.as_str())))
+        .collect();
+    let modules: BTreeSet<Vec<String>> = file_of.keys().cloned().collect();
+    let mut graph = BTreeMap::new();
+    for (rel, code) in files {
+        let Some(module) = module_path(rel) else { continue };
+        let imports: BTreeSet<String> = named_paths(code)
+            .iter()
+            .filter_map(|path| resolve(&module, path, &modules))
+            .filter(|to| !to.starts_with(&module))
+            .filter_map(|to| file_of.get(&to).map(|f| (*f).to_owned()))
+            .collect();
+        graph.insert(rel.clone(), imports);
+    }
+    graph
+}
+
+#[test]
+fn files_import_each_other_in_no_cycle() {
+    let src = repo_root().join("src");
+    let mut paths = Vec::new();
+    rust_files(&src, &mut paths);
+    let files: Vec<(String, String)> = paths
+        .iter()
+        .map(|p| {
+            let rel = p.strip_prefix(&src).expect("under src/").to_string_lossy().into_owned();
+            (rel, product_code(p))
+        })
+        .collect();
+    if let Some(cycle) = cycle_in(&file_graph(&files)) {
+        panic!("files import each other in a circle: {}", cycle.join(" -> "));
+    }
+}
+
+#[test]
+fn the_file_cycle_check_sees_a_circle() {
+    let files = |d: &str| -> Vec<(String, String)> {
+        [
+            ("lib.rs", "pub mod a;\n"),
+            ("main.rs", "use mousepose::a::b::Thing;\n"),
+            (
+                "a/mod.rs",
+                "mod b;\nmod c;\nmod d;\npub use b::Thing;\nuse self::c::helper;\npub struct Error;\n",
+            ),
+            (
+                "a/b.rs",
+                "use super::c::{self, Other as O};\n// crate::a::d::D, in a comment\npub struct Thing;\n",
+            ),
+            ("a/c.rs", "pub fn helper() -> crate::a::d::D {\n    D\n}\n"),
+            ("a/d.rs", d),
+        ]
+        .map(|(rel, code)| (rel.to_owned(), code.to_owned()))
+        .to_vec()
+    };
+    let edges = |graph: &BTreeMap<String, BTreeSet<String>>| -> Vec<String> {
+        graph
+            .iter()
+            .flat_map(|(from, to)| to.iter().map(move |t| format!("{from} -> {t}")))
+            .collect()
+    };
+    let clean = file_graph(&files("use super::Error;\npub struct D;\n"));
+    assert_eq!(
+        edges(&clean),
+        ["a/b.rs -> a/c.rs", "a/c.rs -> a/d.rs", "a/d.rs -> a/mod.rs"]
+    );
+    assert_eq!(cycle_in(&clean), None);
+    let circle = file_graph(&files("use super::{\n    b::Thing,\n    Error,\n};\npub struct D;\n"));
+    assert_eq!(
+        cycle_in(&circle).map(|c| c.join(" -> ")).as_deref(),
+        Some("a/b.rs -> a/c.rs -> a/d.rs -> a/b.rs")
+    );
+    // `self::`, `super::super::` and `crate::` resolve as far as the modules go.
+    let modules: BTreeSet<Vec<String>> = [vec![], vec!["a".to_owned()], vec!["a".to_owned(), "b".to_owned()]].into();
+    let path = |p: &str| p.split("::").map(str::to_owned).collect::<Vec<_>>();
+    assert_eq!(
+        resolve(&path("a"), &path("crate::a::b::Thing::new"), &modules),
+        Some(path("a::b"))
+    );
+    assert_eq!(
+        resolve(&path("a::b"), &path("super::super::a::Error"), &modules),
+        Some(path("a"))
+    );
+    assert_eq!(resolve(&path("a"), &path("self::b"), &modules), Some(path("a::b")));
+    assert_eq!(resolve(&path("a"), &path("std::fs::read"), &modules), None);
 }
 
 /// The command line's shared helpers (printing, argument parsers): every command may use them.
@@ -293,13 +548,14 @@ const ALL: &[&str] = &[
 /// one).
 const COMMANDS: &[&str] = &["engine", "app"];
 
-/// Which layers may use each dependency of the package (by its name in Rust code). Every
-/// dependency has a row, so a new one is placed deliberately.
+/// Which layers (`runtime`) or modules (`runtime::capture`: that module's files) may use each
+/// dependency of the package (by its name in Rust code). Every dependency has a row, so a new
+/// one is placed deliberately.
 const EXTERNAL: &[(&str, &[&str])] = &[
-    // Camera drivers: the capture sources and the device listing of the runtime only.
-    ("openni2", &["runtime"]),
-    ("aravis_ext", &["runtime"]),
-    ("v4l", &["runtime"]),
+    // Camera drivers: the capture sources alone (the device listing asks them).
+    ("openni2", &["runtime::capture"]),
+    ("aravis_ext", &["runtime::capture"]),
+    ("v4l", &["runtime::capture"]),
     // The daemon's HTTP server, metrics and frame-path channels: the runtime.
     ("tokio", &["runtime"]),
     ("axum", &["runtime"]),
@@ -321,11 +577,13 @@ const EXTERNAL: &[(&str, &[&str])] = &[
     ("clap", &["app"]),
     // OpenCV: segmentation and calibration maths, and the commands that read images.
     ("opencv", &["vision", "engine", "app"]),
+    // CSV: the readers and writers of tables and sessions, `poses.csv`, and the batch's and
+    // report's tables.
+    ("csv", &["io", "runtime::sink", "engine::batch", "engine::report"]),
     // Data, maths, formats and logging: anywhere.
     ("serde", ALL),
     ("serde_json", ALL),
     ("toml", ALL),
-    ("csv", ALL),
     ("thiserror", ALL),
     ("tracing", ALL),
     ("nalgebra", ALL),
@@ -393,6 +651,15 @@ fn crate_uses_are_found_in_paths_and_use_lines_only() {
         "let rand = 4; rand_chacha::ChaCha8Rng::seed_from_u64(rand)",
         "rand"
     ));
+    assert!(allowed("runtime::capture", &["runtime::capture"]));
+    assert!(allowed("io::table", &["io", "runtime::sink"]));
+    assert!(!allowed("runtime::devices", &["runtime::capture"]));
+    assert!(!allowed("runtime", &["runtime::capture"]));
+}
+
+/// Whether a table row's `places` (layers, or modules `layer::module`) hold `unit`.
+fn allowed(unit: &str, places: &[&str]) -> bool {
+    places.iter().any(|p| *p == layer(unit) || *p == unit)
 }
 
 #[test]
@@ -414,7 +681,7 @@ fn external_crates_are_used_only_in_their_layers() {
         let Some(unit) = unit_of(&src, &path) else { continue };
         let code = product_code(&path);
         for (name, layers) in EXTERNAL {
-            if !layers.contains(&layer(&unit)) && uses_crate(&code, name) {
+            if !allowed(&unit, layers) && uses_crate(&code, name) {
                 let file = path.strip_prefix(&src).expect("under src/").display().to_string();
                 misplaced.push(format!("{file} uses {name}, allowed only in {layers:?}"));
             }

@@ -123,39 +123,51 @@ pub const PAW_PRIMITIVES: usize = 4;
 /// The skin of a posed mouse, in the world frame. The first [`PAW_PRIMITIVES`] primitives are
 /// the paws in [`Joint::PAWS`] order.
 pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
-    let s = m.scale;
-    let g = m.girth;
     let mut out = Vec::with_capacity(40);
-    let j = |joint: Joint| m.joint(joint);
-    let ellipsoid = |centre: Point3<f64>, axes: Rotation3<f64>, radii: [f64; 3]| Shape::Ellipsoid {
+    paw_skin(m, &mut out);
+    leg_skin(m, &mut out);
+    head_skin(m, &mut out);
+    trunk_skin(m, &mut out);
+    tail_skin(m, &mut out);
+    out
+}
+
+fn ellipsoid(centre: Point3<f64>, axes: Rotation3<f64>, radii: [f64; 3]) -> Shape {
+    Shape::Ellipsoid {
         centre,
         axes,
         radii: Vector3::new(radii[0], radii[1], radii[2]),
-    };
+    }
+}
 
-    // Paws first (their order is the paw boxes' order).
+/// The paws, first in the skin (their order is the paw boxes' order).
+fn paw_skin(m: &MouseInstance, out: &mut Vec<Primitive>) {
+    let s = m.scale;
     for paw in Joint::PAWS {
         let limb = LIMBS.iter().find(|l| l.paw == paw).copied().unwrap_or(LIMBS[0]);
         let heading = super::mouse::flat_heading(m.frame(limb.root));
         let (len, width) = if limb.fore { (3.2, 2.4) } else { (4.8, 2.6) };
         let axes = Rotation3::from_axis_angle(&Vector3::z_axis(), heading.y.atan2(heading.x));
         out.push(Primitive {
-            shape: ellipsoid(j(paw), axes, [len * s, width * s, PAW_SOLE_MM * s]),
+            shape: ellipsoid(m.joint(paw), axes, [len * s, width * s, PAW_SOLE_MM * s]),
             labeller: Labeller::Fixed(Part::trunk(limb.fore, limb.side)),
             material: Material::Paw,
         });
     }
+}
 
-    // Legs, folded under the trunk.
+/// Legs, folded under the trunk.
+fn leg_skin(m: &MouseInstance, out: &mut Vec<Primitive>) {
+    let s = m.scale;
     for limb in LIMBS {
         let root = if limb.fore {
             m.shoulders[usize::from(limb.side == Side::Right)]
         } else {
-            j(limb.root)
+            m.joint(limb.root)
         };
         let part = Part::trunk(limb.fore, limb.side);
         let radii = if limb.fore { [2.6, 1.8, 1.3] } else { [3.6, 2.2, 1.5] };
-        let points = [root, j(limb.upper), j(limb.lower), j(limb.paw)];
+        let points = [root, m.joint(limb.upper), m.joint(limb.lower), m.joint(limb.paw)];
         for (k, r) in radii.into_iter().enumerate() {
             out.push(Primitive {
                 shape: Shape::Capsule {
@@ -168,10 +180,14 @@ pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
             });
         }
     }
+}
 
-    // Head: cranium and muzzle, ears.
-    let head = j(Joint::Head);
-    let snout = j(Joint::Snout);
+/// Head: cranium and muzzle, ears.
+fn head_skin(m: &MouseInstance, out: &mut Vec<Primitive>) {
+    let s = m.scale;
+    let g = m.girth;
+    let head = m.joint(Joint::Head);
+    let snout = m.joint(Joint::Snout);
     let head_frame = *m.frame(Joint::Head);
     let muzzle_len = (snout - head).norm();
     out.push(Primitive {
@@ -198,16 +214,20 @@ pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
         let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), side.sign() * 1.0);
         let tilt = Rotation3::from_axis_angle(&Vector3::y_axis(), -0.8);
         out.push(Primitive {
-            shape: ellipsoid(j(ear), head_frame * turn * tilt, [1.2 * s, 4.0 * s, 4.0 * s]),
+            shape: ellipsoid(m.joint(ear), head_frame * turn * tilt, [1.2 * s, 4.0 * s, 4.0 * s]),
             labeller: Labeller::Fixed(Part::Head),
             material: Material::Skin,
         });
     }
+}
 
-    // Trunk: overlapping ellipsoids along the spine from the tail base to the neck, their
-    // width and height following a mouse's profile (widest over the hips, narrowing to the
-    // neck), so the outline from above is smooth. Centres sit a little below the spine, which
-    // runs along the back.
+/// Trunk: overlapping ellipsoids along the spine from the tail base to the neck, their
+/// width and height following a mouse's profile (widest over the hips, narrowing to the
+/// neck), so the outline from above is smooth. Centres sit a little below the spine, which
+/// runs along the back.
+fn trunk_skin(m: &MouseInstance, out: &mut Vec<Primitive>) {
+    let s = m.scale;
+    let g = m.girth;
     let spine = [
         Joint::TailBase,
         Joint::Rump,
@@ -215,9 +235,12 @@ pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
         Joint::Withers,
         Joint::Neck,
     ];
-    let lengths: Vec<f64> = spine.windows(2).map(|w| (j(w[1]) - j(w[0])).norm()).collect();
+    let lengths: Vec<f64> = spine
+        .windows(2)
+        .map(|w| (m.joint(w[1]) - m.joint(w[0])).norm())
+        .collect();
     let total: f64 = lengths.iter().sum();
-    let mid_back = j(Joint::MidBack);
+    let mid_back = m.joint(Joint::MidBack);
     let front_normal = m.frame(Joint::Withers) * Vector3::x();
     const SAMPLES: usize = 10;
     for k in 0..SAMPLES {
@@ -240,19 +263,22 @@ pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
     let neck_frame = *m.frame(Joint::Neck);
     out.push(Primitive {
         shape: ellipsoid(
-            j(Joint::Neck) - neck_frame * Vector3::new(-s, 0.0, 1.6 * s),
+            m.joint(Joint::Neck) - neck_frame * Vector3::new(-s, 0.0, 1.6 * s),
             neck_frame,
             [7.5 * s, 8.0 * s * g, 7.0 * s],
         ),
         labeller: Labeller::Neck {
-            origin: j(Joint::Neck),
+            origin: m.joint(Joint::Neck),
             forward: neck_frame * Vector3::x(),
             left: neck_frame * Vector3::y(),
         },
         material: Material::Fur,
     });
+}
 
-    // Tail: tapering capsules along its centre line.
+/// Tail: tapering capsules along its centre line.
+fn tail_skin(m: &MouseInstance, out: &mut Vec<Primitive>) {
+    let s = m.scale;
     for k in 0..TAIL_POINTS - 1 {
         let t = k as f64 / (TAIL_POINTS - 2) as f64;
         out.push(Primitive {
@@ -265,7 +291,6 @@ pub fn skin(m: &MouseInstance) -> Vec<Primitive> {
             material: Material::Skin,
         });
     }
-    out
 }
 
 /// The point at arc length `at` along the spine polyline `spine` (segment lengths `lengths`)

@@ -191,6 +191,27 @@ fn rot_yaw_pitch(yaw: f64, pitch: f64) -> Rotation3<f64> {
     Rotation3::from_axis_angle(&Vector3::z_axis(), yaw) * Rotation3::from_axis_angle(&Vector3::y_axis(), -pitch)
 }
 
+/// A pose being built: each joint's position and frame, in the mouse frame.
+struct Posing {
+    joints: JointPositions,
+    frames: [Rotation3<f64>; crate::core::skeleton::JOINT_COUNT],
+}
+
+impl Posing {
+    fn set(&mut self, j: Joint, p: Point3<f64>, r: Rotation3<f64>) {
+        self.joints[j.index()] = p;
+        self.frames[j.index()] = r;
+    }
+
+    fn at(&self, j: Joint) -> Point3<f64> {
+        self.joints[j.index()]
+    }
+
+    fn frame(&self, j: Joint) -> Rotation3<f64> {
+        self.frames[j.index()]
+    }
+}
+
 /// Poses the mouse: forward kinematics in the mouse frame, then the placement into the world.
 pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
     // The placement's pitch and roll tilt the body; the paws stay planted and the legs
@@ -202,16 +223,51 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
     };
     let b = placement.bones.scaled(placement.scale);
     let s = placement.scale;
-    let mut joints = [Point3::origin(); crate::core::skeleton::JOINT_COUNT];
-    let mut frames = [Rotation3::identity(); crate::core::skeleton::JOINT_COUNT];
-    let set = |joints: &mut JointPositions, frames: &mut [Rotation3<f64>; 24], j: Joint, p, r| {
-        joints[j.index()] = p;
-        frames[j.index()] = r;
+    let mut posing = Posing {
+        joints: [Point3::origin(); crate::core::skeleton::JOINT_COUNT],
+        frames: [Rotation3::identity(); crate::core::skeleton::JOINT_COUNT],
     };
-
-    // Spine, from the rump forward.
-    let body_roll = Rotation3::from_axis_angle(&Vector3::x_axis(), -params.roll);
     let rump = Point3::new(0.0, 0.0, params.rump_height * s);
+    pose_spine(&mut posing, params, &b, s, rump);
+    let tail = pose_tail(&mut posing, params, &b, s, rump);
+
+    // Ears on the head, hips on the rump.
+    let head = posing.at(Joint::Head);
+    let head_frame = posing.frame(Joint::Head);
+    let rump_frame = posing.frame(Joint::Rump);
+    for (joint, side) in [(Joint::LeftEar, Side::Left), (Joint::RightEar, Side::Right)] {
+        let p = head + head_frame * Vector3::new(-b.ear_back, side.sign() * b.ear_side, b.ear_up);
+        posing.set(joint, p, head_frame);
+    }
+    for (joint, side) in [(Joint::LeftHip, Side::Left), (Joint::RightHip, Side::Right)] {
+        let p = rump + rump_frame * Vector3::new(0.0, side.sign() * b.hip_side, -b.hip_down);
+        posing.set(joint, p, rump_frame);
+    }
+    let withers = posing.at(Joint::Withers);
+    let withers_frame = posing.frame(Joint::Withers);
+    let shoulders = [Side::Left, Side::Right].map(|side| {
+        withers + withers_frame * Vector3::new(b.shoulder_forward, side.sign() * b.shoulder_side, -b.shoulder_down)
+    });
+    pose_limbs(&mut posing, params, &b, s, &shoulders);
+
+    place(
+        MouseInstance {
+            joints: posing.joints,
+            frames: posing.frames,
+            tail,
+            shoulders,
+            scale: s,
+            girth: placement.girth,
+            behaviour: params.behaviour,
+        },
+        placement,
+    )
+}
+
+/// Spine, from the `rump` forward. The head may not dip into the glass: it is lifted (less
+/// head pitch) until the snout clears.
+fn pose_spine(posing: &mut Posing, params: &PoseParams, b: &BoneLengths, s: f64, rump: Point3<f64>) {
+    let body_roll = Rotation3::from_axis_angle(&Vector3::x_axis(), -params.roll);
     let chain = [
         (Joint::MidBack, b.mid_back_rump),
         (Joint::Withers, b.withers_mid_back),
@@ -219,18 +275,17 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
         (Joint::Head, b.head_neck),
         (Joint::Snout, b.snout_head),
     ];
-    // The head may not dip into the glass: lift it (less head pitch) until the snout clears.
     let mut pitch = params.pitch;
     for _ in 0..40 {
         let mut q = body_roll * rot_yaw_pitch(0.0, params.trunk_pitch);
-        set(&mut joints, &mut frames, Joint::Rump, rump, q);
+        posing.set(Joint::Rump, rump, q);
         let mut p = rump;
         for (k, (joint, len)) in chain.into_iter().enumerate() {
             q *= rot_yaw_pitch(params.yaw[k], pitch[k]);
             p += q * Vector3::new(len, 0.0, 0.0);
-            set(&mut joints, &mut frames, joint, p, q);
+            posing.set(joint, p, q);
         }
-        if joints[Joint::Snout.index()].z >= 5.0 * s && joints[Joint::Head.index()].z >= 8.0 * s {
+        if posing.at(Joint::Snout).z >= 5.0 * s && posing.at(Joint::Head).z >= 8.0 * s {
             break;
         }
         pitch[2] += 0.03;
@@ -238,10 +293,20 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
         pitch[4] += 0.05;
     }
     // The head's frame is that of the muzzle (head to snout).
-    frames[Joint::Head.index()] = frames[Joint::Snout.index()];
+    posing.frames[Joint::Head.index()] = posing.frame(Joint::Snout);
+}
 
-    // Tail base: straight back from the rump, dropping towards the floor.
-    let rump_frame = frames[Joint::Rump.index()];
+/// The tail's base straight back from the `rump`, dropping towards the floor, and the tail
+/// from it: an arc of constant curvature lying on the floor, lifted near its base. Returns
+/// the tail's points.
+fn pose_tail(
+    posing: &mut Posing,
+    params: &PoseParams,
+    b: &BoneLengths,
+    s: f64,
+    rump: Point3<f64>,
+) -> [Point3<f64>; TAIL_POINTS] {
+    let rump_frame = posing.frame(Joint::Rump);
     let back_flat = flat_heading(&rump_frame);
     let back_dir = Rotation3::from_axis_angle(&Vector3::z_axis(), params.tail_yaw * 0.5) * -back_flat;
     let tail_base_height = (params.tail_lift + 4.0 * s).max(2.5 * s);
@@ -249,15 +314,8 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
     let run = (b.rump_tail_base.powi(2) - drop.powi(2)).max(0.0).sqrt();
     let tail_base = rump + back_dir * run - Vector3::z() * drop;
     let tail_heading = back_dir.y.atan2(back_dir.x) + params.tail_yaw * 0.5;
-    set(
-        &mut joints,
-        &mut frames,
-        Joint::TailBase,
-        tail_base,
-        rot_yaw_pitch(tail_heading + PI, 0.0),
-    );
+    posing.set(Joint::TailBase, tail_base, rot_yaw_pitch(tail_heading + PI, 0.0));
 
-    // Tail: an arc of constant curvature lying on the floor, lifted near its base.
     let mut tail = [tail_base; TAIL_POINTS];
     let seg = b.tail / (TAIL_POINTS - 1) as f64;
     let mut heading = tail_heading;
@@ -275,33 +333,17 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
             z,
         );
     }
-    set(
-        &mut joints,
-        &mut frames,
-        Joint::TailTip,
-        tail[TAIL_POINTS - 1],
-        rot_yaw_pitch(heading + PI, 0.0),
-    );
+    posing.set(Joint::TailTip, tail[TAIL_POINTS - 1], rot_yaw_pitch(heading + PI, 0.0));
+    tail
+}
 
-    // Ears on the head, hips on the rump.
-    let head = joints[Joint::Head.index()];
-    let head_frame = frames[Joint::Head.index()];
-    for (joint, side) in [(Joint::LeftEar, Side::Left), (Joint::RightEar, Side::Right)] {
-        let p = head + head_frame * Vector3::new(-b.ear_back, side.sign() * b.ear_side, b.ear_up);
-        set(&mut joints, &mut frames, joint, p, head_frame);
-    }
-    for (joint, side) in [(Joint::LeftHip, Side::Left), (Joint::RightHip, Side::Right)] {
-        let p = rump + rump_frame * Vector3::new(0.0, side.sign() * b.hip_side, -b.hip_down);
-        set(&mut joints, &mut frames, joint, p, rump_frame);
-    }
-    let withers = joints[Joint::Withers.index()];
-    let withers_frame = frames[Joint::Withers.index()];
-    let shoulders = [Side::Left, Side::Right].map(|side| {
-        withers + withers_frame * Vector3::new(b.shoulder_forward, side.sign() * b.shoulder_side, -b.shoulder_down)
-    });
-
-    // Limbs: paws at their stance points plus offsets, then inverse kinematics.
-    let snout = joints[Joint::Snout.index()];
+/// Limbs: paws at their stance points plus offsets (fore paws raised towards the chest and
+/// the face), then inverse kinematics from the `shoulders` and the hips.
+fn pose_limbs(posing: &mut Posing, params: &PoseParams, b: &BoneLengths, s: f64, shoulders: &[Point3<f64>; 2]) {
+    let snout = posing.at(Joint::Snout);
+    let head_frame = posing.frame(Joint::Head);
+    let withers_frame = posing.frame(Joint::Withers);
+    let rump_frame = posing.frame(Joint::Rump);
     for (k, limb) in LIMBS.iter().enumerate() {
         let [dx, dy, dz] = params.paw_offsets[k];
         let sign = limb.side.sign();
@@ -311,10 +353,10 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
                 flat_heading(&withers_frame),
             )
         } else {
-            (joints[limb.root.index()], flat_heading(&rump_frame))
+            (posing.at(limb.root), flat_heading(&rump_frame))
         };
         let left = Vector3::z().cross(&fwd);
-        let lengths = limb.lengths_in(&b);
+        let lengths = limb.lengths_in(b);
         let mut paw = stance_paw(&root, &fwd, sign, limb.fore, s, PAW_SOLE_MM)
             + fwd * dx * s
             + left * sign * dy * s
@@ -332,23 +374,10 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
             hind_limb(&root, &paw, lengths, params.ankle_angle, &fwd, &Vector3::z())
         };
         let limb_frame = if limb.fore { withers_frame } else { rump_frame };
-        set(&mut joints, &mut frames, limb.upper, upper, limb_frame);
-        set(&mut joints, &mut frames, limb.lower, lower, limb_frame);
-        set(&mut joints, &mut frames, limb.paw, paw, limb_frame);
+        posing.set(limb.upper, upper, limb_frame);
+        posing.set(limb.lower, lower, limb_frame);
+        posing.set(limb.paw, paw, limb_frame);
     }
-
-    place(
-        MouseInstance {
-            joints,
-            frames,
-            tail,
-            shoulders,
-            scale: s,
-            girth: placement.girth,
-            behaviour: params.behaviour,
-        },
-        placement,
-    )
 }
 
 impl crate::core::skeleton::LimbChain {

@@ -330,19 +330,11 @@ pub enum SynthSessionError {
     },
 }
 
-/// Generates a session into `dir` (which must exist and be empty), calling `progress` with
-/// the number of frames done out of the total.
-///
-/// # Errors
-/// When the session cannot be written.
-pub fn write_session(
-    dir: &Path,
-    spec: &SessionSpec,
-    mut progress: impl FnMut(u64, u64),
-) -> Result<SessionSummary, SynthSessionError> {
-    let rig = Rig::default_rig().with_color_binning(spec.color_binning);
-    let mut meta = SessionMeta::new(SYNTHETIC_CREATED, SessionSource::Synthetic, cameras(&rig, spec));
-    meta.rig = Some(rig);
+/// The session's description: the synthetic rig's cameras, the colour camera's latency, and
+/// what made it (seed, length, noise, activity, tail) under `[synthetic]`.
+fn session_meta(rig: &Rig, spec: &SessionSpec) -> SessionMeta {
+    let mut meta = SessionMeta::new(SYNTHETIC_CREATED, SessionSource::Synthetic, cameras(rig, spec));
+    meta.rig = Some(*rig);
     if spec.color {
         meta.color_latency_ns = Some(((COLOR_LATENCY_MS - DEPTH_LATENCY_MS) * 1e6) as i64);
     }
@@ -376,6 +368,21 @@ pub fn write_session(
         }
     }
     meta.synthetic = Some(table);
+    meta
+}
+
+/// Generates a session into `dir` (which must exist and be empty), calling `progress` with
+/// the number of frames done out of the total.
+///
+/// # Errors
+/// When the session cannot be written.
+pub fn write_session(
+    dir: &Path,
+    spec: &SessionSpec,
+    mut progress: impl FnMut(u64, u64),
+) -> Result<SessionSummary, SynthSessionError> {
+    let rig = Rig::default_rig().with_color_binning(spec.color_binning);
+    let meta = session_meta(&rig, spec);
 
     let (shots, drop_events, end_host) = plan(spec);
     let mut writer = SessionWriter::create(dir, &meta)?;

@@ -414,59 +414,12 @@ fn draw_clutter(
             y1: b[3].min(ry + rh),
         });
     };
-    // Glare: a soft bright band along one edge of the view, the glass's edge catching the LEDs.
     if rng.gen_bool(0.7) {
-        let along = rng.gen_range(20.0f32..70.0);
-        let across = rng.gen_range(2.5f32..7.0);
-        let side = rng.gen_range(0..4);
-        let inset = rng.gen_range(0.0f32..10.0);
-        let (cx, cy, angle) = match side {
-            0 => (rx + rng.gen_range(0.0..rw), ry + inset, 0.0),
-            1 => (rx + rng.gen_range(0.0..rw), ry + rh - inset, 0.0),
-            2 => (rx + inset, ry + rng.gen_range(0.0..rh), std::f32::consts::FRAC_PI_2),
-            _ => (
-                rx + rw - inset,
-                ry + rng.gen_range(0.0..rh),
-                std::f32::consts::FRAC_PI_2,
-            ),
-        };
-        let level = rng.gen_range(90.0f32..230.0);
-        let blob = Blob {
-            cx,
-            cy,
-            half_length: along / 2.0,
-            sigma: across / 2.0,
-            angle: angle + rng.gen_range(-0.2..0.2),
-            colour: [level * 0.95, level, level * 1.05],
-            cover: 1.0,
-        };
-        place(MarkKind::Glare, blob, img);
+        place(MarkKind::Glare, glare(region, rng), img);
     }
     // Spots and scratches anywhere in the view: on the glass, so over the mouse too.
     for _ in 0..rng.gen_range(0..=3) {
-        let (cx, cy) = (rx + rng.gen_range(0.0..rw), ry + rng.gen_range(0.0..rh));
-        let level = rng.gen_range(70.0f32..190.0);
-        let blob = if rng.gen_bool(0.7) {
-            Blob {
-                cx,
-                cy,
-                half_length: rng.gen_range(0.0f32..4.0),
-                sigma: rng.gen_range(2.0f32..6.0),
-                angle: rng.gen_range(0.0..std::f32::consts::PI),
-                colour: [level, level * 0.97, level * 0.92],
-                cover: rng.gen_range(0.3f32..0.8),
-            }
-        } else {
-            Blob {
-                cx,
-                cy,
-                half_length: rng.gen_range(6.0f32..20.0),
-                sigma: rng.gen_range(0.6f32..1.2),
-                angle: rng.gen_range(0.0..std::f32::consts::PI),
-                colour: [level; 3],
-                cover: 0.0,
-            }
-        };
+        let blob = glass_mark(region, rng);
         let kind = if blob.sigma < 1.5 {
             MarkKind::Scratch
         } else {
@@ -474,26 +427,92 @@ fn draw_clutter(
         };
         place(kind, blob, img);
     }
-    // A pale patch of belly fur, under the back between the mid back and the rump.
-    if rng.gen_bool(0.5) {
-        let t = rng.gen_range(0.0..1.0);
-        let a = m.joint(Joint::MidBack);
-        let b = m.joint(Joint::Rump);
-        let on_belly = nalgebra::Point3::new(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, 0.0);
-        if let Some(p) = camera.project_world(&on_belly) {
-            let blob = Blob {
-                cx: p.x as f32,
-                cy: p.y as f32,
-                half_length: rng.gen_range(0.0f32..6.0),
-                sigma: rng.gen_range(3.0f32..7.0),
-                angle: rng.gen_range(0.0..std::f32::consts::PI),
-                colour: [150.0, 122.0, 116.0].map(|c| c * rng.gen_range(0.6f32..1.0)),
-                cover: 0.8,
-            };
-            place(MarkKind::BellySpot, blob, img);
-        }
+    if rng.gen_bool(0.5)
+        && let Some(blob) = belly_patch(camera, m, rng)
+    {
+        place(MarkKind::BellySpot, blob, img);
     }
     marks
+}
+
+/// Glare: a soft bright band along one edge of the view (`region`), the glass's edge
+/// catching the LEDs.
+fn glare(region: Region, rng: &mut impl Rng) -> Blob {
+    let (rx, ry) = (region.x0 as f32, region.y0 as f32);
+    let (rw, rh) = (region.width as f32, region.height as f32);
+    let along = rng.gen_range(20.0f32..70.0);
+    let across = rng.gen_range(2.5f32..7.0);
+    let side = rng.gen_range(0..4);
+    let inset = rng.gen_range(0.0f32..10.0);
+    let (cx, cy, angle) = match side {
+        0 => (rx + rng.gen_range(0.0..rw), ry + inset, 0.0),
+        1 => (rx + rng.gen_range(0.0..rw), ry + rh - inset, 0.0),
+        2 => (rx + inset, ry + rng.gen_range(0.0..rh), std::f32::consts::FRAC_PI_2),
+        _ => (
+            rx + rw - inset,
+            ry + rng.gen_range(0.0..rh),
+            std::f32::consts::FRAC_PI_2,
+        ),
+    };
+    let level = rng.gen_range(90.0f32..230.0);
+    Blob {
+        cx,
+        cy,
+        half_length: along / 2.0,
+        sigma: across / 2.0,
+        angle: angle + rng.gen_range(-0.2..0.2),
+        colour: [level * 0.95, level, level * 1.05],
+        cover: 1.0,
+    }
+}
+
+/// A spot (round, partly covering) or a scratch (long and thin, adding light) anywhere in
+/// the view (`region`).
+fn glass_mark(region: Region, rng: &mut impl Rng) -> Blob {
+    let (rx, ry) = (region.x0 as f32, region.y0 as f32);
+    let (rw, rh) = (region.width as f32, region.height as f32);
+    let (cx, cy) = (rx + rng.gen_range(0.0..rw), ry + rng.gen_range(0.0..rh));
+    let level = rng.gen_range(70.0f32..190.0);
+    if rng.gen_bool(0.7) {
+        Blob {
+            cx,
+            cy,
+            half_length: rng.gen_range(0.0f32..4.0),
+            sigma: rng.gen_range(2.0f32..6.0),
+            angle: rng.gen_range(0.0..std::f32::consts::PI),
+            colour: [level, level * 0.97, level * 0.92],
+            cover: rng.gen_range(0.3f32..0.8),
+        }
+    } else {
+        Blob {
+            cx,
+            cy,
+            half_length: rng.gen_range(6.0f32..20.0),
+            sigma: rng.gen_range(0.6f32..1.2),
+            angle: rng.gen_range(0.0..std::f32::consts::PI),
+            colour: [level; 3],
+            cover: 0.0,
+        }
+    }
+}
+
+/// A pale patch of belly fur, under the back between the mid back and the rump; `None` when
+/// that point does not project into the camera.
+fn belly_patch(camera: &Camera, m: &MouseInstance, rng: &mut impl Rng) -> Option<Blob> {
+    let t = rng.gen_range(0.0..1.0);
+    let a = m.joint(Joint::MidBack);
+    let b = m.joint(Joint::Rump);
+    let on_belly = nalgebra::Point3::new(a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t, 0.0);
+    let p = camera.project_world(&on_belly)?;
+    Some(Blob {
+        cx: p.x as f32,
+        cy: p.y as f32,
+        half_length: rng.gen_range(0.0f32..6.0),
+        sigma: rng.gen_range(3.0f32..7.0),
+        angle: rng.gen_range(0.0..std::f32::consts::PI),
+        colour: [150.0, 122.0, 116.0].map(|c| c * rng.gen_range(0.6f32..1.0)),
+        cover: 0.8,
+    })
 }
 
 /// A soft elongated blob: a segment of `2 * half_length` pixels at `angle` with a Gaussian

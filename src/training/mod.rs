@@ -322,23 +322,7 @@ pub fn train(job: &TrainJob<'_>, progress: &dyn TrainProgress) -> Result<(Model,
         pixels: &set_t,
         thresholds: job.pixels.thresholds,
     };
-    let mut info = ModelInfo {
-        kind: match job.target {
-            Target::Body => ModelKind::Body,
-            Target::Parts => ModelKind::Parts,
-        },
-        software_version: env!("CARGO_PKG_VERSION").to_owned(),
-        skeleton_version: SKELETON_VERSION,
-        engine_version: ds_t.meta.engine_version,
-        train: job.from.as_ref().map_or(job.params, |m| m.info().train),
-        discriminative: dd.as_ref().map(|_| job.disc),
-        data: std::iter::once(provenance("train", &ds_t))
-            .chain(dd.as_ref().map(|(ds, ..)| provenance("discriminative", ds)))
-            .collect(),
-        pixels_per_image: job.pixels.per_image,
-        thresholds: job.pixels.thresholds,
-        training_seconds: 0.0,
-    };
+    let mut info = model_info(job, &ds_t, dd.as_ref().map(|(ds, ..)| ds));
     progress.stage("training", job.params.trees as u64);
     let (model, passes) = match job.target {
         Target::Body => {
@@ -399,6 +383,28 @@ pub fn train(job: &TrainJob<'_>, progress: &dyn TrainProgress) -> Result<(Model,
         }
     };
     Ok((model, passes))
+}
+
+/// The description of the model `job` trains on `ds_t` (and, for the discriminative pass,
+/// `ds_d`), its training time still to be set.
+fn model_info(job: &TrainJob<'_>, ds_t: &Dataset, ds_d: Option<&Dataset>) -> ModelInfo {
+    ModelInfo {
+        kind: match job.target {
+            Target::Body => ModelKind::Body,
+            Target::Parts => ModelKind::Parts,
+        },
+        software_version: env!("CARGO_PKG_VERSION").to_owned(),
+        skeleton_version: SKELETON_VERSION,
+        engine_version: ds_t.meta.engine_version,
+        train: job.from.as_ref().map_or(job.params, |m| m.info().train),
+        discriminative: ds_d.map(|_| job.disc),
+        data: std::iter::once(provenance("train", ds_t))
+            .chain(ds_d.map(|ds| provenance("discriminative", ds)))
+            .collect(),
+        pixels_per_image: job.pixels.per_image,
+        thresholds: job.pixels.thresholds,
+        training_seconds: 0.0,
+    }
 }
 
 /// Trains the baseline on D_t (or takes `from`) and, given D_d, refines it discriminatively.

@@ -200,24 +200,7 @@ pub fn evaluate(detector: &PawDetector, dir: &Path, binning: u32) -> Result<PawR
     if contact == 0 {
         return Err(PawDataError::NoPaws { path: dir.to_owned() });
     }
-    let count = |o: &[(f32, Outcome)], min: f32| {
-        let (mut t, mut f, mut n, mut err) = (0, [0usize; 3], 0, 0.0);
-        for &(s, outcome) in o {
-            if s < min {
-                continue;
-            }
-            match outcome {
-                Outcome::True(d) => {
-                    t += 1;
-                    err += d;
-                }
-                Outcome::False(at) => f[at as usize] += 1,
-                Outcome::Neutral => n += 1,
-            }
-        }
-        (t, f, n, err)
-    };
-    let (tp, fp_at, neutral, err) = count(&outcomes, f32::NEG_INFINITY);
+    let (tp, fp_at, neutral, err) = tally(&outcomes, f32::NEG_INFINITY);
     let fp = fp_at.iter().sum();
     let precision = ratio(tp, tp + fp);
     let recall = ratio(tp, contact);
@@ -226,24 +209,7 @@ pub fn evaluate(detector: &PawDetector, dir: &Path, binning: u32) -> Result<PawR
     } else {
         0.0
     };
-    let mut thresholds: Vec<f32> = curve_outcomes.iter().map(|o| o.0).collect();
-    thresholds.sort_by(f32::total_cmp);
-    thresholds.dedup();
-    // At most ~60 points, always including the extremes.
-    let stride = (thresholds.len() / 60).max(1);
-    let mut curve = Vec::new();
-    for (i, &t) in thresholds.iter().enumerate() {
-        if i % stride != 0 && i + 1 != thresholds.len() {
-            continue;
-        }
-        let (ct, cf, _, _) = count(&curve_outcomes, t);
-        let cf: usize = cf.iter().sum();
-        curve.push(CurvePoint {
-            min_score: f64::from(t),
-            precision: ratio(ct, ct + cf),
-            recall: ratio(ct, contact),
-        });
-    }
+    let curve = precision_recall_curve(&curve_outcomes, contact);
     Ok(PawReport {
         images,
         contact_paws: contact,
@@ -263,4 +229,47 @@ pub fn evaluate(detector: &PawDetector, dir: &Path, binning: u32) -> Result<PawR
         scales: detector.scales().to_vec(),
         curve,
     })
+}
+
+/// The outcomes scored at least `min`: true detections, false ones by where they lie
+/// ([`FalseAt`]), neutral ones, and the true ones' summed centre error (pixels).
+fn tally(o: &[(f32, Outcome)], min: f32) -> (usize, [usize; 3], usize, f64) {
+    let (mut t, mut f, mut n, mut err) = (0, [0usize; 3], 0, 0.0);
+    for &(s, outcome) in o {
+        if s < min {
+            continue;
+        }
+        match outcome {
+            Outcome::True(d) => {
+                t += 1;
+                err += d;
+            }
+            Outcome::False(at) => f[at as usize] += 1,
+            Outcome::Neutral => n += 1,
+        }
+    }
+    (t, f, n, err)
+}
+
+/// Precision and recall (of `contact` paws) at each score threshold the `outcomes` of every
+/// raw window give: at most ~60 points, always including the extremes.
+fn precision_recall_curve(outcomes: &[(f32, Outcome)], contact: usize) -> Vec<CurvePoint> {
+    let mut thresholds: Vec<f32> = outcomes.iter().map(|o| o.0).collect();
+    thresholds.sort_by(f32::total_cmp);
+    thresholds.dedup();
+    let stride = (thresholds.len() / 60).max(1);
+    let mut curve = Vec::new();
+    for (i, &t) in thresholds.iter().enumerate() {
+        if i % stride != 0 && i + 1 != thresholds.len() {
+            continue;
+        }
+        let (ct, cf, _, _) = tally(outcomes, t);
+        let cf: usize = cf.iter().sum();
+        curve.push(CurvePoint {
+            min_score: f64::from(t),
+            precision: ratio(ct, ct + cf),
+            recall: ratio(ct, contact),
+        });
+    }
+    curve
 }

@@ -440,36 +440,12 @@ pub fn analyse_in(
 ) -> Behaviour {
     let n = frames.len();
     let t: Vec<f64> = frames.iter().map(|f| f.t_s).collect();
-    let dt = if n > 1 {
-        let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
-        crate::core::median(&mut steps).unwrap_or(1.0 / 30.0)
-    } else {
-        1.0 / 30.0
-    };
+    let dt = frame_step(&t);
     let half = ((config.smooth_s / dt / 2.0).round() as usize).max(1);
     let centres: Vec<Option<Point2<f64>>> = frames.iter().map(|f| f.centre).collect();
     let smoothed = smooth(&centres, half);
-
-    // Speed: central differences of the smoothed centre; distance: its steps.
-    let speed: Vec<Option<f64>> = (0..n)
-        .map(|i| {
-            let (a, b) = (i.saturating_sub(1), (i + 1).min(n.saturating_sub(1)));
-            match (smoothed.get(a).copied().flatten(), smoothed.get(b).copied().flatten()) {
-                (Some(p), Some(q)) if t[b] > t[a] => Some((q - p).norm() / (t[b] - t[a])),
-                _ => None,
-            }
-        })
-        .collect();
-    let mut distance = 0.0;
-    let mut cumulative = Vec::with_capacity(n);
-    for i in 0..n {
-        if i > 0
-            && let (Some(p), Some(q)) = (smoothed[i - 1], smoothed[i])
-        {
-            distance += (q - p).norm();
-        }
-        cumulative.push(distance);
-    }
+    let speed = centre_speeds(&smoothed, &t);
+    let (distance, cumulative) = distances(&smoothed);
 
     let rear_flags: Vec<bool> = frames
         .iter()
@@ -480,121 +456,18 @@ pub fn analyse_in(
         .map(|i| !rear_flags[i] && speed[i].is_some_and(|v| (config.walk_min_mm_s..=config.walk_max_mm_s).contains(&v)))
         .collect();
     let (walking, walk_flags) = bouts(&t, &walk_flags, config.min_walk_s, dt);
-    let walk_id: Vec<Option<usize>> = {
-        let mut id = None;
-        let mut count = 0;
-        (0..n)
-            .map(|i| {
-                if walk_flags[i] {
-                    if i == 0 || !walk_flags[i - 1] {
-                        count += 1;
-                    }
-                    id = Some(count);
-                    id
-                } else {
-                    None
-                }
-            })
-            .collect()
-    };
+    let walk_id = walk_ids(&walk_flags);
 
-    let stance: [Vec<bool>; 4] = std::array::from_fn(|k| {
-        let planted: Vec<bool> = (0..n)
-            .map(|i| {
-                let Some(p) = frames[i].paws[k] else { return false };
-                // The step to the next frame (to the one before at the end): a paw stands
-                // at a frame when it stays put until the next.
-                let step = |j: usize| {
-                    let f = frames.get(j)?;
-                    let q = f.paws[k]?;
-                    let dt = (f.t_s - t[i]).abs();
-                    (dt > 0.0).then(|| (q - p).norm() / dt)
-                };
-                let Some(paw_speed) = step(i + 1).or_else(|| i.checked_sub(1).and_then(step)) else {
-                    return false;
-                };
-                let body = speed[i].unwrap_or(0.0);
-                paw_speed < config.stance_speed_factor * body + config.stance_margin_mm_s
-            })
-            .collect();
-        clean_stance(&planted)
-    });
+    let stance: [Vec<bool>; 4] = std::array::from_fn(|k| stance_of(frames, k, &t, &speed, config));
     let mut strides = Vec::new();
     let mut touchdowns: [Vec<(f64, Option<usize>)>; 4] = Default::default();
     for (k, flags) in stance.iter().enumerate() {
-        let phases: Vec<(usize, usize, Option<Point2<f64>>)> = runs(flags)
-            .into_iter()
-            .map(|(a, b)| {
-                let (sum, m) = frames[a..=b]
-                    .iter()
-                    .filter_map(|f| f.paws[k])
-                    .fold((Vector2::zeros(), 0.0), |(s, m), p| (s + p.coords, m + 1.0));
-                (a, b, (m > 0.0).then(|| Point2::from(sum / m)))
-            })
-            .collect();
-        touchdowns[k] = phases.iter().map(|&(a, _, _)| (t[a], walk_id[a])).collect();
-        for w in phases.windows(2) {
-            let ((a, b, pa), (c, _, pc)) = (w[0], w[1]);
-            // Both touchdowns in the same walking bout, and a stance that began after the
-            // paw was seen in swing (not at the start of the sequence).
-            if walk_id[a].is_none() || walk_id[a] != walk_id[c] || a == 0 {
-                continue;
-            }
-            let period = t[c] - t[a];
-            if !(config.min_stride_s..=config.max_stride_s).contains(&period) {
-                continue;
-            }
-            let (Some(pa), Some(pc)) = (pa, pc) else { continue };
-            strides.push(Stride {
-                paw: k,
-                start_s: t[a],
-                period_s: period,
-                length_mm: (pc - pa).norm(),
-                duty_factor: ((t[b] + dt - t[a]) / period).min(1.0),
-            });
-        }
+        let (mine, touched) = paw_strides(frames, k, flags, &t, &walk_id, dt, config);
+        strides.extend(mine);
+        touchdowns[k] = touched;
     }
-    let paws: [PawGait; 4] = std::array::from_fn(|k| {
-        let mine: Vec<&Stride> = strides.iter().filter(|s| s.paw == k).collect();
-        let med = |f: fn(&Stride) -> f64| crate::core::median(&mut mine.iter().map(|s| f(s)).collect::<Vec<_>>());
-        PawGait {
-            strides: mine.len(),
-            stride_length_mm: med(|s| s.length_mm),
-            cadence_hz: med(|s| 1.0 / s.period_s),
-            duty_factor: med(|s| s.duty_factor),
-        }
-    });
-
-    // Base of support: across the body axis, both paws of a girdle in stance, walking.
-    let support = |l: usize, r: usize| {
-        let mut widths: Vec<f64> = (0..n)
-            .filter(|&i| walk_flags[i] && stance[l][i] && stance[r][i])
-            .filter_map(|i| {
-                let f = &frames[i];
-                let (a, b, axis) = (f.paws[l]?, f.paws[r]?, f.axis?);
-                let across = Vector2::new(-axis.y, axis.x).try_normalize(1e-9)?;
-                Some((a - b).dot(&across).abs())
-            })
-            .collect();
-        crate::core::median(&mut widths)
-    };
-
-    // Inter-limb phase: each paw's touchdown within the left hind paw's strides.
-    let reference = 2;
-    let phase_to_left_hind: [Option<f64>; 4] = std::array::from_fn(|k| {
-        let mut angles = Vec::new();
-        for s in strides.iter().filter(|s| s.paw == reference) {
-            let end = s.start_s + s.period_s;
-            if let Some(&(tk, _)) = touchdowns[k].iter().find(|(tk, _)| *tk >= s.start_s && *tk < end) {
-                angles.push(std::f64::consts::TAU * (tk - s.start_s) / s.period_s);
-            }
-        }
-        if angles.is_empty() {
-            return None;
-        }
-        let (sx, sy) = angles.iter().fold((0.0, 0.0), |(x, y), a| (x + a.cos(), y + a.sin()));
-        Some((sy.atan2(sx) / std::f64::consts::TAU).rem_euclid(1.0))
-    });
+    let paws: [PawGait; 4] = std::array::from_fn(|k| gait_of(&strides, k));
+    let phase_to_left_hind = phases_to_left_hind(&strides, &touchdowns);
 
     let mut zone_s = [0.0; 4];
     let frames_out: Vec<FrameResult> = (0..n)
@@ -628,13 +501,195 @@ pub fn analyse_in(
         zone_s,
         rearing,
         walking,
-        base_of_support_fore_mm: support(0, 1),
-        base_of_support_hind_mm: support(2, 3),
+        base_of_support_fore_mm: base_of_support(frames, &walk_flags, &stance, 0, 1),
+        base_of_support_hind_mm: base_of_support(frames, &walk_flags, &stance, 2, 3),
         phase_to_left_hind,
         strides,
         paws,
         frames: frames_out,
     }
+}
+
+/// The frames' time step: the median of the positive steps between times `t` (1/30 s when
+/// there are none).
+fn frame_step(t: &[f64]) -> f64 {
+    if t.len() > 1 {
+        let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+        crate::core::median(&mut steps).unwrap_or(1.0 / 30.0)
+    } else {
+        1.0 / 30.0
+    }
+}
+
+/// Speed: central differences of the smoothed centre.
+fn centre_speeds(smoothed: &[Option<Point2<f64>>], t: &[f64]) -> Vec<Option<f64>> {
+    let n = t.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(n.saturating_sub(1)));
+            match (smoothed.get(a).copied().flatten(), smoothed.get(b).copied().flatten()) {
+                (Some(p), Some(q)) if t[b] > t[a] => Some((q - p).norm() / (t[b] - t[a])),
+                _ => None,
+            }
+        })
+        .collect()
+}
+
+/// Distance: the smoothed centre's steps, in all and up to each frame.
+fn distances(smoothed: &[Option<Point2<f64>>]) -> (f64, Vec<f64>) {
+    let n = smoothed.len();
+    let mut distance = 0.0;
+    let mut cumulative = Vec::with_capacity(n);
+    for i in 0..n {
+        if i > 0
+            && let (Some(p), Some(q)) = (smoothed[i - 1], smoothed[i])
+        {
+            distance += (q - p).norm();
+        }
+        cumulative.push(distance);
+    }
+    (distance, cumulative)
+}
+
+/// Each frame's walking bout, numbered from 1 (`None` outside one).
+fn walk_ids(walk_flags: &[bool]) -> Vec<Option<usize>> {
+    let mut id = None;
+    let mut count = 0;
+    (0..walk_flags.len())
+        .map(|i| {
+            if walk_flags[i] {
+                if i == 0 || !walk_flags[i - 1] {
+                    count += 1;
+                }
+                id = Some(count);
+                id
+            } else {
+                None
+            }
+        })
+        .collect()
+}
+
+/// Paw `k`'s stance per frame: planted when it moves slower than the body allows, cleaned
+/// of single-frame flickers.
+fn stance_of(frames: &[FrameInput], k: usize, t: &[f64], speed: &[Option<f64>], config: &BehaviourConfig) -> Vec<bool> {
+    let planted: Vec<bool> = (0..frames.len())
+        .map(|i| {
+            let Some(p) = frames[i].paws[k] else { return false };
+            // The step to the next frame (to the one before at the end): a paw stands
+            // at a frame when it stays put until the next.
+            let step = |j: usize| {
+                let f = frames.get(j)?;
+                let q = f.paws[k]?;
+                let dt = (f.t_s - t[i]).abs();
+                (dt > 0.0).then(|| (q - p).norm() / dt)
+            };
+            let Some(paw_speed) = step(i + 1).or_else(|| i.checked_sub(1).and_then(step)) else {
+                return false;
+            };
+            let body = speed[i].unwrap_or(0.0);
+            paw_speed < config.stance_speed_factor * body + config.stance_margin_mm_s
+        })
+        .collect();
+    clean_stance(&planted)
+}
+
+/// Paw `k`'s strides (from one touchdown to the next within a walking bout) and its
+/// touchdowns (time and walking bout).
+fn paw_strides(
+    frames: &[FrameInput],
+    k: usize,
+    flags: &[bool],
+    t: &[f64],
+    walk_id: &[Option<usize>],
+    dt: f64,
+    config: &BehaviourConfig,
+) -> (Vec<Stride>, Vec<(f64, Option<usize>)>) {
+    let phases: Vec<(usize, usize, Option<Point2<f64>>)> = runs(flags)
+        .into_iter()
+        .map(|(a, b)| {
+            let (sum, m) = frames[a..=b]
+                .iter()
+                .filter_map(|f| f.paws[k])
+                .fold((Vector2::zeros(), 0.0), |(s, m), p| (s + p.coords, m + 1.0));
+            (a, b, (m > 0.0).then(|| Point2::from(sum / m)))
+        })
+        .collect();
+    let mut strides = Vec::new();
+    for w in phases.windows(2) {
+        let ((a, b, pa), (c, _, pc)) = (w[0], w[1]);
+        // Both touchdowns in the same walking bout, and a stance that began after the
+        // paw was seen in swing (not at the start of the sequence).
+        if walk_id[a].is_none() || walk_id[a] != walk_id[c] || a == 0 {
+            continue;
+        }
+        let period = t[c] - t[a];
+        if !(config.min_stride_s..=config.max_stride_s).contains(&period) {
+            continue;
+        }
+        let (Some(pa), Some(pc)) = (pa, pc) else { continue };
+        strides.push(Stride {
+            paw: k,
+            start_s: t[a],
+            period_s: period,
+            length_mm: (pc - pa).norm(),
+            duty_factor: ((t[b] + dt - t[a]) / period).min(1.0),
+        });
+    }
+    let touchdowns = phases.iter().map(|&(a, _, _)| (t[a], walk_id[a])).collect();
+    (strides, touchdowns)
+}
+
+/// Paw `k`'s gait: the medians of its strides.
+fn gait_of(strides: &[Stride], k: usize) -> PawGait {
+    let mine: Vec<&Stride> = strides.iter().filter(|s| s.paw == k).collect();
+    let med = |f: fn(&Stride) -> f64| crate::core::median(&mut mine.iter().map(|s| f(s)).collect::<Vec<_>>());
+    PawGait {
+        strides: mine.len(),
+        stride_length_mm: med(|s| s.length_mm),
+        cadence_hz: med(|s| 1.0 / s.period_s),
+        duty_factor: med(|s| s.duty_factor),
+    }
+}
+
+/// Base of support: across the body axis, both paws of a girdle (`l`, `r`) in stance,
+/// walking.
+fn base_of_support(
+    frames: &[FrameInput],
+    walk_flags: &[bool],
+    stance: &[Vec<bool>; 4],
+    l: usize,
+    r: usize,
+) -> Option<f64> {
+    let mut widths: Vec<f64> = (0..frames.len())
+        .filter(|&i| walk_flags[i] && stance[l][i] && stance[r][i])
+        .filter_map(|i| {
+            let f = &frames[i];
+            let (a, b, axis) = (f.paws[l]?, f.paws[r]?, f.axis?);
+            let across = Vector2::new(-axis.y, axis.x).try_normalize(1e-9)?;
+            Some((a - b).dot(&across).abs())
+        })
+        .collect();
+    crate::core::median(&mut widths)
+}
+
+/// Inter-limb phase: each paw's touchdown within the left hind paw's strides.
+fn phases_to_left_hind(strides: &[Stride], touchdowns: &[Vec<(f64, Option<usize>)>; 4]) -> [Option<f64>; 4] {
+    let reference = 2;
+    std::array::from_fn(|k| {
+        let mut angles = Vec::new();
+        for s in strides.iter().filter(|s| s.paw == reference) {
+            let end = s.start_s + s.period_s;
+            if let Some(&(tk, _)) = touchdowns[k].iter().find(|(tk, _)| *tk >= s.start_s && *tk < end) {
+                angles.push(std::f64::consts::TAU * (tk - s.start_s) / s.period_s);
+            }
+        }
+        if angles.is_empty() {
+            return None;
+        }
+        let (sx, sy) = angles.iter().fold((0.0, 0.0), |(x, y), a| (x + a.cos(), y + a.sin()));
+        Some((sy.atan2(sx) / std::f64::consts::TAU).rem_euclid(1.0))
+    })
 }
 
 #[cfg(test)]

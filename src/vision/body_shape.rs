@@ -52,16 +52,7 @@ pub fn aligned(points: &[Point3<f64>]) -> Option<Aligned> {
     }
     let nf = n as f64;
     let centre = points.iter().fold(Vector2::zeros(), |a, p| a + Vector2::new(p.x, p.y)) / nf;
-    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for p in points {
-        let (dx, dy) = (p.x - centre.x, p.y - centre.y);
-        sxx += dx * dx;
-        sxy += dx * dy;
-        syy += dy * dy;
-    }
-    // The main direction of the 2x2 scatter.
-    let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-    let axis = Vector2::new(angle.cos(), angle.sin());
+    let axis = main_direction(points, centre);
     let across = Vector2::new(-axis.y, axis.x);
     let rows: Vec<[f64; 3]> = points
         .iter()
@@ -76,8 +67,40 @@ pub fn aligned(points: &[Point3<f64>]) -> Option<Aligned> {
     if top <= 1.0 {
         return None;
     }
-    // The body's ends: where 1 % of its height-weighted mass lies beyond (a thin tail on the
-    // floor weighs little, so it does not stretch the body).
+    let (lo, hi, mass) = body_ends(&rows);
+    let length = hi - lo;
+    if length < 1.0 || mass <= 0.0 {
+        return None;
+    }
+    let mut features = bin_features(&rows, lo, length, top);
+    let (skew, slope) = skew_and_slope(&rows);
+    features[FEATURES - 2] = skew;
+    features[FEATURES - 1] = slope;
+    Some(Aligned {
+        axis,
+        centre: Point2::from(centre),
+        features,
+    })
+}
+
+/// The main direction of the points' 2x2 scatter (in the floor plane) about `centre`.
+fn main_direction(points: &[Point3<f64>], centre: Vector2<f64>) -> Vector2<f64> {
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in points {
+        let (dx, dy) = (p.x - centre.x, p.y - centre.y);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    Vector2::new(angle.cos(), angle.sin())
+}
+
+/// The body's ends along its axis (`rows`: along, across, height): where 1 % of its
+/// height-weighted mass lies beyond (a thin tail on the floor weighs little, so it does not
+/// stretch the body); and that mass.
+fn body_ends(rows: &[[f64; 3]]) -> (f64, f64, f64) {
+    let n = rows.len();
     let mut by_s: Vec<(f64, f64)> = rows.iter().map(|r| (r[0], r[2].max(0.0))).collect();
     by_s.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mass: f64 = by_s.iter().map(|x| x.1).sum();
@@ -91,14 +114,16 @@ pub fn aligned(points: &[Point3<f64>]) -> Option<Aligned> {
         }
         by_s[n - 1].0
     };
-    let (lo, hi) = (quantile(0.01), quantile(0.99));
-    let length = hi - lo;
-    if length < 1.0 || mass <= 0.0 {
-        return None;
-    }
+    (quantile(0.01), quantile(0.99), mass)
+}
+
+/// The per-bin features along the body (from `lo`, over `length`; `top` its height): each
+/// bin's measures at the front half minus the mirrored bin's at the back.
+fn bin_features(rows: &[[f64; 3]], lo: f64, length: f64, top: f64) -> [f64; FEATURES] {
+    let nf = rows.len() as f64;
     // count, sum z, max z, sum t, sum t^2, low count
     let mut bins = [[0.0f64; 6]; BINS];
-    for r in &rows {
+    for r in rows {
         let b = (((r[0] - lo) / length * BINS as f64).floor().max(0.0) as usize).min(BINS - 1);
         let bin = &mut bins[b];
         bin[0] += 1.0;
@@ -130,10 +155,17 @@ pub fn aligned(points: &[Point3<f64>]) -> Option<Aligned> {
             features[k * PER_BIN + m] = plus[m] - minus[m];
         }
     }
+    features
+}
+
+/// The skewness of the points along the axis, and the correlation of height with the
+/// position along it.
+fn skew_and_slope(rows: &[[f64; 3]]) -> (f64, f64) {
+    let nf = rows.len() as f64;
     let mean_s = rows.iter().map(|r| r[0]).sum::<f64>() / nf;
     let mean_z = rows.iter().map(|r| r[2]).sum::<f64>() / nf;
     let (mut m2, mut m3, mut zz, mut sz) = (0.0, 0.0, 0.0, 0.0);
-    for r in &rows {
+    for r in rows {
         let (ds, dz) = (r[0] - mean_s, r[2] - mean_z);
         m2 += ds * ds;
         m3 += ds * ds * ds;
@@ -141,17 +173,13 @@ pub fn aligned(points: &[Point3<f64>]) -> Option<Aligned> {
         sz += ds * dz;
     }
     let sd = (m2 / nf).sqrt();
-    features[FEATURES - 2] = if sd > 1e-9 { m3 / nf / sd.powi(3) } else { 0.0 };
-    features[FEATURES - 1] = if m2 > 1e-9 && zz > 1e-9 {
+    let skew = if sd > 1e-9 { m3 / nf / sd.powi(3) } else { 0.0 };
+    let slope = if m2 > 1e-9 && zz > 1e-9 {
         sz / (m2 * zz).sqrt()
     } else {
         0.0
     };
-    Some(Aligned {
-        axis,
-        centre: Point2::from(centre),
-        features,
-    })
+    (skew, slope)
 }
 
 /// How the model was made, for the record.

@@ -105,66 +105,14 @@ pub fn activity(frames: &[FrameInput], b: &Behaviour, smooth_s: f64, config: &Ac
         .iter()
         .map(|f| f.axis.map(|a| a.y.atan2(a.x).to_degrees()))
         .collect();
-    // The heading unwrapped along each run of frames that have one, so a turn through 180
-    // degrees is not a jump of 360.
-    let mut unwrapped: Vec<Option<f64>> = vec![None; n];
-    for (i, h) in heading.iter().enumerate() {
-        let Some(h) = *h else { continue };
-        unwrapped[i] = Some(match i.checked_sub(1).and_then(|p| unwrapped[p]) {
-            Some(prev) => prev + wrap_deg(h - prev),
-            None => h,
-        });
-    }
+    let unwrapped = unwrap_headings(&heading);
     let dt = {
         let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
         crate::core::median(&mut steps).unwrap_or(1.0 / 30.0)
     };
     let half = ((smooth_s / dt / 2.0).round() as usize).max(1);
-    // Turned in all and net: the changes of the heading averaged over the smoothing window
-    // (within its run of frames), as the body turns; each frame's own estimate wobbles by a few
-    // degrees, and those wobbles added up frame by frame would count several times the real
-    // turning (on a real mouse, 3.6 times the turning of MoSeq's own angle).
-    let (mut turned, mut net) = (0.0, 0.0);
-    let mut previous: Option<f64> = None;
-    for i in 0..n {
-        if unwrapped[i].is_none() {
-            previous = None;
-            continue;
-        }
-        // The smoothing window's reach within the run of frames around this one that have a
-        // heading.
-        let lo = (i.saturating_sub(half)..=i)
-            .find(|&j| (j..=i).all(|k| unwrapped[k].is_some()))
-            .unwrap_or(i);
-        let hi = (i..=(i + half).min(n - 1))
-            .rev()
-            .find(|&j| (i..=j).all(|k| unwrapped[k].is_some()))
-            .unwrap_or(i);
-        // Centred on this frame, narrower toward the run's ends, so a steady turn counts in full.
-        let m = (i - lo).min(hi - i);
-        let mean = (i - m..=i + m).filter_map(|j| unwrapped[j]).sum::<f64>() / (2 * m + 1) as f64;
-        if let Some(p) = previous {
-            turned += (mean - p).abs();
-            net += mean - p;
-        }
-        previous = Some(mean);
-    }
-    // Angular speed: the unwrapped heading's change across the smoothing window, over the
-    // frames of the window that have a heading on both ends.
-    let angular: Vec<Option<f64>> = (0..n)
-        .map(|i| {
-            unwrapped[i]?;
-            let lo = (i.saturating_sub(half)..=i)
-                .find(|&j| unwrapped[j].is_some() && (j..=i).all(|k| unwrapped[k].is_some()))?;
-            let hi = (i..=(i + half).min(n - 1))
-                .rev()
-                .find(|&j| (i..=j).all(|k| unwrapped[k].is_some()))?;
-            if t[hi] <= t[lo] {
-                return None;
-            }
-            Some((unwrapped[hi]? - unwrapped[lo]?) / (t[hi] - t[lo]))
-        })
-        .collect();
+    let (turned, net) = turning(&unwrapped, half);
+    let angular = angular_speeds(&unwrapped, &t, half);
     let known: Vec<f64> = angular.iter().flatten().map(|a| a.abs()).collect();
     let mean_angular = (!known.is_empty()).then(|| known.iter().sum::<f64>() / known.len() as f64);
 
@@ -179,27 +127,7 @@ pub fn activity(frames: &[FrameInput], b: &Behaviour, smooth_s: f64, config: &Ac
             slow && angular[i].is_none_or(|a| a.abs() < config.immobile_turn_deg_s)
         })
         .collect();
-    let mut immobile = vec![false; n];
-    let mut immobility = Vec::new();
-    let mut start = None;
-    for i in 0..=n {
-        let on = i < n && still[i];
-        match (on, start) {
-            (true, None) => start = Some(i),
-            (false, Some(s)) => {
-                let bout = Bout {
-                    start_s: t[s],
-                    end_s: t[i - 1] + dt,
-                };
-                if bout.duration_s() >= config.min_immobile_s {
-                    immobile[s..i].iter_mut().for_each(|x| *x = true);
-                    immobility.push(bout);
-                }
-                start = None;
-            }
-            _ => {}
-        }
-    }
+    let (immobile, immobility) = immobility_bouts(&still, &t, dt, config.min_immobile_s);
     let freezing = immobility
         .iter()
         .filter(|x| x.duration_s() >= config.min_freezing_s)
@@ -226,6 +154,102 @@ pub fn activity(frames: &[FrameInput], b: &Behaviour, smooth_s: f64, config: &Ac
         freezing,
         stride_variability,
     }
+}
+
+/// The heading unwrapped along each run of frames that have one, so a turn through 180
+/// degrees is not a jump of 360.
+fn unwrap_headings(heading: &[Option<f64>]) -> Vec<Option<f64>> {
+    let mut unwrapped: Vec<Option<f64>> = vec![None; heading.len()];
+    for (i, h) in heading.iter().enumerate() {
+        let Some(h) = *h else { continue };
+        unwrapped[i] = Some(match i.checked_sub(1).and_then(|p| unwrapped[p]) {
+            Some(prev) => prev + wrap_deg(h - prev),
+            None => h,
+        });
+    }
+    unwrapped
+}
+
+/// Turned in all and net: the changes of the heading averaged over the smoothing window
+/// (`half` frames each side, within its run of frames), as the body turns; each frame's own
+/// estimate wobbles by a few degrees, and those wobbles added up frame by frame would count
+/// several times the real turning (on a real mouse, 3.6 times the turning of MoSeq's own
+/// angle).
+fn turning(unwrapped: &[Option<f64>], half: usize) -> (f64, f64) {
+    let n = unwrapped.len();
+    let (mut turned, mut net) = (0.0, 0.0);
+    let mut previous: Option<f64> = None;
+    for i in 0..n {
+        if unwrapped[i].is_none() {
+            previous = None;
+            continue;
+        }
+        // The smoothing window's reach within the run of frames around this one that have a
+        // heading.
+        let lo = (i.saturating_sub(half)..=i)
+            .find(|&j| (j..=i).all(|k| unwrapped[k].is_some()))
+            .unwrap_or(i);
+        let hi = (i..=(i + half).min(n - 1))
+            .rev()
+            .find(|&j| (i..=j).all(|k| unwrapped[k].is_some()))
+            .unwrap_or(i);
+        // Centred on this frame, narrower toward the run's ends, so a steady turn counts in full.
+        let m = (i - lo).min(hi - i);
+        let mean = (i - m..=i + m).filter_map(|j| unwrapped[j]).sum::<f64>() / (2 * m + 1) as f64;
+        if let Some(p) = previous {
+            turned += (mean - p).abs();
+            net += mean - p;
+        }
+        previous = Some(mean);
+    }
+    (turned, net)
+}
+
+/// Angular speed: the unwrapped heading's change across the smoothing window, over the
+/// frames of the window that have a heading on both ends.
+fn angular_speeds(unwrapped: &[Option<f64>], t: &[f64], half: usize) -> Vec<Option<f64>> {
+    let n = unwrapped.len();
+    (0..n)
+        .map(|i| {
+            unwrapped[i]?;
+            let lo = (i.saturating_sub(half)..=i)
+                .find(|&j| unwrapped[j].is_some() && (j..=i).all(|k| unwrapped[k].is_some()))?;
+            let hi = (i..=(i + half).min(n - 1))
+                .rev()
+                .find(|&j| (i..=j).all(|k| unwrapped[k].is_some()))?;
+            if t[hi] <= t[lo] {
+                return None;
+            }
+            Some((unwrapped[hi]? - unwrapped[lo]?) / (t[hi] - t[lo]))
+        })
+        .collect()
+}
+
+/// The runs of `still` frames lasting at least `min_s`: each frame's flag, and the bouts.
+fn immobility_bouts(still: &[bool], t: &[f64], dt: f64, min_s: f64) -> (Vec<bool>, Vec<Bout>) {
+    let n = still.len();
+    let mut immobile = vec![false; n];
+    let mut immobility = Vec::new();
+    let mut start = None;
+    for i in 0..=n {
+        let on = i < n && still[i];
+        match (on, start) {
+            (true, None) => start = Some(i),
+            (false, Some(s)) => {
+                let bout = Bout {
+                    start_s: t[s],
+                    end_s: t[i - 1] + dt,
+                };
+                if bout.duration_s() >= min_s {
+                    immobile[s..i].iter_mut().for_each(|x| *x = true);
+                    immobility.push(bout);
+                }
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    (immobile, immobility)
 }
 
 #[cfg(test)]

@@ -94,14 +94,6 @@ pub fn find_tail(mask: &[bool], width: usize, height: usize, search: &TailSearch
     if !body.iter().any(|&b| b) {
         return None;
     }
-    let neighbours = |k: usize| {
-        let (x, y) = ((k % width) as isize, (k / width) as isize);
-        NEIGHBOURS.iter().filter_map(move |&(dx, dy, step)| {
-            let (nx, ny) = (x + dx, y + dy);
-            (nx >= 0 && ny >= 0 && (nx as usize) < width && (ny as usize) < height)
-                .then(|| (ny as usize * width + nx as usize, step))
-        })
-    };
     let body_axis = body_axis(&body, width)?;
     let mut seen = vec![false; mask.len()];
     // Each pixel's place in the piece being measured (usize::MAX: not in it).
@@ -111,63 +103,13 @@ pub fn find_tail(mask: &[bool], width: usize, height: usize, search: &TailSearch
         if !mask[start] || body[start] || seen[start] {
             continue;
         }
-        // One piece of what the opening removed.
-        let mut piece = Vec::new();
-        let mut queue = VecDeque::from([start]);
-        seen[start] = true;
-        while let Some(k) = queue.pop_front() {
-            piece.push(k);
-            for (n, _) in neighbours(k) {
-                if mask[n] && !body[n] && !seen[n] {
-                    seen[n] = true;
-                    queue.push_back(n);
-                }
-            }
-        }
+        let piece = removed_piece(start, mask, &body, &mut seen, width, height);
         // A piece as long as the shortest tail has at least that length over sqrt 2 pixels
         // (all steps diagonal): most pieces (the rim's noise) have far fewer.
         if piece.len() as f64 * std::f64::consts::SQRT_2 < search.min_length_px {
             continue;
         }
-        // Its length along itself from the pixels that touch the body (Dijkstra, steps of 1
-        // and sqrt 2); a piece that does not touch the body is not a tail of this mouse.
-        let mut distance = vec![f64::INFINITY; piece.len()];
-        // (A pixel of an earlier piece keeps its place, but is never a neighbour of this
-        // one's: the pieces are 8-connected components.)
-        for (i, &k) in piece.iter().enumerate() {
-            place[k] = i;
-        }
-        let mut heap = BinaryHeap::new();
-        let mut base = (0.0, 0.0, 0usize);
-        for (i, &k) in piece.iter().enumerate() {
-            if neighbours(k).any(|(n, _)| body[n]) {
-                distance[i] = 0.0;
-                heap.push(Reverse(0.0, i));
-                base = (base.0 + (k % width) as f64, base.1 + (k / width) as f64, base.2 + 1);
-            }
-        }
-        if base.2 == 0 {
-            continue;
-        }
-        while let Some(Reverse(d, i)) = heap.pop() {
-            if d > distance[i] {
-                continue;
-            }
-            for (n, step) in neighbours(piece[i]) {
-                let j = place[n];
-                if j != usize::MAX && d + step < distance[j] {
-                    distance[j] = d + step;
-                    heap.push(Reverse(d + step, j));
-                }
-            }
-        }
-        let Some((far, length)) = distance
-            .iter()
-            .enumerate()
-            .filter(|(_, d)| d.is_finite())
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .map(|(i, d)| (piece[i], *d))
-        else {
+        let Some((base, far, length)) = measure_piece(&piece, &body, &mut place, width, height) else {
             continue;
         };
         let width_px = piece.len() as f64 / length.max(1.0);
@@ -191,6 +133,92 @@ pub fn find_tail(mask: &[bool], width: usize, height: usize, search: &TailSearch
         }
     }
     best
+}
+
+/// The 8 neighbours of pixel `k` of a `width` x `height` image, with the length of the step
+/// to each.
+fn neighbours(k: usize, width: usize, height: usize) -> impl Iterator<Item = (usize, f64)> {
+    let (x, y) = ((k % width) as isize, (k / width) as isize);
+    NEIGHBOURS.iter().filter_map(move |&(dx, dy, step)| {
+        let (nx, ny) = (x + dx, y + dy);
+        (nx >= 0 && ny >= 0 && (nx as usize) < width && (ny as usize) < height)
+            .then(|| (ny as usize * width + nx as usize, step))
+    })
+}
+
+/// One piece of what the opening removed from the mask: the 8-connected pixels of `mask`
+/// off the `body` around `start`, marked in `seen`.
+fn removed_piece(
+    start: usize,
+    mask: &[bool],
+    body: &[bool],
+    seen: &mut [bool],
+    width: usize,
+    height: usize,
+) -> Vec<usize> {
+    let mut piece = Vec::new();
+    let mut queue = VecDeque::from([start]);
+    seen[start] = true;
+    while let Some(k) = queue.pop_front() {
+        piece.push(k);
+        for (n, _) in neighbours(k, width, height) {
+            if mask[n] && !body[n] && !seen[n] {
+                seen[n] = true;
+                queue.push_back(n);
+            }
+        }
+    }
+    piece
+}
+
+/// A piece's length along itself from the pixels that touch the body (Dijkstra, steps of 1
+/// and sqrt 2): the sum of those pixels' coordinates and their count, the farthest pixel and
+/// its distance. `None` for a piece that does not touch the body (not a tail of this mouse).
+/// `place` is each pixel's place in the piece (`usize::MAX`: not in it).
+fn measure_piece(
+    piece: &[usize],
+    body: &[bool],
+    place: &mut [usize],
+    width: usize,
+    height: usize,
+) -> Option<((f64, f64, usize), usize, f64)> {
+    let mut distance = vec![f64::INFINITY; piece.len()];
+    // (A pixel of an earlier piece keeps its place, but is never a neighbour of this
+    // one's: the pieces are 8-connected components.)
+    for (i, &k) in piece.iter().enumerate() {
+        place[k] = i;
+    }
+    let mut heap = BinaryHeap::new();
+    let mut base = (0.0, 0.0, 0usize);
+    for (i, &k) in piece.iter().enumerate() {
+        if neighbours(k, width, height).any(|(n, _)| body[n]) {
+            distance[i] = 0.0;
+            heap.push(Reverse(0.0, i));
+            base = (base.0 + (k % width) as f64, base.1 + (k / width) as f64, base.2 + 1);
+        }
+    }
+    if base.2 == 0 {
+        return None;
+    }
+    while let Some(Reverse(d, i)) = heap.pop() {
+        if d > distance[i] {
+            continue;
+        }
+        for (n, step) in neighbours(piece[i], width, height) {
+            let j = place[n];
+            if j != usize::MAX && d + step < distance[j] {
+                distance[j] = d + step;
+                heap.push(Reverse(d + step, j));
+            }
+        }
+    }
+    let (far, length) = distance
+        .iter()
+        .enumerate()
+        .filter(|(_, d)| d.is_finite())
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(i, d)| (piece[i], *d))?;
+    Some((base, far, length))
 }
 
 /// The 8 neighbours of a pixel and the length of the step to each.

@@ -348,9 +348,26 @@ fn apply_settings(camera: &Camera, id: &str, config: &AravisConfig) -> Result<Pi
     if let Err(error) = camera.set_acquisition_mode(aravis::AcquisitionMode::Continuous) {
         tracing::debug!(message = "AcquisitionMode not set.", camera = %id, %error);
     }
+    apply_trigger(camera, id, &config.trigger)?;
+    apply_pixel_format(camera, id, config.pixel_format)?;
+    if let Some(region) = config.region {
+        apply_region(camera, id, region)?;
+    }
+    if let Some(exposure_us) = config.exposure_us {
+        apply_exposure(camera, id, exposure_us)?;
+    }
+    if let Some(gain_db) = config.gain_db {
+        apply_gain(camera, id, gain_db)?;
+    }
+    if let Some(fps) = config.fps {
+        apply_frame_rate(camera, id, fps)?;
+    }
+    Ok(config.pixel_format)
+}
 
-    // Trigger.
-    match &config.trigger {
+/// The trigger: free run, or the named line when the camera offers it.
+fn apply_trigger(camera: &Camera, id: &str, trigger: &Trigger) -> Result<(), CaptureError> {
+    match trigger {
         Trigger::FreeRun => {
             // A camera without trigger control always runs free.
             if camera.is_feature_available("TriggerMode").unwrap_or(false) {
@@ -372,9 +389,11 @@ fn apply_settings(camera: &Camera, id: &str, config: &AravisConfig) -> Result<Pi
                 .map_err(driver(id, format!("setting trigger source {line}")))?;
         }
     }
+    Ok(())
+}
 
-    // Pixel format.
-    let wanted = config.pixel_format;
+/// The pixel format, by the first of its GenICam names the camera offers, checked once set.
+fn apply_pixel_format(camera: &Camera, id: &str, wanted: PixelFormat) -> Result<(), CaptureError> {
     let available = camera
         .dup_available_pixel_formats_as_strings()
         .map_err(driver(id, "reading the pixel formats"))?;
@@ -400,98 +419,103 @@ fn apply_settings(camera: &Camera, id: &str, config: &AravisConfig) -> Result<Pi
             format!("the camera kept format 0x{:08x}", set.raw()),
         ));
     }
+    Ok(())
+}
 
-    // Region.
-    if let Some((x, y, width, height)) = config.region {
-        let (w_min, w_max) = camera.width_bounds().map_err(driver(id, "reading the width range"))?;
-        let (h_min, h_max) = camera.height_bounds().map_err(driver(id, "reading the height range"))?;
-        let (sensor_w, sensor_h) = camera.sensor_size().unwrap_or((w_max, h_max));
-        let allowed = format!(
-            "the camera allows width {w_min} to {w_max}, height {h_min} to {h_max}, within a {sensor_w}x{sensor_h} sensor"
-        );
-        let what = format!("region x {x} y {y} width {width} height {height}");
-        let fits = |offset: u32, len: u32, min: i32, max: i32, sensor: i32| {
-            i64::from(len) >= i64::from(min)
-                && i64::from(len) <= i64::from(max)
-                && i64::from(offset) + i64::from(len) <= i64::from(sensor.max(max))
-        };
-        if !fits(x, width, w_min, w_max, sensor_w) || !fits(y, height, h_min, h_max, sensor_h) {
-            return Err(refused(id, what, allowed));
-        }
-        let as_i32 = |v: u32| i32::try_from(v).unwrap_or(i32::MAX);
-        camera
-            .set_region(as_i32(x), as_i32(y), as_i32(width), as_i32(height))
-            .map_err(driver(id, format!("setting {what}")))?;
-        let got = camera.region().map_err(driver(id, "reading the region"))?;
-        if got != (as_i32(x), as_i32(y), as_i32(width), as_i32(height)) {
-            let (gx, gy, gw, gh) = got;
-            return Err(refused(
-                id,
-                what,
-                format!("the camera set x {gx} y {gy} width {gw} height {gh} instead ({allowed}, in its increments)"),
-            ));
-        }
+/// The region `(x, y, width, height)`, within the camera's ranges, checked once set.
+fn apply_region(camera: &Camera, id: &str, region: (u32, u32, u32, u32)) -> Result<(), CaptureError> {
+    let (x, y, width, height) = region;
+    let (w_min, w_max) = camera.width_bounds().map_err(driver(id, "reading the width range"))?;
+    let (h_min, h_max) = camera.height_bounds().map_err(driver(id, "reading the height range"))?;
+    let (sensor_w, sensor_h) = camera.sensor_size().unwrap_or((w_max, h_max));
+    let allowed = format!(
+        "the camera allows width {w_min} to {w_max}, height {h_min} to {h_max}, within a {sensor_w}x{sensor_h} sensor"
+    );
+    let what = format!("region x {x} y {y} width {width} height {height}");
+    let fits = |offset: u32, len: u32, min: i32, max: i32, sensor: i32| {
+        i64::from(len) >= i64::from(min)
+            && i64::from(len) <= i64::from(max)
+            && i64::from(offset) + i64::from(len) <= i64::from(sensor.max(max))
+    };
+    if !fits(x, width, w_min, w_max, sensor_w) || !fits(y, height, h_min, h_max, sensor_h) {
+        return Err(refused(id, what, allowed));
     }
+    let as_i32 = |v: u32| i32::try_from(v).unwrap_or(i32::MAX);
+    camera
+        .set_region(as_i32(x), as_i32(y), as_i32(width), as_i32(height))
+        .map_err(driver(id, format!("setting {what}")))?;
+    let got = camera.region().map_err(driver(id, "reading the region"))?;
+    if got != (as_i32(x), as_i32(y), as_i32(width), as_i32(height)) {
+        let (gx, gy, gw, gh) = got;
+        return Err(refused(
+            id,
+            what,
+            format!("the camera set x {gx} y {gy} width {gw} height {gh} instead ({allowed}, in its increments)"),
+        ));
+    }
+    Ok(())
+}
 
-    // Exposure.
-    if let Some(exposure_us) = config.exposure_us {
-        let what = format!("exposure {exposure_us} us");
-        if !camera.is_exposure_time_available().unwrap_or(false) {
-            return Err(refused(id, what, "the camera has no exposure time control"));
-        }
-        let (min, max) = camera
-            .exposure_time_bounds()
-            .map_err(driver(id, "reading the exposure range"))?;
-        if !(min..=max).contains(&exposure_us) {
-            return Err(refused(id, what, format!("the camera allows {min} to {max} us")));
-        }
-        if camera.is_exposure_auto_available().unwrap_or(false) {
-            camera
-                .set_exposure_time_auto(aravis::Auto::Off)
-                .map_err(driver(id, "switching auto exposure off"))?;
-        }
-        camera
-            .set_exposure_time(exposure_us)
-            .map_err(driver(id, format!("setting {what}")))?;
+/// The exposure time (auto exposure off), within the camera's range.
+fn apply_exposure(camera: &Camera, id: &str, exposure_us: f64) -> Result<(), CaptureError> {
+    let what = format!("exposure {exposure_us} us");
+    if !camera.is_exposure_time_available().unwrap_or(false) {
+        return Err(refused(id, what, "the camera has no exposure time control"));
     }
+    let (min, max) = camera
+        .exposure_time_bounds()
+        .map_err(driver(id, "reading the exposure range"))?;
+    if !(min..=max).contains(&exposure_us) {
+        return Err(refused(id, what, format!("the camera allows {min} to {max} us")));
+    }
+    if camera.is_exposure_auto_available().unwrap_or(false) {
+        camera
+            .set_exposure_time_auto(aravis::Auto::Off)
+            .map_err(driver(id, "switching auto exposure off"))?;
+    }
+    camera
+        .set_exposure_time(exposure_us)
+        .map_err(driver(id, format!("setting {what}")))?;
+    Ok(())
+}
 
-    // Gain.
-    if let Some(gain_db) = config.gain_db {
-        let what = format!("gain {gain_db} dB");
-        if !camera.is_gain_available().unwrap_or(false) {
-            return Err(refused(id, what, "the camera has no gain control"));
-        }
-        let (min, max) = camera.gain_bounds().map_err(driver(id, "reading the gain range"))?;
-        if !(min..=max).contains(&gain_db) {
-            return Err(refused(id, what, format!("the camera allows {min} to {max} dB")));
-        }
-        if camera.is_gain_auto_available().unwrap_or(false) {
-            camera
-                .set_gain_auto(aravis::Auto::Off)
-                .map_err(driver(id, "switching auto gain off"))?;
-        }
-        camera
-            .set_gain(gain_db)
-            .map_err(driver(id, format!("setting {what}")))?;
+/// The gain (auto gain off), within the camera's range.
+fn apply_gain(camera: &Camera, id: &str, gain_db: f64) -> Result<(), CaptureError> {
+    let what = format!("gain {gain_db} dB");
+    if !camera.is_gain_available().unwrap_or(false) {
+        return Err(refused(id, what, "the camera has no gain control"));
     }
+    let (min, max) = camera.gain_bounds().map_err(driver(id, "reading the gain range"))?;
+    if !(min..=max).contains(&gain_db) {
+        return Err(refused(id, what, format!("the camera allows {min} to {max} dB")));
+    }
+    if camera.is_gain_auto_available().unwrap_or(false) {
+        camera
+            .set_gain_auto(aravis::Auto::Off)
+            .map_err(driver(id, "switching auto gain off"))?;
+    }
+    camera
+        .set_gain(gain_db)
+        .map_err(driver(id, format!("setting {what}")))?;
+    Ok(())
+}
 
-    // Frame rate.
-    if let Some(fps) = config.fps {
-        let what = format!("frame rate {fps} fps");
-        if !camera.is_frame_rate_available().unwrap_or(false) {
-            return Err(refused(id, what, "the camera has no frame rate control"));
-        }
-        let (min, max) = camera
-            .frame_rate_bounds()
-            .map_err(driver(id, "reading the frame rate range"))?;
-        if !(min..=max).contains(&fps) {
-            return Err(refused(id, what, format!("the camera allows {min} to {max} fps")));
-        }
-        camera
-            .set_frame_rate(fps)
-            .map_err(driver(id, format!("setting {what}")))?;
+/// The frame rate, within the camera's range.
+fn apply_frame_rate(camera: &Camera, id: &str, fps: f64) -> Result<(), CaptureError> {
+    let what = format!("frame rate {fps} fps");
+    if !camera.is_frame_rate_available().unwrap_or(false) {
+        return Err(refused(id, what, "the camera has no frame rate control"));
     }
-    Ok(wanted)
+    let (min, max) = camera
+        .frame_rate_bounds()
+        .map_err(driver(id, "reading the frame rate range"))?;
+    if !(min..=max).contains(&fps) {
+        return Err(refused(id, what, format!("the camera allows {min} to {max} fps")));
+    }
+    camera
+        .set_frame_rate(fps)
+        .map_err(driver(id, format!("setting {what}")))?;
+    Ok(())
 }
 
 fn read_meta(camera: &Camera, id: &str, format: PixelFormat) -> Result<CameraMeta, CaptureError> {

@@ -98,6 +98,17 @@ impl Collector for WatchCollector {
     fn encode(&self, encoder: DescriptorEncoder) -> std::fmt::Result {
         let w = &self.0;
         let mut f = Families(encoder);
+        f.frame_families(w)?;
+        f.camera_families(w)?;
+        f.pipeline_families(w)?;
+        f.pose_families(w)?;
+        f.process_families(w)
+    }
+}
+
+impl Families<'_> {
+    /// Frames per camera: captured, paired, dropped, lost, recorded.
+    fn frame_families(&mut self, w: &Watch) -> std::fmt::Result {
         let cameras = w.parts.pipeline.cameras();
         let per_camera = |get: &dyn Fn(&CameraSummary) -> u64| -> Vec<(Labels, u64)> {
             cameras
@@ -119,49 +130,53 @@ impl Collector for WatchCollector {
                 })
                 .collect::<Vec<_>>()
         };
-        f.counter(
+        self.counter(
             "mousepose_frames_captured",
             "Frames the camera delivered.",
             None,
             &per_camera(&|c| c.captured),
         )?;
-        f.counter(
+        self.counter(
             "mousepose_frames_paired",
             "Frames processed in a depth-colour pair.",
             None,
             &per_camera(&|c| c.paired),
         )?;
-        f.counter(
+        self.counter(
             "mousepose_frames_unpaired",
             "Frames processed without a partner (depth-only pairs, colour frames no depth frame claimed).",
             None,
             &per_camera(&|c| c.unpaired),
         )?;
-        f.counter(
+        self.counter(
             "mousepose_frames_dropped",
             "Frames delivered but not processed, by reason.",
             None,
             &by_reason(&|c| &c.dropped, &DROPPED_REASONS),
         )?;
-        f.counter(
+        self.counter(
             "mousepose_frames_lost_before_capture",
             "Frames the camera never delivered (gaps in its frame counter, damaged buffers), by reason.",
             None,
             &by_reason(&|c| &c.lost_before_capture, &LOST_REASONS),
         )?;
-        f.counter(
+        self.counter(
             "mousepose_frames_recorded",
             "Frames written to the raw recording.",
             None,
             &per_camera(&|c| c.recorded.unwrap_or(0)),
         )?;
-        f.counter(
+        self.counter(
             "mousepose_frames_not_recorded",
             "Frames delivered but not recorded, by reason.",
             None,
             &by_reason(&|c| &c.not_recorded, &NOT_RECORDED_REASONS),
         )?;
+        Ok(())
+    }
 
+    /// The cameras' health: up, state, time away, outages.
+    fn camera_families(&mut self, w: &Watch) -> std::fmt::Result {
         let now_ns = monotonic_ns();
         let (mut up, mut away_s, mut outages, mut states) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for (name, health) in &w.parts.cameras {
@@ -180,33 +195,37 @@ impl Collector for WatchCollector {
             away_s.push((label("camera", name), seconds));
             outages.push((label("camera", name), h.outages.len() as u64));
         }
-        f.gauge(
+        self.gauge(
             "mousepose_camera_up",
             "1 while the camera delivers frames, 0 while it is opening or away.",
             None,
             &up,
         )?;
-        f.gauge(
+        self.gauge(
             "mousepose_camera_state",
             "The camera's state (1 for the current one).",
             None,
             &states,
         )?;
-        f.gauge(
+        self.gauge(
             "mousepose_camera_away",
             "How long the camera has been away in its current outage (0 when it is not).",
             Some(&Unit::Seconds),
             &away_s,
         )?;
-        f.counter(
+        self.counter(
             "mousepose_camera_outages",
             "Times the camera went away.",
             None,
             &outages,
         )?;
+        Ok(())
+    }
 
+    /// The pipeline: each stage's latency and items, end-to-end latency, the edges' queues.
+    fn pipeline_families(&mut self, w: &Watch) -> std::fmt::Result {
         let stages = w.parts.pipeline.stages();
-        f.histogram(
+        self.histogram(
             "mousepose_stage_latency",
             "Time a stage or sink spends on one item.",
             &stages
@@ -214,7 +233,7 @@ impl Collector for WatchCollector {
                 .map(|(name, s)| (label("stage", name), &s.latency))
                 .collect::<Vec<_>>(),
         )?;
-        f.counter(
+        self.counter(
             "mousepose_stage_items",
             "Items a stage or sink finished.",
             None,
@@ -223,13 +242,13 @@ impl Collector for WatchCollector {
                 .map(|(name, s)| (label("stage", name), s.items_out.load(Ordering::Relaxed)))
                 .collect::<Vec<_>>(),
         )?;
-        f.histogram(
+        self.histogram(
             "mousepose_end_to_end_latency",
             "From a frame pair leaving the synchroniser to its pose row handed to the operating system.",
             &[(Vec::new(), w.parts.pipeline.end_to_end())],
         )?;
         let edges = w.parts.pipeline.edges();
-        f.gauge(
+        self.gauge(
             "mousepose_queue_depth",
             "Items waiting on an edge between threads (after its last send).",
             None,
@@ -238,7 +257,7 @@ impl Collector for WatchCollector {
                 .map(|(name, e)| (label("edge", name), e.depth as f64))
                 .collect::<Vec<_>>(),
         )?;
-        f.gauge(
+        self.gauge(
             "mousepose_queue_capacity",
             "Capacity of an edge between threads.",
             None,
@@ -247,9 +266,13 @@ impl Collector for WatchCollector {
                 .map(|(name, e)| (label("edge", name), e.capacity as f64))
                 .collect::<Vec<_>>(),
         )?;
+        Ok(())
+    }
 
+    /// The poses by status, the rows lost, the chunk, and the recorder's gauges.
+    fn pose_families(&mut self, w: &Watch) -> std::fmt::Result {
         let live = w.live();
-        f.counter(
+        self.counter(
             "mousepose_poses",
             "Poses made, by status (ok, no_mouse, ...).",
             None,
@@ -262,59 +285,64 @@ impl Collector for WatchCollector {
                 .map(|(status, n)| (label("status", status), n))
                 .collect::<Vec<_>>(),
         )?;
-        f.counter(
+        self.counter(
             "mousepose_poses_not_written",
             "Poses that could not be written to poses.csv (full disk, write error).",
             None,
             &[(Vec::new(), live.rows_lost)],
         )?;
-        f.gauge(
+        self.gauge(
             "mousepose_chunk",
             "The chunk poses are written to now (0, 1, ...).",
             None,
             &[(Vec::new(), live.chunk as f64)],
         )?;
         if let Some(g) = &w.parts.recorder {
-            f.counter(
+            self.counter(
                 "mousepose_recorded",
                 "Encoded frame bytes written to the raw recording.",
                 Some(&Unit::Bytes),
                 &[(Vec::new(), g.frame_bytes.load(Ordering::Relaxed))],
             )?;
-            f.gauge(
+            self.gauge(
                 "mousepose_disk_free",
                 "Free space on the output's file system.",
                 Some(&Unit::Bytes),
                 &[(Vec::new(), g.disk_free_bytes.load(Ordering::Relaxed) as f64)],
             )?;
-            f.gauge(
+            self.gauge(
                 "mousepose_recording_paused",
                 "1 while raw recording is paused (disk low or after a write error).",
                 None,
                 &[(Vec::new(), f64::from(u8::from(g.paused.load(Ordering::Relaxed))))],
             )?;
         }
+        Ok(())
+    }
+
+    /// The process: memory, CPU time, uptime, version.
+    fn process_families(&mut self, w: &Watch) -> std::fmt::Result {
         if let Some(bytes) = process_resident_bytes() {
-            f.gauge(
+            self.gauge(
                 "mousepose_process_resident_memory",
                 "Resident memory of the daemon.",
                 Some(&Unit::Bytes),
                 &[(Vec::new(), bytes as f64)],
             )?;
         }
-        f.counter(
+        self.counter(
             "mousepose_process_cpu",
             "CPU time the daemon used.",
             Some(&Unit::Seconds),
             &[(Vec::new(), process_cpu_s())],
         )?;
-        f.gauge(
+        self.gauge(
             "mousepose_run_uptime",
             "Time since the run started.",
             Some(&Unit::Seconds),
             &[(Vec::new(), w.parts.pipeline.elapsed_s())],
         )?;
-        f.gauge(
+        self.gauge(
             "mousepose_build_info",
             "The running version (value 1).",
             None,

@@ -102,36 +102,12 @@ pub fn calibrate_intrinsics(images: &[PathBuf], board: &Board) -> Result<Intrins
     if images.is_empty() {
         return Err(IntrinsicsError::NoImages.into());
     }
-    let mut size: Option<(PathBuf, Size)> = None;
-    let mut image_points: Vector<Vector<Point2f>> = Vector::new();
-    let mut views = Vec::new();
-    let mut skipped = Vec::new();
-    for path in images {
-        let grey = read_grey(path)?;
-        let s = grey.size().map_err(solve_err("read an image size"))?;
-        match &size {
-            None => size = Some((path.clone(), s)),
-            Some((first, fs)) if *fs != s => {
-                return Err(IntrinsicsError::MixedSizes {
-                    first: first.clone(),
-                    first_w: fs.width,
-                    first_h: fs.height,
-                    other: path.clone(),
-                    other_w: s.width,
-                    other_h: s.height,
-                }
-                .into());
-            }
-            Some(_) => {}
-        }
-        match board.find_corners(&grey, path)? {
-            Some(corners) => {
-                image_points.push(corners.iter().map(|p| Point2f::new(p.x as f32, p.y as f32)).collect());
-                views.push(path.display().to_string());
-            }
-            None => skipped.push(path.display().to_string()),
-        }
-    }
+    let FoundViews {
+        size,
+        image_points,
+        views,
+        skipped,
+    } = find_views(images, board)?;
     if views.len() < MIN_VIEWS {
         return Err(IntrinsicsError::TooFewViews {
             board: *board,
@@ -145,17 +121,7 @@ pub fn calibrate_intrinsics(images: &[PathBuf], board: &Board) -> Result<Intrins
     let Some((_, size)) = size else {
         return Err(IntrinsicsError::NoImages.into());
     };
-    // Any consistent planar object works for intrinsics: the detection order's own grid.
-    let grid: Vector<Point3f> = (0..board.rows)
-        .flat_map(|j| (0..board.cols).map(move |i| (i, j)))
-        .map(|(i, j)| {
-            Point3f::new(
-                (f64::from(i) * board.square_mm) as f32,
-                (f64::from(j) * board.square_mm) as f32,
-                0.0,
-            )
-        })
-        .collect();
+    let grid = board_grid(board);
     let object_points: Vector<Vector<Point3f>> = (0..views.len()).map(|_| grid.clone()).collect();
     let mut k = Mat::default();
     let mut d = Mat::default();
@@ -206,4 +172,67 @@ pub fn calibrate_intrinsics(images: &[PathBuf], board: &Board) -> Result<Intrins
         skipped,
         board: *board,
     })
+}
+
+/// The images' views of the board: their common size (and the first image, for messages),
+/// each found board's corners and its image's name, and the images without a board.
+struct FoundViews {
+    size: Option<(PathBuf, Size)>,
+    image_points: Vector<Vector<Point2f>>,
+    views: Vec<String>,
+    skipped: Vec<String>,
+}
+
+/// Finds the board in each of `images`, refusing images of different sizes.
+fn find_views(images: &[PathBuf], board: &Board) -> Result<FoundViews, CalibrationError> {
+    let mut size: Option<(PathBuf, Size)> = None;
+    let mut image_points: Vector<Vector<Point2f>> = Vector::new();
+    let mut views = Vec::new();
+    let mut skipped = Vec::new();
+    for path in images {
+        let grey = read_grey(path)?;
+        let s = grey.size().map_err(solve_err("read an image size"))?;
+        match &size {
+            None => size = Some((path.clone(), s)),
+            Some((first, fs)) if *fs != s => {
+                return Err(IntrinsicsError::MixedSizes {
+                    first: first.clone(),
+                    first_w: fs.width,
+                    first_h: fs.height,
+                    other: path.clone(),
+                    other_w: s.width,
+                    other_h: s.height,
+                }
+                .into());
+            }
+            Some(_) => {}
+        }
+        match board.find_corners(&grey, path)? {
+            Some(corners) => {
+                image_points.push(corners.iter().map(|p| Point2f::new(p.x as f32, p.y as f32)).collect());
+                views.push(path.display().to_string());
+            }
+            None => skipped.push(path.display().to_string()),
+        }
+    }
+    Ok(FoundViews {
+        size,
+        image_points,
+        views,
+        skipped,
+    })
+}
+
+/// Any consistent planar object works for intrinsics: the detection order's own grid.
+fn board_grid(board: &Board) -> Vector<Point3f> {
+    (0..board.rows)
+        .flat_map(|j| (0..board.cols).map(move |i| (i, j)))
+        .map(|(i, j)| {
+            Point3f::new(
+                (f64::from(i) * board.square_mm) as f32,
+                (f64::from(j) * board.square_mm) as f32,
+                0.0,
+            )
+        })
+        .collect()
 }

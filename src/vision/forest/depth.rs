@@ -8,7 +8,6 @@
 //! epsilon), with leaves that keep the mean offset and the spread of those offsets.
 
 use super::discriminative::ErrorScope;
-use super::model;
 use super::{Objective, SplitSpace, uniform_thresholds};
 use crate::core::image::Region;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -198,109 +197,6 @@ pub struct JointVote {
 
 /// A body-forest leaf: one vote per main-body joint.
 pub type JointLeaf = [JointVote; BODY_JOINTS];
-
-/// A tree's leaves in the form run time reads: each leaf's record as a version 2 model file
-/// stores it ([`model::leaf_record`]: the mask of the joints it votes for, then 10 bytes per
-/// vote), one after the other, so a leaf is one short run of memory (80 bytes on average for
-/// the bundled forest, where the votes as `f32`s took 160 in three arrays). Leaf `l`'s record
-/// is `records[start[l]..start[l + 1]]`. Its votes are decoded as they are read, exactly as
-/// the file's reader decodes them.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SparseLeaves {
-    start: Vec<u32>,
-    records: Vec<u8>,
-}
-
-impl Default for SparseLeaves {
-    fn default() -> Self {
-        Self {
-            start: vec![0],
-            records: Vec::new(),
-        }
-    }
-}
-
-impl SparseLeaves {
-    /// The leaves of a tree in the training form, their votes quantised as a model file's.
-    pub fn from_leaves(leaves: &[JointLeaf]) -> Self {
-        let mut out = Self::default();
-        out.start.reserve(leaves.len());
-        for leaf in leaves {
-            out.push_leaf(leaf);
-        }
-        out
-    }
-
-    /// Adds a leaf of the training form, its votes quantised as a model file's.
-    pub fn push_leaf(&mut self, leaf: &JointLeaf) {
-        model::leaf_record(leaf, &mut self.records);
-        self.start.push(self.records.len() as u32);
-    }
-
-    /// Adds a leaf from its record in a version 2 model file: its joints' `mask` and its
-    /// votes' bytes, checked by the caller.
-    pub(super) fn push_record(&mut self, mask: u16, votes: &[u8]) {
-        self.records.extend_from_slice(&mask.to_le_bytes());
-        self.records.extend_from_slice(votes);
-        self.start.push(self.records.len() as u32);
-    }
-
-    /// Where leaf `leaf`'s votes lie, and which joints they are for (this reads the leaf's
-    /// first bytes); [`Self::votes`] then reads the votes.
-    #[inline]
-    pub fn locate(&self, leaf: u32) -> Located {
-        // Every record starts with its two bytes of mask.
-        let (start, end) = (self.start[leaf as usize], self.start[leaf as usize + 1]);
-        let mask = &self.records[start as usize..start as usize + 2];
-        Located {
-            start: start + 2,
-            end,
-            mask: u16::from_le_bytes([mask[0], mask[1]]),
-        }
-    }
-
-    /// The votes of a leaf [`Self::locate`] found, with their joints, in joint order.
-    #[inline]
-    pub fn votes(&self, at: Located) -> LeafVotes<'_> {
-        LeafVotes {
-            mask: at.mask,
-            votes: &self.records[at.start as usize..at.end as usize],
-        }
-    }
-}
-
-/// A leaf of [`SparseLeaves`] found ([`SparseLeaves::locate`]): where its votes' bytes lie
-/// and the mask of the joints they are for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Located {
-    start: u32,
-    end: u32,
-    mask: u16,
-}
-
-/// The votes of one leaf of [`SparseLeaves`], decoded one by one.
-#[derive(Clone, Debug)]
-pub struct LeafVotes<'a> {
-    /// The joints whose votes are still to come.
-    mask: u16,
-    votes: &'a [u8],
-}
-
-impl Iterator for LeafVotes<'_> {
-    type Item = (usize, JointVote);
-
-    #[inline]
-    fn next(&mut self) -> Option<Self::Item> {
-        if self.mask == 0 || self.votes.len() < model::VOTE_BYTES {
-            return None;
-        }
-        let joint = self.mask.trailing_zeros() as usize;
-        self.mask &= self.mask - 1;
-        let (vote, rest) = self.votes.split_at(model::VOTE_BYTES);
-        self.votes = rest;
-        Some((joint, model::vote_from_bytes(vote)))
-    }
-}
 
 /// Regression targets of a pixel set: offsets to each joint and which joints are near.
 #[derive(Clone, Debug, Default)]

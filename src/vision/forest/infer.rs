@@ -17,7 +17,8 @@
 //! Buffers live in the estimator and are reused, so estimating a frame allocates nothing once
 //! the first frame has sized them.
 
-use super::depth::{BODY_JOINTS, DepthFeature, DepthImage, JointLeaf, Located, SparseLeaves};
+use super::depth::{BODY_JOINTS, DepthFeature, DepthImage, JointLeaf};
+use super::leaf::{Located, SparseLeaves};
 use super::simd::{self, Kernel, PixelLanes};
 use super::{BadTree, Forest, PackedTree, Traversal, Tree, model};
 use crate::core::geometry::Intrinsics;

@@ -11,6 +11,7 @@ pub mod classify;
 pub mod depth;
 pub mod discriminative;
 pub mod infer;
+pub mod leaf;
 pub mod model;
 mod packed;
 pub mod simd;

@@ -20,7 +20,8 @@
 //! the kind, the checksum, every length against what is left, and every child and leaf index
 //! against the arrays, so a tree loaded is one that can be walked.
 
-use super::depth::{BODY_JOINTS, DepthFeature, JointLeaf, JointVote, SparseLeaves};
+use super::depth::{BODY_JOINTS, DepthFeature, JointLeaf, JointVote};
+use super::leaf::{SparseLeaves, VOTE_BYTES, leaf_record, vote_from_bytes};
 use super::{Forest, Node, Tree};
 use crate::core::skeleton::PART_COUNT;
 use serde::{Deserialize, Serialize};
@@ -29,25 +30,12 @@ use std::path::{Path, PathBuf};
 const MAGIC: &[u8; 8] = b"MPFOREST";
 /// The model format version this build writes; it also reads version 1 (votes as f32).
 pub const FORMAT_VERSION: u32 = 2;
-/// Resolution of stored vote offsets (mm) and spreads (mm^2) in version 2.
-const OFFSET_UNIT_MM: f32 = 0.05;
-const SPREAD_UNIT_MM2: f32 = 0.25;
-
 /// The zstd level of the tree section. Quantised votes hardly compress (about 1.5:1 at any
 /// level), and every start-up decompresses the section: level 1 decompresses the bundled
 /// body forest's 43 MB 2.5x faster than level 9 did (`hyperfine` of `zstd -d`), for a file
 /// 2 % larger.
 const TREES_ZSTD_LEVEL: i32 = 1;
 
-/// `v / unit` rounded to the nearest `i16`, saturating.
-fn quantise_i16(v: f32, unit: f32) -> i16 {
-    (v / unit).round().clamp(f32::from(i16::MIN), f32::from(i16::MAX)) as i16
-}
-
-/// `v / unit` rounded into `[lo, u16::MAX]`.
-fn quantise_u16(v: f32, unit: f32, lo: u16) -> u16 {
-    (v / unit).round().clamp(f32::from(lo), f32::from(u16::MAX)) as u16
-}
 /// The largest decompressed tree section accepted (far above any real model).
 const MAX_TREES_BYTES: usize = 1 << 30;
 /// The largest model file read (the bundled ones are about 9 MB).
@@ -188,40 +176,6 @@ fn encode_trees<L>(forest: &Forest<DepthFeature, L>, mut leaf: impl FnMut(&mut V
         }
     }
     out
-}
-
-/// Bytes of a vote in a leaf of a version 2 file.
-pub(super) const VOTE_BYTES: usize = 10;
-
-/// A body leaf as a version 2 file stores it, appended to `out`: a bit mask of the joints the
-/// leaf votes for (those with a weight), then their votes in joint order, each 3 offsets, its
-/// weight and its spread ([`vote_from_bytes`] reads one).
-pub(super) fn leaf_record(leaf: &JointLeaf, out: &mut Vec<u8>) {
-    let mask = leaf
-        .iter()
-        .enumerate()
-        .filter(|(_, v)| v.weight > 0.0)
-        .fold(0u16, |m, (j, _)| m | (1 << j));
-    out.extend_from_slice(&mask.to_le_bytes());
-    for v in leaf.iter().filter(|v| v.weight > 0.0) {
-        for c in v.offset {
-            out.extend_from_slice(&quantise_i16(c, OFFSET_UNIT_MM).to_le_bytes());
-        }
-        out.extend_from_slice(&quantise_u16(v.weight, 1.0 / 65535.0, 1).to_le_bytes());
-        out.extend_from_slice(&quantise_u16(v.spread, SPREAD_UNIT_MM2, 0).to_le_bytes());
-    }
-}
-
-/// A vote of a version 2 leaf from its [`VOTE_BYTES`] bytes.
-#[inline]
-pub(super) fn vote_from_bytes(b: &[u8]) -> JointVote {
-    let i = |k: usize| i16::from_le_bytes([b[k], b[k + 1]]);
-    let u = |k: usize| u16::from_le_bytes([b[k], b[k + 1]]);
-    JointVote {
-        offset: [0, 2, 4].map(|k| f32::from(i(k)) * OFFSET_UNIT_MM),
-        weight: f32::from(u(6)) / 65535.0,
-        spread: f32::from(u(8)) * SPREAD_UNIT_MM2,
-    }
 }
 
 /// Encodes a model file.
@@ -701,11 +655,7 @@ pub fn load_body_trees<T>(
     mut convert: impl FnMut(Tree<DepthFeature, ()>, SparseLeaves) -> T,
 ) -> Result<(ModelInfo, Vec<T>), ModelError> {
     use std::io::{Read as _, Seek as _};
-    let io = |source| ModelError::Io {
-        path: path.to_owned(),
-        action: "read",
-        source,
-    };
+    let io = read_error(path);
     let corrupt = |reason: String| ModelError::Corrupt {
         path: path.to_owned(),
         reason,
@@ -716,8 +666,71 @@ pub fn load_body_trees<T>(
             "it is not a regular file",
         )));
     }
-    // First pass: the checksum as the file streams by, and its first bytes (the header).
     let mut file = std::fs::File::open(path).map_err(io)?;
+    let Scan {
+        mut head,
+        held,
+        total,
+        crc,
+    } = scan(&mut file, path)?;
+    let version = magic_and_version(&head, total, path)?;
+    if crc != u32::from_le_bytes([held[0], held[1], held[2], held[3]]) {
+        return Err(corrupt(
+            "its checksum does not match (truncated or modified)".to_owned(),
+        ));
+    }
+    let body_len = total - 4;
+    head.truncate(body_len);
+    let (_, info, start, len) = match fields(&head, body_len, path, Some(ModelKind::Body)) {
+        Ok(f) => f,
+        // A description longer than the bytes kept: read as a whole, as `load` does.
+        Err(ModelError::Corrupt { .. }) if head.len() < body_len => {
+            return match load(path, Some(ModelKind::Body))? {
+                Model::Body(info, forest) => {
+                    let trees = forest.trees.into_iter().map(run_form).map(|(t, l)| convert(t, l));
+                    Ok((info, trees.collect()))
+                }
+                Model::Parts(..) => Err(corrupt("it changed while it was read".to_owned())),
+            };
+        }
+        Err(e) => return Err(e),
+    };
+    // Second pass: the tree section, decompressed and decoded as it streams.
+    file.seek(std::io::SeekFrom::Start(start as u64)).map_err(io)?;
+    let limit = head
+        .get(start..)
+        .and_then(|frame| declared_size(frame, len))
+        .unwrap_or(MAX_TREES_BYTES);
+    let unreadable = |e: std::io::Error| corrupt(format!("its trees do not decompress: {e}"));
+    let inner = zstd::stream::read::Decoder::new(file.take(len as u64)).map_err(unreadable)?;
+    let trees = decode_streamed(inner, limit, version, convert).map_err(corrupt);
+    Ok((info, trees?))
+}
+
+/// The error of reading the model file at `path`.
+fn read_error(path: &Path) -> impl Fn(std::io::Error) -> ModelError + Copy + '_ {
+    move |source| ModelError::Io {
+        path: path.to_owned(),
+        action: "read",
+        source,
+    }
+}
+
+/// What the first pass over a model file found.
+struct Scan {
+    /// The file's first bytes (at most [`HEAD_BYTES`]): its header.
+    head: Vec<u8>,
+    /// The bytes left out of the checksum: the file's last four (fewer in a shorter file).
+    held: Vec<u8>,
+    total: usize,
+    /// The checksum of every byte before `held`.
+    crc: u32,
+}
+
+/// First pass: the checksum as the file streams by, and its first bytes (the header).
+fn scan(file: &mut std::fs::File, path: &Path) -> Result<Scan, ModelError> {
+    use std::io::Read as _;
+    let io = read_error(path);
     let mut hasher = crc32fast::Hasher::new();
     let (mut head, mut held, mut total) = (Vec::new(), Vec::with_capacity(8), 0usize);
     let mut chunk = vec![0u8; 1 << 20];
@@ -747,76 +760,27 @@ pub fn load_body_trees<T>(
             held.drain(..hashed);
         }
     }
-    drop(chunk);
-    let version = magic_and_version(&head, total, path)?;
-    if hasher.finalize() != u32::from_le_bytes([held[0], held[1], held[2], held[3]]) {
-        return Err(corrupt(
-            "its checksum does not match (truncated or modified)".to_owned(),
-        ));
-    }
-    let body_len = total - 4;
-    head.truncate(body_len);
-    let (_, info, start, len) = match fields(&head, body_len, path, Some(ModelKind::Body)) {
-        Ok(f) => f,
-        // A description longer than the bytes kept: read as a whole, as `load` does.
-        Err(ModelError::Corrupt { .. }) if head.len() < body_len => {
-            return match load(path, Some(ModelKind::Body))? {
-                Model::Body(info, forest) => {
-                    let trees = forest.trees.into_iter().map(run_form).map(|(t, l)| convert(t, l));
-                    Ok((info, trees.collect()))
-                }
-                Model::Parts(..) => Err(corrupt("it changed while it was read".to_owned())),
-            };
-        }
-        Err(e) => return Err(e),
-    };
-    // Second pass: the tree section, decompressed and decoded as it streams.
-    file.seek(std::io::SeekFrom::Start(start as u64)).map_err(io)?;
-    let limit = head
-        .get(start..)
-        .and_then(|frame| declared_size(frame, len))
-        .unwrap_or(MAX_TREES_BYTES);
-    let unreadable = |e: std::io::Error| corrupt(format!("its trees do not decompress: {e}"));
-    let mut inner = zstd::stream::read::Decoder::new(file.take(len as u64)).map_err(unreadable)?;
-    // Decompressed on a thread of its own while this one decodes what it has already: the two
-    // halves of the load overlap. Chunks of 256 KiB, at most 4 ahead; each chunk read goes
-    // back to be filled again, so the section is not written into fresh pages (the page faults
-    // of a new chunk each time cost as much as the decompression).
-    const CHUNK: usize = 1 << 18;
+    Ok(Scan {
+        head,
+        held,
+        total,
+        crc: hasher.finalize(),
+    })
+}
+
+/// Decodes a body forest's tree section from its decompressor `inner`, at most `limit`
+/// bytes, handing each tree to `convert` as it ends. Decompressed on a thread of its own
+/// while this one decodes what it has already: the two halves of the load overlap.
+fn decode_streamed<T>(
+    inner: impl std::io::Read + Send,
+    limit: usize,
+    version: u32,
+    mut convert: impl FnMut(Tree<DepthFeature, ()>, SparseLeaves) -> T,
+) -> Result<Vec<T>, String> {
     let (tx, rx) = std::sync::mpsc::sync_channel::<std::io::Result<Vec<u8>>>(4);
     let (back, spare) = std::sync::mpsc::channel::<Vec<u8>>();
     std::thread::scope(|scope| {
-        scope.spawn(move || {
-            loop {
-                let mut chunk = spare.try_recv().unwrap_or_default();
-                chunk.resize(CHUNK, 0);
-                let mut filled = 0;
-                let result = loop {
-                    match inner.read(&mut chunk[filled..]) {
-                        Ok(0) => break Ok(()),
-                        Ok(k) => {
-                            filled += k;
-                            if filled == chunk.len() {
-                                break Ok(());
-                            }
-                        }
-                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                        Err(e) => break Err(e),
-                    }
-                };
-                chunk.truncate(filled);
-                let done = filled == 0 || result.is_err();
-                let message = match result {
-                    Ok(()) if filled == 0 => break,
-                    Ok(()) => Ok(chunk),
-                    Err(e) => Err(e),
-                };
-                // The reader stopped (an error found in what it has): nothing more is wanted.
-                if tx.send(message).is_err() || done {
-                    break;
-                }
-            }
-        });
+        scope.spawn(move || decompress_chunks(inner, &tx, &spare));
         let mut r = Stream::new(
             Chunks {
                 rx,
@@ -829,11 +793,52 @@ pub fn load_body_trees<T>(
         // Each leaf goes straight into the tree's run-time form, taken as the tree ends.
         let leaves = std::cell::RefCell::new(SparseLeaves::default());
         let leaf = |r: &mut Stream<Chunks>| body_leaf_record(r, version, &mut leaves.borrow_mut());
-        let trees = decode_trees(&mut r, 2, leaf, |tree| convert(tree, leaves.take())).map_err(corrupt);
+        let trees = decode_trees(&mut r, 2, leaf, |tree| convert(tree, leaves.take()));
         // Dropping the receiver ends the decompressing thread at its next chunk.
         drop(r);
-        Ok((info, trees?))
+        trees
     })
+}
+
+/// The decompressing thread's loop: chunks of 256 KiB, at most 4 ahead (`tx` is bounded);
+/// each chunk read comes back (`spare`) to be filled again, so the section is not written
+/// into fresh pages (the page faults of a new chunk each time cost as much as the
+/// decompression).
+fn decompress_chunks(
+    mut inner: impl std::io::Read,
+    tx: &std::sync::mpsc::SyncSender<std::io::Result<Vec<u8>>>,
+    spare: &std::sync::mpsc::Receiver<Vec<u8>>,
+) {
+    const CHUNK: usize = 1 << 18;
+    loop {
+        let mut chunk = spare.try_recv().unwrap_or_default();
+        chunk.resize(CHUNK, 0);
+        let mut filled = 0;
+        let result = loop {
+            match inner.read(&mut chunk[filled..]) {
+                Ok(0) => break Ok(()),
+                Ok(k) => {
+                    filled += k;
+                    if filled == chunk.len() {
+                        break Ok(());
+                    }
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => break Err(e),
+            }
+        };
+        chunk.truncate(filled);
+        let done = filled == 0 || result.is_err();
+        let message = match result {
+            Ok(()) if filled == 0 => break,
+            Ok(()) => Ok(chunk),
+            Err(e) => Err(e),
+        };
+        // The reader stopped (an error found in what it has): nothing more is wanted.
+        if tx.send(message).is_err() || done {
+            break;
+        }
+    }
 }
 
 /// A body tree of the training form in the form [`load_body_trees`] hands on: its nodes, and

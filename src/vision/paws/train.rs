@@ -172,34 +172,11 @@ pub fn train(
     let (w, h) = (set.width, set.height);
     let features = basic_features(w as u32, h as u32);
     let mut rng = ChaCha8Rng::seed_from_u64(params.seed);
-    // The positive pool, shuffled once; flat windows can never be detected.
-    let mut order: Vec<usize> = (0..set.positive_count()).collect();
-    order.shuffle(&mut rng);
     let mut ii = Integral::default();
-    let mut pool = Windows::new(w, h);
-    let mut flat_positives = 0;
-    for &k in &order {
-        ii.compute(&set.positives[k * w * h..(k + 1) * w * h], w, h);
-        let (factor, ok) = window_norm(&ii, 0, 0, w, h);
-        if ok {
-            pool.push(&ii, factor);
-        } else {
-            flat_positives += 1;
-        }
-    }
+    let (pool, flat_positives) = positive_pool(set, &mut rng, &mut ii);
     let mut image_order: Vec<usize> = (0..set.backgrounds.len()).collect();
     image_order.shuffle(&mut rng);
-    // The hard negatives, shuffled once (no draw when there are none).
-    let mut hard_order: Vec<usize> = (0..set.hard_count()).collect();
-    hard_order.shuffle(&mut rng);
-    let mut hard_pool = Windows::new(w, h);
-    for &k in &hard_order {
-        ii.compute(&set.hard[k * w * h..(k + 1) * w * h], w, h);
-        let (factor, ok) = window_norm(&ii, 0, 0, w, h);
-        if ok {
-            hard_pool.push(&ii, factor);
-        }
-    }
+    let hard_pool = hard_pool(set, &mut rng, &mut ii);
     let hard_limit = (params.negatives as f64 * params.hard_share.clamp(0.0, 1.0)) as usize;
     let mut cascade = Cascade {
         width: w as u32,
@@ -235,16 +212,7 @@ pub fn train(
             break;
         }
         let npos = pos.len();
-        let n = npos + neg.len();
-        let binned = Binned::build(features.len(), n, |f, out| {
-            let feature = &features[f];
-            for (i, v) in out.iter_mut().enumerate() {
-                let (src, k) = if i < npos { (&pos, i) } else { (&neg, i - npos) };
-                let c = src.corners();
-                let sums = &src.sums[k * c..(k + 1) * c];
-                *v = raw_value(feature, sums, w + 1) * src.factors[k];
-            }
-        });
+        let binned = feature_values(&features, &pos, &neg, w);
         let boosted = boost_stage(
             &binned,
             npos,
@@ -289,6 +257,58 @@ pub fn train(
         stages: reports,
         stop,
         flat_positives,
+    })
+}
+
+/// The positive pool, shuffled once; flat windows can never be detected (how many there
+/// were is the second value).
+fn positive_pool(set: &TrainingSet, rng: &mut ChaCha8Rng, ii: &mut Integral) -> (Windows, usize) {
+    let (w, h) = (set.width, set.height);
+    let mut order: Vec<usize> = (0..set.positive_count()).collect();
+    order.shuffle(rng);
+    let mut pool = Windows::new(w, h);
+    let mut flat_positives = 0;
+    for &k in &order {
+        ii.compute(&set.positives[k * w * h..(k + 1) * w * h], w, h);
+        let (factor, ok) = window_norm(ii, 0, 0, w, h);
+        if ok {
+            pool.push(ii, factor);
+        } else {
+            flat_positives += 1;
+        }
+    }
+    (pool, flat_positives)
+}
+
+/// The hard negatives, shuffled once (no draw when there are none), flat ones left out.
+fn hard_pool(set: &TrainingSet, rng: &mut ChaCha8Rng, ii: &mut Integral) -> Windows {
+    let (w, h) = (set.width, set.height);
+    let mut hard_order: Vec<usize> = (0..set.hard_count()).collect();
+    hard_order.shuffle(rng);
+    let mut hard_pool = Windows::new(w, h);
+    for &k in &hard_order {
+        ii.compute(&set.hard[k * w * h..(k + 1) * w * h], w, h);
+        let (factor, ok) = window_norm(ii, 0, 0, w, h);
+        if ok {
+            hard_pool.push(ii, factor);
+        }
+    }
+    hard_pool
+}
+
+/// Every feature's value on a stage's windows, positives (`pos`) then negatives, binned for
+/// boosting (windows `w` pixels wide).
+fn feature_values(features: &[super::haar::HaarFeature], pos: &Windows, neg: &Windows, w: usize) -> Binned {
+    let npos = pos.len();
+    let n = npos + neg.len();
+    Binned::build(features.len(), n, |f, out| {
+        let feature = &features[f];
+        for (i, v) in out.iter_mut().enumerate() {
+            let (src, k) = if i < npos { (pos, i) } else { (neg, i - npos) };
+            let c = src.corners();
+            let sums = &src.sums[k * c..(k + 1) * c];
+            *v = raw_value(feature, sums, w + 1) * src.factors[k];
+        }
     })
 }
 

@@ -215,6 +215,33 @@ impl Parser<'_> {
         }
         let height: u32 = self.field(top, "height")?;
         let width: u32 = self.field(top, "width")?;
+        let params = self.new_params(top)?;
+        let stage_num: usize = self.field(top, "stageNum")?;
+        let mut stages = Vec::new();
+        for (k, s) in items(self.need(top, "stages")?).enumerate() {
+            stages.push(self.new_stage(k, s)?);
+        }
+        if stages.len() != stage_num {
+            return Err(self.bad(format!(
+                "<stageNum> is {stage_num} but {} stages are present",
+                stages.len()
+            )));
+        }
+        let features = items(self.need(top, "features")?)
+            .map(|f| self.rects(f))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Cascade {
+            width,
+            height,
+            params,
+            stages,
+            features,
+        })
+    }
+
+    /// The new format's training parameters (`stageParams`, `featureParams`), as far as they
+    /// are given; categorical features are refused.
+    fn new_params(&self, top: XmlNode<'_, '_>) -> Result<CascadeParams, PawError> {
         let mut params = CascadeParams::default();
         if let Some(sp) = child(top, "stageParams") {
             if let Some(n) = child(sp, "boostType") {
@@ -247,65 +274,50 @@ impl Parser<'_> {
                 text(n).clone_into(&mut params.mode);
             }
         }
-        let stage_num: usize = self.field(top, "stageNum")?;
-        let mut stages = Vec::new();
-        for (k, s) in items(self.need(top, "stages")?).enumerate() {
-            let threshold = self.field::<f64>(s, "stageThreshold")? as f32;
-            let mut weak = Vec::new();
-            for w in items(self.need(s, "weakClassifiers")?) {
-                let nodes = self.numbers(self.need(w, "internalNodes")?, "internalNodes")?;
-                let leaves = self.numbers(self.need(w, "leafValues")?, "leafValues")?;
-                if nodes.is_empty() || nodes.len() % 4 != 0 {
-                    return Err(self.bad(format!(
-                        "a weak classifier of stage {k} has {} internal-node numbers (4 per node expected)",
-                        nodes.len()
-                    )));
-                }
-                let nodes = nodes
-                    .chunks(4)
-                    .map(|c| {
-                        let feature = self.int(c[2], "internalNodes")?;
-                        Ok(Node {
-                            left: self.int(c[0], "internalNodes")?,
-                            right: self.int(c[1], "internalNodes")?,
-                            feature: usize::try_from(feature)
-                                .map_err(|_| self.bad(format!("a node names feature {feature}")))?,
-                            threshold: c[3] as f32,
-                        })
+        Ok(params)
+    }
+
+    /// Stage `k` of the new format: its threshold and weak classifiers, each checked.
+    fn new_stage(&self, k: usize, s: XmlNode<'_, '_>) -> Result<BoostStage, PawError> {
+        let threshold = self.field::<f64>(s, "stageThreshold")? as f32;
+        let mut weak = Vec::new();
+        for w in items(self.need(s, "weakClassifiers")?) {
+            let nodes = self.numbers(self.need(w, "internalNodes")?, "internalNodes")?;
+            let leaves = self.numbers(self.need(w, "leafValues")?, "leafValues")?;
+            if nodes.is_empty() || nodes.len() % 4 != 0 {
+                return Err(self.bad(format!(
+                    "a weak classifier of stage {k} has {} internal-node numbers (4 per node expected)",
+                    nodes.len()
+                )));
+            }
+            let nodes = nodes
+                .chunks(4)
+                .map(|c| {
+                    let feature = self.int(c[2], "internalNodes")?;
+                    Ok(Node {
+                        left: self.int(c[0], "internalNodes")?,
+                        right: self.int(c[1], "internalNodes")?,
+                        feature: usize::try_from(feature)
+                            .map_err(|_| self.bad(format!("a node names feature {feature}")))?,
+                        threshold: c[3] as f32,
                     })
-                    .collect::<Result<Vec<_>, PawError>>()?;
-                weak.push(WeakTree {
-                    nodes,
-                    leaves: leaves.iter().map(|&v| v as f32).collect(),
-                });
-            }
-            if let Some(n) = child(s, "maxWeakCount") {
-                let declared: usize = self.num(n, "maxWeakCount")?;
-                if declared != weak.len() {
-                    return Err(self.bad(format!(
-                        "stage {k} declares {declared} weak classifiers but holds {}",
-                        weak.len()
-                    )));
-                }
-            }
-            stages.push(BoostStage { threshold, weak });
+                })
+                .collect::<Result<Vec<_>, PawError>>()?;
+            weak.push(WeakTree {
+                nodes,
+                leaves: leaves.iter().map(|&v| v as f32).collect(),
+            });
         }
-        if stages.len() != stage_num {
-            return Err(self.bad(format!(
-                "<stageNum> is {stage_num} but {} stages are present",
-                stages.len()
-            )));
+        if let Some(n) = child(s, "maxWeakCount") {
+            let declared: usize = self.num(n, "maxWeakCount")?;
+            if declared != weak.len() {
+                return Err(self.bad(format!(
+                    "stage {k} declares {declared} weak classifiers but holds {}",
+                    weak.len()
+                )));
+            }
         }
-        let features = items(self.need(top, "features")?)
-            .map(|f| self.rects(f))
-            .collect::<Result<Vec<_>, _>>()?;
-        Ok(Cascade {
-            width,
-            height,
-            params,
-            stages,
-            features,
-        })
+        Ok(BoostStage { threshold, weak })
     }
 
     /// The older format: each tree node carries its own feature, stumps only.

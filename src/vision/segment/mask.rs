@@ -3,7 +3,9 @@
 //! largest strong component in the box (OpenCV), and that component grown into the tail. What
 //! comes out is the grown mask, left in the segmenter's buffers for the last steps.
 
-use super::{Bounds, FloorPlane, Grid, SegmentError, Segmenter, cv_err, mat_over, mat_over_mut, same_buffer};
+use super::{
+    Background, Bounds, FloorPlane, Grid, Scratch, SegmentError, Segmenter, cv_err, mat_over, mat_over_mut, same_buffer,
+};
 use opencv::core::{self as cv, Mat, MatTraitConst};
 use opencv::imgproc;
 
@@ -212,73 +214,123 @@ impl Segmenter {
         ridge_mm: f32,
     ) -> Bounds {
         let FloorPlane { normal, offset_mm } = self.background.floor;
-        let (nx, ny, nz, c) = (normal.x as f32, normal.y as f32, normal.z as f32, offset_mm as f32);
-        let margin = grow_mm.min(self.config.background_margin_mm);
-        let bg = &self.background;
-        let height = |i: usize, d: f32| -> f32 {
-            let at = (g.oy + i / g.w) * g.bg_w + g.ox + i % g.w;
-            bg.rays
-                .get(at)
-                .map_or(f32::NEG_INFINITY, |r| (nx * r[0] + ny * r[1] + nz) * d + c)
-        };
-        // Height above the floor, or above the background where that is nearer (a wall).
-        let above = |i: usize, d: f32| -> f32 {
-            let at = (g.oy + i / g.w) * g.bg_w + g.ox + i % g.w;
-            let (Some(r), Some(&b)) = (bg.rays.get(at), bg.depth.get(at)) else {
-                return f32::NEG_INFINITY;
-            };
-            let a = nx * r[0] + ny * r[1] + nz;
-            let h = a * d + c;
-            if b > 0.0 { h.min(a * (d - b)) } else { h }
-        };
-        let bg_at = |i: usize| {
-            bg.depth
-                .get((g.oy + i / g.w) * g.bg_w + g.ox + i % g.w)
-                .copied()
-                .unwrap_or(0.0)
-        };
-        let accept = |i: usize, strong: &[u8], jump: &[u8]| -> bool {
-            let d = depth[i];
-            if d == 0 {
-                return false;
-            }
-            let d = f32::from(d);
-            let h = height(i, d);
-            let b = bg_at(i);
-            if h >= grow_mm && (b <= 0.0 || d <= b - margin) {
-                return true;
-            }
-            if !ridge_mm.is_finite() || above(i, d) < 0.0 {
-                return false;
-            }
-            // A ridge: along some direction, the median height of the five pixels centred
-            // here (without the body's strong pixels) is high enough.
-            let (x, y) = ((i % g.w) as isize, (i / g.w) as isize);
-            let mut best = f32::NEG_INFINITY;
-            for (dx, dy) in [(1isize, 0isize), (0, 1), (1, 1), (1, -1)] {
-                let mut v = [0f32; 11];
-                let mut n = 0;
-                for k in -RIDGE_HALF_PX..=RIDGE_HALF_PX {
-                    let (px, py) = (x + k * dx, y + k * dy);
-                    if px < 0 || py < 0 || px >= g.w as isize || py >= g.h as isize {
-                        continue;
-                    }
-                    let j = py as usize * g.w + px as usize;
-                    if depth[j] == 0 || strong[j] != 0 || jump[j] != 0 {
-                        continue;
-                    }
-                    v[n] = above(j, f32::from(depth[j]));
-                    n += 1;
-                }
-                if n as isize > RIDGE_HALF_PX {
-                    let vs = &mut v[..n];
-                    vs.sort_by(f32::total_cmp);
-                    best = best.max(vs[n / 2]);
-                }
-            }
-            best >= ridge_mm
+        let growth = Growth {
+            depth,
+            g,
+            bg: &self.background,
+            plane: (normal.x as f32, normal.y as f32, normal.z as f32, offset_mm as f32),
+            margin: grow_mm.min(self.config.background_margin_mm),
+            grow_mm,
+            ridge_mm,
         };
         let s = &mut self.scratch;
+        let mut b = s.seed_mask(g, search, seed);
+        s.grow_from_seed(g, &growth);
+        s.keep_long_branches(g, &mut b);
+        b
+    }
+}
+
+/// What decides whether a pixel joins the grown mask: its depth against the floor plane
+/// (`nx`, `ny`, `nz`, offset) and the background.
+struct Growth<'a> {
+    depth: &'a [u16],
+    g: &'a Grid,
+    bg: &'a Background,
+    plane: (f32, f32, f32, f32),
+    /// How much nearer than the background a pixel must be.
+    margin: f32,
+    grow_mm: f32,
+    ridge_mm: f32,
+}
+
+impl Growth<'_> {
+    /// The background's index of pixel `i` of the region.
+    fn at(&self, i: usize) -> usize {
+        let g = self.g;
+        (g.oy + i / g.w) * g.bg_w + g.ox + i % g.w
+    }
+
+    /// Height above the floor of pixel `i` at depth `d`.
+    fn height(&self, i: usize, d: f32) -> f32 {
+        let (nx, ny, nz, c) = self.plane;
+        self.bg
+            .rays
+            .get(self.at(i))
+            .map_or(f32::NEG_INFINITY, |r| (nx * r[0] + ny * r[1] + nz) * d + c)
+    }
+
+    /// Height above the floor, or above the background where that is nearer (a wall).
+    fn above(&self, i: usize, d: f32) -> f32 {
+        let (nx, ny, nz, c) = self.plane;
+        let at = self.at(i);
+        let (Some(r), Some(&b)) = (self.bg.rays.get(at), self.bg.depth.get(at)) else {
+            return f32::NEG_INFINITY;
+        };
+        let a = nx * r[0] + ny * r[1] + nz;
+        let h = a * d + c;
+        if b > 0.0 { h.min(a * (d - b)) } else { h }
+    }
+
+    fn bg_at(&self, i: usize) -> f32 {
+        self.bg.depth.get(self.at(i)).copied().unwrap_or(0.0)
+    }
+
+    /// Whether pixel `i` joins the mask: high enough and nearer than the background, or on
+    /// a ridge.
+    fn accepts(&self, i: usize, strong: &[u8], jump: &[u8]) -> bool {
+        let d = self.depth[i];
+        if d == 0 {
+            return false;
+        }
+        let d = f32::from(d);
+        let h = self.height(i, d);
+        let b = self.bg_at(i);
+        if h >= self.grow_mm && (b <= 0.0 || d <= b - self.margin) {
+            return true;
+        }
+        if !self.ridge_mm.is_finite() || self.above(i, d) < 0.0 {
+            return false;
+        }
+        self.ridge_height(i, strong, jump) >= self.ridge_mm
+    }
+
+    /// A ridge: along some direction, the median height of the five pixels centred at `i`
+    /// (without the body's strong pixels) is high enough; the highest such median.
+    fn ridge_height(&self, i: usize, strong: &[u8], jump: &[u8]) -> f32 {
+        let (g, depth) = (self.g, self.depth);
+        let (x, y) = ((i % g.w) as isize, (i / g.w) as isize);
+        let mut best = f32::NEG_INFINITY;
+        for (dx, dy) in [(1isize, 0isize), (0, 1), (1, 1), (1, -1)] {
+            let mut v = [0f32; 11];
+            let mut n = 0;
+            for k in -RIDGE_HALF_PX..=RIDGE_HALF_PX {
+                let (px, py) = (x + k * dx, y + k * dy);
+                if px < 0 || py < 0 || px >= g.w as isize || py >= g.h as isize {
+                    continue;
+                }
+                let j = py as usize * g.w + px as usize;
+                if depth[j] == 0 || strong[j] != 0 || jump[j] != 0 {
+                    continue;
+                }
+                v[n] = self.above(j, f32::from(depth[j]));
+                n += 1;
+            }
+            if n as isize > RIDGE_HALF_PX {
+                let vs = &mut v[..n];
+                vs.sort_by(f32::total_cmp);
+                best = best.max(vs[n / 2]);
+            }
+        }
+        best
+    }
+}
+
+impl Scratch {
+    /// Puts the `seed` component (labelled over `search`) into the mask and onto the stack;
+    /// returns its box.
+    fn seed_mask(&mut self, g: &Grid, search: Bounds, seed: i32) -> Bounds {
+        let s = self;
         let sw = search.width();
         let mut b = Bounds::empty();
         s.stack.clear();
@@ -293,7 +345,14 @@ impl Segmenter {
                 }
             }
         }
-        // Mask values while growing: 1 seed, 2 grown, 4 tried and refused.
+        b
+    }
+
+    /// Grows the mask from the stack into the neighbours `growth` accepts, noting them in
+    /// `grown`. Mask values while growing: 1 seed, 2 grown, 4 tried and refused (cleared at
+    /// the end).
+    fn grow_from_seed(&mut self, g: &Grid, growth: &Growth<'_>) {
+        let s = self;
         s.grown.clear();
         s.refused.clear();
         while let Some(i) = s.stack.pop() {
@@ -303,7 +362,7 @@ impl Segmenter {
                 if s.mask[n] != 0 {
                     continue;
                 }
-                if accept(n, &s.strong, &s.jump) {
+                if growth.accepts(n, &s.strong, &s.jump) {
                     s.mask[n] = 2;
                     s.stack.push(n as u32);
                     s.grown.push(n as u32);
@@ -316,8 +375,12 @@ impl Segmenter {
         for &i in &s.refused {
             s.mask[i as usize] = 0;
         }
-        // Grown pixels form branches (8-connected among themselves); the small ones are noise
-        // along the body's edge, the long ones the tail.
+    }
+
+    /// Grown pixels form branches (8-connected among themselves); the small ones are noise
+    /// along the body's edge, dropped, the long ones the tail, kept and added to the box `b`.
+    fn keep_long_branches(&mut self, g: &Grid, b: &mut Bounds) {
+        let s = self;
         for k in 0..s.grown.len() {
             let start = s.grown[k] as usize;
             if s.mask[start] != 2 {
@@ -347,7 +410,6 @@ impl Segmenter {
                 }
             }
         }
-        b
     }
 }
 
