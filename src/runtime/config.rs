@@ -5,9 +5,10 @@
 //! `docs/rig.example.toml` is a commented example of every key.
 
 use crate::io::read_bounded;
-use crate::runtime::capture::backend::{Backend, COLOR_BACKENDS, DEPTH_BACKENDS, read_table};
+use crate::runtime::capture::backend::{Backend, read_table};
 pub use crate::runtime::capture::backend::{ColorCamera, DepthCamera};
 pub use crate::runtime::capture::supervise::Reconnect;
+use crate::runtime::capture::{COLOR_BACKENDS, DEPTH_BACKENDS};
 use crate::runtime::pipeline::{EdgeConfig, WhenFull};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};

@@ -4,8 +4,9 @@
 //! Vision cameras are looked for only at the addresses a rig config names (Aravis 0.8 cannot
 //! limit its discovery to one network interface, so no discovery is run at all).
 
+use crate::runtime::capture::backend::Backend;
 pub use crate::runtime::capture::backend::BackendDevices;
-use crate::runtime::capture::backend::{Backend, COLOR_BACKENDS, DEPTH_BACKENDS};
+use crate::runtime::capture::{COLOR_BACKENDS, DEPTH_BACKENDS};
 use crate::runtime::config::Config;
 
 /// Lists every backend's cameras, each backend as the camera `config` gives it sees it (GigE

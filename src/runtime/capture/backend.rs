@@ -3,12 +3,12 @@
 //!
 //! A new camera backend is one module under `capture/` holding its [`FrameSource`], its
 //! table (a serde struct with `deny_unknown_fields`, checked into a [`CameraConfig`]) and a
-//! [`Backend`] constant (`REGISTERED`), plus one line in [`DEPTH_BACKENDS`] or [`COLOR_BACKENDS`]
-//! (docs/ARCHITECTURE.md, "Adding a camera backend").
+//! [`Backend`] constant (`REGISTERED`), plus one line in `capture::DEPTH_BACKENDS` or
+//! `capture::COLOR_BACKENDS` (docs/ARCHITECTURE.md, "Adding a camera backend").
 
 use crate::core::frame::{ColorFrame, DepthFrame};
 use crate::core::geometry::Rig;
-use crate::runtime::capture::{CaptureError, DeviceInfo, FrameSource, aravis, openni, session, v4l2};
+use crate::runtime::capture::{CaptureError, DeviceInfo, FrameSource};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 use std::fmt;
@@ -94,17 +94,6 @@ impl<C: ?Sized> fmt::Debug for Backend<C> {
 
 pub type DepthBackend = Backend<dyn DepthConfig>;
 pub type ColorBackend = Backend<dyn CameraConfig<Frame = ColorFrame>>;
-
-/// The depth camera backends: `[depth] backend = "..."` names one.
-pub const DEPTH_BACKENDS: &[DepthBackend] = &[openni::REGISTERED, session::REGISTERED];
-
-/// The colour camera backends: `[color] backend = "..."` names one.
-pub const COLOR_BACKENDS: &[ColorBackend] = &[
-    aravis::REGISTERED,
-    v4l2::REGISTERED,
-    #[cfg(test)]
-    crate::runtime::capture::test_pattern::REGISTERED,
-];
 
 /// The backend of `backends` that `table`'s `backend` key names, and its checked camera.
 ///

@@ -5,6 +5,9 @@
 //! the device clock and the host's monotonic clock at arrival) and counts, by reason, the frames
 //! it saw but could not pass on (a GigE buffer with missing packets, a timeout). Gaps in the
 //! device counter are counted by the runner, not here.
+//!
+//! The backends are registered here, one line each ([`DEPTH_BACKENDS`], [`COLOR_BACKENDS`]);
+//! what a backend is: [`backend`].
 
 pub mod aravis;
 pub mod backend;
@@ -18,6 +21,20 @@ mod test_pattern;
 pub mod v4l2;
 
 pub use clock::Clock;
+
+use backend::{ColorBackend, DepthBackend};
+
+/// The depth camera backends: `[depth] backend = "..."` names one.
+pub const DEPTH_BACKENDS: &[DepthBackend] = &[openni::REGISTERED, session::REGISTERED];
+
+/// The colour camera backends: `[color] backend = "..."` names one.
+pub const COLOR_BACKENDS: &[ColorBackend] = &[
+    aravis::REGISTERED,
+    v4l2::REGISTERED,
+    #[cfg(test)]
+    test_pattern::REGISTERED,
+];
+
 pub use openni::{OpenNiConfig, OpenNiDepth};
 
 use crate::core::frame::{ColorFrame, DepthFrame, Stamp};

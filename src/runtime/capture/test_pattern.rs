@@ -1,6 +1,6 @@
 //! A colour backend for the tests only, and the example of what a camera backend is: this
 //! module (its [`FrameSource`], its table, its `REGISTERED` entry) and one line in
-//! `capture::backend::COLOR_BACKENDS`. It delivers `frames` flat grey frames, numbered from 0,
+//! `capture::COLOR_BACKENDS`. It delivers `frames` flat grey frames, numbered from 0,
 //! one every `interval_ms`, stamped with the clock it was started with.
 
 use super::backend::{self, Backend, CameraConfig, ColorBackend, TableError};
