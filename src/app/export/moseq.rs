@@ -2,6 +2,7 @@
 //! [`crate::engine::export::moseq`], and what was written printed.
 
 use crate::app::output::print;
+use crate::app::progress::Bars;
 use crate::engine::export::moseq::{COLOR_AVI, MoseqOptions};
 use crate::runtime::capture::moseq::DEPTH_AVI;
 use clap::Args;
@@ -33,13 +34,16 @@ pub struct MoseqArgs {
 
 /// `mousepose export moseq`.
 pub fn command(args: &MoseqArgs) -> crate::app::Outcome {
-    let e = crate::engine::export::moseq::moseq(&MoseqOptions {
-        session: args.session.clone(),
-        out: args.out.clone(),
-        subject: args.subject.clone(),
-        session_name: args.session_name.clone(),
-        force: args.force,
-    })?;
+    let e = crate::engine::export::moseq::moseq(
+        &MoseqOptions {
+            session: args.session.clone(),
+            out: args.out.clone(),
+            subject: args.subject.clone(),
+            session_name: args.session_name.clone(),
+            force: args.force,
+        },
+        &Bars::default(),
+    )?;
     match e.millimetres.as_ref() {
         Some(mm) => {
             if let Some(w) = mm.warning() {
