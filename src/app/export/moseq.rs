@@ -44,16 +44,6 @@ pub fn command(args: &MoseqArgs) -> crate::app::Outcome {
         },
         &Bars::default(),
     )?;
-    match e.millimetres.as_ref() {
-        Some(mm) => {
-            if let Some(w) = mm.warning() {
-                eprintln!("warning: {w}");
-            }
-        }
-        None => eprintln!(
-            "warning: the depth camera's intrinsics are unknown (no rig calibration, a camera the table does not know): moseq2-extract's millimetre scalars assume a Kinect v2's field of view and may be off"
-        ),
-    }
     if args.json {
         return Ok(crate::app::output::print_json(&e)?);
     }

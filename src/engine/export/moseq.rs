@@ -406,7 +406,8 @@ fn millimetres_of(rig: Option<&crate::core::geometry::Rig>, depth_meta: &CameraM
 }
 
 /// `mousepose export moseq`: finds the session of `options.session` and exports it, telling
-/// `progress` the frames done.
+/// `progress` the frames done, then warns there when moseq2-extract's millimetres will be off
+/// (or may be: a camera of unknown intrinsics).
 ///
 /// # Errors
 /// See [`export_moseq`]; a directory that is neither a session nor a run (the user's).
@@ -425,7 +426,18 @@ pub fn moseq(options: &MoseqOptions, progress: &dyn Progress) -> Result<MoseqExp
         },
     );
     progress.finish();
-    result.map_err(|f| f.context(format!("exporting {:?} for MoSeq", run.session)))
+    let export = result.map_err(|f| f.context(format!("exporting {:?} for MoSeq", run.session)))?;
+    match export.millimetres.as_ref() {
+        Some(mm) => {
+            if let Some(w) = mm.warning() {
+                progress.warning(&w);
+            }
+        }
+        None => progress.warning(
+            "the depth camera's intrinsics are unknown (no rig calibration, a camera the table does not know): moseq2-extract's millimetre scalars assume a Kinect v2's field of view and may be off",
+        ),
+    }
+    Ok(export)
 }
 
 #[cfg(test)]
