@@ -194,8 +194,9 @@ fn modules_import_each_other_in_no_cycle() {
     }
 }
 
-/// The command line's shared helpers (printing, argument parsers): every command may use them.
-const APP_HELPERS: [&str; 2] = ["app::output", "app::parse"];
+/// The command line's shared helpers (printing, argument parsers, progress bars): every
+/// command may use them.
+const APP_HELPERS: [&str; 3] = ["app::output", "app::parse", "app::progress"];
 
 #[test]
 fn no_command_file_imports_another() {
