@@ -25,8 +25,9 @@ const READ_THROUGH: [&str; 8] = [
     "docs/metrics.md",
 ];
 /// The repository's top-level folders a path in a document may start with.
-const TOP: [&str; 9] = [
+const TOP: [&str; 10] = [
     "src/",
+    "python/",
     "docs/",
     "scripts/",
     "tests/",

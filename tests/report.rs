@@ -7,7 +7,7 @@ use crate::util::{mousepose, repo_root};
 use mousepose::core::noise::{DepthNoise, NoiseModel};
 use mousepose::core::skeleton::Joint;
 use mousepose::engine::replay::replay;
-use mousepose::engine::report::{frame_input, report};
+use mousepose::engine::report::{ReportOptions, frame_input, report};
 use mousepose::io::session::SessionReader;
 use mousepose::synth::mouse::Behaviour as Act;
 use mousepose::synth::session::{SessionSpec, session_animator, write_session};
@@ -185,7 +185,9 @@ fn gait_of_a_rendered_walk_matches_the_animators_stride() {
     // The same measured from the pipeline's poses (paws from the bottom view).
     let run = tmp.path().join("run");
     replay_to(&session, &run);
-    let measured = report(&run, &tmp.path().join("report"), false).unwrap();
+    let measured = report(&ReportOptions::new(&run, tmp.path().join("report")))
+        .unwrap()
+        .behaviour;
     let (ml, md) = (median(lengths(&measured)), median(duties(&measured)));
     let cadence = median(measured.strides.iter().map(|s| 1.0 / s.period_s).collect());
     println!(

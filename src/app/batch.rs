@@ -3,6 +3,7 @@
 
 use crate::app::Outcome;
 use crate::app::output::show_batch;
+use crate::app::progress::Bars;
 use crate::engine::batch::{BatchOptions, SlurmResources, batch};
 use clap::Args;
 use std::path::PathBuf;
@@ -48,7 +49,7 @@ pub fn command(args: &BatchArgs) -> Outcome {
         force: args.force,
     };
     let slurm = args.slurm.then(|| args.resources.resources());
-    let summary = batch(&args.sessions, &args.out, &options, slurm.as_ref())?;
+    let summary = batch(&args.sessions, &args.out, &options, slurm.as_ref(), &Bars::default())?;
     show_batch(&summary, args.json)
 }
 

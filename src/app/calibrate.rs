@@ -4,9 +4,10 @@
 use crate::app::Outcome;
 use crate::app::output::{print, print_json};
 use crate::app::parse;
-use crate::engine::calibrate::{self, ExtrinsicsOptions, IntrinsicsOptions};
+use crate::engine::calibrate::{self, ExtrinsicsOptions, IntrinsicsOptions, IntrinsicsSummary};
 use clap::{Args, Subcommand};
-use std::path::PathBuf;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
 
 /// Calibrate the cameras: intrinsics of each, then both posed against a board on the glass.
 #[derive(Debug, Subcommand)]
@@ -95,7 +96,7 @@ pub struct ExtrinsicsArgs {
 ///
 /// # Errors
 /// Whatever the command meets; the message names the file at fault.
-pub fn run(command: &CalibrateCommand) -> Outcome {
+pub fn command(command: &CalibrateCommand) -> Outcome {
     match command {
         CalibrateCommand::Intrinsics(args) => intrinsics(args),
         CalibrateCommand::Extrinsics(args) => extrinsics(args),
@@ -114,7 +115,40 @@ fn intrinsics(args: &IntrinsicsArgs) -> Outcome {
     if args.json {
         return Ok(print_json(&summary)?);
     }
-    Ok(print(&summary.text)?)
+    Ok(print(&intrinsics_text(&summary, &args.out))?)
+}
+
+/// What `calibrate intrinsics` prints without `--json`: the depth mode and its fields of
+/// view (OpenNI), or each view's error and the intrinsics found (chessboard views).
+fn intrinsics_text(s: &IntrinsicsSummary, out: &Path) -> String {
+    if let Some([hfov, vfov]) = s.field_of_view_deg {
+        return format!(
+            "{}x{} depth mode, field of view {:.2} x {:.2} degrees: fx {:.2} fy {:.2} cx {:.2} cy {:.2}; written to {:?}\n",
+            s.width, s.height, hfov, vfov, s.fx, s.fy, s.cx, s.cy, out
+        );
+    }
+    let mut t = String::new();
+    let _ = writeln!(t, "{:<40} {:>10}", "view", "rms px");
+    for (v, e) in s.views.iter().zip(&s.per_view_errors) {
+        let _ = writeln!(t, "{v:<40} {e:>10.3}");
+    }
+    for v in &s.skipped {
+        let _ = writeln!(t, "{v:<40} {:>10}", "no board");
+    }
+    let _ = writeln!(
+        t,
+        "{}x{}: fx {:.2} fy {:.2} cx {:.2} cy {:.2}, distortion {:?}",
+        s.width, s.height, s.fx, s.fy, s.cx, s.cy, s.distortion
+    );
+    let _ = writeln!(
+        t,
+        "rms {:.3} px over {} views ({} without a board skipped); written to {:?}",
+        s.rms.unwrap_or(f64::NAN),
+        s.views.len(),
+        s.skipped.len(),
+        out
+    );
+    t
 }
 
 fn extrinsics(args: &ExtrinsicsArgs) -> Outcome {

@@ -47,12 +47,22 @@ fn parse_px_per_mm(s: &str) -> Result<f64, String> {
     crate::app::parse::ranged(s, "pixels per millimetre", 0.05, 50.0)
 }
 
+/// `mousepose detect ...`.
+///
+/// # Errors
+/// See each detector.
+pub fn command(command: &DetectCommand) -> crate::app::Outcome {
+    match command {
+        DetectCommand::Paws(args) => paws(args),
+    }
+}
+
 /// `mousepose detect paws`.
 ///
 /// # Errors
 /// A missing or unreadable image or model, or an output directory in the way (exit code 1);
 /// a failure writing the output (2).
-pub fn paws(args: &DetectPawsArgs) -> crate::app::Outcome {
+fn paws(args: &DetectPawsArgs) -> crate::app::Outcome {
     let detections = crate::engine::detect::paws(&DetectPawsOptions {
         images: args.images.clone(),
         out: args.out.clone(),

@@ -3,8 +3,10 @@
 
 use crate::app::ModelTarget;
 use crate::app::output::{print, print_json};
-use crate::engine::eval::EvalOptions;
+use crate::engine::eval::{BodyFigures, EvalOptions, EvalSummary};
+use crate::training;
 use clap::Args;
+use std::fmt::Write as _;
 use std::path::PathBuf;
 
 #[derive(Debug, Args)]
@@ -34,7 +36,7 @@ pub struct EvalArgs {
 }
 
 /// `mousepose eval body|parts|paws`.
-pub fn run(args: &EvalArgs) -> crate::app::Outcome {
+pub fn command(args: &EvalArgs) -> crate::app::Outcome {
     let summary = crate::engine::eval::eval(&EvalOptions {
         target: args.target.into(),
         model: args.model.clone(),
@@ -46,5 +48,76 @@ pub fn run(args: &EvalArgs) -> crate::app::Outcome {
     if args.json {
         return Ok(print_json(&summary)?);
     }
-    Ok(print(&summary.text())?)
+    Ok(print(&summary_text(&summary))?)
+}
+
+/// The table `eval` prints without `--json`.
+fn summary_text(summary: &EvalSummary) -> String {
+    match summary {
+        EvalSummary::Body(report) => body_text(report),
+        EvalSummary::Parts(report) => parts_text(report),
+        EvalSummary::Paws(report) => paws_text(report),
+        EvalSummary::Orientation(f) => format!(
+            "head end right in {:.2} % of {} views (tail hidden {:.2} %, tail shown {:.2} %; full resolution {:.2} %, half {:.2} %)\n",
+            100.0 * f.accuracy,
+            f.views,
+            100.0 * f.tail_hidden,
+            100.0 * f.tail_shown,
+            100.0 * f.full_resolution,
+            100.0 * f.half_resolution,
+        ),
+    }
+}
+
+fn body_text(report: &BodyFigures) -> String {
+    let mut t = String::new();
+    let _ = writeln!(t, "{:<16} {:>9} {:>13}", "joint", "error mm", "paper's mm");
+    for (name, e) in &report.report.per_joint_mm {
+        let paper = report.paper_method.per_joint_mm.get(name).copied().unwrap_or(f64::NAN);
+        let _ = writeln!(t, "{name:<16} {e:>9.2} {paper:>13.2}");
+    }
+    let _ = writeln!(
+        t,
+        "{:<16} {:>9.2} {:>13.2}",
+        "mean (1-12)", report.report.mean_error_mm, report.paper_method.mean_error_mm
+    );
+    let _ = writeln!(
+        t,
+        "{} images, {} without a mouse found; \"paper's\": votes and mean-shift alone, without \
+         the step along the segmented tail",
+        report.report.images, report.report.no_mouse
+    );
+    t
+}
+
+fn parts_text(report: &training::PartsReport) -> String {
+    let mut t = String::new();
+    let _ = writeln!(t, "{:<12} {:>9}", "class", "accuracy");
+    for (name, a) in &report.per_class_accuracy {
+        let _ = writeln!(t, "{name:<12} {:>8.1}%", 100.0 * a);
+    }
+    let _ = writeln!(t, "{:<12} {:>8.1}%", "mean", 100.0 * report.mean_class_accuracy);
+    let _ = writeln!(t, "{:<12} {:>8.1}%", "all pixels", 100.0 * report.pixel_accuracy);
+    t
+}
+
+fn paws_text(report: &training::paws_eval::PawReport) -> String {
+    let mut t = String::new();
+    let _ = writeln!(t, "{:<28} {:>9}", "images", report.images);
+    let _ = writeln!(t, "{:<28} {:>9}", "paws on the glass", report.contact_paws);
+    let _ = writeln!(t, "{:<28} {:>9}", "detections", report.detections);
+    let _ = writeln!(t, "{:<28} {:>9.3}", "precision", report.precision);
+    let _ = writeln!(t, "{:<28} {:>9.3}", "recall (paws on the glass)", report.recall);
+    let _ = writeln!(t, "{:<28} {:>9.3}", "F1", report.f1);
+    let _ = writeln!(
+        t,
+        "{:<28} {:>9.2}",
+        "mean centre error (px)", report.mean_centre_error_px
+    );
+    let _ = writeln!(
+        t,
+        "{} true, {} false ({} on marks of the view, {} on the body's look-alikes of paws), {} of lifted or hidden paws (neither)",
+        report.true_positives, report.false_positives, report.false_on_marks, report.false_on_body, report.neutral
+    );
+    t
 }

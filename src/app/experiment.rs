@@ -2,6 +2,7 @@
 //! the figures printed.
 
 use crate::app::output::{print, print_json};
+use crate::app::progress::Bars;
 use crate::engine::experiment::{Gauss2dOptions, gauss2d_tables};
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
@@ -28,13 +29,23 @@ pub struct Gauss2dArgs {
     pub json: bool,
 }
 
+/// `mousepose experiment ...`.
+pub fn command(command: &ExperimentCommand) -> crate::app::Outcome {
+    match command {
+        ExperimentCommand::Gauss2d(args) => gauss2d(args),
+    }
+}
+
 /// `mousepose experiment gauss2d`.
-pub fn gauss2d(args: &Gauss2dArgs) -> crate::app::Outcome {
-    let report = crate::engine::experiment::gauss2d(&Gauss2dOptions {
-        quick: args.quick,
-        seed: args.seed,
-        report: args.report.clone(),
-    })?;
+fn gauss2d(args: &Gauss2dArgs) -> crate::app::Outcome {
+    let report = crate::engine::experiment::gauss2d(
+        &Gauss2dOptions {
+            quick: args.quick,
+            seed: args.seed,
+            report: args.report.clone(),
+        },
+        &Bars::default(),
+    )?;
     if args.json {
         return Ok(print_json(&report)?);
     }

@@ -15,6 +15,7 @@ pub mod experiment;
 pub mod export;
 pub mod output;
 pub mod parse;
+pub mod progress;
 pub mod record;
 pub mod replay;
 pub mod report;
@@ -197,7 +198,7 @@ pub fn main() -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::from(1);
     }
-    match run(cli) {
+    match dispatch(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(failure) => {
             eprintln!("error: {:#}", failure.error());
@@ -206,23 +207,24 @@ pub fn main() -> ExitCode {
     }
 }
 
-fn run(cli: Cli) -> Outcome {
+/// Hands the command line to its command.
+fn dispatch(cli: Cli) -> Outcome {
     match cli.command {
-        Command::Synth(command) => synth::run(command),
-        Command::Train(args) => train::run(&args),
-        Command::Eval(args) => eval::run(&args),
-        Command::Experiment(experiment::ExperimentCommand::Gauss2d(args)) => experiment::gauss2d(&args),
+        Command::Synth(command) => synth::command(command),
+        Command::Train(args) => train::command(&args),
+        Command::Eval(args) => eval::command(&args),
+        Command::Experiment(command) => experiment::command(&command),
         Command::Bench(args) => bench::command(&args),
         Command::Replay(args) => replay::command(&args),
         Command::Record(args) => record::command(&args),
         Command::Run(args) => run::command(&args),
         Command::Status(args) => status::command(&args),
         Command::Devices(args) => devices::command(&args),
-        Command::Calibrate(command) => calibrate::run(&command),
-        Command::Export(command) => export::run(&command),
+        Command::Calibrate(command) => calibrate::command(&command),
+        Command::Export(command) => export::command(&command),
         Command::Batch(args) => batch::command(&args),
         Command::Report(args) => report::command(&args),
-        Command::Detect(detect::DetectCommand::Paws(args)) => detect::paws(&args),
+        Command::Detect(command) => detect::command(&command),
     }
 }
 

@@ -4,8 +4,8 @@
 
 use crate::app::Outcome;
 use crate::app::output::{print, print_json, show_batch};
+use crate::app::progress::{Bars, bar};
 use crate::engine::batch::{BatchOptions, batch, is_batch};
-use crate::engine::progress;
 use crate::engine::replay::{PICTURE_FILE, ReplayError, ReplayOptions, ReplaySummary, replay_with};
 use crate::engine::{Failure, Interrupt};
 use crate::runtime::sink::poses::POSES_FILE;
@@ -166,7 +166,7 @@ pub fn command(args: &ReplayArgs) -> Outcome {
     };
     let interrupt = Interrupt::install().map_err(ReplayError::Signals)?;
     // Rows written against the recording's depth frames (about one row per frame).
-    let bar = progress::bar(0, "replay");
+    let bar = bar(0, "replay");
     let result = replay_with(&options, &interrupt, |rows, total| {
         bar.set_length(total.max(rows));
         bar.set_position(rows);
@@ -192,5 +192,8 @@ fn replay_many(args: &ReplayArgs) -> Outcome {
         calibration: args.calibration.clone(),
         force: args.force,
     };
-    show_batch(&batch(&args.sessions, &args.out, &options, None)?, args.json)
+    show_batch(
+        &batch(&args.sessions, &args.out, &options, None, &Bars::default())?,
+        args.json,
+    )
 }

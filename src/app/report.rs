@@ -3,7 +3,7 @@
 
 use crate::app::output::{print, print_json};
 use crate::engine::Failure;
-use crate::engine::report::{ReportOptions, report_with, summary};
+use crate::engine::report::{ReportOptions, report, summary};
 use crate::vision::behaviour::{Arena, BehaviourConfig};
 use crate::vision::movement::ActivityConfig;
 use clap::Args;
@@ -83,8 +83,6 @@ fn parse_arena(s: &str) -> Result<Arena, String> {
     })
 }
 
-/// What a report is made with besides the run: the thresholds, and the arena (`None`: the
-/// run's own, see [`ReportArgs::arena`]).
 /// `mousepose report`.
 pub fn command(args: &ReportArgs) -> crate::app::Outcome {
     if args.walk_min >= args.walk_max {
@@ -95,6 +93,9 @@ pub fn command(args: &ReportArgs) -> crate::app::Outcome {
         )));
     }
     let options = ReportOptions {
+        run: args.run.clone(),
+        out: args.out.clone(),
+        force: args.force,
         config: BehaviourConfig {
             walk_min_mm_s: args.walk_min,
             walk_max_mm_s: args.walk_max,
@@ -109,10 +110,9 @@ pub fn command(args: &ReportArgs) -> crate::app::Outcome {
         },
         arena: args.arena,
     };
-    let reported = report_with(&args.run, &args.out, args.force, &options)
-        .map_err(|f| f.context(format!("reporting on {:?}", args.run)))?;
+    let reported = report(&options).map_err(|f| f.context(format!("reporting on {:?}", args.run)))?;
     if args.json {
-        return Ok(print_json(&summary(&args.run, &options, &reported))?);
+        return Ok(print_json(&summary(&options, &reported))?);
     }
     let (b, arena) = (&reported.behaviour, reported.arena);
     let stride = |k: usize| {

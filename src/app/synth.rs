@@ -4,6 +4,7 @@
 
 use crate::app::Outcome;
 use crate::app::parse;
+use crate::app::progress::Bars;
 use crate::core::frame::PixelFormat;
 use crate::core::noise::{DepthNoise, NoiseModel};
 use crate::engine::calibrate::{self, ChessboardOptions};
@@ -202,7 +203,7 @@ pub struct SessionArgs {
 }
 
 /// `mousepose synth ...`.
-pub fn run(command: SynthCommand) -> Outcome {
+pub fn command(command: SynthCommand) -> Outcome {
     match command {
         SynthCommand::Dataset(args) => synth_dataset(&args),
         SynthCommand::Session(args) => synth_session(&args),
@@ -212,15 +213,18 @@ pub fn run(command: SynthCommand) -> Outcome {
 }
 
 fn synth_chessboard(args: &ChessboardArgs) -> Outcome {
-    let summary = calibrate::synth_chessboard(&ChessboardOptions {
-        out: args.out.clone(),
-        board: args.board.clone(),
-        square_mm: args.square_mm,
-        views: args.views,
-        seed: args.seed,
-        color_binning: args.color_binning,
-        force: args.force,
-    })?;
+    let summary = calibrate::synth_chessboard(
+        &ChessboardOptions {
+            out: args.out.clone(),
+            board: args.board.clone(),
+            square_mm: args.square_mm,
+            views: args.views,
+            seed: args.seed,
+            color_binning: args.color_binning,
+            force: args.force,
+        },
+        &Bars::default(),
+    )?;
     if args.json {
         crate::app::output::print_json(&serde_json::json!({ "out": summary.out, "views": summary.views }))?;
     }
@@ -241,11 +245,14 @@ fn synth_moseq(args: &MoseqArgs) -> Outcome {
         camera_height_mm: args.camera_height_mm,
         tilt_deg: args.tilt_deg,
     };
-    engine::synth_moseq(&MoseqOptions {
-        out: args.out.clone(),
-        spec,
-        force: args.force,
-    })?;
+    engine::synth_moseq(
+        &MoseqOptions {
+            out: args.out.clone(),
+            spec,
+            force: args.force,
+        },
+        &Bars::default(),
+    )?;
     Ok(())
 }
 
@@ -261,11 +268,14 @@ fn synth_dataset(args: &DatasetArgs) -> Outcome {
         bottom_clutter: args.bottom_clutter,
         mice: args.mice,
     };
-    let summary = engine::synth_dataset(&DatasetOptions {
-        out: args.out.clone(),
-        spec,
-        force: args.force,
-    })?;
+    let summary = engine::synth_dataset(
+        &DatasetOptions {
+            out: args.out.clone(),
+            spec,
+            force: args.force,
+        },
+        &Bars::default(),
+    )?;
     if args.json {
         crate::app::output::print_json(&serde_json::json!({ "out": summary.out, "images": summary.images }))?;
     }
@@ -288,11 +298,14 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         activity: args.activity,
         tail: args.tail,
     };
-    let summary = engine::synth_session(&SessionOptions {
-        out: args.out.clone(),
-        spec,
-        force: args.force,
-    })?;
+    let summary = engine::synth_session(
+        &SessionOptions {
+            out: args.out.clone(),
+            spec,
+            force: args.force,
+        },
+        &Bars::default(),
+    )?;
     if args.json {
         crate::app::output::print_json(&serde_json::json!({
             "out": summary.out,

@@ -2,6 +2,7 @@
 //! what was written printed with `--json`.
 
 use crate::app::parse;
+use crate::app::progress::Bars;
 use crate::app::{ModelTarget, Outcome};
 use crate::engine::train::{TrainOptions, TrainSummary};
 use crate::vision::forest::discriminative::ErrorScope;
@@ -92,8 +93,8 @@ pub struct TrainArgs {
 }
 
 /// `mousepose train body|parts|paws`.
-pub fn run(args: &TrainArgs) -> Outcome {
-    let summary = crate::engine::train::train(&TrainOptions {
+pub fn command(args: &TrainArgs) -> Outcome {
+    let options = TrainOptions {
         target: args.target.into(),
         data: args.data.clone(),
         out: args.out.clone(),
@@ -115,7 +116,8 @@ pub fn run(args: &TrainArgs) -> Outcome {
         seed: args.seed,
         stages: args.stages,
         force: args.force,
-    })?;
+    };
+    let summary = crate::engine::train::train(&options, &Bars::default())?;
     if !args.json {
         return Ok(());
     }

@@ -14,6 +14,7 @@
 //! task per session, each task a `mousepose replay`); the command waits for the array to end
 //! and gathers the summaries the same way.
 
+use crate::engine::progress::Progress;
 use crate::engine::replay::{ReplayOptions, SUMMARY_FILE, replay_until};
 use crate::engine::{Failure, Interrupt};
 use crate::io::table::Fixed;
@@ -280,10 +281,6 @@ pub fn run_local(
         .collect()
 }
 
-fn opt<T: std::fmt::Display>(v: Option<T>) -> String {
-    v.map(|v| v.to_string()).unwrap_or_default()
-}
-
 /// The columns of `batch.csv`.
 const BATCH_COLUMNS: [&str; 8] = [
     "name",
@@ -330,40 +327,6 @@ pub fn table_csv(rows: &[BatchRow]) -> Result<Vec<u8>, csv::Error> {
     crate::io::table::table(&BATCH_COLUMNS, &lines)
 }
 
-/// The table as the terminal shows it.
-pub fn table_text(rows: &[BatchRow]) -> String {
-    let width = rows.iter().map(|r| r.name.len()).max().unwrap_or(7).max(7);
-    let mut text = format!(
-        "{:<width$}  {:<7}  {:>7}  {:>7}  {:>9}  {:>8}\n",
-        "session", "status", "pairs", "ok", "pairs/s", "error mm"
-    );
-    for r in rows {
-        let _ = writeln!(
-            text,
-            "{:<width$}  {:<7}  {:>7}  {:>7}  {:>9}  {:>8}",
-            r.name,
-            r.status,
-            opt(r.pairs),
-            opt(r.ok_poses),
-            opt(r.throughput_pairs_per_s.map(|v| format!("{v:.0}"))),
-            opt(r.mean_error_mm.map(|v| format!("{v:.2}"))),
-        );
-        if let Some(e) = &r.error {
-            let _ = writeln!(text, "{:<width$}  {e}", "");
-        }
-    }
-    let count = |s: &str| rows.iter().filter(|r| r.status == s).count();
-    let _ = writeln!(
-        text,
-        "{} sessions: {} replayed, {} skipped (finished before), {} failed",
-        rows.len(),
-        count("done"),
-        count("skipped"),
-        count("failed")
-    );
-    text
-}
-
 /// Writes `batch.csv` into `out` (through a temporary file and a rename).
 ///
 /// # Errors
@@ -385,11 +348,6 @@ pub struct BatchSummary {
 }
 
 impl BatchSummary {
-    /// The rows as a terminal shows them.
-    pub fn text(&self) -> String {
-        table_text(&self.rows)
-    }
-
     /// Sessions that failed make the batch a failure of the work, naming the table to read.
     pub fn failure(&self) -> Option<Failure> {
         let failed = self.rows.iter().filter(|r| r.status == "failed").count();
@@ -414,6 +372,7 @@ pub fn batch(
     out: &Path,
     options: &BatchOptions,
     slurm: Option<&SlurmResources>,
+    progress: &dyn Progress,
 ) -> Result<BatchSummary, Failure> {
     let sessions = expand_sessions(sessions)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {out:?}"))?;
@@ -421,15 +380,15 @@ pub fn batch(
     let items = plan(&sessions, &out)?;
     let _lock = BatchLock::take(&out)?;
     let rows = match slurm {
-        Some(slurm) => run_slurm(&items, &out, options, slurm)?,
+        Some(slurm) => run_slurm(&items, &out, options, slurm, progress)?,
         None => {
             let interrupt = Interrupt::install().context("installing the signal handlers")?;
-            let bar = crate::engine::progress::bar(items.len() as u64, "sessions");
+            progress.start("sessions", items.len() as u64);
             let rows = run_local(&items, options, &interrupt, |name| {
-                bar.set_message(name.to_owned());
-                bar.inc(1);
+                progress.label(name);
+                progress.advance(1);
             });
-            bar.finish_and_clear();
+            progress.finish();
             if interrupt.requested() {
                 let done = rows.iter().filter(|r| r.status != "failed").count();
                 return Err(Failure::from(anyhow::anyhow!(
@@ -612,6 +571,7 @@ fn run_slurm(
     out: &Path,
     options: &BatchOptions,
     slurm: &SlurmResources,
+    progress: &dyn Progress,
 ) -> Result<Vec<BatchRow>, Failure> {
     let finished_before: Vec<bool> = items.iter().map(|i| i.finished() && !options.force).collect();
     let todo: Vec<&BatchItem> = items
@@ -648,18 +608,21 @@ fn run_slurm(
                 "sbatch answered {submitted:?}, not a job id"
             )));
         }
-        eprintln!("submitted job array {id} ({} tasks); waiting for it", todo.len());
-        let bar = crate::engine::progress::bar(todo.len() as u64, "tasks");
+        progress.notice(&format!(
+            "submitted job array {id} ({} tasks); waiting for it",
+            todo.len()
+        ));
+        progress.start("tasks", todo.len() as u64);
         let started = Instant::now();
         while job_queued(&id)? {
-            bar.set_position(todo.iter().filter(|i| i.finished()).count() as u64);
+            progress.set_done(todo.iter().filter(|i| i.finished()).count() as u64);
             std::thread::sleep(Duration::from_secs(if started.elapsed() < Duration::from_secs(30) {
                 1
             } else {
                 5
             }));
         }
-        bar.finish_and_clear();
+        progress.finish();
         job = Some(id);
     }
     let mut todo_index = 0usize;

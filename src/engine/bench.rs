@@ -16,7 +16,6 @@ use crate::synth::views::render_top_frame;
 use crate::vision::segment::{Background, SegmentError, SegmenterConfig};
 use rayon::prelude::*;
 use serde::Serialize;
-use std::fmt::Write as _;
 use std::time::Instant;
 
 /// What `bench` measured.
@@ -95,84 +94,6 @@ pub struct ForestBench {
     pub estimate_ms_per_frame: f64,
 }
 
-impl BenchReport {
-    /// A human-readable table.
-    pub fn table(&self) -> String {
-        let mut s = String::new();
-        let rows = [
-            ("render depth images/s, 1 core", self.render_depth_images_per_s_one_core),
-            ("render depth images/s, all cores", self.render_depth_images_per_s),
-            ("mean rendered region, pixels", self.mean_region_px),
-            ("dataset samples/s with bottom views", self.dataset_samples_per_s),
-            ("training pixel-trees/s, all cores", self.train_pixel_trees_per_s),
-            ("segment one depth frame, ms", self.segment_ms_per_frame),
-        ];
-        let _ = writeln!(
-            s,
-            "{:<40} {:>12}",
-            format!("measure ({} threads)", self.threads),
-            "value"
-        );
-        for (name, v) in rows {
-            let digits = if v.abs() < 10.0 { 3 } else { 1 };
-            let _ = writeln!(s, "{name:<40} {v:>12.digits$}");
-        }
-        match &self.forest {
-            Some(f) => {
-                let _ = writeln!(
-                    s,
-                    "{:<40} {:>12.1}",
-                    format!("mouse pixels per frame ({} trees)", f.trees),
-                    f.pixels_per_frame
-                );
-                let _ = writeln!(
-                    s,
-                    "{:<40} {:>12.3}",
-                    format!("forest traversal ms/frame, 1 core, {}", f.kernel),
-                    f.traverse_ms_per_frame
-                );
-                let _ = writeln!(
-                    s,
-                    "{:<40} {:>12.3}",
-                    "forest traversal ms/frame, portable", f.traverse_portable_ms_per_frame
-                );
-                let _ = writeln!(
-                    s,
-                    "{:<40} {:>12.3}",
-                    "body estimate ms/frame, 1 core", f.estimate_ms_per_frame
-                );
-            }
-            None => {
-                let _ = writeln!(s, "(no bundled body model found: forest inference not measured)");
-            }
-        }
-        if let Some(p) = &self.paws {
-            let _ = writeln!(
-                s,
-                "{:<40} {:>12.3}",
-                format!(
-                    "paw detection ms/frame ({}x{} px)",
-                    p.roi_px[2] - p.roi_px[0],
-                    p.roi_px[3] - p.roi_px[1]
-                ),
-                p.detect_ms_per_frame
-            );
-        }
-        if let Some(p) = &self.pipeline {
-            let rows = [
-                ("replay pairs/s (all stages, all cores)", p.replay_pairs_per_s),
-                ("paced 30 fps latency p50, ms", p.paced_latency_p50_ms),
-                ("paced 30 fps latency p99, ms", p.paced_latency_p99_ms),
-                ("recording, cores used at 30 fps", p.record_cores),
-            ];
-            for (name, v) in rows {
-                let _ = writeln!(s, "{name:<40} {v:>12.3}");
-            }
-        }
-        s
-    }
-}
-
 fn rate(n: u64, f: impl FnOnce()) -> f64 {
     let t = Instant::now();
     f();
@@ -195,8 +116,16 @@ fn clean_top_views(count: u64, seed: u64) -> DatasetSpec {
     }
 }
 
-/// Runs the benchmarks; `quick` takes a few seconds instead of about a minute.
-pub fn run(quick: bool) -> BenchReport {
+/// What `bench` measures.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BenchOptions {
+    /// A few seconds instead of about a minute.
+    pub quick: bool,
+}
+
+/// `mousepose bench`: runs the benchmarks.
+pub fn bench(options: &BenchOptions) -> BenchReport {
+    let quick = options.quick;
     let rig = Rig::default_rig();
     let library = pose_library();
     let n: u64 = if quick { 400 } else { 6000 };

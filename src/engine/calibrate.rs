@@ -1,6 +1,7 @@
 //! The calibration engines behind `mousepose calibrate intrinsics|extrinsics` and `mousepose
 //! synth chessboard`: options in, a summary out (its JSON, and the table the command prints).
 
+use crate::engine::progress::Progress;
 use crate::engine::{Exists, Failure, output_failure};
 use crate::io::output::Staging;
 use crate::synth::chessboard::{ChessboardSpec, write_chessboards};
@@ -103,7 +104,8 @@ fn calibration_failure(e: CalibrationError) -> Failure {
     Failure::classed(e.is_input_problem(), e)
 }
 
-/// What `calibrate intrinsics` found and wrote: its `--json`, and the text it prints.
+/// What `calibrate intrinsics` found and wrote: its `--json` (the command line prints it as
+/// text otherwise).
 #[derive(Clone, Debug, Serialize)]
 pub struct IntrinsicsSummary {
     pub out: String,
@@ -119,9 +121,9 @@ pub struct IntrinsicsSummary {
     pub views: Vec<String>,
     pub skipped: Vec<String>,
     pub source: &'static str,
-    /// The lines printed without `--json`.
+    /// The depth stream's horizontal and vertical fields of view, degrees (`openni` only).
     #[serde(skip)]
-    pub text: String,
+    pub field_of_view_deg: Option<[f64; 2]>,
 }
 
 fn board(size: &str, square_mm: f64) -> Result<Board, Failure> {
@@ -140,18 +142,6 @@ pub fn intrinsics(options: &IntrinsicsOptions) -> Result<IntrinsicsSummary, Fail
         let found = crate::runtime::capture::openni::depth_intrinsics(uri)
             .with_context(|| format!("reading OpenNI device {uri:?}"))?;
         crate::vision::calibrate::field_of_view::save(&found, &options.out).map_err(calibration_failure)?;
-        let text = format!(
-            "{}x{} depth mode, field of view {:.2} x {:.2} degrees: fx {:.2} fy {:.2} cx {:.2} cy {:.2}; written to {:?}\n",
-            found.intrinsics.width,
-            found.intrinsics.height,
-            found.hfov_deg,
-            found.vfov_deg,
-            found.intrinsics.fx,
-            found.intrinsics.fy,
-            found.intrinsics.cx,
-            found.intrinsics.cy,
-            options.out
-        );
         return Ok(IntrinsicsSummary {
             out: options.out.display().to_string(),
             width: found.intrinsics.width,
@@ -166,7 +156,7 @@ pub fn intrinsics(options: &IntrinsicsOptions) -> Result<IntrinsicsSummary, Fail
             views: Vec::new(),
             skipped: Vec::new(),
             source: "openni",
-            text,
+            field_of_view_deg: Some([found.hfov_deg, found.vfov_deg]),
         });
     }
     let pattern = options.images.as_deref().unwrap_or_default();
@@ -174,27 +164,6 @@ pub fn intrinsics(options: &IntrinsicsOptions) -> Result<IntrinsicsSummary, Fail
     let result = calibrate_intrinsics(&images, &board).map_err(calibration_failure)?;
     result.save(&options.out).map_err(calibration_failure)?;
     let i = &result.intrinsics;
-    let mut t = String::new();
-    let _ = writeln!(t, "{:<40} {:>10}", "view", "rms px");
-    for (v, e) in result.views.iter().zip(&result.per_view_errors_px) {
-        let _ = writeln!(t, "{v:<40} {e:>10.3}");
-    }
-    for v in &result.skipped {
-        let _ = writeln!(t, "{v:<40} {:>10}", "no board");
-    }
-    let _ = writeln!(
-        t,
-        "{}x{}: fx {:.2} fy {:.2} cx {:.2} cy {:.2}, distortion {:?}",
-        i.width, i.height, i.fx, i.fy, i.cx, i.cy, i.distortion
-    );
-    let _ = writeln!(
-        t,
-        "rms {:.3} px over {} views ({} without a board skipped); written to {:?}",
-        result.rms_px,
-        result.views.len(),
-        result.skipped.len(),
-        options.out
-    );
     Ok(IntrinsicsSummary {
         out: options.out.display().to_string(),
         width: i.width,
@@ -209,7 +178,7 @@ pub fn intrinsics(options: &IntrinsicsOptions) -> Result<IntrinsicsSummary, Fail
         views: result.views.clone(),
         skipped: result.skipped.clone(),
         source: "chessboard",
-        text: t,
+        field_of_view_deg: None,
     })
 }
 
@@ -347,7 +316,7 @@ pub struct ChessboardSummary {
 ///
 /// # Errors
 /// A bad board, an output directory that may not be replaced, or a render that cannot be written.
-pub fn synth_chessboard(options: &ChessboardOptions) -> Result<ChessboardSummary, Failure> {
+pub fn synth_chessboard(options: &ChessboardOptions, progress: &dyn Progress) -> Result<ChessboardSummary, Failure> {
     let board = board(&options.board, options.square_mm)?;
     if ![1, 2, 4].contains(&options.color_binning) {
         return Err(Failure::usage(anyhow::anyhow!(
@@ -363,10 +332,10 @@ pub fn synth_chessboard(options: &ChessboardOptions) -> Result<ChessboardSummary
         color_binning: options.color_binning,
     };
     let rig = crate::core::geometry::Rig::default_rig().with_color_binning(options.color_binning);
-    let bar = crate::engine::progress::bar(u64::from(options.views) * 2 + 2, "rendering");
-    write_chessboards(staging.path(), &rig, &spec, |done| bar.set_position(done))
+    progress.start("rendering", u64::from(options.views) * 2 + 2);
+    write_chessboards(staging.path(), &rig, &spec, |done| progress.set_done(done))
         .with_context(|| format!("writing chessboard views to {:?}", options.out))?;
-    bar.finish_and_clear();
+    progress.finish();
     let out = staging.commit()?;
     tracing::info!(message = "Chessboard views written.", path = %out.display(), views = options.views);
     Ok(ChessboardSummary {

@@ -10,7 +10,6 @@ use crate::vision::forest::Forest;
 use crate::vision::forest::infer::{BodyEstimator, VoteSettings};
 use crate::vision::forest::model::{self, Model, ModelKind};
 use anyhow::{Context, Result, bail};
-use std::fmt::Write as _;
 use std::path::PathBuf;
 
 /// What `eval` evaluates, on what (see its `--help`).
@@ -29,7 +28,8 @@ pub struct EvalOptions {
     pub color_binning: u32,
 }
 
-/// A model's figures: what `eval --json` prints; [`EvalSummary::text`] is its table.
+/// A model's figures: what `eval --json` prints (the command line prints them as a table
+/// otherwise).
 #[derive(Debug, serde::Serialize)]
 #[serde(untagged)]
 pub enum EvalSummary {
@@ -53,10 +53,11 @@ pub fn eval(options: &EvalOptions) -> Result<EvalSummary, Failure> {
     if options.target == ModelTarget::Orientation {
         return eval_orientation(options);
     }
-    Ok(run(options)?)
+    Ok(eval_forest(options)?)
 }
 
-fn run(options: &EvalOptions) -> Result<EvalSummary> {
+/// `eval body|parts|paws`: the model the target names, on the test dataset.
+fn eval_forest(options: &EvalOptions) -> Result<EvalSummary> {
     let kind = match options.target {
         ModelTarget::Body => ModelKind::Body,
         ModelTarget::Parts => ModelKind::Parts,
@@ -198,27 +199,6 @@ fn eval_body(
     Ok(EvalSummary::Body(report))
 }
 
-fn body_text(report: &BodyFigures) -> String {
-    let mut t = String::new();
-    let _ = writeln!(t, "{:<16} {:>9} {:>13}", "joint", "error mm", "paper's mm");
-    for (name, e) in &report.report.per_joint_mm {
-        let paper = report.paper_method.per_joint_mm.get(name).copied().unwrap_or(f64::NAN);
-        let _ = writeln!(t, "{name:<16} {e:>9.2} {paper:>13.2}");
-    }
-    let _ = writeln!(
-        t,
-        "{:<16} {:>9.2} {:>13.2}",
-        "mean (1-12)", report.report.mean_error_mm, report.paper_method.mean_error_mm
-    );
-    let _ = writeln!(
-        t,
-        "{} images, {} without a mouse found; \"paper's\": votes and mean-shift alone, without \
-         the step along the segmented tail",
-        report.report.images, report.report.no_mouse
-    );
-    t
-}
-
 fn eval_parts(
     options: &EvalOptions,
     forest: &Forest<[f32; 2], Vec<f32>>,
@@ -246,17 +226,6 @@ fn eval_parts(
         write_report_file(dir, "summary.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(EvalSummary::Parts(report))
-}
-
-fn parts_text(report: &training::PartsReport) -> String {
-    let mut t = String::new();
-    let _ = writeln!(t, "{:<12} {:>9}", "class", "accuracy");
-    for (name, a) in &report.per_class_accuracy {
-        let _ = writeln!(t, "{name:<12} {:>8.1}%", 100.0 * a);
-    }
-    let _ = writeln!(t, "{:<12} {:>8.1}%", "mean", 100.0 * report.mean_class_accuracy);
-    let _ = writeln!(t, "{:<12} {:>8.1}%", "all pixels", 100.0 * report.pixel_accuracy);
-    t
 }
 
 /// `mousepose eval paws`.
@@ -302,57 +271,16 @@ fn eval_paws(options: &EvalOptions) -> Result<EvalSummary> {
     Ok(EvalSummary::Paws(report))
 }
 
-fn paws_text(report: &training::paws_eval::PawReport) -> String {
-    let mut t = String::new();
-    let _ = writeln!(t, "{:<28} {:>9}", "images", report.images);
-    let _ = writeln!(t, "{:<28} {:>9}", "paws on the glass", report.contact_paws);
-    let _ = writeln!(t, "{:<28} {:>9}", "detections", report.detections);
-    let _ = writeln!(t, "{:<28} {:>9.3}", "precision", report.precision);
-    let _ = writeln!(t, "{:<28} {:>9.3}", "recall (paws on the glass)", report.recall);
-    let _ = writeln!(t, "{:<28} {:>9.3}", "F1", report.f1);
-    let _ = writeln!(
-        t,
-        "{:<28} {:>9.2}",
-        "mean centre error (px)", report.mean_centre_error_px
-    );
-    let _ = writeln!(
-        t,
-        "{} true, {} false ({} on marks of the view, {} on the body's look-alikes of paws), {} of lifted or hidden paws (neither)",
-        report.true_positives, report.false_positives, report.false_on_marks, report.false_on_body, report.neutral
-    );
-    t
-}
-
-impl EvalSummary {
-    /// The table `eval` prints without `--json`.
-    pub fn text(&self) -> String {
-        match self {
-            Self::Body(report) => body_text(report),
-            Self::Parts(report) => parts_text(report),
-            Self::Paws(report) => paws_text(report),
-            Self::Orientation(f) => format!(
-                "head end right in {:.2} % of {} views (tail hidden {:.2} %, tail shown {:.2} %; full resolution {:.2} %, half {:.2} %)\n",
-                100.0 * f.accuracy,
-                f.views,
-                100.0 * f.tail_hidden,
-                100.0 * f.tail_shown,
-                100.0 * f.full_resolution,
-                100.0 * f.half_resolution,
-            ),
-        }
-    }
-}
-
 /// What `eval orientation` prints: the share of views whose head end the model gets right,
 /// over all and by the tail hidden or shown and the resolution.
 #[derive(Debug, serde::Serialize)]
 pub struct OrientationFigures {
-    views: usize,
-    accuracy: f64,
-    tail_hidden: f64,
-    tail_shown: f64,
-    full_resolution: f64,
-    half_resolution: f64,
+    pub views: usize,
+    pub accuracy: f64,
+    pub tail_hidden: f64,
+    pub tail_shown: f64,
+    pub full_resolution: f64,
+    pub half_resolution: f64,
 }
 
 fn eval_orientation(options: &EvalOptions) -> Result<EvalSummary, Failure> {

@@ -1,7 +1,7 @@
 //! The engine of `mousepose experiment gauss2d`: the paper's running example.
 
 use crate::engine::chart::line_chart;
-use crate::engine::progress;
+use crate::engine::progress::Progress;
 use crate::engine::{Failure, report_dir, write_report_file};
 use crate::experiment::gauss2d::{self, Setup};
 use crate::vision::forest::discriminative::{DiscriminativeParams, Scoring};
@@ -61,113 +61,211 @@ const PAPER: PaperFigures = PaperFigures {
     discriminative_accuracy: 0.812,
 };
 
-/// `mousepose experiment gauss2d`: the figures, and the tables and plots in `options.report`.
+/// `mousepose experiment gauss2d`: the figures, and the tables and plots in `options.report`;
+/// `progress` follows the forests trained.
 ///
 /// # Errors
 /// The report cannot be written.
-pub fn gauss2d(options: &Gauss2dOptions) -> Result<Gauss2dReport, Failure> {
-    Ok(run_gauss2d(options)?)
+pub fn gauss2d(options: &Gauss2dOptions, progress: &dyn Progress) -> Result<Gauss2dReport, Failure> {
+    Ok(run_gauss2d(options, progress)?)
 }
 
-fn run_gauss2d(options: &Gauss2dOptions) -> Result<Gauss2dReport> {
+fn run_gauss2d(options: &Gauss2dOptions, progress: &dyn Progress) -> Result<Gauss2dReport> {
     let setup = Setup::new(options.quick, options.seed);
     let steps = if options.quick { 30 } else { 40 };
-    let bar = progress::bar(steps, "gauss2d");
+    progress.start("gauss2d", steps);
     let blobs = gauss2d::blobs(setup.seed);
-    let d_t = gauss2d::sample(&blobs, setup.points, setup.seed, 0);
-    let d_d = gauss2d::sample(&blobs, setup.points, setup.seed, 1);
-    let d_e = gauss2d::sample(&blobs, setup.points, setup.seed, 2);
-    let acc = |f: &gauss2d::AxisForest| gauss2d::accuracy(f, &d_e);
-    let base = gauss2d::baseline(&d_t, &setup.train_params());
-    bar.inc(1);
-    let mut union_params = setup.train_params();
-    union_params.min_leaf *= 2;
-    let union = gauss2d::baseline(&d_t.union(&d_d), &union_params);
-    bar.inc(1);
-    let (disc_gain, _) = gauss2d::discriminative(&base, &d_d, &setup.discriminative_params(Scoring::Gain));
-    bar.inc(1);
-    let disc_params = setup.discriminative_params(Scoring::SubtreeError);
-    let (disc, _) = gauss2d::discriminative(&base, &d_d, &disc_params);
-    bar.inc(1);
-    let keep_current = DiscriminativeParams {
-        keep_current: true,
-        ..disc_params
+    let data = Sets {
+        t: gauss2d::sample(&blobs, setup.points, setup.seed, 0),
+        d: gauss2d::sample(&blobs, setup.points, setup.seed, 1),
+        e: gauss2d::sample(&blobs, setup.points, setup.seed, 2),
     };
-    let (disc_keep, _) = gauss2d::discriminative(&base, &d_d, &keep_current);
-    bar.inc(1);
-    let base_acc = acc(&base);
+    let forests = Compared::train(&setup, &data, progress);
+    let base_acc = data.accuracy(&forests.base);
+    let disc_params = setup.discriminative_params(Scoring::SubtreeError);
     let mut sweeps = std::collections::BTreeMap::new();
+    sweeps.insert(
+        "forest_size".to_owned(),
+        forest_size_sweep(options.quick, &setup, &data, progress),
+    );
+    parameter_sweeps(
+        options.quick,
+        &setup,
+        &forests.base,
+        base_acc,
+        &data,
+        progress,
+        &mut sweeps,
+    );
+    sweeps.insert(
+        "iterations".to_owned(),
+        iterations_sweep(options.quick, &forests.base, base_acc, &disc_params, &data, progress),
+    );
+    progress.finish();
 
-    // Forest size: trees are independent, so a k-tree forest is the first k of a larger one.
-    let sizes: Vec<usize> = if options.quick {
+    let report = Gauss2dReport {
+        setup,
+        bayes_accuracy: gauss2d::bayes_accuracy(&blobs, &data.e),
+        baseline_accuracy: base_acc,
+        union_baseline_accuracy: data.accuracy(&forests.union),
+        discriminative_gain_accuracy: data.accuracy(&forests.disc_gain),
+        discriminative_accuracy: data.accuracy(&forests.disc),
+        discriminative_keep_current_accuracy: data.accuracy(&forests.disc_keep),
+        paper: PAPER,
+        sweeps,
+    };
+    if let Some(dir) = &options.report {
+        write_gauss2d_report(dir, &report)?;
+    }
+    Ok(report)
+}
+
+/// The three sets of points: D_t to train, D_d to refine, D_e to evaluate.
+struct Sets {
+    t: gauss2d::Points,
+    d: gauss2d::Points,
+    e: gauss2d::Points,
+}
+
+impl Sets {
+    /// A forest's accuracy on D_e.
+    fn accuracy(&self, forest: &gauss2d::AxisForest) -> f64 {
+        gauss2d::accuracy(forest, &self.e)
+    }
+}
+
+/// The forests the paper's table compares.
+struct Compared {
+    base: gauss2d::AxisForest,
+    union: gauss2d::AxisForest,
+    disc_gain: gauss2d::AxisForest,
+    disc: gauss2d::AxisForest,
+    disc_keep: gauss2d::AxisForest,
+}
+
+impl Compared {
+    /// Trains them, one step of `progress` each.
+    fn train(setup: &Setup, data: &Sets, progress: &dyn Progress) -> Self {
+        let base = gauss2d::baseline(&data.t, &setup.train_params());
+        progress.advance(1);
+        let mut union_params = setup.train_params();
+        union_params.min_leaf *= 2;
+        let union = gauss2d::baseline(&data.t.union(&data.d), &union_params);
+        progress.advance(1);
+        let (disc_gain, _) = gauss2d::discriminative(&base, &data.d, &setup.discriminative_params(Scoring::Gain));
+        progress.advance(1);
+        let disc_params = setup.discriminative_params(Scoring::SubtreeError);
+        let (disc, _) = gauss2d::discriminative(&base, &data.d, &disc_params);
+        progress.advance(1);
+        let keep_current = DiscriminativeParams {
+            keep_current: true,
+            ..disc_params
+        };
+        let (disc_keep, _) = gauss2d::discriminative(&base, &data.d, &keep_current);
+        progress.advance(1);
+        Self {
+            base,
+            union,
+            disc_gain,
+            disc,
+            disc_keep,
+        }
+    }
+}
+
+/// Forest size: trees are independent, so a k-tree forest is the first k of a larger one.
+fn forest_size_sweep(quick: bool, setup: &Setup, data: &Sets, progress: &dyn Progress) -> Vec<SweepPoint> {
+    let sizes: Vec<usize> = if quick {
         vec![1, 3, 5, 9]
     } else {
         vec![1, 3, 5, 7, 9, 13, 17]
     };
     let max_trees = sizes.iter().copied().max().unwrap_or(5);
     let big = gauss2d::baseline(
-        &d_t,
+        &data.t,
         &TrainParams {
             trees: max_trees,
             ..setup.train_params()
         },
     );
-    let (big_disc, _) = gauss2d::discriminative(&big, &d_d, &disc_params);
+    let disc_params = setup.discriminative_params(Scoring::SubtreeError);
+    let (big_disc, _) = gauss2d::discriminative(&big, &data.d, &disc_params);
     let first = |f: &gauss2d::AxisForest, k: usize| Forest {
         trees: f.trees[..k].to_vec(),
     };
-    sweeps.insert(
-        "forest_size".to_owned(),
-        sizes
-            .iter()
-            .map(|&k| {
-                bar.inc(1);
-                SweepPoint {
-                    value: k as f64,
-                    baseline_accuracy: acc(&first(&big, k)),
-                    discriminative_accuracy: acc(&first(&big_disc, k)),
-                }
-            })
-            .collect(),
-    );
+    sizes
+        .iter()
+        .map(|&k| {
+            progress.advance(1);
+            SweepPoint {
+                value: k as f64,
+                baseline_accuracy: data.accuracy(&first(&big, k)),
+                discriminative_accuracy: data.accuracy(&first(&big_disc, k)),
+            }
+        })
+        .collect()
+}
+
+/// The sweeps of one discriminative parameter each (m, l_n, the start level, the subset),
+/// the baseline `base` refined with each value.
+fn parameter_sweeps(
+    quick: bool,
+    setup: &Setup,
+    base: &gauss2d::AxisForest,
+    base_acc: f64,
+    data: &Sets,
+    progress: &dyn Progress,
+    sweeps: &mut std::collections::BTreeMap<String, Vec<SweepPoint>>,
+) {
+    let disc_params = setup.discriminative_params(Scoring::SubtreeError);
     let mut sweep = |name: &str, values: &[f64], set: &dyn Fn(&mut DiscriminativeParams, f64)| {
         let points = values
             .iter()
             .map(|&v| {
                 let mut p = disc_params;
                 set(&mut p, v);
-                let (f, _) = gauss2d::discriminative(&base, &d_d, &p);
-                bar.inc(1);
+                let (f, _) = gauss2d::discriminative(base, &data.d, &p);
+                progress.advance(1);
                 SweepPoint {
                     value: v,
                     baseline_accuracy: base_acc,
-                    discriminative_accuracy: acc(&f),
+                    discriminative_accuracy: data.accuracy(&f),
                 }
             })
             .collect();
         sweeps.insert(name.to_owned(), points);
     };
-    let ms: &[f64] = if options.quick {
+    let ms: &[f64] = if quick {
         &[10.0, 50.0, 200.0, 640.0]
     } else {
         &[10.0, 20.0, 50.0, 100.0, 200.0, 320.0, 640.0]
     };
     sweep("m", ms, &|p, v| p.tests = v as usize);
-    let lns: &[f64] = if options.quick {
+    let lns: &[f64] = if quick {
         &[10.0, 60.0, 1000.0, 10000.0]
     } else {
         &[10.0, 30.0, 60.0, 250.0, 1000.0, 2500.0, 10000.0]
     };
     sweep("l_n", lns, &|p, v| p.min_leaf = v as usize);
-    let levels: &[f64] = if options.quick {
+    let levels: &[f64] = if quick {
         &[0.0, 4.0, 8.0, 12.0]
     } else {
         &[0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0]
     };
     sweep("start_level", levels, &|p, v| p.start_level = v as u32);
     sweep("subset", &[0.25, 0.5, 1.0], &|p, v| p.subset = v);
-    // Iterations: each pass refines the previous pass's forest with a fresh subset.
-    let iterations = if options.quick { 3 } else { 5 };
+}
+
+/// Iterations: each pass refines the previous pass's forest with a fresh subset.
+fn iterations_sweep(
+    quick: bool,
+    base: &gauss2d::AxisForest,
+    base_acc: f64,
+    disc_params: &DiscriminativeParams,
+    data: &Sets,
+    progress: &dyn Progress,
+) -> Vec<SweepPoint> {
+    let iterations = if quick { 3 } else { 5 };
     let mut forest = base.clone();
     let mut points = vec![SweepPoint {
         value: 0.0,
@@ -177,59 +275,48 @@ fn run_gauss2d(options: &Gauss2dOptions) -> Result<Gauss2dReport> {
     for it in 0..iterations {
         forest = gauss2d::discriminative_from(
             &forest,
-            &d_d,
+            &data.d,
             &DiscriminativeParams {
                 iterations: 1,
-                ..disc_params
+                ..*disc_params
             },
             it,
         )
         .0;
-        bar.inc(1);
+        progress.advance(1);
         points.push(SweepPoint {
             value: (it + 1) as f64,
             baseline_accuracy: base_acc,
-            discriminative_accuracy: acc(&forest),
+            discriminative_accuracy: data.accuracy(&forest),
         });
     }
-    sweeps.insert("iterations".to_owned(), points);
-    bar.finish_and_clear();
+    points
+}
 
-    let report = Gauss2dReport {
-        setup,
-        bayes_accuracy: gauss2d::bayes_accuracy(&blobs, &d_e),
-        baseline_accuracy: base_acc,
-        union_baseline_accuracy: acc(&union),
-        discriminative_gain_accuracy: acc(&disc_gain),
-        discriminative_accuracy: acc(&disc),
-        discriminative_keep_current_accuracy: acc(&disc_keep),
-        paper: PAPER,
-        sweeps,
-    };
-    if let Some(dir) = &options.report {
-        report_dir(dir)?;
-        write_report_file(dir, "gauss2d.json", serde_json::to_string_pretty(&report)?.as_bytes())?;
-        write_report_file(dir, "gauss2d.txt", gauss2d_tables(&report).as_bytes())?;
-        for (name, points) in &report.sweeps {
-            let x: Vec<f64> = points.iter().map(|p| p.value).collect();
-            let b: Vec<f64> = points.iter().map(|p| p.baseline_accuracy).collect();
-            let d: Vec<f64> = points.iter().map(|p| p.discriminative_accuracy).collect();
-            let bayes = vec![report.bayes_accuracy; x.len()];
-            line_chart(
-                &format!("gauss2d: accuracy vs {name}"),
-                name,
-                "accuracy",
-                &x,
-                &[
-                    ("baseline", [120, 120, 120], &b),
-                    ("discriminative", [40, 90, 220], &d),
-                    ("Bayes-optimal", [40, 160, 60], &bayes),
-                ],
-            )
-            .write_png(&dir.join(format!("sweep_{name}.png")))?;
-        }
+/// Writes `gauss2d.json`, `gauss2d.txt` and a plot per sweep into `dir`.
+fn write_gauss2d_report(dir: &std::path::Path, report: &Gauss2dReport) -> Result<()> {
+    report_dir(dir)?;
+    write_report_file(dir, "gauss2d.json", serde_json::to_string_pretty(report)?.as_bytes())?;
+    write_report_file(dir, "gauss2d.txt", gauss2d_tables(report).as_bytes())?;
+    for (name, points) in &report.sweeps {
+        let x: Vec<f64> = points.iter().map(|p| p.value).collect();
+        let b: Vec<f64> = points.iter().map(|p| p.baseline_accuracy).collect();
+        let d: Vec<f64> = points.iter().map(|p| p.discriminative_accuracy).collect();
+        let bayes = vec![report.bayes_accuracy; x.len()];
+        line_chart(
+            &format!("gauss2d: accuracy vs {name}"),
+            name,
+            "accuracy",
+            &x,
+            &[
+                ("baseline", [120, 120, 120], &b),
+                ("discriminative", [40, 90, 220], &d),
+                ("Bayes-optimal", [40, 160, 60], &bayes),
+            ],
+        )
+        .write_png(&dir.join(format!("sweep_{name}.png")))?;
     }
-    Ok(report)
+    Ok(())
 }
 
 /// The tables `experiment gauss2d` prints (and writes to `gauss2d.txt`).

@@ -20,12 +20,12 @@ use crate::runtime::pose_record::PoseRecord;
 use crate::runtime::recording::{Recording, RecordingError, RecordingRig};
 use crate::runtime::sink::poses::{POSES_FILE, PoseTally, PoseWriter};
 use crate::runtime::stages::segment::SegmentStage;
-use crate::runtime::topology::{Edges, Processing, Sources, Topology, TopologyError};
-use crate::vision::segment::{ArenaCheck, Background, SegmentError, SegmenterConfig};
+use crate::runtime::topology::{Edges, Finished, Processing, Sources, Topology, TopologyError};
+use crate::vision::segment::{ArenaCheck, Background, SegmentError, Segmenter, SegmenterConfig};
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
-use std::sync::PoisonError;
+use std::sync::{Mutex, PoisonError};
 
 /// The file with the run's summary.
 pub const SUMMARY_FILE: &str = "summary.json";
@@ -382,71 +382,10 @@ pub fn replay_with(
     progress: impl Fn(u64, u64) + Sync,
 ) -> Result<ReplaySummary, ReplayError> {
     let recording = Recording::open(&options.session)?;
-    // The models load on a thread of their own while the empty cage is modelled from the
-    // recording (the two longest steps of a MoSeq recording's start-up); their errors come
-    // first, as when they were loaded first. Without colour frames the paw cascade is not read.
-    let color = recording.has_color();
-    let (models, scene) = std::thread::scope(|scope| {
-        let models = scope.spawn(|| Models::load_for(options.models.as_deref(), color));
-        let scene = (|| {
-            let chosen = match &options.calibration {
-                Some(path) => RecordingRig {
-                    rig: recording.calibrated_rig(path)?,
-                    calibrated: true,
-                    intrinsics_from: "rig calibration".to_owned(),
-                },
-                None => recording.rig(options.intrinsics.as_deref())?,
-            };
-            let roi = match &options.roi {
-                Some(path) => {
-                    let (w, h) = recording.depth_size();
-                    Some(read_mask_png(path, w, h)?)
-                }
-                None => None,
-            };
-            let background = background_in(&recording, &chosen.rig, roi.as_deref())?;
-            Ok::<_, ReplayError>((chosen, background))
-        })();
-        let models = models.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-        (models, scene)
-    });
-    let models = models?;
-    let (mut chosen, background) = scene?;
+    let (models, chosen, background) = load_models_and_scene(options, &recording)?;
     let (body_model, paw_model, orientation_model) =
         (models.body_path(), models.paws_path(), models.orientation_path());
-    let depth_size = (background.region().width, background.region().height);
-    let floor = background.floor_plane();
-    if !chosen.calibrated {
-        // No calibration: the world is the floor's, z the height above it.
-        chosen.rig.depth.world_from_camera = floor.world_from_camera();
-    }
-    let rig = chosen.rig;
-    let arena = background.arena();
-    let on_floor = arena_on_floor(arena, background.depth(), background.region(), &rig.depth);
-    let world = WorldSummary {
-        frame: if chosen.calibrated { "calibration" } else { "floor" },
-        camera_height_mm: floor.camera_height_mm(),
-        camera_tilt_deg: floor.camera_tilt_deg(),
-        intrinsics_from: chosen.intrinsics_from,
-        fx: rig.depth.intrinsics.fx,
-        fy: rig.depth.intrinsics.fy,
-        cx: rig.depth.intrinsics.cx,
-        cy: rig.depth.intrinsics.cy,
-        world_from_camera: {
-            let m = rig.depth.world_from_camera.to_homogeneous();
-            std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
-        },
-        arena_share: arena.iter().filter(|&&m| m != 0).count() as f64 / arena.len().max(1) as f64,
-        arena_from: if options.roi.is_some() { "roi" } else { "found" },
-        arena_check: background.arena_check(),
-        arena_mm: on_floor.as_ref().map(|f| f.0),
-        arena_outline_mm: on_floor.and_then(|f| f.1),
-    };
-    let arena = arena.to_vec();
-    let segmenter = SegmenterConfig::default()
-        .build(background)
-        .map_err(ReplayError::Background)?
-        .with_world(rig.depth.world_from_camera);
+    let scene = Scene::place(options, chosen, background)?;
     let truth = recording.truth()?;
     let staging = Staging::new(&options.out, options.force)?;
     let truth_joints: HashMap<u64, _> = truth
@@ -461,63 +400,15 @@ pub fn replay_with(
             }
         })?;
     let tally = writer.tally();
-    let topology = Topology {
-        sources: Sources::Recording {
-            recording: &recording,
-            realtime: options.realtime,
-            depth_size: Some(depth_size),
-        },
-        sync: recording.sync_config(),
-        edges: Edges::replay(),
-        processing: Some(Processing {
-            segment: SegmentStage::new(segmenter),
-            models,
-            rig,
-            workers: options.workers,
-            overlays: options.overlays,
-            poses: Box::new(writer),
-        }),
-        recorder: None,
-    };
-    if interrupt.requested() {
-        return Err(ReplayError::Interrupted);
-    }
-    let running = topology.start()?;
-    // A signal stops the reader; the stages drain what it sent, then the staging directory
-    // is removed (dropped uncommitted).
-    let forwarded = interrupt
-        .forward_to(&running.shutdown().flag())
-        .map_err(ReplayError::Signals);
-    if forwarded.is_err() {
-        running.shutdown().request();
-    }
-    let total = recording.depth_count() as u64;
-    // Dropping `stop` ends the watcher at once.
-    let (stop, stopped) = crossbeam_channel::bounded::<()>(1);
-    let finished = std::thread::scope(|scope| {
-        let watcher = std::thread::Builder::new()
-            .name("progress".to_owned())
-            .spawn_scoped(scope, || {
-                loop {
-                    let rows = tally.lock().unwrap_or_else(PoisonError::into_inner).rows;
-                    progress(rows, total);
-                    if !matches!(
-                        stopped.recv_timeout(PROGRESS_EVERY),
-                        Err(crossbeam_channel::RecvTimeoutError::Timeout)
-                    ) {
-                        break;
-                    }
-                }
-            });
-        let finished = running.join();
-        drop(stop);
-        if let Ok(w) = watcher {
-            drop(w.join());
-        }
-        finished
-    });
-    drop(forwarded?);
-    progress(tally.lock().unwrap_or_else(PoisonError::into_inner).rows, total);
+    let Scene {
+        rig,
+        world,
+        arena,
+        depth_size,
+        segmenter,
+    } = scene;
+    let topology = replay_topology(&recording, options, depth_size, segmenter, models, rig, writer);
+    let finished = run_pipeline(topology, interrupt, &tally, recording.depth_count() as u64, &progress)?;
     let stages = finished.outcome?;
     if interrupt.requested() {
         return Err(ReplayError::Interrupted);
@@ -571,13 +462,204 @@ pub fn replay_with(
     for warning in &summary.warnings {
         tracing::warn!(message = "The arena may miss the mouse.", detail = %warning);
     }
-    // The picture is a convenience: without it (no frame that reads back, a write error) the
-    // results are still whole, and written.
-    let mut summary = summary;
+    let summary = with_picture(summary, &staging, &recording, &rig, &tally, &arena);
+    let path = staging.path().join(SUMMARY_FILE);
+    let json = serde_json::to_vec_pretty(&summary).map_err(std::io::Error::from);
+    json.and_then(|j| std::fs::write(&path, j))
+        .map_err(|source| ReplayError::Write { path, source })?;
+    staging.commit()?;
+    Ok(summary)
+}
+
+/// Loads the models on a thread of their own while the rig is chosen and the empty cage is
+/// modelled from the recording (the two longest steps of a MoSeq recording's start-up); the
+/// models' errors come first, as when they were loaded first. Without colour frames the paw
+/// cascade is not read.
+fn load_models_and_scene(
+    options: &ReplayOptions,
+    recording: &Recording,
+) -> Result<(Models, RecordingRig, Background), ReplayError> {
+    let color = recording.has_color();
+    let (models, scene) = std::thread::scope(|scope| {
+        let models = scope.spawn(|| Models::load_for(options.models.as_deref(), color));
+        let scene = (|| {
+            let chosen = match &options.calibration {
+                Some(path) => RecordingRig {
+                    rig: recording.calibrated_rig(path)?,
+                    calibrated: true,
+                    intrinsics_from: "rig calibration".to_owned(),
+                },
+                None => recording.rig(options.intrinsics.as_deref())?,
+            };
+            let roi = match &options.roi {
+                Some(path) => {
+                    let (w, h) = recording.depth_size();
+                    Some(read_mask_png(path, w, h)?)
+                }
+                None => None,
+            };
+            let background = background_in(recording, &chosen.rig, roi.as_deref())?;
+            Ok::<_, ReplayError>((chosen, background))
+        })();
+        let models = models.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        (models, scene)
+    });
+    let models = models?;
+    let (chosen, background) = scene?;
+    Ok((models, chosen, background))
+}
+
+/// The replay's world: the rig placed (on the fitted floor when uncalibrated), the arena, and
+/// the segmenter built on the background.
+struct Scene {
+    rig: Rig,
+    world: WorldSummary,
+    arena: Vec<u8>,
+    depth_size: (u32, u32),
+    segmenter: Segmenter,
+}
+
+impl Scene {
+    fn place(options: &ReplayOptions, mut chosen: RecordingRig, background: Background) -> Result<Self, ReplayError> {
+        let depth_size = (background.region().width, background.region().height);
+        let floor = background.floor_plane();
+        if !chosen.calibrated {
+            // No calibration: the world is the floor's, z the height above it.
+            chosen.rig.depth.world_from_camera = floor.world_from_camera();
+        }
+        let rig = chosen.rig;
+        let arena = background.arena();
+        let on_floor = arena_on_floor(arena, background.depth(), background.region(), &rig.depth);
+        let world = WorldSummary {
+            frame: if chosen.calibrated { "calibration" } else { "floor" },
+            camera_height_mm: floor.camera_height_mm(),
+            camera_tilt_deg: floor.camera_tilt_deg(),
+            intrinsics_from: chosen.intrinsics_from,
+            fx: rig.depth.intrinsics.fx,
+            fy: rig.depth.intrinsics.fy,
+            cx: rig.depth.intrinsics.cx,
+            cy: rig.depth.intrinsics.cy,
+            world_from_camera: {
+                let m = rig.depth.world_from_camera.to_homogeneous();
+                std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
+            },
+            arena_share: arena.iter().filter(|&&m| m != 0).count() as f64 / arena.len().max(1) as f64,
+            arena_from: if options.roi.is_some() { "roi" } else { "found" },
+            arena_check: background.arena_check(),
+            arena_mm: on_floor.as_ref().map(|f| f.0),
+            arena_outline_mm: on_floor.and_then(|f| f.1),
+        };
+        let arena = arena.to_vec();
+        let segmenter = SegmenterConfig::default()
+            .build(background)
+            .map_err(ReplayError::Background)?
+            .with_world(rig.depth.world_from_camera);
+        Ok(Self {
+            rig,
+            world,
+            arena,
+            depth_size,
+            segmenter,
+        })
+    }
+}
+
+/// The replay's topology: the recording as its source, the processing branch, no recorder.
+fn replay_topology<'a>(
+    recording: &'a Recording,
+    options: &ReplayOptions,
+    depth_size: (u32, u32),
+    segmenter: Segmenter,
+    models: Models,
+    rig: Rig,
+    writer: PoseWriter,
+) -> Topology<'a> {
+    Topology {
+        sources: Sources::Recording {
+            recording,
+            realtime: options.realtime,
+            depth_size: Some(depth_size),
+        },
+        sync: recording.sync_config(),
+        edges: Edges::replay(),
+        processing: Some(Processing {
+            segment: SegmentStage::new(segmenter),
+            models,
+            rig,
+            workers: options.workers,
+            overlays: options.overlays,
+            poses: Box::new(writer),
+        }),
+        recorder: None,
+    }
+}
+
+/// Starts `topology` and waits for it, calling `progress` with the rows written (in `tally`)
+/// and the recording's `total` depth frames every [`PROGRESS_EVERY`] from a thread of its
+/// own, and once at the end. A signal stops the reader; the stages drain what it sent.
+fn run_pipeline(
+    topology: Topology<'_>,
+    interrupt: &Interrupt,
+    tally: &Mutex<PoseTally>,
+    total: u64,
+    progress: &(impl Fn(u64, u64) + Sync),
+) -> Result<Finished, ReplayError> {
+    if interrupt.requested() {
+        return Err(ReplayError::Interrupted);
+    }
+    let running = topology.start()?;
+    // A signal stops the reader; the stages drain what it sent, then the staging directory
+    // is removed (dropped uncommitted).
+    let forwarded = interrupt
+        .forward_to(&running.shutdown().flag())
+        .map_err(ReplayError::Signals);
+    if forwarded.is_err() {
+        running.shutdown().request();
+    }
+    // Dropping `stop` ends the watcher at once.
+    let (stop, stopped) = crossbeam_channel::bounded::<()>(1);
+    let finished = std::thread::scope(|scope| {
+        let watcher = std::thread::Builder::new()
+            .name("progress".to_owned())
+            .spawn_scoped(scope, || {
+                loop {
+                    let rows = tally.lock().unwrap_or_else(PoisonError::into_inner).rows;
+                    progress(rows, total);
+                    if !matches!(
+                        stopped.recv_timeout(PROGRESS_EVERY),
+                        Err(crossbeam_channel::RecvTimeoutError::Timeout)
+                    ) {
+                        break;
+                    }
+                }
+            });
+        let finished = running.join();
+        drop(stop);
+        if let Ok(w) = watcher {
+            drop(w.join());
+        }
+        finished
+    });
+    drop(forwarded?);
+    progress(tally.lock().unwrap_or_else(PoisonError::into_inner).rows, total);
+    Ok(finished)
+}
+
+/// `summary` with the picture of one frame written into the staging directory; the picture
+/// is a convenience: without it (no frame that reads back, a write error) the results are
+/// still whole, and written, and the summary says why there is none.
+fn with_picture(
+    mut summary: ReplaySummary,
+    staging: &Staging,
+    recording: &Recording,
+    rig: &Rig,
+    tally: &PoseTally,
+    arena: &[u8],
+) -> ReplaySummary {
     let outside = summary.world.arena_check.is_some_and(|c| c.mouse_sized_outside > 0);
     let img = match &tally.snapshot {
-        Some(pose) => picture(&recording, &rig, pose, &arena),
-        None => picture_without_mouse(&recording, &rig, &arena, outside),
+        Some(pose) => picture(recording, rig, pose, arena),
+        None => picture_without_mouse(recording, rig, arena, outside),
     };
     let written = match img {
         Some(img) => img
@@ -592,10 +674,5 @@ pub fn replay_with(
             summary.picture_error = Some(error);
         }
     }
-    let path = staging.path().join(SUMMARY_FILE);
-    let json = serde_json::to_vec_pretty(&summary).map_err(std::io::Error::from);
-    json.and_then(|j| std::fs::write(&path, j))
-        .map_err(|source| ReplayError::Write { path, source })?;
-    staging.commit()?;
-    Ok(summary)
+    summary
 }

@@ -35,17 +35,36 @@ use crate::vision::movement::{Activity, ActivityConfig, StrideVariability, activ
 use anyhow::Context as _;
 use nalgebra::{Point2, Vector2};
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// A paw placed from a detection is on the glass when it is at most this high, mm (fusion
 /// places a paw the leg cannot reach on the glass up its ray instead).
 const ON_GLASS_MM: f64 = 6.0;
 
-#[derive(Clone, Copy, Debug, Default)]
+/// What `report` reads, where it writes, and what it measures with.
+#[derive(Clone, Debug, Default)]
 pub struct ReportOptions {
+    /// The run: a replay's output directory (or a daemon's chunk), with its `poses.csv`.
+    pub run: PathBuf,
+    /// The directory to write the page, charts and tables into.
+    pub out: PathBuf,
+    /// Replace `out` if it is not empty.
+    pub force: bool,
     pub config: BehaviourConfig,
     pub activity: ActivityConfig,
+    /// The arena (`None`: the run's own, else the synthetic cage).
     pub arena: Option<Arena>,
+}
+
+impl ReportOptions {
+    /// A report of `run` into `out` with the default thresholds and the run's arena.
+    pub fn new(run: impl Into<PathBuf>, out: impl Into<PathBuf>) -> Self {
+        Self {
+            run: run.into(),
+            out: out.into(),
+            ..Self::default()
+        }
+    }
 }
 
 /// The arena a report used, and where it came from: `flag`, `recording` (the replay's
@@ -255,6 +274,7 @@ fn html_escape(text: &str) -> String {
     text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
+/// The page, `index.html`: the figures, the charts, the gait, and how each measure is taken.
 fn page(
     run: &Path,
     (b, a): (&Behaviour, &Activity),
@@ -262,7 +282,6 @@ fn page(
     arena: &ArenaUsed,
     no_gait: Option<&str>,
 ) -> String {
-    let total: f64 = b.zone_s.iter().sum::<f64>().max(1e-9);
     let mut h = String::from(
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>mousepose report</title>\n<style>body{font-family:sans-serif;max-width:960px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:4px 10px;text-align:right}th{background:#f3f3f3}img{max-width:100%;border:1px solid #eee}</style></head><body>\n",
     );
@@ -271,6 +290,21 @@ fn page(
         "<h1>Behaviour and gait</h1><p>Run: <code>{}</code></p>",
         html_escape(&run.display().to_string())
     );
+    overview_section(&mut h, b, a);
+    if let Some(why) = no_gait {
+        let _ = writeln!(h, "<h2>Gait</h2>\n<p>{}</p>", html_escape(why));
+    } else {
+        gait_section(&mut h, b, a);
+    }
+    how_section(&mut h, config, activity, arena);
+    h.push_str("<p>Tables: <a href=\"frames.csv\">frames.csv</a>, <a href=\"strides.csv\">strides.csv</a>, <a href=\"bouts.csv\">bouts.csv</a>, <a href=\"summary.json\">summary.json</a>.</p>\n</body></html>\n");
+    h
+}
+
+/// The page's tables of the whole run (distance, zones, bouts, turning, immobility) and its
+/// charts over time.
+fn overview_section(h: &mut String, b: &Behaviour, a: &Activity) {
+    let total: f64 = b.zone_s.iter().sum::<f64>().max(1e-9);
     let _ = writeln!(
         h,
         "<table><tr><th>duration</th><th>distance</th><th>mean speed</th><th>in the centre</th><th>by the walls</th><th>between</th><th>mouse not found</th><th>rearing bouts</th><th>walking bouts</th></tr>\
@@ -311,11 +345,10 @@ fn page(
     ] {
         let _ = writeln!(h, "<p><img src=\"{img}\" alt=\"{alt}\"></p>");
     }
-    if let Some(why) = no_gait {
-        let _ = writeln!(h, "<h2>Gait</h2>\n<p>{}</p>", html_escape(why));
-    } else {
-        gait_section(&mut h, b, a);
-    }
+}
+
+/// The page's account of how each measure is taken, with the thresholds used.
+fn how_section(h: &mut String, config: &BehaviourConfig, activity: &ActivityConfig, arena: &ArenaUsed) {
     let _ = writeln!(
         h,
         "<h2>How</h2><ul>\
@@ -363,8 +396,6 @@ fn page(
         activity.min_immobile_s,
         activity.min_freezing_s,
     );
-    h.push_str("<p>Tables: <a href=\"frames.csv\">frames.csv</a>, <a href=\"strides.csv\">strides.csv</a>, <a href=\"bouts.csv\">bouts.csv</a>, <a href=\"summary.json\">summary.json</a>.</p>\n</body></html>\n");
-    h
 }
 
 /// The page's gait table and charts.
@@ -433,15 +464,7 @@ pub struct Summary<'a> {
     freezing_s: f64,
 }
 
-/// Reads `run/poses.csv`, analyses it and writes the report into `out`.
-///
-/// # Errors
-/// The poses cannot be read (or there are none), or `out` cannot be written.
-pub fn report(run: &Path, out: &Path, force: bool) -> Result<Behaviour, Failure> {
-    report_with(run, out, force, &ReportOptions::default()).map(|r| r.behaviour)
-}
-
-/// What [`report_with`] measured.
+/// What [`report`] measured.
 #[derive(Clone, Debug)]
 pub struct Reported {
     pub behaviour: Behaviour,
@@ -452,11 +475,13 @@ pub struct Reported {
     pub gait_unavailable: Option<&'static str>,
 }
 
-/// [`report`] with other thresholds or another arena; also says which arena it used.
+/// `mousepose report`: reads `options.run`'s `poses.csv`, analyses it and writes the report
+/// into `options.out`; says what it measured and which arena it used.
 ///
 /// # Errors
 /// The poses cannot be read (or there are none), or `out` cannot be written.
-pub fn report_with(run: &Path, out: &Path, force: bool, options: &ReportOptions) -> Result<Reported, Failure> {
+pub fn report(options: &ReportOptions) -> Result<Reported, Failure> {
+    let run = options.run.as_path();
     let rows = read_poses(&run.join(POSES_FILE)).map_err(Failure::usage)?;
     let Some(first) = rows.first() else {
         return Err(Failure::usage(anyhow::anyhow!(
@@ -470,32 +495,52 @@ pub fn report_with(run: &Path, out: &Path, force: bool, options: &ReportOptions)
     let arena = arena_of(run, options);
     let b = analyse_in(&inputs, &arena.arena, arena.outline.as_ref(), &config);
     let act = activity(&inputs, &b, config.smooth_s, &options.activity);
-    let gait_unavailable = no_gait(&rows);
-    let staging = Staging::new(out, force).map_err(output_failure)?;
+    let reported = Reported {
+        behaviour: b,
+        activity: act,
+        arena,
+        gait_unavailable: no_gait(&rows),
+    };
+    let staging = Staging::new(&options.out, options.force).map_err(output_failure)?;
     let dir = staging.path();
+    write_charts(dir, &inputs, &reported, &config)?;
+    let (b, act) = (&reported.behaviour, &reported.activity);
+    crate::engine::write_report_file(dir, "frames.csv", &frames_csv(b, act, &inputs)?)?;
+    crate::engine::write_report_file(dir, "strides.csv", &strides_csv(b)?)?;
+    crate::engine::write_report_file(dir, "bouts.csv", &bouts_csv(b, act)?)?;
+    let summary = summary(options, &reported);
+    crate::engine::write_report_file(dir, "summary.json", &serde_json::to_vec_pretty(&summary)?)?;
+    crate::engine::write_report_file(
+        dir,
+        "index.html",
+        page(
+            run,
+            (b, act),
+            (&config, &options.activity),
+            &reported.arena,
+            reported.gait_unavailable,
+        )
+        .as_bytes(),
+    )?;
+    staging.commit().map_err(output_failure)?;
+    Ok(reported)
+}
+
+/// Writes the report's charts into `dir`: the path, speed, distance, zones and head height;
+/// the stance and gait charts when the run can have a gait.
+fn write_charts(
+    dir: &Path,
+    inputs: &[FrameInput],
+    reported: &Reported,
+    config: &BehaviourConfig,
+) -> anyhow::Result<()> {
+    let (b, act, arena) = (&reported.behaviour, &reported.activity, &reported.arena);
     let t: Vec<f64> = b.frames.iter().map(|f| f.t_s).collect();
     let write_png = |name: &str, img: crate::core::image::RgbImage| -> anyhow::Result<()> {
         img.write_png(&dir.join(name))
             .with_context(|| format!("writing {name}"))
     };
-    // The chart draws its arena around the origin.
-    let middle = arena.arena.centre();
-    let path: Vec<Option<(f64, f64)>> = inputs
-        .iter()
-        .map(|i| i.centre.map(|c| (c.x - middle.x, c.y - middle.y)))
-        .collect();
-    let (length, width) = arena.arena.size_mm();
-    let corners: Vec<(f64, f64)> = arena.outline.as_ref().map_or_else(Vec::new, |o| {
-        o.vertices().iter().map(|v| (v.x - middle.x, v.y - middle.y)).collect()
-    });
-    let outline = arena.outline.as_ref().map(|o| ChartOutline {
-        corners: &corners,
-        centre: (o.centre().x - middle.x, o.centre().y - middle.y),
-    });
-    write_png(
-        "path.png",
-        path_chart("PATH IN THE ARENA", &path, (length / 2.0, width / 2.0), outline),
-    )?;
+    write_png("path.png", path_picture(inputs, arena))?;
     let speed: Vec<f64> = b.frames.iter().map(|f| nan(f.speed_mm_s)).collect();
     write_png(
         "speed.png",
@@ -545,7 +590,7 @@ pub fn report_with(run: &Path, out: &Path, force: bool, options: &ReportOptions)
     rows_raster.push(("walking", b.frames.iter().map(|f| f.walking).collect()));
     rows_raster.push(("rearing", b.frames.iter().map(|f| f.rearing).collect()));
     rows_raster.push(("immobile", act.immobile.clone()));
-    if gait_unavailable.is_none() {
+    if reported.gait_unavailable.is_none() {
         write_png(
             "stance.png",
             raster_chart("STANCE PER PAW", "TIME (S)", &t, &rows_raster),
@@ -560,41 +605,36 @@ pub fn report_with(run: &Path, out: &Path, force: bool, options: &ReportOptions)
         ("cadence x10 hz", [40, 140, 80], &cadence10),
         ("duty factor %", [200, 80, 40], &duty100),
     ];
-    if gait_unavailable.is_none() {
+    if reported.gait_unavailable.is_none() {
         write_png("gait.png", bar_chart("GAIT PER PAW (WALKING)", "", &paws, &series))?;
     }
-    crate::engine::write_report_file(dir, "frames.csv", &frames_csv(&b, &act, &inputs)?)?;
-    crate::engine::write_report_file(dir, "strides.csv", &strides_csv(&b)?)?;
-    crate::engine::write_report_file(dir, "bouts.csv", &bouts_csv(&b, &act)?)?;
-    let reported = Reported {
-        behaviour: b,
-        activity: act,
-        arena,
-        gait_unavailable,
-    };
-    let summary = summary(run, options, &reported);
-    crate::engine::write_report_file(dir, "summary.json", &serde_json::to_vec_pretty(&summary)?)?;
-    crate::engine::write_report_file(
-        dir,
-        "index.html",
-        page(
-            run,
-            (&reported.behaviour, &reported.activity),
-            (&config, &options.activity),
-            &reported.arena,
-            gait_unavailable,
-        )
-        .as_bytes(),
-    )?;
-    staging.commit().map_err(output_failure)?;
-    Ok(reported)
+    Ok(())
+}
+
+/// The body's path in the arena (its outline drawn when it has one), about the arena's middle.
+fn path_picture(inputs: &[FrameInput], arena: &ArenaUsed) -> crate::core::image::RgbImage {
+    // The chart draws its arena around the origin.
+    let middle = arena.arena.centre();
+    let path: Vec<Option<(f64, f64)>> = inputs
+        .iter()
+        .map(|i| i.centre.map(|c| (c.x - middle.x, c.y - middle.y)))
+        .collect();
+    let (length, width) = arena.arena.size_mm();
+    let corners: Vec<(f64, f64)> = arena.outline.as_ref().map_or_else(Vec::new, |o| {
+        o.vertices().iter().map(|v| (v.x - middle.x, v.y - middle.y)).collect()
+    });
+    let outline = arena.outline.as_ref().map(|o| ChartOutline {
+        corners: &corners,
+        centre: (o.centre().x - middle.x, o.centre().y - middle.y),
+    });
+    path_chart("PATH IN THE ARENA", &path, (length / 2.0, width / 2.0), outline)
 }
 
 /// The summary of a report: every measure of the page.
-pub fn summary<'a>(run: &'a Path, options: &'a ReportOptions, r: &'a Reported) -> Summary<'a> {
+pub fn summary<'a>(options: &'a ReportOptions, r: &'a Reported) -> Summary<'a> {
     let (config, arena, b, a) = (&options.config, &r.arena, &r.behaviour, &r.activity);
     Summary {
-        run,
+        run: &options.run,
         config,
         arena,
         duration_s: b.duration_s,

@@ -27,15 +27,15 @@ pub struct StatusOptions {
 /// # Errors
 /// The config or token file cannot be read, the config turns the server off, the daemon
 /// asks for a token (the user's), or it cannot be reached or answers with an error.
-pub fn status(args: &StatusOptions) -> Result<String, Failure> {
-    let config = args
+pub fn status(options: &StatusOptions) -> Result<String, Failure> {
+    let config = options
         .config
         .as_deref()
         .map(Config::load)
         .transpose()
         .map_err(Failure::usage)?;
     let http = config.map(|c| c.http);
-    let address = match (args.address, &http) {
+    let address = match (options.address, &http) {
         (Some(a), _) => a,
         (None, Some(h)) => h
             .address
@@ -43,7 +43,7 @@ pub fn status(args: &StatusOptions) -> Result<String, Failure> {
             .map_err(Failure::usage)?,
         (None, None) => SocketAddr::from(([127, 0, 0, 1], DEFAULT_HTTP_PORT)),
     };
-    let token = match &args.token_file {
+    let token = match &options.token_file {
         Some(path) => Some(
             crate::io::read_bounded(path, crate::runtime::config::MAX_TOKEN_BYTES)
                 .with_context(|| format!("cannot read the token file {path:?}"))
@@ -53,7 +53,7 @@ pub fn status(args: &StatusOptions) -> Result<String, Failure> {
         ),
         None => http.and_then(|h| h.token),
     };
-    let path = if args.json { "/status" } else { "/status?format=text" };
+    let path = if options.json { "/status" } else { "/status?format=text" };
     let answer = get(address, path, token.as_deref(), Duration::from_secs(5))?;
     match answer.status {
         200 => Ok(String::from_utf8_lossy(&answer.body).into_owned()),

@@ -1,7 +1,7 @@
 //! The rendering engines behind `mousepose synth dataset|session|moseq`: a spec and an output
 //! directory in, what was written out (`synth chessboard` is [`crate::engine::calibrate`]'s).
 
-use crate::engine::progress;
+use crate::engine::progress::Progress;
 use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
 use crate::synth::dataset::{DatasetSpec, write_dataset};
@@ -62,15 +62,15 @@ pub struct SessionSummary {
 /// # Errors
 /// A frame size the camera table lacks, an output directory in the way (the user's), or a
 /// recording that cannot be written.
-pub fn synth_moseq(options: &MoseqOptions) -> Result<PathBuf, Failure> {
+pub fn synth_moseq(options: &MoseqOptions, progress: &dyn Progress) -> Result<PathBuf, Failure> {
     let spec = options.spec;
     // A size the camera table lacks is the user's mistake: said before anything is written.
     moseq_camera(&spec).map_err(Failure::usage)?;
     let staging = Staging::new(&options.out, options.force).map_err(output_failure)?;
-    let bar = progress::bar(spec.frames, "rendering");
-    write_moseq(staging.path(), &spec, |done, _| bar.set_position(done))
+    progress.start("rendering", spec.frames);
+    write_moseq(staging.path(), &spec, |done, _| progress.set_done(done))
         .with_context(|| format!("writing the MoSeq recording {:?}", options.out))?;
-    bar.finish_and_clear();
+    progress.finish();
     let out = staging.commit()?;
     tracing::info!(message = "MoSeq recording written.", path = %out.display(), frames = spec.frames);
     Ok(out)
@@ -80,14 +80,14 @@ pub fn synth_moseq(options: &MoseqOptions) -> Result<PathBuf, Failure> {
 ///
 /// # Errors
 /// An output directory in the way (the user's), or a dataset that cannot be written.
-pub fn synth_dataset(options: &DatasetOptions) -> Result<DatasetSummary, Failure> {
+pub fn synth_dataset(options: &DatasetOptions, progress: &dyn Progress) -> Result<DatasetSummary, Failure> {
     let staging = Staging::new(&options.out, options.force).map_err(output_failure)?;
     let spec = options.spec;
-    let bar = progress::bar(spec.count, "rendering");
+    progress.start("rendering", spec.count);
     let rig = crate::core::geometry::Rig::default_rig();
-    write_dataset(staging.path(), &rig, &spec, |done| bar.set_position(done))
+    write_dataset(staging.path(), &rig, &spec, |done| progress.set_done(done))
         .with_context(|| format!("writing dataset {:?}", options.out))?;
-    bar.finish_and_clear();
+    progress.finish();
     let out = staging.commit()?;
     tracing::info!(message = "Dataset written.", path = %out.display(), images = spec.count);
     Ok(DatasetSummary {
@@ -100,16 +100,16 @@ pub fn synth_dataset(options: &DatasetOptions) -> Result<DatasetSummary, Failure
 ///
 /// # Errors
 /// An output directory in the way (the user's), or a session that cannot be written.
-pub fn synth_session(options: &SessionOptions) -> Result<SessionSummary, Failure> {
+pub fn synth_session(options: &SessionOptions, progress: &dyn Progress) -> Result<SessionSummary, Failure> {
     let staging = Staging::new(&options.out, options.force).map_err(output_failure)?;
     let spec = options.spec;
-    let bar = progress::bar(0, "rendering");
+    progress.start("rendering", 0);
     let summary = write_session(staging.path(), &spec, |done, total| {
-        bar.set_length(total);
-        bar.set_position(done);
+        progress.set_total(total);
+        progress.set_done(done);
     })
     .with_context(|| format!("writing session {:?}", options.out))?;
-    bar.finish_and_clear();
+    progress.finish();
     let out = staging.commit()?;
     tracing::info!(
         message = "Session written.",

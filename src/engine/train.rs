@@ -1,14 +1,13 @@
 //! The engine of `mousepose train body|parts|paws|orientation`: forests, the paw cascade and the
 //! orientation model from synthetic datasets.
 
-use crate::engine::progress;
+use crate::engine::progress::Progress;
 use crate::engine::{Exists, Failure};
 use crate::training::{self, PixelParams, Target, TrainJob, TrainProgress};
 use crate::vision::forest::discriminative::{DiscriminativeParams, ErrorScope, Scoring};
 use crate::vision::forest::model::{self, Model, ModelKind};
 use crate::vision::forest::{Forest, TrainParams};
 use anyhow::{Context, Result};
-use indicatif::ProgressBar;
 use std::path::PathBuf;
 
 /// What `train` and `eval` work on.
@@ -89,17 +88,18 @@ pub enum TrainSummary {
     },
 }
 
-struct Bar(ProgressBar);
+/// The engine's progress as the forest trainer reports it: each stage a label and a count.
+struct Stages<'a>(&'a dyn Progress);
 
-impl TrainProgress for Bar {
+impl TrainProgress for Stages<'_> {
     fn stage(&self, what: &str, total: u64) {
-        self.0.set_message(what.to_owned());
-        self.0.set_length(total);
-        self.0.set_position(0);
+        self.0.label(what);
+        self.0.set_total(total);
+        self.0.set_done(0);
     }
 
     fn tick(&self) {
-        self.0.inc(1);
+        self.0.advance(1);
     }
 }
 
@@ -107,12 +107,12 @@ impl TrainProgress for Bar {
 ///
 /// # Errors
 /// A model file in the way (the user's), or a dataset or model that cannot be read or written.
-pub fn train(options: &TrainOptions) -> Result<TrainSummary, Failure> {
+pub fn train(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSummary, Failure> {
     if options.out.exists() && !options.force {
         return Err(Failure::usage(Exists(options.out.clone())));
     }
     if options.target == ModelTarget::Paws {
-        return Ok(train_paws(options)?);
+        return Ok(train_paws(options, progress)?);
     }
     if options.target == ModelTarget::Orientation {
         return Ok(train_orientation(options)?);
@@ -164,9 +164,9 @@ pub fn train(options: &TrainOptions) -> Result<TrainSummary, Failure> {
             None => None,
         },
     };
-    let bar = Bar(progress::bar(0, "loading"));
-    let (model, passes) = training::train(&job, &bar).context("training")?;
-    bar.0.finish_and_clear();
+    progress.start("loading", 0);
+    let (model, passes) = training::train(&job, &Stages(progress)).context("training")?;
+    progress.finish();
     if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
     }
@@ -233,7 +233,7 @@ const PAW_BINNINGS: &[u32] = &[1, 2, 4];
 const PAW_MIN_HIT_RATE: f64 = 0.998;
 
 /// `mousepose train paws`.
-fn train_paws(options: &TrainOptions) -> Result<TrainSummary> {
+fn train_paws(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSummary> {
     use crate::training::paws_data as data;
     use crate::vision::paws::{WINDOW_PX, train, xml};
     let set = data::load(
@@ -256,11 +256,11 @@ fn train_paws(options: &TrainOptions) -> Result<TrainSummary> {
         backgrounds = set.backgrounds.len(),
     );
     let params = paw_params(options);
-    let bar = progress::bar(params.stages as u64, "stages");
+    progress.start("stages", params.stages as u64);
     let started = std::time::Instant::now();
     let trained = train::train(&set, &params, &mut |r| {
-        bar.inc(1);
-        bar.set_message(format!("fa {:.4}", r.false_alarm));
+        progress.advance(1);
+        progress.label(&format!("fa {:.4}", r.false_alarm));
         tracing::debug!(
             message = "Stage trained.",
             stage = r.stage,
@@ -275,7 +275,7 @@ fn train_paws(options: &TrainOptions) -> Result<TrainSummary> {
         );
     })
     .context("training the paw cascade")?;
-    bar.finish_and_clear();
+    progress.finish();
     if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
     }

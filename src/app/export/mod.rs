@@ -21,7 +21,7 @@ pub enum ExportCommand {
 }
 
 /// `mousepose export`.
-pub fn run(command: &ExportCommand) -> crate::app::Outcome {
+pub fn command(command: &ExportCommand) -> crate::app::Outcome {
     match command {
         ExportCommand::Nwb(args) => nwb::command(args),
         ExportCommand::Moseq(args) => moseq::command(args),

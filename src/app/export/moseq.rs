@@ -2,6 +2,7 @@
 //! [`crate::engine::export::moseq`], and what was written printed.
 
 use crate::app::output::print;
+use crate::app::progress::Bars;
 use crate::engine::export::moseq::{COLOR_AVI, MoseqOptions};
 use crate::runtime::recording::moseq::DEPTH_AVI;
 use clap::Args;
@@ -33,23 +34,16 @@ pub struct MoseqArgs {
 
 /// `mousepose export moseq`.
 pub fn command(args: &MoseqArgs) -> crate::app::Outcome {
-    let e = crate::engine::export::moseq::moseq(&MoseqOptions {
-        session: args.session.clone(),
-        out: args.out.clone(),
-        subject: args.subject.clone(),
-        session_name: args.session_name.clone(),
-        force: args.force,
-    })?;
-    match e.millimetres.as_ref() {
-        Some(mm) => {
-            if let Some(w) = mm.warning() {
-                eprintln!("warning: {w}");
-            }
-        }
-        None => eprintln!(
-            "warning: the depth camera's intrinsics are unknown (no rig calibration, a camera the table does not know): moseq2-extract's millimetre scalars assume a Kinect v2's field of view and may be off"
-        ),
-    }
+    let e = crate::engine::export::moseq::moseq(
+        &MoseqOptions {
+            session: args.session.clone(),
+            out: args.out.clone(),
+            subject: args.subject.clone(),
+            session_name: args.session_name.clone(),
+            force: args.force,
+        },
+        &Bars::default(),
+    )?;
     if args.json {
         return Ok(crate::app::output::print_json(&e)?);
     }

@@ -2,6 +2,7 @@
 //! [`crate::engine::export::video`], and what was written printed.
 
 use crate::app::output::print;
+use crate::app::progress::Bars;
 use crate::engine::Failure;
 use crate::engine::export::Run;
 use crate::engine::export::video::{VideoExport, VideoOptions};
@@ -43,14 +44,17 @@ fn parse_offset(s: &str) -> Result<f64, String> {
 /// `mousepose export video`.
 pub fn command(args: &VideoArgs) -> crate::app::Outcome {
     let run = Run::open(&args.run, args.session.as_deref()).map_err(Failure::usage)?;
-    let v = crate::engine::export::video::video(&VideoOptions {
-        run,
-        out: args.out.clone(),
-        from_s: args.from,
-        to_s: args.to,
-        crf: args.crf,
-        force: args.force,
-    })?;
+    let v = crate::engine::export::video::video(
+        &VideoOptions {
+            run,
+            out: args.out.clone(),
+            from_s: args.from,
+            to_s: args.to,
+            crf: args.crf,
+            force: args.force,
+        },
+        &Bars::default(),
+    )?;
     if args.json {
         #[derive(serde::Serialize)]
         struct Written<'a> {

@@ -14,6 +14,7 @@
 
 use crate::core::frame::PixelFormat;
 use crate::engine::export::Run;
+use crate::engine::progress::Progress;
 use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
 use crate::io::session::{CameraMeta, CameraRole, SessionReader};
@@ -194,101 +195,24 @@ pub fn export_moseq(
     let color_meta = meta.camera(CameraRole::Color).cloned();
     let staging = Staging::new(out, force).map_err(output_failure)?;
     let dir = staging.path().to_owned();
-    let total = (reader.depth_count() + reader.color_count()) as u64;
-    let mut done = 0u64;
-    let mut skipped = 0u64;
+    let mut count = Count {
+        done: 0,
+        total: (reader.depth_count() + reader.color_count()) as u64,
+        skipped: 0,
+        progress: &mut progress,
+    };
     let fps = if depth_meta.fps > 0.0 { depth_meta.fps } else { 30.0 };
-
-    // Depth: 16-bit grey, as MoSeq's acquisition writes it.
-    let mut depth = Encoder::start(
-        EncoderSpec::ffv1(depth_meta.width, depth_meta.height, "gray16le", 2, fps),
-        &dir.join(DEPTH_AVI),
-    )?;
-    let mut depth_ts = String::new();
-    let mut bytes = Vec::new();
-    for frame in reader.depth_frames() {
-        done += 1;
-        progress(done, total);
-        let frame = match frame {
-            Ok(f) => f,
-            Err(e) => {
-                tracing::warn!(message = "Damaged depth frame left out.", error = %e);
-                skipped += 1;
-                continue;
-            }
-        };
-        if (frame.width, frame.height) != (depth_meta.width, depth_meta.height) {
-            tracing::warn!(
-                message = "Depth frame of another size than the camera's left out.",
-                seq = frame.stamp.seq
-            );
-            skipped += 1;
-            continue;
-        }
-        bytes.clear();
-        bytes.extend(frame.data.iter().flat_map(|d| d.to_le_bytes()));
-        depth.write(&bytes)?;
-        let _ = writeln!(depth_ts, "{} {}", ms(frame.stamp.device_ns), ms(frame.stamp.host_ns));
-    }
-    let depth_frames = depth.frames();
+    let depth_frames = write_depth(&reader, &depth_meta, fps, &dir, &mut count)?;
     if depth_frames == 0 {
         return Err(Failure::usage(anyhow::anyhow!(
             "the session {session:?} has no readable depth frame"
         )));
     }
-    depth.finish()?;
-    crate::engine::write_report_file(&dir, DEPTH_TS, depth_ts.as_bytes())?;
-
-    // Colour: its own lossless video, in the camera's layout.
-    let mut color_frames = 0;
-    let mut color_pixel_format = None;
-    if let (Some(color_meta), Some(frames)) = (&color_meta, reader.color_frames()) {
-        let mut encoder: Option<(Encoder, PixelFormat, u32, u32)> = None;
-        let mut color_ts = String::new();
-        for frame in frames {
-            done += 1;
-            progress(done, total);
-            let frame = match frame {
-                Ok(f) => f,
-                Err(e) => {
-                    tracing::warn!(message = "Damaged colour frame left out.", error = %e);
-                    skipped += 1;
-                    continue;
-                }
-            };
-            let (enc, format, width, height) = match &mut encoder {
-                Some(e) => e,
-                None => {
-                    let (pix_fmt, bpp) = color_pix_fmt(frame.format);
-                    let spec = EncoderSpec::ffv1(
-                        frame.width,
-                        frame.height,
-                        pix_fmt,
-                        bpp,
-                        if color_meta.fps > 0.0 { color_meta.fps } else { fps },
-                    );
-                    color_pixel_format = Some(frame.format.name());
-                    let enc = Encoder::start(spec, &dir.join(COLOR_AVI))?;
-                    encoder.insert((enc, frame.format, frame.width, frame.height))
-                }
-            };
-            if frame.format != *format || (frame.width, frame.height) != (*width, *height) {
-                tracing::warn!(
-                    message = "Colour frame of another size or format left out.",
-                    seq = frame.stamp.seq
-                );
-                skipped += 1;
-                continue;
-            }
-            enc.write(&frame.data)?;
-            let _ = writeln!(color_ts, "{} {}", ms(frame.stamp.device_ns), ms(frame.stamp.host_ns));
-        }
-        if let Some((enc, ..)) = encoder {
-            color_frames = enc.frames();
-            enc.finish()?;
-            crate::engine::write_report_file(&dir, COLOR_TS, color_ts.as_bytes())?;
-        }
-    }
+    let (color_frames, color_pixel_format) = match &color_meta {
+        Some(color_meta) => write_color(&reader, color_meta, fps, &dir, &mut count)?,
+        None => (0, None),
+    };
+    let skipped = count.skipped;
 
     let session_name = session_name.map(str::to_owned).unwrap_or_else(|| {
         session
@@ -311,18 +235,7 @@ pub fn export_moseq(
         nidaq_channels: 0,
         nidaq_sampling_rate: 0.0,
     };
-    // The depth camera's intrinsics: the session's calibration, else the camera table's.
-    let millimetres = match &meta.rig {
-        Some(rig) => Some(MoseqMillimetres::new(
-            &rig.depth.intrinsics,
-            "rig calibration".to_owned(),
-        )),
-        None => {
-            crate::core::cameras::depth_camera(Some(depth_meta.model.as_str()), depth_meta.width, depth_meta.height)
-                .ok()
-                .map(|m| MoseqMillimetres::new(&m.intrinsics(), format!("{}, nominal", m.label())))
-        }
-    };
+    let millimetres = millimetres_of(meta.rig.as_ref(), &depth_meta);
     let provenance = Provenance {
         software_version: env!("CARGO_PKG_VERSION"),
         session: std::fs::canonicalize(session).unwrap_or_else(|_| session.to_owned()),
@@ -350,14 +263,157 @@ pub fn export_moseq(
     })
 }
 
-/// `mousepose export moseq`: finds the session of `options.session` and exports it, with a
-/// progress bar.
+/// The frames an export has gone through of all the session's, and those it left out;
+/// `progress` is told of each frame.
+struct Count<'a> {
+    done: u64,
+    total: u64,
+    skipped: u64,
+    progress: &'a mut dyn FnMut(u64, u64),
+}
+
+impl Count<'_> {
+    /// One more frame gone through.
+    fn next(&mut self) {
+        self.done += 1;
+        (self.progress)(self.done, self.total);
+    }
+}
+
+/// Writes the depth frames into `dir` as MoSeq's acquisition does (16-bit grey FFV1, and their
+/// timestamps) and returns how many; damaged frames and frames of another size are left out.
+/// With no frame written, nothing is finished.
+fn write_depth(
+    reader: &SessionReader,
+    depth_meta: &CameraMeta,
+    fps: f64,
+    dir: &Path,
+    count: &mut Count<'_>,
+) -> Result<u64, Failure> {
+    let mut depth = Encoder::start(
+        EncoderSpec::ffv1(depth_meta.width, depth_meta.height, "gray16le", 2, fps),
+        &dir.join(DEPTH_AVI),
+    )?;
+    let mut depth_ts = String::new();
+    let mut bytes = Vec::new();
+    for frame in reader.depth_frames() {
+        count.next();
+        let frame = match frame {
+            Ok(f) => f,
+            Err(e) => {
+                tracing::warn!(message = "Damaged depth frame left out.", error = %e);
+                count.skipped += 1;
+                continue;
+            }
+        };
+        if (frame.width, frame.height) != (depth_meta.width, depth_meta.height) {
+            tracing::warn!(
+                message = "Depth frame of another size than the camera's left out.",
+                seq = frame.stamp.seq
+            );
+            count.skipped += 1;
+            continue;
+        }
+        bytes.clear();
+        bytes.extend(frame.data.iter().flat_map(|d| d.to_le_bytes()));
+        depth.write(&bytes)?;
+        let _ = writeln!(depth_ts, "{} {}", ms(frame.stamp.device_ns), ms(frame.stamp.host_ns));
+    }
+    let depth_frames = depth.frames();
+    if depth_frames == 0 {
+        return Ok(0);
+    }
+    depth.finish()?;
+    crate::engine::write_report_file(dir, DEPTH_TS, depth_ts.as_bytes())?;
+    Ok(depth_frames)
+}
+
+/// Writes the colour frames into `dir` as a lossless video of their own, in the camera's
+/// layout (the first frame's), with their timestamps; returns how many, and the layout.
+fn write_color(
+    reader: &SessionReader,
+    color_meta: &CameraMeta,
+    fps: f64,
+    dir: &Path,
+    count: &mut Count<'_>,
+) -> Result<(u64, Option<&'static str>), Failure> {
+    let Some(frames) = reader.color_frames() else {
+        return Ok((0, None));
+    };
+    let mut color_pixel_format = None;
+    let mut encoder: Option<(Encoder, PixelFormat, u32, u32)> = None;
+    let mut color_ts = String::new();
+    for frame in frames {
+        count.next();
+        let frame = match frame {
+            Ok(f) => f,
+            Err(e) => {
+                tracing::warn!(message = "Damaged colour frame left out.", error = %e);
+                count.skipped += 1;
+                continue;
+            }
+        };
+        let (enc, format, width, height) = match &mut encoder {
+            Some(e) => e,
+            None => {
+                let (pix_fmt, bpp) = color_pix_fmt(frame.format);
+                let spec = EncoderSpec::ffv1(
+                    frame.width,
+                    frame.height,
+                    pix_fmt,
+                    bpp,
+                    if color_meta.fps > 0.0 { color_meta.fps } else { fps },
+                );
+                color_pixel_format = Some(frame.format.name());
+                let enc = Encoder::start(spec, &dir.join(COLOR_AVI))?;
+                encoder.insert((enc, frame.format, frame.width, frame.height))
+            }
+        };
+        if frame.format != *format || (frame.width, frame.height) != (*width, *height) {
+            tracing::warn!(
+                message = "Colour frame of another size or format left out.",
+                seq = frame.stamp.seq
+            );
+            count.skipped += 1;
+            continue;
+        }
+        enc.write(&frame.data)?;
+        let _ = writeln!(color_ts, "{} {}", ms(frame.stamp.device_ns), ms(frame.stamp.host_ns));
+    }
+    let mut color_frames = 0;
+    if let Some((enc, ..)) = encoder {
+        color_frames = enc.frames();
+        enc.finish()?;
+        crate::engine::write_report_file(dir, COLOR_TS, color_ts.as_bytes())?;
+    }
+    Ok((color_frames, color_pixel_format))
+}
+
+/// The depth camera's intrinsics (the session's calibration, else the camera table's) and
+/// how moseq2-extract's millimetres differ from them; `None` when they are unknown.
+fn millimetres_of(rig: Option<&crate::core::geometry::Rig>, depth_meta: &CameraMeta) -> Option<MoseqMillimetres> {
+    match rig {
+        Some(rig) => Some(MoseqMillimetres::new(
+            &rig.depth.intrinsics,
+            "rig calibration".to_owned(),
+        )),
+        None => {
+            crate::core::cameras::depth_camera(Some(depth_meta.model.as_str()), depth_meta.width, depth_meta.height)
+                .ok()
+                .map(|m| MoseqMillimetres::new(&m.intrinsics(), format!("{}, nominal", m.label())))
+        }
+    }
+}
+
+/// `mousepose export moseq`: finds the session of `options.session` and exports it, telling
+/// `progress` the frames done, then warns there when moseq2-extract's millimetres will be off
+/// (or may be: a camera of unknown intrinsics).
 ///
 /// # Errors
 /// See [`export_moseq`]; a directory that is neither a session nor a run (the user's).
-pub fn moseq(options: &MoseqOptions) -> Result<MoseqExport, Failure> {
+pub fn moseq(options: &MoseqOptions, progress: &dyn Progress) -> Result<MoseqExport, Failure> {
     let run = Run::open(&options.session, None).map_err(Failure::usage)?;
-    let bar = crate::engine::progress::bar(0, "moseq");
+    progress.start("moseq", 0);
     let result = export_moseq(
         &run.session,
         &options.out,
@@ -365,12 +421,23 @@ pub fn moseq(options: &MoseqOptions) -> Result<MoseqExport, Failure> {
         options.session_name.as_deref(),
         options.force,
         |done, total| {
-            bar.set_length(total);
-            bar.set_position(done);
+            progress.set_total(total);
+            progress.set_done(done);
         },
     );
-    bar.finish_and_clear();
-    result.map_err(|f| f.context(format!("exporting {:?} for MoSeq", run.session)))
+    progress.finish();
+    let export = result.map_err(|f| f.context(format!("exporting {:?} for MoSeq", run.session)))?;
+    match export.millimetres.as_ref() {
+        Some(mm) => {
+            if let Some(w) = mm.warning() {
+                progress.warning(&w);
+            }
+        }
+        None => progress.warning(
+            "the depth camera's intrinsics are unknown (no rig calibration, a camera the table does not know): moseq2-extract's millimetre scalars assume a Kinect v2's field of view and may be off",
+        ),
+    }
+    Ok(export)
 }
 
 #[cfg(test)]

@@ -16,6 +16,7 @@ use crate::core::image::RgbImage;
 use crate::engine::Failure;
 use crate::engine::chart::{draw_text, text_width};
 use crate::engine::export::{Run, check_file_out};
+use crate::engine::progress::Progress;
 use crate::io::session::{CameraRole, SessionReader};
 use crate::io::video::{Encoder, EncoderSpec};
 use crate::runtime::overlay;
@@ -62,6 +63,74 @@ fn place(canvas: &mut RgbImage, img: &RgbImage, y0: u32) {
     }
 }
 
+/// `picture` on a white canvas of `size` under a line of counters: `text` on the left,
+/// `label` on the right.
+fn with_counters(picture: &RgbImage, (width, height): (u32, u32), text: &str, label: &str) -> RgbImage {
+    let mut canvas = RgbImage::new(width, height, [255, 255, 255]);
+    place(&mut canvas, picture, COUNTER_BAR_PX);
+    draw_text(&mut canvas, 6, 6, text, [20, 20, 20], 2);
+    draw_text(
+        &mut canvas,
+        i64::from(width) - i64::from(text_width(label, 2)) - 6,
+        6,
+        label,
+        [90, 90, 90],
+        2,
+    );
+    canvas
+}
+
+/// The rows of `poses.csv` to draw: those of the time window whose depth frame the session
+/// holds (at least one).
+struct Window<'r> {
+    /// The run's first row's depth device time, ns: the window's times count from it.
+    t0_ns: u64,
+    rows: Vec<&'r PoseRecord>,
+    /// Rows of the window whose depth frame is not in the session.
+    rows_without_frames: u64,
+}
+
+impl<'r> Window<'r> {
+    fn choose(options: &VideoOptions, rows: &'r [PoseRecord], reader: &SessionReader) -> Result<Self, Failure> {
+        let run = &options.run;
+        let Some(first) = rows.first() else {
+            return Err(Failure::usage(anyhow::anyhow!(
+                "{:?} has no rows",
+                run.dir.join(POSES_FILE)
+            )));
+        };
+        let t0 = first.depth.device_ns;
+        let seconds = |r: &PoseRecord| r.depth.device_ns.saturating_sub(t0) as f64 / 1e9;
+        let (from, to) = (options.from_s.unwrap_or(0.0), options.to_s.unwrap_or(f64::INFINITY));
+        if to <= from {
+            return Err(Failure::usage(anyhow::anyhow!(
+                "--to {to} s is not after --from {from} s"
+            )));
+        }
+        let chosen: Vec<&PoseRecord> = rows.iter().filter(|r| (from..to).contains(&seconds(r))).collect();
+        if chosen.is_empty() {
+            return Err(Failure::usage(anyhow::anyhow!(
+                "no frame of the run lies between {from} s and {to} s (it lasts {:.2} s)",
+                rows.last().map_or(0.0, seconds)
+            )));
+        }
+        let recorded: std::collections::HashSet<u64> = reader.seqs(CameraRole::Depth).into_iter().collect();
+        let in_window = chosen.len() as u64;
+        let chosen: Vec<&PoseRecord> = chosen.into_iter().filter(|r| recorded.contains(&r.depth.seq)).collect();
+        if chosen.is_empty() {
+            return Err(Failure::usage(anyhow::anyhow!(
+                "none of the run's depth frames between {from} s and {to} s is in the session {:?} (is it the run's session?)",
+                run.session
+            )));
+        }
+        Ok(Self {
+            t0_ns: t0,
+            rows_without_frames: in_window - chosen.len() as u64,
+            rows: chosen,
+        })
+    }
+}
+
 /// Writes the video (see the module documentation); `progress` is called with the frames done
 /// and the total.
 ///
@@ -81,38 +150,14 @@ pub fn export_video(options: &VideoOptions, mut progress: impl FnMut(u64, u64)) 
             .rig
             .unwrap_or_else(crate::core::geometry::Rig::default_rig),
     };
-    let Some(first) = rows.first() else {
-        return Err(Failure::usage(anyhow::anyhow!(
-            "{:?} has no rows",
-            run.dir.join(POSES_FILE)
-        )));
-    };
-    let t0 = first.depth.device_ns;
+    let Window {
+        t0_ns: t0,
+        rows: chosen,
+        rows_without_frames,
+    } = Window::choose(options, &rows, &reader)?;
     let seconds = |r: &PoseRecord| r.depth.device_ns.saturating_sub(t0) as f64 / 1e9;
-    let (from, to) = (options.from_s.unwrap_or(0.0), options.to_s.unwrap_or(f64::INFINITY));
-    if to <= from {
-        return Err(Failure::usage(anyhow::anyhow!(
-            "--to {to} s is not after --from {from} s"
-        )));
-    }
-    let chosen: Vec<&PoseRecord> = rows.iter().filter(|r| (from..to).contains(&seconds(r))).collect();
-    if chosen.is_empty() {
-        return Err(Failure::usage(anyhow::anyhow!(
-            "no frame of the run lies between {from} s and {to} s (it lasts {:.2} s)",
-            rows.last().map_or(0.0, seconds)
-        )));
-    }
-    let recorded: std::collections::HashSet<u64> = reader.seqs(CameraRole::Depth).into_iter().collect();
-    let in_window = chosen.len() as u64;
-    let chosen: Vec<&PoseRecord> = chosen.into_iter().filter(|r| recorded.contains(&r.depth.seq)).collect();
-    let rows_without_frames = in_window - chosen.len() as u64;
-    let Some(first_drawn) = chosen.first() else {
-        return Err(Failure::usage(anyhow::anyhow!(
-            "none of the run's depth frames between {from} s and {to} s is in the session {:?} (is it the run's session?)",
-            run.session
-        )));
-    };
-    let t_first = first_drawn.depth.device_ns;
+    // The window holds a row at least.
+    let t_first = chosen.first().map_or(t0, |r| r.depth.device_ns);
     let has_color = reader.meta().camera(CameraRole::Color).is_some();
     check_file_out(&options.out, options.force)?;
 
@@ -161,27 +206,15 @@ pub fn export_video(options: &VideoOptions, mut progress: impl FnMut(u64, u64)) 
                 )?)
             }
         };
-        let mut canvas = RgbImage::new(width, height, [255, 255, 255]);
-        place(&mut canvas, &picture, COUNTER_BAR_PX);
-        let colour_text = row.color.map_or_else(|| "-".to_owned(), |c| c.seq.to_string());
         let text = format!(
             "frame {}  depth {}  colour {}  t {:.3} s  {}",
             k + 1,
             row.depth.seq,
-            colour_text,
+            row.color.map_or_else(|| "-".to_owned(), |c| c.seq.to_string()),
             seconds(row),
             row.status.name()
         );
-        draw_text(&mut canvas, 6, 6, &text, [20, 20, 20], 2);
-        let label = format!("{}/{}", k + 1, total);
-        draw_text(
-            &mut canvas,
-            i64::from(width) - i64::from(text_width(&label, 2)) - 6,
-            6,
-            &label,
-            [90, 90, 90],
-            2,
-        );
+        let canvas = with_counters(&picture, (width, height), &text, &format!("{}/{}", k + 1, total));
         // The depth frame's device time from the first frame drawn (times that do not
         // increase are nudged by a microsecond, as a container needs).
         let t_us = row.depth.device_ns.saturating_sub(t_first) / 1000;
@@ -203,16 +236,16 @@ pub fn export_video(options: &VideoOptions, mut progress: impl FnMut(u64, u64)) 
     })
 }
 
-/// `mousepose export video`: [`export_video`] with a progress bar.
+/// `mousepose export video`: [`export_video`], telling `progress` the frames done.
 ///
 /// # Errors
 /// See [`export_video`].
-pub fn video(options: &VideoOptions) -> Result<VideoExport, Failure> {
-    let bar = crate::engine::progress::bar(0, "video");
+pub fn video(options: &VideoOptions, progress: &dyn Progress) -> Result<VideoExport, Failure> {
+    progress.start("video", 0);
     let result = export_video(options, |done, total| {
-        bar.set_length(total);
-        bar.set_position(done);
+        progress.set_total(total);
+        progress.set_done(done);
     });
-    bar.finish_and_clear();
+    progress.finish();
     result.map_err(|f| f.context(format!("drawing the video of {:?}", options.run.dir)))
 }
