@@ -669,23 +669,13 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("color.address") && e.contains("test_pattern"), "{e}");
-        let topology = Topology {
-            sources: Sources::Cameras {
-                depth: Box::new(Numbered {
-                    seqs: vec![0, 1, 2],
-                    delivered: 0,
-                    damaged: 0,
-                    damaged_from: 0,
-                }),
-                color: Some(color.open().unwrap()),
-                epochs: Epochs::default(),
-            },
-            sync: SyncConfig::default(),
-            edges: Edges::replay(),
-            processing: None,
-            recorder: None,
+        let depth = Numbered {
+            seqs: vec![0, 1, 2],
+            delivered: 0,
+            damaged: 0,
+            damaged_from: 0,
         };
-        let finished = topology.start().unwrap().join();
+        let finished = captured(depth, Some(color.open().unwrap()));
         assert!(finished.outcome.is_ok());
         assert_eq!(finished.cameras["color"].captured, 5);
         assert_eq!(finished.cameras["depth"].captured, 3);
@@ -693,10 +683,15 @@ mod tests {
 
     /// The frames `depth` lost before capture, by reason, once the pipeline has run it.
     fn lost_of(depth: Numbered) -> BTreeMap<String, u64> {
+        captured(depth, None).cameras["depth"].lost_before_capture.clone()
+    }
+
+    /// A capture-only pipeline run on these cameras until they end.
+    fn captured(depth: Numbered, color: Option<ColorSource>) -> Finished {
         let topology = Topology {
             sources: Sources::Cameras {
                 depth: Box::new(depth),
-                color: None,
+                color,
                 epochs: Epochs::default(),
             },
             sync: SyncConfig::default(),
@@ -704,7 +699,6 @@ mod tests {
             processing: None,
             recorder: None,
         };
-        let finished = topology.start().unwrap().join();
-        finished.cameras["depth"].lost_before_capture.clone()
+        topology.start().unwrap().join()
     }
 }
