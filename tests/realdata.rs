@@ -102,6 +102,8 @@ fn a_real_mouse_is_found_in_every_frame_along_moseqs_axis_and_its_head_leads_its
     assert!(get("axis_deg_p95") <= 20.0, "{f}");
     assert!(get("moving_frames") >= 100.0, "{f}");
     assert!(get("head_leading") >= 0.98 * get("moving_frames"), "{f}");
+    // Issue 49, item 1: no heading turned 180 degrees and back within one or two frames.
+    assert_eq!(get("brief_reversals"), 0.0, "{f}");
     let turned = get("report_turned_deg") / get("moseq_turned_deg");
     assert!((0.8..=1.2).contains(&turned), "turned {turned:.2}x MoSeq's: {f}");
     assert!(get("centre_px_median") <= 2.0, "{f}");

@@ -235,6 +235,9 @@ pub struct ReplaySummary {
     /// tracker, by each frame's own evidence, and by the body forest alone.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub orientation: Option<crate::runtime::sink::poses::OrientationCheck>,
+    /// In how many frames with a mouse a tail was seen, on any recording (truth or not).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tails: Option<crate::runtime::sink::poses::TailsSeen>,
     /// What the user should know about the replay (the arena missing the mouse), one
     /// sentence each; also printed on stderr.
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -450,6 +453,7 @@ pub fn replay_with(
         mean_error_mm: tally.mean_error_mm(),
         group_error_mm: tally.group_error_mm(),
         orientation: (tally.orientation.frames > 0).then_some(tally.orientation),
+        tails: (tally.tails.frames > 0).then_some(tally.tails),
         warnings: arena_warnings(
             world.arena_check.as_ref(),
             if options.roi.is_some() { "given" } else { "found" },

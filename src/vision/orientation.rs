@@ -10,9 +10,16 @@
 //! two hypotheses frame by frame with a Viterbi recursion over them: a flip from one to the
 //! other costs, evidence adds up over frames, a mouse that moves fast mostly moves head first,
 //! and the body's shape counts more when nothing else does (the first frame, a still mouse).
-//! It decides each frame
-//! when it comes (no look-ahead, so the daemon's latency does not grow), and its margin
-//! between the two hypotheses is the frame's orientation confidence.
+//!
+//! A heading held with confidence changes only on evidence that lasts: the recursion's
+//! preference must have turned against it for [`TrackerConfig::confirm_frames`] frames in a
+//! row (or a visible tail must say so) before the tracker gives the other end. One or two
+//! frames whose shape points the wrong way (a real mouse's body seen badly) turn the
+//! recursion for as long, but no longer the output: a real mouse turns around in hundreds of
+//! milliseconds, through a curled body, never in 33 ms. A real turn-around is followed
+//! `confirm_frames - 1` frames later than the recursion alone follows it (67 ms at 30 fps).
+//! It decides each frame when it comes (no look-ahead, so the daemon's latency does not
+//! grow), and its margin between the two hypotheses is the frame's orientation confidence.
 
 use crate::core::pose::JointEstimate;
 use crate::core::skeleton::Joint;
@@ -76,6 +83,17 @@ pub struct TrackerConfig {
     pub flip_cost: f64,
     /// A gap without a mouse longer than this starts the tracking afresh.
     pub reset_after_ns: u64,
+    /// A heading held with at least this margin (log-odds) since it was taken is confident:
+    /// it changes only when the recursion has preferred the other end for `confirm_frames`
+    /// frames in a row. A heading never this sure follows the recursion at once.
+    pub confident_margin: f64,
+    /// How many frames of evidence against a confident heading (while the recursion prefers
+    /// the other end; a frame for the held end counts one off) turn it (1: at once, as the
+    /// recursion alone).
+    pub confirm_frames: u32,
+    /// A visible tail's log-odds at least this large, on the side the recursion prefers,
+    /// turns a confident heading at once (where a tail is seen, its end has been right).
+    pub decisive_tail: f64,
 }
 
 impl Default for TrackerConfig {
@@ -91,6 +109,9 @@ impl Default for TrackerConfig {
             full_speed_mm_s: 150.0,
             flip_cost: 6.0,
             reset_after_ns: 1_000_000_000,
+            confident_margin: 3.0,
+            confirm_frames: 3,
+            decisive_tail: 8.0,
         }
     }
 }
@@ -114,7 +135,8 @@ pub struct Decision {
     pub chosen: usize,
     /// The choice the frame's own evidence makes, without the tracker.
     pub frame_alone: usize,
-    /// How sure the tracker is: `1 / (1 + e^-margin)` of the two hypotheses' costs (0.5 to 1).
+    /// How sure the tracker is: `1 / (1 + e^-margin)` of the two hypotheses' costs (0.5 to 1);
+    /// 0.5 while it holds a heading the recursion no longer prefers.
     pub confidence: f64,
 }
 
@@ -132,7 +154,8 @@ pub struct Orientation {
     pub tail: Option<Vector2<f64>>,
 }
 
-/// Viterbi over head toward `+axis` / toward `-axis`, decided frame by frame.
+/// Viterbi over head toward `+axis` / toward `-axis`, decided frame by frame, with a held
+/// heading that turns only on lasting evidence.
 #[derive(Clone, Debug, Default)]
 pub struct Tracker {
     config: TrackerConfig,
@@ -140,6 +163,19 @@ pub struct Tracker {
     cost: [f64; 2],
     /// The previous frame: its time, axis and centre.
     last: Option<(u64, Vector2<f64>, Point2<f64>)>,
+    /// The heading given (index as [`Decision::chosen`], for the latest frame's axis).
+    held: Hold,
+}
+
+/// The heading the tracker gives, and how sure it has been of it.
+#[derive(Clone, Copy, Debug, Default)]
+struct Hold {
+    chosen: usize,
+    /// The recursion's margin for it has reached [`TrackerConfig::confident_margin`].
+    confident: bool,
+    /// Frames the recursion has preferred the other end, less those among them whose own
+    /// evidence was for the held end.
+    against: u32,
 }
 
 impl Tracker {
@@ -162,6 +198,7 @@ impl Tracker {
                 // mouse from frame to frame.
                 if axis.dot(&h.axis) < 0.0 {
                     self.cost.swap(0, 1);
+                    self.held.chosen = 1 - self.held.chosen;
                 }
                 let dt = (time_ns - t) as f64 * 1e-9;
                 let velocity = (h.centre - centre) / dt;
@@ -175,9 +212,13 @@ impl Tracker {
             }
             _ => {
                 self.cost = [0.0; 2];
+                self.held = Hold::default();
                 evidence += still_extra;
             }
         }
+        let first = self
+            .last
+            .is_none_or(|(t, ..)| time_ns <= t || time_ns - t > c.reset_after_ns);
         self.last = Some((time_ns, h.axis, h.centre));
         let [plus, minus] = self.cost;
         let next = [
@@ -186,12 +227,60 @@ impl Tracker {
         ];
         let low = next[0].min(next[1]);
         self.cost = [next[0] - low, next[1] - low];
-        let chosen = usize::from(self.cost[1] < self.cost[0]);
+        let preferred = usize::from(self.cost[1] < self.cost[0]);
         let margin = (self.cost[0] - self.cost[1]).abs();
+        let decisive_tail = c.tail_weight * h.tail * if preferred == 0 { 1.0 } else { -1.0 } >= c.decisive_tail;
+        // The frame's own evidence (travel included) for the held end or against it.
+        let toward_held = evidence * if self.held.chosen == 0 { 1.0 } else { -1.0 } > 0.0;
+        self.held = self.held.next(&c, first, preferred, margin, decisive_tail, toward_held);
         Decision {
-            chosen,
+            chosen: self.held.chosen,
             frame_alone: usize::from(c.frame_evidence(h) < 0.0),
-            confidence: 1.0 / (1.0 + (-margin).exp()),
+            confidence: if self.held.chosen == preferred {
+                1.0 / (1.0 + (-margin).exp())
+            } else {
+                0.5
+            },
+        }
+    }
+}
+
+impl Hold {
+    /// The held heading after a frame whose recursion prefers `preferred` by `margin`; the
+    /// frame's own evidence points `toward_held` or not.
+    fn next(
+        self,
+        c: &TrackerConfig,
+        first: bool,
+        preferred: usize,
+        margin: f64,
+        decisive_tail: bool,
+        toward_held: bool,
+    ) -> Self {
+        let take = |chosen| Self {
+            chosen,
+            confident: margin >= c.confident_margin,
+            against: 0,
+        };
+        if first || preferred == self.chosen {
+            let mut held = take(preferred);
+            held.confident |= !first && self.confident;
+            return held;
+        }
+        // The recursion, clipped at the flip cost, takes a few frames to come back after a
+        // strong contrary frame: a frame whose own evidence is for the held end counts one
+        // contrary frame off, so that only contrary evidence that lasts turns the heading.
+        if toward_held {
+            return Self {
+                against: self.against.saturating_sub(1),
+                ..self
+            };
+        }
+        let against = self.against + 1;
+        if !self.confident || decisive_tail || against >= c.confirm_frames {
+            take(preferred)
+        } else {
+            Self { against, ..self }
         }
     }
 }
@@ -310,5 +399,130 @@ mod tests {
         }
         assert_eq!(last.chosen, 1);
         assert!(last.confidence > 0.99);
+    }
+
+    /// A tracker that has held the head toward `+axis` for a second: votes, shape and travel
+    /// agree (the mouse walks toward `+x` at 120 mm/s). Returns the next frame's number.
+    fn settled(tracker: &mut Tracker, axis: Vector2<f64>) -> u64 {
+        for k in 0..30u64 {
+            let mut h = frame(axis, Point2::new(k as f64 * 4.0, 0.0), 0.3);
+            h.shape = 1.5;
+            let d = tracker.update(k * 33_000_000, &h);
+            assert_eq!(d.chosen, 0, "frame {k}");
+        }
+        30
+    }
+
+    /// A frame as `settled` gives them, but with the body's shape and the votes firmly on the
+    /// wrong end (a real mouse's body seen badly), at `k`.
+    fn contrary(k: u64, axis: Vector2<f64>) -> Headings {
+        let mut h = frame(axis, Point2::new(k as f64 * 4.0, 0.0), -0.8);
+        h.shape = -1e9;
+        h
+    }
+
+    #[test]
+    fn one_or_two_frames_of_contrary_shape_do_not_flip_a_confident_heading() {
+        let axis = Vector2::new(1.0, 0.0);
+        for run in [1, 2] {
+            let mut tracker = Tracker::new(TrackerConfig::default());
+            let mut k = settled(&mut tracker, axis);
+            for _ in 0..run {
+                let d = tracker.update(k * 33_000_000, &contrary(k, axis));
+                assert_eq!((d.chosen, d.frame_alone), (0, 1), "run {run}, frame {k}");
+                k += 1;
+            }
+            for k in k..k + 30 {
+                let mut h = frame(axis, Point2::new(k as f64 * 4.0, 0.0), 0.3);
+                h.shape = 1.5;
+                assert_eq!(tracker.update(k * 33_000_000, &h).chosen, 0, "run {run}, frame {k}");
+            }
+        }
+        // The recursion alone (no hold) is turned by the single frame: the case the hold is for.
+        let mut alone = Tracker::new(TrackerConfig {
+            confirm_frames: 1,
+            ..TrackerConfig::default()
+        });
+        let k = settled(&mut alone, axis);
+        assert_eq!(alone.update(k * 33_000_000, &contrary(k, axis)).chosen, 1);
+    }
+
+    #[test]
+    fn lasting_contrary_shape_flips_a_confident_heading() {
+        let axis = Vector2::new(1.0, 0.0);
+        let mut tracker = Tracker::new(TrackerConfig::default());
+        let start = settled(&mut tracker, axis);
+        let turned = (start..start + 30)
+            .map(|k| tracker.update(k * 33_000_000, &contrary(k, axis)).chosen)
+            .position(|chosen| chosen == 1);
+        // The recursion turns on the first such frame; the output three frames in.
+        assert_eq!(turned, Some(2));
+    }
+
+    #[test]
+    fn a_seen_tail_turns_a_confident_heading_at_once() {
+        let axis = Vector2::new(1.0, 0.0);
+        let mut tracker = Tracker::new(TrackerConfig::default());
+        let k = settled(&mut tracker, axis);
+        let mut h = contrary(k, axis);
+        h.tail = -16.0;
+        assert_eq!(tracker.update(k * 33_000_000, &h).chosen, 1);
+    }
+
+    /// A real turn-around: the mouse walks toward `+x` head first, stops and curls for a third
+    /// of a second (its shape saying nothing, its long axis where it was), then walks
+    /// back toward `-x` head first, its shape now pointing that way. The tracker follows within
+    /// 4 frames (133 ms) of the walk back's start (3 today, the recursion alone 1),
+    /// and never returns.
+    #[test]
+    fn a_real_turn_around_is_followed_within_four_frames() {
+        let held = turn_around(TrackerConfig::default());
+        let alone = turn_around(TrackerConfig {
+            confirm_frames: 1,
+            ..TrackerConfig::default()
+        });
+        eprintln!("a turn-around followed {held} frames into the walk back ({alone} without the hold)");
+        assert!(held <= 4, "followed {held} frames into the walk back");
+        assert!(held <= alone + 2, "{held} against {alone}");
+    }
+
+    /// How many frames into the walk back of a turn-around the tracker with `config` follows.
+    fn turn_around(config: TrackerConfig) -> usize {
+        let mut tracker = Tracker::new(config);
+        let frame_ns = 33_333_333u64;
+        let mut x = 0.0;
+        let mut k = 0u64;
+        let mut head = Vec::new();
+        for _ in 0..30 {
+            x += 5.0;
+            let mut h = frame(Vector2::new(1.0, 0.0), Point2::new(x, 0.0), 0.2);
+            h.shape = 1.5;
+            let d = tracker.update(k * frame_ns, &h);
+            head.push(if d.chosen == 0 { h.axis } else { -h.axis });
+            k += 1;
+        }
+        // The curl: the body balled up, its long axis seen where it was (the axis does not turn
+        // with the head, so only the evidence after it can turn the tracker), nothing said of
+        // the head's end.
+        for _ in 0..10 {
+            let axis = Vector2::new(1.0, 0.0);
+            let d = tracker.update(k * frame_ns, &frame(axis, Point2::new(x, 0.0), 0.0));
+            head.push(if d.chosen == 0 { axis } else { -axis });
+            k += 1;
+        }
+        let back = head.len();
+        for _ in 0..30 {
+            x -= 5.0;
+            // The head now toward -x.
+            let mut h = frame(Vector2::new(1.0, 0.0), Point2::new(x, 0.0), -0.2);
+            h.shape = -1.5;
+            let d = tracker.update(k * frame_ns, &h);
+            head.push(if d.chosen == 0 { h.axis } else { -h.axis });
+            k += 1;
+        }
+        assert!(head[..30].iter().all(|v| v.x > 0.0));
+        let followed = head[back..].iter().position(|v| v.x < 0.0).unwrap_or(usize::MAX);
+        assert!(head[back..].iter().skip(followed).all(|v| v.x < 0.0), "{head:?}");
+        followed
     }
 }

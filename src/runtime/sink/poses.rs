@@ -130,6 +130,18 @@ pub struct PoseTally {
     pub snapshot: Option<PoseRecord>,
     /// Flipped headings against the truth (frames without truth are not counted).
     pub orientation: OrientationCheck,
+    /// In how many frames a tail was seen, truth or not.
+    pub tails: TailsSeen,
+}
+
+/// In how many of the frames whose head's end the tracker chose a visible tail was found
+/// (`vision::tail`), on any recording, with ground truth or not.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct TailsSeen {
+    /// Frames with a mouse and a heading chosen.
+    pub frames: u64,
+    /// Of those, the frames where a tail was seen.
+    pub seen: u64,
 }
 
 impl PoseTally {
@@ -313,6 +325,10 @@ impl Sink for PoseWriter {
                 tally.detected_paw_error.0 += e;
                 tally.detected_paw_error.1 += 1;
             }
+        }
+        if let Some(o) = &r.orientation {
+            tally.tails.frames += 1;
+            tally.tails.seen += u64::from(o.tail.is_some());
         }
         if let (Some(o), Some(t)) = (&r.orientation, truth) {
             let body: BodyJoints = std::array::from_fn(|k| r.pose.joints[k]);
