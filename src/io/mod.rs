@@ -23,6 +23,44 @@ pub fn u16_samples(bytes: &[u8]) -> Vec<u16> {
     samples
 }
 
+/// What became of a file being written that is no longer where it was written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gone {
+    /// No name is left: what is written to it is lost when it is closed.
+    Removed,
+    /// It still has a name, but not the one it was created under (its directory, or one
+    /// above it, renamed away): what is written to it goes where it was moved.
+    Moved,
+}
+
+impl Gone {
+    /// The reason's label in counters and reports (`removed`, `moved`).
+    pub fn reason(self) -> &'static str {
+        match self {
+            Self::Removed => "removed",
+            Self::Moved => "moved",
+        }
+    }
+}
+
+/// Whether `file`, open for writing and created as `path`, is gone from there: removed
+/// ([`unlinked`]), or moved away (`path` names another file, or none). A file whose state
+/// cannot be read, or a `path` that cannot be looked up for another reason than its absence,
+/// counts as still there.
+pub fn gone(file: &std::fs::File, path: &Path) -> Option<Gone> {
+    use std::os::unix::fs::MetadataExt as _;
+    let open = file.metadata().ok()?;
+    if open.nlink() == 0 {
+        return Some(Gone::Removed);
+    }
+    match std::fs::metadata(path) {
+        Ok(named) if named.dev() == open.dev() && named.ino() == open.ino() => None,
+        Ok(_) => Some(Gone::Moved),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => Some(Gone::Moved),
+        Err(_) => None,
+    }
+}
+
 /// Whether `file`, open for writing, was removed from the file system (no name is left: what
 /// is written to it is lost when it is closed). A file whose state cannot be read counts as
 /// still there.
