@@ -104,3 +104,28 @@ pub fn read_bounded(path: &Path, max: u64) -> io::Result<String> {
     String::from_utf8(read_bounded_bytes(path, max)?)
         .map_err(|_| io::Error::new(io::ErrorKind::InvalidData, "it is not UTF-8 text"))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A file being written is there, then moved away with its directory (still a name, not
+    /// its own), then removed; a directory of the same name made again is not it.
+    #[test]
+    fn a_file_being_written_is_there_moved_or_removed() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("run");
+        std::fs::create_dir(&dir).unwrap();
+        let path = dir.join("poses.csv");
+        let file = std::fs::File::create(&path).unwrap();
+        assert_eq!(gone(&file, &path), None);
+        std::fs::rename(&dir, tmp.path().join("moved")).unwrap();
+        assert_eq!(gone(&file, &path), Some(Gone::Moved));
+        std::fs::create_dir(&dir).unwrap();
+        std::fs::write(&path, b"another").unwrap();
+        assert_eq!(gone(&file, &path), Some(Gone::Moved));
+        std::fs::remove_dir_all(tmp.path().join("moved")).unwrap();
+        assert_eq!(gone(&file, &path), Some(Gone::Removed));
+        assert_eq!(Gone::Removed.reason(), "removed");
+    }
+}
