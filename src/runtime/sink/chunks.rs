@@ -429,7 +429,7 @@ impl ChunkRecorder {
                 "the chunk's session was removed from the disk: its frames are lost (counted as lost \
                  after recording: removed); recording goes on in a new chunk"
             ),
-            crate::io::Gone::Moved => tracing::warn!(
+            crate::io::Gone::Moved => tracing::info!(
                 chunk = self.index,
                 depth_frames = depth,
                 color_frames = color,
@@ -834,7 +834,7 @@ impl ChunkPoses {
                 );
                 self.live.lock().unwrap_or_else(PoisonError::into_inner).rows_lost += rows;
             }
-            crate::io::Gone::Moved => tracing::warn!(
+            crate::io::Gone::Moved => tracing::info!(
                 chunk = self.index,
                 rows,
                 "poses.csv was moved away: nothing more is written into it; poses go on in a new chunk"
