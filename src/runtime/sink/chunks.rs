@@ -413,11 +413,20 @@ impl ChunkRecorder {
     /// counted as recorded), and nothing more is written into it; recording goes on in a new
     /// chunk at once, in the run directory made again (or pauses if that cannot be created).
     fn check_removed(&mut self, host_ns: u64) {
+        if self.forget_gone() {
+            let index = self.chunks.replace(self.index, host_ns);
+            self.switch(index);
+        }
+    }
+
+    /// Whether the current session is gone (removed or moved away); if so its frames are
+    /// counted as lost after recording and it is dropped, never closed into where it went.
+    fn forget_gone(&mut self) -> bool {
         let Some(gone) = self.writer.as_ref().and_then(SessionWriter::gone) else {
-            return;
+            return false;
         };
         let Some(w) = self.writer.take() else {
-            return;
+            return false;
         };
         let (depth, color) = (w.depth_frames(), w.color_frames());
         let reason = gone.reason();
@@ -448,8 +457,7 @@ impl ChunkRecorder {
             .entry(reason)
             .or_default() += self.counted;
         self.counted = 0;
-        let index = self.chunks.replace(self.index, host_ns);
-        self.switch(index);
+        true
     }
 
     /// Writes `frame` into its chunk's session, or says why not.
@@ -545,6 +553,10 @@ impl crate::runtime::sink::session::FrameRecorder for ChunkRecorder {
 
     fn take_lost(&mut self) -> Vec<(CameraRole, &'static str, u64)> {
         std::mem::take(&mut self.lost)
+    }
+
+    fn notice_gone(&mut self) {
+        self.forget_gone();
     }
 
     fn finish(mut self: Box<Self>) -> Result<Option<SessionSummary>, SessionError> {

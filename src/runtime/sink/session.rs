@@ -30,6 +30,11 @@ pub trait FrameRecorder: Send + std::fmt::Debug + 'static {
         Vec::new()
     }
 
+    /// At the end, once the last frame was written: notices a session gone since (removed or
+    /// moved away), whose frames [`FrameRecorder::take_lost`] then gives, and which is not
+    /// closed into where it went.
+    fn notice_gone(&mut self) {}
+
     /// Closes the (last) session cleanly and says what it holds (`None`: no session was open).
     ///
     /// # Errors
@@ -91,6 +96,10 @@ pub fn write_frames(
             }
             Some(reason) => bump(&counters.not_recorded, reason, 1),
         }
+    }
+    writer.notice_gone();
+    for (role, reason, n) in writer.take_lost() {
+        bump(&acct.camera(role).lost_after_recording, reason, n);
     }
     Ok(())
 }
