@@ -27,6 +27,8 @@ packages=(
   systemd udev
   # the Debian package (scripts/package: dpkg-shlibdeps, strip)
   dpkg-dev binutils
+  # promtool: the tests check the alert rules of docs/metrics.md (promtool check rules)
+  prometheus
 )
 
 missing=()

@@ -569,3 +569,65 @@ fn the_checks_of_this_module_see_what_they_look_for() {
         Some("no type `Failures` under src/")
     );
 }
+
+/// The alert rules of `docs/metrics.md`, as they stand there (its first YAML block after
+/// "## Alert rules").
+fn alert_rules() -> String {
+    let text = read("docs/metrics.md");
+    let section = text
+        .split_once("\n## Alert rules\n")
+        .expect("docs/metrics.md has its alert rules")
+        .1;
+    let block = section.split_once("```yaml\n").expect("a YAML block of rules").1;
+    block.split_once("```").expect("the block ends").0.to_owned()
+}
+
+/// Issue 48 item 1: the alert rules of `docs/metrics.md` are what Prometheus loads
+/// (`promtool check rules`), and the removal of recorded frames fires its alert while a run
+/// directory moved away (the documented way of taking a live run) does not
+/// (`promtool test rules`).
+#[test]
+fn the_alert_rules_of_metrics_md_pass_promtool() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rules = tmp.path().join("mousepose-alerts.yml");
+    fs::write(&rules, alert_rules()).unwrap();
+    let promtool = |args: &[&str]| {
+        let out = std::process::Command::new("promtool")
+            .args(args)
+            .current_dir(tmp.path())
+            .output()
+            .expect("promtool (Debian's prometheus package; scripts/setup.sh installs it)");
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(out.status.success(), "promtool {args:?}:\n{text}");
+    };
+    promtool(&["check", "rules", "mousepose-alerts.yml"]);
+    let series =
+        "mousepose_frames_lost_after_recording_total{job=\"mousepose\",instance=\"rig01:8470\",camera=\"depth\"";
+    let tests = format!(
+        "rule_files: [mousepose-alerts.yml]\n\
+         evaluation_interval: 1m\n\
+         tests:\n\
+         \x20 - interval: 1m\n\
+         \x20   input_series:\n\
+         \x20     - series: '{series},reason=\"removed\"}}'\n\
+         \x20       values: '0 0 0 250 250 250 250'\n\
+         \x20     - series: '{series},reason=\"moved\"}}'\n\
+         \x20       values: '0 400 400 400 800 800 800'\n\
+         \x20   alert_rule_test:\n\
+         \x20     - eval_time: 2m\n\
+         \x20       alertname: MouseposeRecordedFramesRemoved\n\
+         \x20       exp_alerts: []\n\
+         \x20     - eval_time: 5m\n\
+         \x20       alertname: MouseposeRecordedFramesRemoved\n\
+         \x20       exp_alerts:\n\
+         \x20         - exp_labels: {{severity: warn, job: mousepose, instance: \"rig01:8470\", camera: depth, reason: removed}}\n\
+         \x20           exp_annotations:\n\
+         \x20             summary: \"rig01:8470: 250 recorded depth frames removed from the disk under the daemon in 10 minutes\"\n"
+    );
+    fs::write(tmp.path().join("tests.yml"), tests).unwrap();
+    promtool(&["test", "rules", "tests.yml"]);
+}

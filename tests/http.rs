@@ -583,3 +583,91 @@ fn idle_connections_are_closed_and_do_not_use_up_the_descriptors() {
     let (status, _, err) = terminate(child, Duration::from_secs(30));
     assert!(status.success(), "{status}: {err}");
 }
+
+/// Whether a sample of `name` is one that only counts up: a counter's `_total`, a histogram's
+/// `_count`, `_sum` and `_bucket`.
+fn counts_up(name: &str) -> bool {
+    ["_total", "_count", "_sum", "_bucket"]
+        .iter()
+        .any(|s| name.ends_with(s))
+}
+
+/// Issue 48 item 1: `/metrics` scraped again and again while faults hit a live run (the
+/// current chunk's directory removed, the run directory moved away and removed, SIGHUP):
+/// no counter ever falls or vanishes (Prometheus would read either as a reset and count the
+/// whole value again), and what left the run's directory is counted on a counter of its own.
+#[test]
+fn issue48_no_counter_ever_falls_through_faults() {
+    let tmp = tempfile::tempdir().unwrap();
+    let _camera = fake_camera();
+    let port = free_port();
+    let address: SocketAddr = format!("127.0.0.1:{port}").parse().unwrap();
+    let rig = http_rig(tmp.path(), true, &format!("address = \"{address}\"\n"));
+    let out = tmp.path().join("out");
+    let child = daemon(&rig, None);
+    wait_status(address, Duration::from_secs(60), |s| {
+        s["cameras"]["depth"]["recorded"].as_u64() > Some(30) && s["cameras"]["color"]["recorded"].as_u64() > Some(30)
+    });
+    let mut last: Option<Series> = None;
+    let mut falls = Vec::new();
+    let mut scrapes = 0;
+    let mut scrape_for = |seconds: f64, last: &mut Option<Series>| {
+        let until = Instant::now() + Duration::from_secs_f64(seconds);
+        while Instant::now() < until {
+            let text = String::from_utf8(fetch(address, "/metrics", None).body).unwrap();
+            let now = parse_exposition(&text).unwrap_or_else(|e| panic!("{e}\n{text}"));
+            scrapes += 1;
+            if let Some(before) = last.as_ref() {
+                for (key, &was) in before.iter().filter(|((name, _), _)| counts_up(name)) {
+                    match now.get(key) {
+                        Some(&is) if is >= was => {}
+                        is => falls.push(format!("scrape {scrapes}: {key:?} {was} -> {is:?}")),
+                    }
+                }
+            }
+            *last = Some(now);
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    };
+    let run = || std::fs::read_dir(&out).unwrap().next().unwrap().unwrap().path();
+    scrape_for(2.0, &mut last);
+    // The chunk being written, removed in place.
+    let mut chunks: Vec<_> = std::fs::read_dir(run()).unwrap().map(|e| e.unwrap().path()).collect();
+    chunks.sort();
+    // (A summary written into it at that very moment may keep it: the files are gone anyway.)
+    let _ = std::fs::remove_dir_all(chunks.last().unwrap());
+    scrape_for(3.0, &mut last);
+    // The run directory moved away, and the moved copy removed.
+    let run = run();
+    let moved = tmp.path().join("moved");
+    std::fs::rename(&run, &moved).unwrap();
+    std::fs::remove_dir_all(&moved).unwrap();
+    scrape_for(3.0, &mut last);
+    crate::run::signal(&child, "HUP");
+    scrape_for(2.0, &mut last);
+    let (exit, _, err) = terminate(child, Duration::from_secs(30));
+    assert!(exit.success(), "{err}");
+    assert!(falls.is_empty(), "counters fell:\n{}", falls.join("\n"));
+    assert!(!err.contains("panicked"), "{err}");
+    let last = last.unwrap();
+    let lost = |camera: &str| {
+        ["removed", "moved"]
+            .iter()
+            .map(|r| {
+                value(
+                    &last,
+                    "mousepose_frames_lost_after_recording_total",
+                    &[("camera", camera), ("reason", r)],
+                )
+            })
+            .sum::<f64>()
+    };
+    assert!(lost("depth") > 0.0 && lost("color") > 0.0, "the faults were not seen");
+    let lost_bytes: f64 = ["removed", "moved"]
+        .iter()
+        .map(|r| value(&last, "mousepose_lost_after_recording_bytes_total", &[("reason", r)]))
+        .sum();
+    assert!(lost_bytes > 0.0);
+    assert!(value(&last, "mousepose_recorded_bytes_total", &[]) > lost_bytes);
+    assert!(scrapes > 50, "{scrapes} scrapes");
+}

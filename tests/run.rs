@@ -328,7 +328,7 @@ fn a_bad_config_is_exit_code_1_naming_the_key() {
 }
 
 /// Sends `signal` (`STOP`, `CONT`, `KILL`...) to a child.
-fn signal(child: &ChildGuard, signal: &str) {
+pub(crate) fn signal(child: &ChildGuard, signal: &str) {
     let status = Command::new("kill")
         .arg(format!("-{signal}"))
         .arg(child.0.id().to_string())
@@ -782,12 +782,12 @@ fn pose_rows(chunk: &Path) -> usize {
     std::fs::read_to_string(chunk.join("poses.csv")).map_or(0, |t| t.lines().count().saturating_sub(1))
 }
 
-/// Issue 37 item 2: a run directory deleted under the daemon is not reported as recorded: the
-/// frames and poses of the chunk removed are counted as not recorded (`write_error`) and not
-/// written, and recording goes on at once in a new chunk. What the report says was recorded is
-/// what is on the disk.
+/// Issue 37 item 2, issue 48 item 1: a chunk's directory deleted under the daemon is not
+/// reported as on the disk: its frames stay counted as recorded (a count never goes down) and
+/// are counted as lost after recording (`removed`), its poses as not written, and recording
+/// goes on at once in a new chunk. Recorded less lost after recording is what is on the disk.
 #[test]
-fn issue37_a_run_directory_removed_under_the_daemon_is_counted_as_lost_and_recording_goes_on() {
+fn issue37_a_chunk_directory_removed_under_the_daemon_is_counted_as_lost_and_recording_goes_on() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
     let rig = tmp.path().join("rig.toml");
@@ -806,14 +806,12 @@ fn issue37_a_run_directory_removed_under_the_daemon_is_counted_as_lost_and_recor
         assert!(start.elapsed() < Duration::from_secs(60), "the daemon wrote no poses");
         std::thread::sleep(Duration::from_millis(100));
     }
-    let run = std::fs::read_dir(&out).unwrap().next().unwrap().unwrap().path();
-    // Out of the daemon's way first, so that the new chunk it makes is not deleted too.
-    let gone = tmp.path().join("gone");
-    std::fs::rename(&run, &gone).unwrap();
+    // The chunk the daemon writes, removed in place: the daemon goes on in a new chunk beside
+    // it and never writes into it again, so that the removal always succeeds.
+    let gone = chunks(&out).remove(0);
     std::fs::remove_dir_all(&gone).unwrap();
-    // Recording and poses go on in a new chunk, in the run directory made again.
     let start = Instant::now();
-    while !run.is_dir() || chunks(&out).is_empty() || pose_rows(&chunks(&out)[0]) < 30 || {
+    while chunks(&out).is_empty() || pose_rows(&chunks(&out)[0]) < 30 || {
         SessionReader::open(&chunks(&out)[0]).map_or(0, |s| s.depth_count()) < 30
     } {
         assert!(
@@ -822,15 +820,18 @@ fn issue37_a_run_directory_removed_under_the_daemon_is_counted_as_lost_and_recor
         );
         std::thread::sleep(Duration::from_millis(100));
     }
+    assert!(!gone.exists(), "the daemon wrote into the removed chunk again");
     let (status, stdout, err) = terminate(daemon, Duration::from_secs(30));
     assert!(status.success(), "{status}: {err}");
     assert!(err.contains("removed from the disk"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
     let report = report(&stdout);
     let depth = &report["cameras"]["depth"];
     assert_accounted(depth);
-    let lost = depth["not_recorded"]["write_error"].as_u64().unwrap_or(0);
+    let lost = depth["lost_after_recording"]["removed"].as_u64().unwrap_or(0);
     assert!(lost >= 30, "{report:#}");
-    // Recorded is what is on the disk, frame for frame and row for row.
+    assert_eq!(depth["not_recorded_total"].as_u64(), Some(0), "{report:#}");
+    // Recorded less lost is what is on the disk, frame for frame and row for row.
     let chunks = chunks(&out);
     let on_disk: usize = chunks
         .iter()
@@ -840,7 +841,11 @@ fn issue37_a_run_directory_removed_under_the_daemon_is_counted_as_lost_and_recor
                 .depth_count()
         })
         .sum();
-    assert_eq!(depth["recorded"].as_u64(), Some(on_disk as u64), "{report:#}");
+    assert_eq!(
+        depth["recorded"].as_u64().map(|r| r - lost),
+        Some(on_disk as u64),
+        "{report:#}"
+    );
     let rows: usize = chunks.iter().map(|c| pose_rows(c)).sum();
     let written = report["poses"].as_u64().unwrap() - report["poses_not_written"].as_u64().unwrap();
     assert_eq!(written, rows as u64, "{report:#}");
@@ -850,6 +855,100 @@ fn issue37_a_run_directory_removed_under_the_daemon_is_counted_as_lost_and_recor
             serde_json::from_slice(&std::fs::read(chunk.join("summary.json")).unwrap()).unwrap();
         assert_eq!(summary["rows"].as_u64(), Some(pose_rows(chunk) as u64), "{chunk:?}");
     }
+}
+
+/// Depth frames of the sessions in the chunks of `run` (a chunk without a readable session
+/// counts 0).
+fn depth_frames(run: &Path) -> u64 {
+    std::fs::read_dir(run).map_or(0, |entries| {
+        entries
+            .map(|e| SessionReader::open(e.expect("test set-up").path()).map_or(0, |s| s.depth_count() as u64))
+            .sum()
+    })
+}
+
+/// Rows of the `poses.csv` files in the chunks of `run`.
+fn rows_in(run: &Path) -> usize {
+    std::fs::read_dir(run).map_or(0, |entries| {
+        entries.map(|e| pose_rows(&e.expect("test set-up").path())).sum()
+    })
+}
+
+/// Issue 48 item 6: the documented way to take a live run away: move (rename) its directory,
+/// then remove the moved copy at leisure. The daemon notices the move, never writes into the
+/// moved copy again and goes on in the run directory made again; the removal succeeds every
+/// time, and the frames moved away are counted (`lost_after_recording`: `moved`), frame for
+/// frame.
+#[test]
+fn issue48_a_live_run_moved_away_is_left_alone_and_its_removal_succeeds_every_time() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let rig = tmp.path().join("rig.toml");
+    std::fs::write(
+        &rig,
+        format!(
+            "[depth]\n{}[output]\ndir = {out:?}\nchunk_minutes = 60\nmin_free_gb = 0\nmin_free_percent = 0\n\
+             [http]\naddress = \"127.0.0.1:0\"\n",
+            session_depth()
+        ),
+    )
+    .unwrap();
+    let daemon = daemon(&rig, None);
+    let wait_for_frames = |run: &Path| {
+        let start = Instant::now();
+        while depth_frames(run) < 10 || rows_in(run) < 5 {
+            assert!(start.elapsed() < Duration::from_secs(60), "nothing written in {run:?}");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    };
+    let start = Instant::now();
+    while !out.is_dir() || std::fs::read_dir(&out).unwrap().next().is_none() {
+        assert!(start.elapsed() < Duration::from_secs(60), "no run directory");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let run = std::fs::read_dir(&out).unwrap().next().unwrap().unwrap().path();
+    let (mut moved_frames, mut moved_rows) = (0, 0);
+    for attempt in 0..8 {
+        wait_for_frames(&run);
+        let moved = tmp.path().join(format!("moved-{attempt}"));
+        std::fs::rename(&run, &moved).unwrap();
+        // Once the daemon has noticed (its recorder and its pose sink write in the run
+        // directory made again), the moved copy no longer changes.
+        let start = Instant::now();
+        while depth_frames(&run) == 0 || rows_in(&run) == 0 {
+            assert!(start.elapsed() < Duration::from_secs(30), "the daemon did not go on");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let (frames, rows) = (depth_frames(&moved), rows_in(&moved));
+        std::thread::sleep(Duration::from_millis(300));
+        assert_eq!(
+            (depth_frames(&moved), rows_in(&moved)),
+            (frames, rows),
+            "attempt {attempt}: written into the moved copy"
+        );
+        moved_frames += frames;
+        moved_rows += rows;
+        std::fs::remove_dir_all(&moved).unwrap_or_else(|e| panic!("attempt {attempt}: {e}"));
+    }
+    wait_for_frames(&run);
+    let (status, stdout, err) = terminate(daemon, Duration::from_secs(30));
+    assert!(status.success(), "{status}: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(err.contains("moved away"), "{err}");
+    let report = report(&stdout);
+    let depth = &report["cameras"]["depth"];
+    assert_accounted(depth);
+    assert_eq!(
+        depth["lost_after_recording"],
+        serde_json::json!({ "moved": moved_frames }),
+        "{report:#}"
+    );
+    let recorded = depth["recorded"].as_u64().unwrap();
+    assert_eq!(recorded - moved_frames, depth_frames(&run), "{report:#}");
+    // Rows moved away were written: none is counted as not written.
+    let rows: usize = chunks(&out).iter().map(|c| pose_rows(c)).sum();
+    assert_eq!(report["poses_not_written"].as_u64(), Some(0), "{report:#}");
+    assert_eq!(report["poses"].as_u64(), Some((rows + moved_rows) as u64), "{report:#}");
 }
 
 /// Issue 37 item 5: a configuration that can never work is refused at start in one sentence

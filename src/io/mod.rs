@@ -23,6 +23,44 @@ pub fn u16_samples(bytes: &[u8]) -> Vec<u16> {
     samples
 }
 
+/// What became of a file being written that is no longer where it was written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gone {
+    /// No name is left: what is written to it is lost when it is closed.
+    Removed,
+    /// It still has a name, but not the one it was created under (its directory, or one
+    /// above it, renamed away): what is written to it goes where it was moved.
+    Moved,
+}
+
+impl Gone {
+    /// The reason's label in counters and reports (`removed`, `moved`).
+    pub fn reason(self) -> &'static str {
+        match self {
+            Self::Removed => "removed",
+            Self::Moved => "moved",
+        }
+    }
+}
+
+/// Whether `file`, open for writing and created as `path`, is gone from there: removed
+/// ([`unlinked`]), or moved away (`path` names another file, or none). A file whose state
+/// cannot be read, or a `path` that cannot be looked up for another reason than its absence,
+/// counts as still there.
+pub fn gone(file: &std::fs::File, path: &Path) -> Option<Gone> {
+    use std::os::unix::fs::MetadataExt as _;
+    let open = file.metadata().ok()?;
+    if open.nlink() == 0 {
+        return Some(Gone::Removed);
+    }
+    match std::fs::metadata(path) {
+        Ok(named) if named.dev() == open.dev() && named.ino() == open.ino() => None,
+        Ok(_) => Some(Gone::Moved),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => Some(Gone::Moved),
+        Err(_) => None,
+    }
+}
+
 /// Whether `file`, open for writing, was removed from the file system (no name is left: what
 /// is written to it is lost when it is closed). A file whose state cannot be read counts as
 /// still there.
@@ -65,4 +103,29 @@ pub fn read_bounded_bytes(path: &Path, max: u64) -> io::Result<Vec<u8>> {
 pub fn read_bounded(path: &Path, max: u64) -> io::Result<String> {
     String::from_utf8(read_bounded_bytes(path, max)?)
         .map_err(|_| io::Error::new(io::ErrorKind::InvalidData, "it is not UTF-8 text"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A file being written is there, then moved away with its directory (still a name, not
+    /// its own), then removed; a directory of the same name made again is not it.
+    #[test]
+    fn a_file_being_written_is_there_moved_or_removed() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("run");
+        std::fs::create_dir(&dir).unwrap();
+        let path = dir.join("poses.csv");
+        let file = std::fs::File::create(&path).unwrap();
+        assert_eq!(gone(&file, &path), None);
+        std::fs::rename(&dir, tmp.path().join("moved")).unwrap();
+        assert_eq!(gone(&file, &path), Some(Gone::Moved));
+        std::fs::create_dir(&dir).unwrap();
+        std::fs::write(&path, b"another").unwrap();
+        assert_eq!(gone(&file, &path), Some(Gone::Moved));
+        std::fs::remove_dir_all(tmp.path().join("moved")).unwrap();
+        assert_eq!(gone(&file, &path), Some(Gone::Removed));
+        assert_eq!(Gone::Removed.reason(), "removed");
+    }
 }

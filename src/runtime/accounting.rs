@@ -1,7 +1,8 @@
 //! What became of every frame, per camera: on the processing branch captured = paired +
 //! unpaired + dropped (by reason); on the recorder branch captured = recorded + not recorded
 //! (by reason); frames lost before capture (gaps in the camera's frame counter, damaged buffers or records)
-//! are counted apart. The capture threads, the edges and the sync thread count into one
+//! are counted apart, and so are frames recorded and then lost (their chunk's files removed
+//! or moved away under the recorder): every count only grows. The capture threads, the edges and the sync thread count into one
 //! [`Accounting`]; summaries read it as [`CameraSummary`].
 
 use crate::io::session::CameraRole;
@@ -30,6 +31,9 @@ pub struct CameraCounters {
     /// Never delivered, by reason (`camera_gap`: missing sequence numbers; the source's own
     /// losses such as damaged buffers or records).
     pub lost: Mutex<BTreeMap<String, u64>>,
+    /// Written by the recorder (so counted in `recorded`), then gone from the run's directory,
+    /// by reason ([`LOST_AFTER_RECORDING_REASONS`]).
+    pub lost_after_recording: Mutex<BTreeMap<String, u64>>,
 }
 
 /// The reasons a frame is dropped, lost before capture or not recorded that any rig can meet;
@@ -38,6 +42,9 @@ pub struct CameraCounters {
 pub const DROPPED_REASONS: [&str; 3] = ["queue_full", "seq_out_of_order", "time_out_of_order"];
 pub const LOST_REASONS: [&str; 2] = ["camera_gap", "wrong_size"];
 pub const NOT_RECORDED_REASONS: [&str; 3] = ["queue_full", "disk_low", "write_error"];
+/// Why recorded frames left the run's directory: their chunk's files `removed` under the
+/// recorder, or `moved` away (the run directory renamed; the frames are where it went).
+pub const LOST_AFTER_RECORDING_REASONS: [&str; 2] = ["removed", "moved"];
 
 /// Adds `n` to `reason`'s count (nothing for 0).
 pub fn bump(map: &Mutex<BTreeMap<String, u64>>, reason: &str, n: u64) {
@@ -67,7 +74,8 @@ impl Accounting {
 
 /// One camera in a run's report (`record`, `replay` and `run` alike). With processing,
 /// `captured = paired + unpaired + dropped_total`; with a recorder,
-/// `captured = recorded + not_recorded_total`.
+/// `captured = recorded + not_recorded_total`; of the recorded frames, those in the run's
+/// directory are `recorded - lost_after_recording` (all reasons).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct CameraSummary {
     pub captured: u64,
@@ -82,6 +90,9 @@ pub struct CameraSummary {
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub not_recorded: BTreeMap<String, u64>,
     pub not_recorded_total: u64,
+    /// Frames recorded and then gone from the run's directory, by reason (with a recorder).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub lost_after_recording: BTreeMap<String, u64>,
 }
 
 impl CameraSummary {
@@ -89,10 +100,10 @@ impl CameraSummary {
     pub fn of(c: &CameraCounters, processing: bool, recorder: bool) -> Self {
         let read = |m: &Mutex<BTreeMap<String, u64>>| m.lock().unwrap_or_else(PoisonError::into_inner).clone();
         let dropped = if processing { read(&c.dropped) } else { BTreeMap::new() };
-        let not_recorded = if recorder {
-            read(&c.not_recorded)
+        let (not_recorded, lost_after_recording) = if recorder {
+            (read(&c.not_recorded), read(&c.lost_after_recording))
         } else {
-            BTreeMap::new()
+            (BTreeMap::new(), BTreeMap::new())
         };
         Self {
             captured: c.captured.load(Ordering::Relaxed),
@@ -104,6 +115,7 @@ impl CameraSummary {
             recorded: recorder.then(|| c.recorded.load(Ordering::Relaxed)),
             not_recorded_total: not_recorded.values().sum(),
             not_recorded,
+            lost_after_recording,
         }
     }
 

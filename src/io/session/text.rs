@@ -66,6 +66,11 @@ impl LineWriter {
         crate::io::unlinked(self.out.get_ref())
     }
 
+    /// Whether the file was removed or moved away while being written ([`crate::io::gone`]).
+    pub fn gone(&self) -> Option<crate::io::Gone> {
+        crate::io::gone(self.out.get_ref(), &self.path)
+    }
+
     /// Lines written, the header not counted.
     pub fn lines(&self) -> u64 {
         self.lines

@@ -286,6 +286,17 @@ impl SessionWriter {
                 .any(|s| s.store.unlinked() || s.timestamps.unlinked())
     }
 
+    /// Whether the session's files are gone from where they were written: removed (as
+    /// [`SessionWriter::removed`] says), or moved away (its directory, or one above it, renamed:
+    /// `events.jsonl` is no longer at its path). What is written from now on does not go into
+    /// the directory the session was started in.
+    pub fn gone(&self) -> Option<crate::io::Gone> {
+        if self.removed() {
+            return Some(crate::io::Gone::Removed);
+        }
+        self.events.gone()
+    }
+
     /// Whether the session has frames of `role` (its metadata declares the camera).
     pub fn has_camera(&self, role: CameraRole) -> bool {
         match role {

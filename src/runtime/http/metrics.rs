@@ -3,7 +3,9 @@
 //! name starts with `mousepose_`; labels are few-valued (camera, reason, stage, edge, status),
 //! never a path, a message or a frame number. `docs/metrics.md` lists them.
 
-use crate::runtime::accounting::{CameraSummary, DROPPED_REASONS, LOST_REASONS, NOT_RECORDED_REASONS};
+use crate::runtime::accounting::{
+    CameraSummary, DROPPED_REASONS, LOST_AFTER_RECORDING_REASONS, LOST_REASONS, NOT_RECORDED_REASONS,
+};
 use crate::runtime::capture::clock::monotonic_ns;
 use crate::runtime::capture::supervise::{CameraState, lock};
 use crate::runtime::pipeline::Histogram;
@@ -162,7 +164,7 @@ impl Families<'_> {
         )?;
         self.counter(
             "mousepose_frames_recorded",
-            "Frames written to the raw recording.",
+            "Frames written to the raw recording (it only grows: see frames_lost_after_recording).",
             None,
             &per_camera(&|c| c.recorded.unwrap_or(0)),
         )?;
@@ -171,6 +173,12 @@ impl Families<'_> {
             "Frames delivered but not recorded, by reason.",
             None,
             &by_reason(&|c| &c.not_recorded, &NOT_RECORDED_REASONS),
+        )?;
+        self.counter(
+            "mousepose_frames_lost_after_recording",
+            "Frames recorded, then gone from the run's directory (their chunk removed or moved away), by reason.",
+            None,
+            &by_reason(&|c| &c.lost_after_recording, &LOST_AFTER_RECORDING_REASONS),
         )?;
         Ok(())
     }
@@ -300,9 +308,25 @@ impl Families<'_> {
         if let Some(g) = &w.parts.recorder {
             self.counter(
                 "mousepose_recorded",
-                "Encoded frame bytes written to the raw recording.",
+                "Encoded frame bytes written to the raw recording (it only grows).",
                 Some(&Unit::Bytes),
                 &[(Vec::new(), g.frame_bytes.load(Ordering::Relaxed))],
+            )?;
+            let mut lost: BTreeMap<&str, u64> = LOST_AFTER_RECORDING_REASONS.iter().map(|&r| (r, 0)).collect();
+            lost.extend(
+                g.lost_bytes
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .iter(),
+            );
+            self.counter(
+                "mousepose_lost_after_recording",
+                "Encoded frame bytes recorded, then gone from the run's directory (their chunk removed or moved away), by reason.",
+                Some(&Unit::Bytes),
+                &lost
+                    .into_iter()
+                    .map(|(reason, n)| (label("reason", reason), n))
+                    .collect::<Vec<_>>(),
             )?;
             self.gauge(
                 "mousepose_disk_free",

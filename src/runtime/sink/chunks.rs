@@ -244,8 +244,12 @@ const RESUME_FREE_BYTES: u64 = 8 << 20;
 /// metrics read it; the recorder thread writes it).
 #[derive(Debug, Default)]
 pub struct RecorderGauges {
-    /// Encoded frame bytes written, all chunks.
+    /// Encoded frame bytes written, all chunks (it only grows: bytes of a chunk gone from the
+    /// run's directory later are counted in `lost_bytes` as well).
     pub frame_bytes: AtomicU64,
+    /// Of `frame_bytes`, those of chunks whose session was removed or moved away under the
+    /// recorder, by reason (`removed`, `moved`).
+    pub lost_bytes: Mutex<BTreeMap<&'static str, u64>>,
     /// Free bytes on the output's file system at the last check (once a second).
     pub disk_free_bytes: AtomicU64,
     /// Raw recording paused (disk low, or after a write error).
@@ -271,9 +275,10 @@ pub struct ChunkRecorder {
     /// `events.jsonl` of the session recording resumes in (`recording_paused`,
     /// `recording_resumed`): the one it paused in may not be writable.
     paused: Option<(u64, &'static str)>,
-    /// Frames (depth, colour) counted as recorded in a session whose files were removed since,
-    /// not yet handed to the accounting ([`FrameRecorder::take_lost`]).
-    lost: [u64; 2],
+    /// Frames counted as recorded in a session whose files were removed or moved away since,
+    /// per camera and reason, not yet handed to the accounting
+    /// ([`crate::runtime::sink::session::FrameRecorder::take_lost`]).
+    lost: Vec<(CameraRole, &'static str, u64)>,
     cameras: Vec<SharedHealth>,
     gauges: Arc<RecorderGauges>,
 }
@@ -289,7 +294,7 @@ impl ChunkRecorder {
             paused_until: None,
             broken: false,
             paused: None,
-            lost: [0, 0],
+            lost: Vec::new(),
             cameras,
             gauges,
         }
@@ -403,28 +408,56 @@ impl ChunkRecorder {
     }
 
     /// When the current session's files were removed under the recorder (its chunk's
-    /// directory deleted): its frames are lost, so counted as not recorded; recording goes on
-    /// in a new chunk at once (or pauses if that cannot be created).
+    /// directory deleted) or moved away (the run directory renamed): its frames are gone from
+    /// the run's directory, so counted as lost after recording (`removed`, `moved`; they stay
+    /// counted as recorded), and nothing more is written into it; recording goes on in a new
+    /// chunk at once, in the run directory made again (or pauses if that cannot be created).
     fn check_removed(&mut self, host_ns: u64) {
-        let Some(w) = self.writer.take_if(|w| w.removed()) else {
-            return;
+        if self.forget_gone() {
+            let index = self.chunks.replace(self.index, host_ns);
+            self.switch(index);
+        }
+    }
+
+    /// Whether the current session is gone (removed or moved away); if so its frames are
+    /// counted as lost after recording and it is dropped, never closed into where it went.
+    fn forget_gone(&mut self) -> bool {
+        let Some(gone) = self.writer.as_ref().and_then(SessionWriter::gone) else {
+            return false;
+        };
+        let Some(w) = self.writer.take() else {
+            return false;
         };
         let (depth, color) = (w.depth_frames(), w.color_frames());
-        tracing::error!(
-            chunk = self.index,
-            depth_frames = depth,
-            color_frames = color,
-            "recording paused: the chunk's session was removed from the disk; its frames are lost \
-             (counted as not recorded: write_error); recording goes on in a new chunk"
-        );
+        let reason = gone.reason();
+        match gone {
+            crate::io::Gone::Removed => tracing::error!(
+                chunk = self.index,
+                depth_frames = depth,
+                color_frames = color,
+                "the chunk's session was removed from the disk: its frames are lost (counted as lost \
+                 after recording: removed); recording goes on in a new chunk"
+            ),
+            crate::io::Gone::Moved => tracing::info!(
+                chunk = self.index,
+                depth_frames = depth,
+                color_frames = color,
+                "the chunk's session was moved away: nothing more is written into it (its frames \
+                 counted as lost after recording: moved); recording goes on in a new chunk"
+            ),
+        }
         drop(w);
-        self.paused.get_or_insert((host_ns, "write_error"));
-        self.lost[0] += depth;
-        self.lost[1] += color;
-        self.gauges.frame_bytes.fetch_sub(self.counted, Ordering::Relaxed);
+        self.lost
+            .extend([(CameraRole::Depth, reason, depth), (CameraRole::Color, reason, color)]);
+        *self
+            .gauges
+            .lost_bytes
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .entry(reason)
+            .or_default() += self.counted;
         self.counted = 0;
-        let index = self.chunks.replace(self.index, host_ns);
-        self.switch(index);
+        true
     }
 
     /// Writes `frame` into its chunk's session, or says why not.
@@ -518,8 +551,12 @@ impl crate::runtime::sink::session::FrameRecorder for ChunkRecorder {
         }
     }
 
-    fn take_lost(&mut self) -> [u64; 2] {
+    fn take_lost(&mut self) -> Vec<(CameraRole, &'static str, u64)> {
         std::mem::take(&mut self.lost)
+    }
+
+    fn notice_gone(&mut self) {
+        self.forget_gone();
     }
 
     fn finish(mut self: Box<Self>) -> Result<Option<SessionSummary>, SessionError> {
@@ -779,7 +816,8 @@ impl ChunkPoses {
     /// When the current chunk's `poses.csv` was removed under the run (its directory
     /// deleted): its rows are lost, so counted as not written, and the chunk (whose summary
     /// could only lie) is left without one; poses go on in a new chunk at once (or are tried
-    /// again later if it cannot be created).
+    /// again later if it cannot be created). Likewise when it was moved away (the run
+    /// directory renamed), but its rows, where it went, stay counted as written.
     fn check_removed(&mut self, host_ns: u64) {
         if self.forget_removed() {
             self.index = self.chunks.replace(self.index, host_ns);
@@ -787,23 +825,33 @@ impl ChunkPoses {
         }
     }
 
-    /// Whether the current chunk's `poses.csv` was removed under the run; if so its rows are
-    /// counted as not written and the chunk is forgotten (no summary: it could only lie).
+    /// Whether the current chunk's `poses.csv` was removed or moved away under the run; if so
+    /// the chunk is forgotten (no summary: it could only lie, or land where the run is not),
+    /// and the rows of a removed one are counted as not written.
     fn forget_removed(&mut self) -> bool {
-        if !self.writer.as_ref().is_some_and(PoseWriter::removed) {
+        let Some(gone) = self.writer.as_ref().and_then(PoseWriter::gone) else {
             return false;
-        }
+        };
         self.writer = None;
         let rows = self
             .tally
             .take()
             .map_or(0, |t| t.lock().unwrap_or_else(PoisonError::into_inner).rows);
-        tracing::error!(
-            chunk = self.index,
-            rows,
-            "poses.csv was removed from the disk: its rows are lost (counted as not written); poses go on in a new chunk"
-        );
-        self.live.lock().unwrap_or_else(PoisonError::into_inner).rows_lost += rows;
+        match gone {
+            crate::io::Gone::Removed => {
+                tracing::error!(
+                    chunk = self.index,
+                    rows,
+                    "poses.csv was removed from the disk: its rows are lost (counted as not written); poses go on in a new chunk"
+                );
+                self.live.lock().unwrap_or_else(PoisonError::into_inner).rows_lost += rows;
+            }
+            crate::io::Gone::Moved => tracing::info!(
+                chunk = self.index,
+                rows,
+                "poses.csv was moved away: nothing more is written into it; poses go on in a new chunk"
+            ),
+        }
         (self.first_ns, self.last_ns, self.rows_lost, self.retry_at) = (None, None, 0, None);
         true
     }

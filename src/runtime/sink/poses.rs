@@ -277,6 +277,12 @@ impl PoseWriter {
         crate::io::unlinked(self.out.get_ref())
     }
 
+    /// Whether `poses.csv` was removed or moved away while being written
+    /// ([`crate::io::gone`]).
+    pub fn gone(&self) -> Option<crate::io::Gone> {
+        crate::io::gone(self.out.get_ref(), &self.dir.join(POSES_FILE))
+    }
+
     /// The tally, readable while and after the writer runs.
     pub fn tally(&self) -> Arc<Mutex<PoseTally>> {
         Arc::clone(&self.tally)

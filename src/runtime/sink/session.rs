@@ -22,12 +22,18 @@ pub trait FrameRecorder: Send + std::fmt::Debug + 'static {
     /// The event cannot be written.
     fn log_event(&mut self, event: &SessionEvent) -> Result<(), SessionError>;
 
-    /// Frames (depth, colour) counted as recorded that were lost since the last call (a
-    /// session whose files were removed under the recorder): the caller counts them as not
-    /// recorded (`write_error`) instead.
-    fn take_lost(&mut self) -> [u64; 2] {
-        [0, 0]
+    /// Frames counted as recorded that left the run's directory since the last call (a
+    /// session whose files were removed or moved away under the recorder), per camera and
+    /// reason: the caller counts them as lost after recording (they stay recorded: a
+    /// count never goes down).
+    fn take_lost(&mut self) -> Vec<(CameraRole, &'static str, u64)> {
+        Vec::new()
     }
+
+    /// At the end, once the last frame was written: notices a session gone since (removed or
+    /// moved away), whose frames [`FrameRecorder::take_lost`] then gives, and which is not
+    /// closed into where it went.
+    fn notice_gone(&mut self) {}
 
     /// Closes the (last) session cleanly and says what it holds (`None`: no session was open).
     ///
@@ -55,7 +61,8 @@ impl FrameRecorder for SessionWriter {
 }
 
 /// The recorder thread: writes each frame as it arrives, logging gaps in the cameras'
-/// sequence numbers as dropped frames. Written frames are counted as `recorded`.
+/// sequence numbers as dropped frames. Written frames are counted as `recorded`, and those
+/// of a session gone from the run's directory later also as `lost_after_recording`.
 pub fn write_frames(
     writer: &mut dyn FrameRecorder,
     rx: &crossbeam_channel::Receiver<Captured>,
@@ -80,15 +87,8 @@ pub fn write_frames(
         }
         let counters = acct.camera(role);
         let outcome = writer.write(&captured)?;
-        for (role, n) in [CameraRole::Depth, CameraRole::Color]
-            .into_iter()
-            .zip(writer.take_lost())
-        {
-            if n > 0 {
-                let counters = acct.camera(role);
-                counters.recorded.fetch_sub(n, std::sync::atomic::Ordering::Relaxed);
-                bump(&counters.not_recorded, "write_error", n);
-            }
+        for (role, reason, n) in writer.take_lost() {
+            bump(&acct.camera(role).lost_after_recording, reason, n);
         }
         match outcome {
             None => {
@@ -96,6 +96,10 @@ pub fn write_frames(
             }
             Some(reason) => bump(&counters.not_recorded, reason, 1),
         }
+    }
+    writer.notice_gone();
+    for (role, reason, n) in writer.take_lost() {
+        bump(&acct.camera(role).lost_after_recording, reason, n);
     }
     Ok(())
 }

@@ -35,8 +35,11 @@ pub struct RunCamera {
 /// The raw recording, while a run records.
 #[derive(Clone, Debug, Serialize)]
 pub struct RecordingReport {
-    /// Encoded frame bytes written, all chunks.
+    /// Encoded frame bytes written, all chunks (it only grows).
     pub frame_bytes: u64,
+    /// Of those, the bytes of chunks removed or moved away under the run, by reason.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub frame_bytes_lost_after_recording: BTreeMap<&'static str, u64>,
     /// Free bytes on the output's file system at the last check.
     pub disk_free_bytes: u64,
     /// Paused: disk low, or after a write error (poses go on).
@@ -117,6 +120,13 @@ impl RunReport {
                 c.frames.not_recorded,
                 c.outages.len()
             );
+            if !c.frames.lost_after_recording.is_empty() {
+                let _ = writeln!(
+                    text,
+                    "{name:>6}: recorded then lost (chunks removed or moved away) {:?}",
+                    c.frames.lost_after_recording
+                );
+            }
         }
         if let Some(r) = &self.recording {
             let size = |b: u64| match b {
@@ -248,6 +258,7 @@ impl Watch {
             resident_memory_bytes: process_resident_bytes(),
             recording: self.parts.recorder.as_ref().map(|g| RecordingReport {
                 frame_bytes: g.frame_bytes.load(Ordering::Relaxed),
+                frame_bytes_lost_after_recording: g.lost_bytes.lock().unwrap_or_else(PoisonError::into_inner).clone(),
                 disk_free_bytes: g.disk_free_bytes.load(Ordering::Relaxed),
                 paused: g.paused.load(Ordering::Relaxed),
             }),
