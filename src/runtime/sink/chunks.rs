@@ -20,7 +20,7 @@ use crate::runtime::capture::supervise::{SharedHealth, lock};
 use crate::runtime::capture::{Captured, Stamped, error_chain};
 use crate::runtime::pipeline::{Sink, StageError};
 use crate::runtime::pose_record::PoseRecord;
-use crate::runtime::sink::poses::{PoseTally, PoseWriter};
+use crate::runtime::sink::poses::{PoseTally, PoseWriter, TailsSeen};
 use crate::runtime::stages::Fused;
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
@@ -580,6 +580,10 @@ pub struct ChunkSummary {
     pub software_version: &'static str,
     pub body_model: PathBuf,
     pub paw_model: Option<PathBuf>,
+    /// In how many of its frames with a heading chosen a tail was seen (as a replay's
+    /// `summary.json` says); absent when no frame had a mouse.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tails: Option<TailsSeen>,
 }
 
 /// The latest pose and counts, for the status line (and the live page).
@@ -732,6 +736,7 @@ impl ChunkPoses {
             software_version: env!("CARGO_PKG_VERSION"),
             body_model: self.chunks.plan.body_model.clone(),
             paw_model: self.chunks.plan.paw_model.clone(),
+            tails: (tally.tails.frames > 0).then_some(tally.tails),
         };
         let path = self.chunks.dir(self.index).join(CHUNK_SUMMARY_FILE);
         match serde_json::to_vec_pretty(&summary) {
@@ -1019,6 +1024,20 @@ mod tests {
             .unwrap();
         };
         write(&mut sink, 10);
+        let (mut record, frames) = pose(11, false);
+        record.orientation = Some(crate::vision::orientation::Orientation {
+            confidence: 1.0,
+            frame_alone: None,
+            forest: None,
+            shape: None,
+            tail: Some(nalgebra::Vector2::x()),
+        });
+        sink.write(Fused {
+            record,
+            frames,
+            overlay: None,
+        })
+        .unwrap();
         // The recorder begins chunks 1 and 2 (a camera back twice); poses go on in chunk 2.
         assert_eq!(chunks.split(20), 1);
         assert_eq!(chunks.split(30), 2);
@@ -1026,16 +1045,21 @@ mod tests {
         // And chunk 3, just before the end.
         assert_eq!(chunks.split(40), 3);
         sink.flush().unwrap();
-        let rows: Vec<u64> = (0..4)
+        let summaries: Vec<serde_json::Value> = (0..4)
             .map(|k| {
                 let dir = chunks.dir(k);
                 let lines = std::fs::read_to_string(dir.join("poses.csv")).unwrap().lines().count() as u64;
                 let summary: serde_json::Value =
                     serde_json::from_slice(&std::fs::read(dir.join(CHUNK_SUMMARY_FILE)).unwrap()).unwrap();
                 assert_eq!(summary["rows"].as_u64(), Some(lines - 1), "chunk {k}");
-                lines - 1
+                summary
             })
             .collect();
-        assert_eq!(rows, [1, 0, 1, 0]);
+        let rows: Vec<u64> = summaries.iter().map(|s| s["rows"].as_u64().unwrap()).collect();
+        assert_eq!(rows, [2, 0, 1, 0]);
+        // Issue 49: a chunk says in how many frames a tail was seen, as a replay does; not
+        // at all without a frame with a heading.
+        assert_eq!(summaries[0]["tails"], serde_json::json!({"frames": 1, "seen": 1}));
+        assert!(summaries[2].get("tails").is_none());
     }
 }
