@@ -29,6 +29,20 @@ pub(crate) fn session_depth() -> String {
     )
 }
 
+/// A rig config in `dir`: the fixture session as the depth camera, no colour camera, chunks of
+/// an hour in `dir/out`, never paused for disk space; its HTTP server on any free port.
+fn session_rig(dir: &Path) -> PathBuf {
+    let path = dir.join("rig.toml");
+    let text = format!(
+        "[depth]\n{}[output]\ndir = {:?}\nchunk_minutes = 60\nmin_free_gb = 0\nmin_free_percent = 0\n\
+         [http]\naddress = \"127.0.0.1:0\"\n",
+        session_depth(),
+        dir.join("out")
+    );
+    std::fs::write(&path, text).expect("test set-up");
+    path
+}
+
 /// A rig config in `dir` with the depth table `depth`, the fake camera as colour camera if
 /// `color`, and `output` added to the `[output]` table; its HTTP server on any free port.
 fn rig_with(dir: &Path, depth: &str, color: bool, output: &str) -> PathBuf {
@@ -790,16 +804,7 @@ fn pose_rows(chunk: &Path) -> usize {
 fn issue37_a_chunk_directory_removed_under_the_daemon_is_counted_as_lost_and_recording_goes_on() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
-    let rig = tmp.path().join("rig.toml");
-    std::fs::write(
-        &rig,
-        format!(
-            "[depth]\n{}[output]\ndir = {out:?}\nchunk_minutes = 60\nmin_free_gb = 0\nmin_free_percent = 0\n\
-             [http]\naddress = \"127.0.0.1:0\"\n",
-            session_depth()
-        ),
-    )
-    .unwrap();
+    let rig = session_rig(tmp.path());
     let daemon = daemon(&rig, None);
     let start = Instant::now();
     while !out.is_dir() || chunks(&out).is_empty() || pose_rows(&chunks(&out)[0]) < 30 {
@@ -883,16 +888,7 @@ fn rows_in(run: &Path) -> usize {
 fn issue48_a_live_run_moved_away_is_left_alone_and_its_removal_succeeds_every_time() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
-    let rig = tmp.path().join("rig.toml");
-    std::fs::write(
-        &rig,
-        format!(
-            "[depth]\n{}[output]\ndir = {out:?}\nchunk_minutes = 60\nmin_free_gb = 0\nmin_free_percent = 0\n\
-             [http]\naddress = \"127.0.0.1:0\"\n",
-            session_depth()
-        ),
-    )
-    .unwrap();
+    let rig = session_rig(tmp.path());
     let daemon = daemon(&rig, None);
     let wait_for_frames = |run: &Path| {
         let start = Instant::now();
@@ -1027,16 +1023,7 @@ fn run_on_a_disk_freed_later(
     let filler = out.join("filler");
     // Written until the disk is full when it is larger than the disk.
     drop(std::fs::write(&filler, vec![1u8; filler_mb << 20]));
-    let rig = tmp.path().join("rig.toml");
-    std::fs::write(
-        &rig,
-        format!(
-            "[depth]\n{}[output]\ndir = {out:?}\nchunk_minutes = 60\nmin_free_gb = 0\nmin_free_percent = 0\n\
-             [http]\naddress = \"127.0.0.1:0\"\n",
-            session_depth()
-        ),
-    )
-    .expect("test set-up");
+    let rig = session_rig(tmp.path());
     let daemon = daemon(&rig, None);
     std::thread::sleep(Duration::from_secs(full_s));
     std::fs::remove_file(&filler).expect("test set-up");

@@ -5,7 +5,7 @@
 //! `docs/rig.example.toml` is a commented example of every key.
 
 use crate::io::read_bounded;
-use crate::runtime::capture::backend::{Backend, read_table};
+use crate::runtime::capture::backend::{self, Backend, read_table};
 pub use crate::runtime::capture::backend::{ColorCamera, DepthCamera};
 pub use crate::runtime::capture::supervise::Reconnect;
 use crate::runtime::capture::{COLOR_BACKENDS, DEPTH_BACKENDS};
@@ -252,11 +252,7 @@ impl Checker<'_> {
     }
 
     fn positive(&self, key: &str, v: f64, max: f64) -> Result<f64, ConfigError> {
-        if v.is_finite() && v > 0.0 && v <= max {
-            Ok(v)
-        } else {
-            Err(self.bad(key, format!("must be above 0 and at most {max}, not {v}")))
-        }
+        backend::positive(key, v, max).map_err(|e| self.bad(&e.key, e.reason))
     }
 
     /// A camera's table (`[depth]`, `[color]`), read by the backend it names.
