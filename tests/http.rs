@@ -13,7 +13,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 /// A port free on loopback now.
-fn free_port() -> u16 {
+pub(crate) fn free_port() -> u16 {
     let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("test set-up");
     listener.local_addr().expect("test set-up").port()
 }
@@ -23,7 +23,11 @@ fn fetch(address: SocketAddr, path: &str, token: Option<&str>) -> Answer {
 }
 
 /// Polls `/status` until `ready` holds for it (at most `limit`); returns it.
-fn wait_status(address: SocketAddr, limit: Duration, ready: impl Fn(&serde_json::Value) -> bool) -> serde_json::Value {
+pub(crate) fn wait_status(
+    address: SocketAddr,
+    limit: Duration,
+    ready: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
     let deadline = Instant::now() + limit;
     let mut last = serde_json::Value::Null;
     while Instant::now() < deadline {
@@ -41,9 +45,9 @@ fn wait_status(address: SocketAddr, limit: Duration, ready: impl Fn(&serde_json:
 }
 
 /// A series of an exposition: its name and labels.
-type SeriesKey = (String, Vec<(String, String)>);
+pub(crate) type SeriesKey = (String, Vec<(String, String)>);
 /// The samples of an exposition.
-type Series = BTreeMap<SeriesKey, f64>;
+pub(crate) type Series = BTreeMap<SeriesKey, f64>;
 
 /// Checks `text` strictly against the OpenMetrics text format as Prometheus reads it: every
 /// family declared (`# HELP`, `# TYPE`) before its samples, sample names the family's name with
@@ -182,7 +186,7 @@ fn parse_exposition(text: &str) -> Result<Series, String> {
     Ok(series)
 }
 
-fn value(series: &Series, name: &str, labels: &[(&str, &str)]) -> f64 {
+pub(crate) fn value(series: &Series, name: &str, labels: &[(&str, &str)]) -> f64 {
     let key = (
         name.to_owned(),
         labels.iter().map(|(k, v)| ((*k).to_owned(), (*v).to_owned())).collect(),
@@ -592,6 +596,57 @@ fn counts_up(name: &str) -> bool {
         .any(|s| name.ends_with(s))
 }
 
+/// `/metrics` of a live daemon, scraped again and again: every fall or disappearance of a
+/// series that only counts up is kept (Prometheus would read either as a reset).
+pub(crate) struct Scraper {
+    address: SocketAddr,
+    last: Option<Series>,
+    falls: Vec<String>,
+    pub(crate) scrapes: usize,
+}
+
+impl Scraper {
+    pub(crate) fn new(address: SocketAddr) -> Self {
+        Self {
+            address,
+            last: None,
+            falls: Vec::new(),
+            scrapes: 0,
+        }
+    }
+
+    /// Scrapes every 50 ms for `seconds`, each exposition checked as Prometheus reads it.
+    pub(crate) fn scrape_for(&mut self, seconds: f64) {
+        let until = Instant::now() + Duration::from_secs_f64(seconds);
+        while Instant::now() < until {
+            let text = String::from_utf8(fetch(self.address, "/metrics", None).body).expect("UTF-8 metrics");
+            let now = parse_exposition(&text).unwrap_or_else(|e| panic!("{e}\n{text}"));
+            self.scrapes += 1;
+            if let Some(before) = &self.last {
+                for (key, &was) in before.iter().filter(|((name, _), _)| counts_up(name)) {
+                    match now.get(key) {
+                        Some(&is) if is >= was => {}
+                        is => self
+                            .falls
+                            .push(format!("scrape {}: {key:?} {was} -> {is:?}", self.scrapes)),
+                    }
+                }
+            }
+            self.last = Some(now);
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// The last exposition.
+    pub(crate) fn last(&self) -> &Series {
+        self.last.as_ref().expect("scraped at least once")
+    }
+
+    pub(crate) fn assert_none_fell(&self) {
+        assert!(self.falls.is_empty(), "counters fell:\n{}", self.falls.join("\n"));
+    }
+}
+
 /// Issue 48 item 1: `/metrics` scraped again and again while faults hit a live run (the
 /// current chunk's directory removed, the run directory moved away and removed, SIGHUP):
 /// no counter ever falls or vanishes (Prometheus would read either as a reset and count the
@@ -608,54 +663,34 @@ fn issue48_no_counter_ever_falls_through_faults() {
     wait_status(address, Duration::from_secs(60), |s| {
         s["cameras"]["depth"]["recorded"].as_u64() > Some(30) && s["cameras"]["color"]["recorded"].as_u64() > Some(30)
     });
-    let mut last: Option<Series> = None;
-    let mut falls = Vec::new();
-    let mut scrapes = 0;
-    let mut scrape_for = |seconds: f64, last: &mut Option<Series>| {
-        let until = Instant::now() + Duration::from_secs_f64(seconds);
-        while Instant::now() < until {
-            let text = String::from_utf8(fetch(address, "/metrics", None).body).unwrap();
-            let now = parse_exposition(&text).unwrap_or_else(|e| panic!("{e}\n{text}"));
-            scrapes += 1;
-            if let Some(before) = last.as_ref() {
-                for (key, &was) in before.iter().filter(|((name, _), _)| counts_up(name)) {
-                    match now.get(key) {
-                        Some(&is) if is >= was => {}
-                        is => falls.push(format!("scrape {scrapes}: {key:?} {was} -> {is:?}")),
-                    }
-                }
-            }
-            *last = Some(now);
-            std::thread::sleep(Duration::from_millis(50));
-        }
-    };
+    let mut metrics = Scraper::new(address);
     let run = || std::fs::read_dir(&out).unwrap().next().unwrap().unwrap().path();
-    scrape_for(2.0, &mut last);
+    metrics.scrape_for(2.0);
     // The chunk being written, removed in place.
     let mut chunks: Vec<_> = std::fs::read_dir(run()).unwrap().map(|e| e.unwrap().path()).collect();
     chunks.sort();
     // (A summary written into it at that very moment may keep it: the files are gone anyway.)
     let _ = std::fs::remove_dir_all(chunks.last().unwrap());
-    scrape_for(3.0, &mut last);
+    metrics.scrape_for(3.0);
     // The run directory moved away, and the moved copy removed.
     let run = run();
     let moved = tmp.path().join("moved");
     std::fs::rename(&run, &moved).unwrap();
     std::fs::remove_dir_all(&moved).unwrap();
-    scrape_for(3.0, &mut last);
+    metrics.scrape_for(3.0);
     crate::run::signal(&child, "HUP");
-    scrape_for(2.0, &mut last);
+    metrics.scrape_for(2.0);
     let (exit, _, err) = terminate(child, Duration::from_secs(30));
     assert!(exit.success(), "{err}");
-    assert!(falls.is_empty(), "counters fell:\n{}", falls.join("\n"));
+    metrics.assert_none_fell();
     assert!(!err.contains("panicked"), "{err}");
-    let last = last.unwrap();
+    let last = metrics.last();
     let lost = |camera: &str| {
         ["removed", "moved"]
             .iter()
             .map(|r| {
                 value(
-                    &last,
+                    last,
                     "mousepose_frames_lost_after_recording_total",
                     &[("camera", camera), ("reason", r)],
                 )
@@ -665,9 +700,9 @@ fn issue48_no_counter_ever_falls_through_faults() {
     assert!(lost("depth") > 0.0 && lost("color") > 0.0, "the faults were not seen");
     let lost_bytes: f64 = ["removed", "moved"]
         .iter()
-        .map(|r| value(&last, "mousepose_lost_after_recording_bytes_total", &[("reason", r)]))
+        .map(|r| value(last, "mousepose_lost_after_recording_bytes_total", &[("reason", r)]))
         .sum();
     assert!(lost_bytes > 0.0);
-    assert!(value(&last, "mousepose_recorded_bytes_total", &[]) > lost_bytes);
-    assert!(scrapes > 50, "{scrapes} scrapes");
+    assert!(value(last, "mousepose_recorded_bytes_total", &[]) > lost_bytes);
+    assert!(metrics.scrapes > 50, "{} scrapes", metrics.scrapes);
 }

@@ -24,5 +24,6 @@ mod report;
 mod run;
 mod segment;
 mod session;
+mod soak;
 mod synth;
 mod util;

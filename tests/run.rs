@@ -83,7 +83,7 @@ pub(crate) fn daemon(rig: &Path, notify: Option<&Path>) -> ChildGuard {
 }
 
 /// The run's chunk directories, in order.
-fn chunks(out: &Path) -> Vec<PathBuf> {
+pub(crate) fn chunks(out: &Path) -> Vec<PathBuf> {
     let mut runs: Vec<PathBuf> = std::fs::read_dir(out)
         .expect("test set-up")
         .map(|e| e.expect("test set-up").path())
@@ -351,12 +351,12 @@ pub(crate) fn signal(child: &ChildGuard, signal: &str) {
     assert!(status.success());
 }
 
-fn report(out: &str) -> serde_json::Value {
+pub(crate) fn report(out: &str) -> serde_json::Value {
     serde_json::from_str(out).unwrap_or_else(|e| panic!("{e}: {out}"))
 }
 
 /// Every frame of `camera` in the report is accounted for by both branches.
-fn assert_accounted(camera: &serde_json::Value) {
+pub(crate) fn assert_accounted(camera: &serde_json::Value) {
     let n = |key: &str| camera[key].as_u64().unwrap_or_else(|| panic!("no {key}: {camera:#}"));
     assert_eq!(
         n("captured"),
@@ -499,37 +499,37 @@ fn lossy_packets_are_counted_and_every_chunk_replays() {
         .collect();
     assert!(rows.iter().take(30).any(|l| l.contains(",ok,")), "{rows:#?}");
     for chunk in &chunks {
-        let session = SessionReader::open(chunk).unwrap_or_else(|e| panic!("{chunk:?}: {e}"));
-        assert!(session.complete(), "{chunk:?} was not closed");
-        let replayed = tmp.path().join("replayed");
-        let run = mousepose()
-            .arg("replay")
-            .arg(chunk)
-            .arg("--out")
-            .arg(&replayed)
-            .args(["--force", "--json"])
-            .env("MOUSEPOSE_MODELS", repo_root().join("fixtures/models"))
-            .output()
-            .unwrap();
-        assert!(
-            run.status.success(),
-            "{chunk:?}: {}",
-            String::from_utf8_lossy(&run.stderr)
-        );
-        let rows = std::fs::read_to_string(replayed.join("poses.csv"))
-            .unwrap()
-            .lines()
-            .count()
-            - 1;
-        assert_eq!(rows, session.depth_count(), "{chunk:?}");
+        assert_replays_whole(chunk, &tmp.path().join("replayed"));
     }
 }
 
+/// `chunk` is a closed session that `mousepose replay` reads whole (into `out`): a pose row for
+/// each of its depth frames.
+pub(crate) fn assert_replays_whole(chunk: &Path, out: &Path) {
+    let session = SessionReader::open(chunk).unwrap_or_else(|e| panic!("{chunk:?}: {e}"));
+    assert!(session.complete(), "{chunk:?} was not closed");
+    let run = mousepose()
+        .arg("replay")
+        .arg(chunk)
+        .arg("--out")
+        .arg(out)
+        .args(["--force", "--json"])
+        .env("MOUSEPOSE_MODELS", repo_root().join("fixtures/models"))
+        .output()
+        .expect("test set-up");
+    assert!(
+        run.status.success(),
+        "{chunk:?}: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert_eq!(pose_rows(out), session.depth_count(), "{chunk:?}");
+}
+
 /// A small tmpfs mounted at a directory for the life of the guard (needs root).
-struct Tmpfs(PathBuf);
+pub(crate) struct Tmpfs(PathBuf);
 
 impl Tmpfs {
-    fn mount(dir: &Path, size: &str) -> Self {
+    pub(crate) fn mount(dir: &Path, size: &str) -> Self {
         std::fs::create_dir_all(dir).expect("test set-up");
         let status = Command::new("mount")
             .args(["-t", "tmpfs", "-o", &format!("size={size}"), "mousepose-test"])
@@ -547,7 +547,7 @@ impl Drop for Tmpfs {
     }
 }
 
-fn is_root() -> bool {
+pub(crate) fn is_root() -> bool {
     Command::new("id")
         .arg("-u")
         .output()
@@ -792,7 +792,7 @@ fn issue31_poses_are_written_again_soon_after_a_full_disk() {
 }
 
 /// The rows of a `poses.csv` (its header not counted), 0 when it is missing.
-fn pose_rows(chunk: &Path) -> usize {
+pub(crate) fn pose_rows(chunk: &Path) -> usize {
     std::fs::read_to_string(chunk.join("poses.csv")).map_or(0, |t| t.lines().count().saturating_sub(1))
 }
 

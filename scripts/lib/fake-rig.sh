@@ -4,7 +4,8 @@
 
 # Installs what is missing and builds the release binary; as root, then runs the calling
 # script again (with the same arguments) in its own network namespace with only loopback, so
-# that nothing it does can reach a network or clash with another fake camera.
+# that nothing it does can reach a network or clash with another fake camera, and in a mount
+# namespace of its own (a file system it mounts is seen by it alone, and goes with it).
 #   fake_rig_enter SCRIPT ARGS...
 fake_rig_enter() {
     if [ -n "${FAKE_RIG_IN_NETNS:-}" ]; then
@@ -14,17 +15,18 @@ fake_rig_enter() {
     bash scripts/setup.sh
     cargo build --release --locked --quiet
     if [ "$(id -u)" = 0 ]; then
-        exec env FAKE_RIG_IN_NETNS=1 unshare --net bash "$@"
+        exec env FAKE_RIG_IN_NETNS=1 unshare --net --mount --propagation private bash "$@"
     fi
 }
 
-# Writes the rig config.
-#   fake_rig_config FILE OUTPUT_DIR RECORD CHUNK_MINUTES
+# Writes the rig config; DEPTH_EXTRA, if given, is added to the [depth] table.
+#   fake_rig_config FILE OUTPUT_DIR RECORD CHUNK_MINUTES [DEPTH_EXTRA]
 fake_rig_config() {
     cat >"$1" <<CONFIG
 [depth]
 backend = "session"
 path = "$PWD/fixtures/sessions/synthetic-small"
+${5:-}
 
 [color]
 backend = "aravis"

@@ -54,11 +54,14 @@ impl LineWriter {
         self.write_bytes(&bytes)
     }
 
+    /// A line that the buffer took is counted even when handing it to the operating system
+    /// fails: it stays buffered, whole, and the next flush (a retry, [`LineWriter::sync`])
+    /// writes it. (Lines are far shorter than the buffer, so one that it did not take was not
+    /// written at all.)
     fn write_bytes(&mut self, bytes: &[u8]) -> Result<()> {
         self.out.write_all(bytes).map_err(io_error(&self.path, "write"))?;
-        self.out.flush().map_err(io_error(&self.path, "write"))?;
         self.lines += 1;
-        Ok(())
+        self.out.flush().map_err(io_error(&self.path, "write"))
     }
 
     /// Whether the file was removed while being written ([`crate::io::unlinked`]).

@@ -47,6 +47,9 @@ struct StreamWriter {
     encoder: FrameEncoder,
     index_path: PathBuf,
     index: Vec<(u64, u64)>,
+    /// The end of the last record in the index: the file's length once closed (a record that
+    /// failed to be written whole is cut off).
+    indexed_end: u64,
     timestamps: LineWriter,
 }
 
@@ -62,6 +65,7 @@ impl StreamWriter {
         })?;
         let timestamps = LineWriter::create(sub.join(TIMESTAMPS_FILE), Some(TIMESTAMPS_HEADER))?;
         Ok(Self {
+            indexed_end: store.position(),
             store,
             encoder,
             index_path: sub.join(INDEX_FILE),
@@ -75,12 +79,16 @@ impl StreamWriter {
         let offset = self.store.append(payload)?;
         self.store.flush()?;
         self.index.push((stamp.seq, offset));
+        self.indexed_end = self.store.position();
         self.timestamps.write_row(&(stamp.seq, stamp.device_ns, stamp.host_ns))
     }
 
     fn write_index(&mut self) -> Result<()> {
+        if self.store.position() > self.indexed_end {
+            self.store.truncate(self.indexed_end)?;
+        }
         self.store.flush()?;
-        store::write_index(&self.index_path, self.store.position(), &self.index)?;
+        store::write_index(&self.index_path, self.indexed_end, &self.index)?;
         Ok(())
     }
 
@@ -141,6 +149,8 @@ pub struct SessionWriter {
     last_host_ns: u64,
     /// Encoded frame bytes appended so far.
     frame_bytes: u64,
+    /// Whether `session_ended` is in the event log (written, or buffered to be).
+    ended: bool,
 }
 
 impl SessionWriter {
@@ -261,6 +271,7 @@ impl SessionWriter {
             events,
             truth: None,
             last_host_ns: 0,
+            ended: false,
             frame_bytes: 0,
         })
     }
@@ -429,15 +440,35 @@ impl SessionWriter {
     /// # Errors
     /// [`SessionError::Io`] or [`SessionError::Store`] when writing or syncing fails.
     pub fn finish_at(mut self, host_ns: u64) -> Result<SessionSummary> {
+        self.close_at(host_ns)
+    }
+
+    /// Ends the session at the latest host time seen, as [`SessionWriter::finish`] does, and
+    /// can be tried again after it failed (a full disk): the frames appended before are
+    /// written whole, the indexes again, and `session_ended` once.
+    ///
+    /// # Errors
+    /// As [`SessionWriter::finish_at`].
+    pub fn close(&mut self) -> Result<SessionSummary> {
+        self.close_at(self.last_host_ns)
+    }
+
+    fn close_at(&mut self, host_ns: u64) -> Result<SessionSummary> {
         for stream in self.depth.iter_mut().chain(self.color.iter_mut()) {
             stream.write_index()?;
         }
         let (depth_frames, color_frames) = (self.depth_frames(), self.color_frames());
-        self.log_event(&SessionEvent::SessionEnded {
-            host_ns,
-            depth_frames,
-            color_frames,
-        })?;
+        if !self.ended {
+            let logged = self.events.lines();
+            let result = self.log_event(&SessionEvent::SessionEnded {
+                host_ns,
+                depth_frames,
+                color_frames,
+            });
+            // Taken (buffered) even when handing it to the system failed: written by a retry.
+            self.ended = self.events.lines() > logged;
+            result?;
+        }
         for stream in self.depth.iter_mut().chain(self.color.iter_mut()) {
             stream.sync()?;
         }

@@ -6,7 +6,7 @@ use super::format::{
 };
 use super::{Result, StoreError, io_error};
 use std::fs::{File, OpenOptions};
-use std::io::{BufWriter, Write};
+use std::io::{BufWriter, Seek, Write};
 use std::path::{Path, PathBuf};
 
 /// Writes a record file: the file header at creation, then one record per [`append`].
@@ -119,6 +119,29 @@ impl RecordWriter {
         self.out.get_ref().sync_all().map_err(io_error(&self.path, "sync"))
     }
 
+    /// Cuts the file back to `len` bytes (the end of a record: the records after it, and what
+    /// of them is still buffered, are dropped), so that a writer that failed mid-record can
+    /// close the file on its whole records.
+    ///
+    /// # Errors
+    /// [`StoreError::Io`] when the file can not be cut.
+    pub fn truncate(&mut self, len: u64) -> Result<()> {
+        let file = self
+            .out
+            .get_ref()
+            .try_clone()
+            .map_err(io_error(&self.path, "truncate"))?;
+        let fresh = BufWriter::with_capacity(self.out.capacity(), file);
+        // Unflushed bytes are after `len`: dropped with the old buffer, never written.
+        drop(std::mem::replace(&mut self.out, fresh).into_parts());
+        let file = self.out.get_mut();
+        file.set_len(len).map_err(io_error(&self.path, "truncate"))?;
+        file.seek(std::io::SeekFrom::Start(len))
+            .map_err(io_error(&self.path, "truncate"))?;
+        self.position = len;
+        Ok(())
+    }
+
     /// The file's length once everything appended is flushed: the offset of the next record.
     pub fn position(&self) -> u64 {
         self.position
@@ -149,5 +172,25 @@ mod tests {
         let big = vec![0u8; MAX_PAYLOAD_LEN as usize + 1];
         assert!(matches!(w.append(&big), Err(StoreError::PayloadTooLarge { .. })));
         assert!(RecordWriter::create(dir.path().join("x"), Kind::ColorFrames).is_err());
+    }
+
+    #[test]
+    fn truncate_cuts_back_to_a_record_end_and_drops_what_was_buffered_after_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x");
+        let mut w = RecordWriter::create(&path, Kind::ColorFrames).unwrap();
+        w.append(&[1; 100]).unwrap();
+        w.flush().unwrap();
+        let end = w.position();
+        // Buffered, not flushed: gone with the cut, never written after it.
+        w.append(&[2; 100]).unwrap();
+        w.truncate(end).unwrap();
+        w.sync().unwrap();
+        drop(w);
+        assert_eq!(std::fs::metadata(&path).unwrap().len(), end);
+        let mut reader = crate::io::store::RecordReader::open(&path, Kind::ColorFrames).unwrap();
+        let records: Vec<_> = reader.records().collect::<Result<_>>().unwrap();
+        assert_eq!(records.len(), 1);
+        assert_eq!(records[0].payload, vec![1; 100]);
     }
 }

@@ -36,6 +36,10 @@ pub struct LoopedDepth {
     last: Option<(u64, u64, Instant)>,
     interval_ns: u64,
     corrupt: u64,
+    /// While this file exists no frame is given, as a camera that stalls gives none.
+    stall_while: Option<PathBuf>,
+    /// Whether the last call found the camera stalled.
+    stalled: bool,
 }
 
 impl LoopedDepth {
@@ -71,7 +75,49 @@ impl LoopedDepth {
             last: None,
             interval_ns,
             corrupt: 0,
+            stall_while: None,
+            stalled: false,
         })
+    }
+
+    /// Gives no frame while `file` exists (as a camera that stalls, its device clock running
+    /// on), and goes on at camera pace once it is gone: for rehearsing a rig's faults.
+    #[must_use]
+    pub fn stalled_while(mut self, file: Option<PathBuf>) -> Self {
+        self.stall_while = file;
+        self
+    }
+
+    /// Whether the camera is stalled now; on its end, the frames that fell due meanwhile are
+    /// skipped (the device clock and counter moved on), not delivered in a burst.
+    fn stall(&mut self, timeout: Duration) -> bool {
+        let Some(file) = &self.stall_while else {
+            return false;
+        };
+        if file.exists() {
+            self.stalled = true;
+            std::thread::sleep(timeout.min(Duration::from_millis(20)));
+            return true;
+        }
+        if std::mem::take(&mut self.stalled) {
+            if let Some((seq, device_ns, due)) = self.last {
+                let interval = Duration::from_nanos(self.interval_ns);
+                let now = Instant::now();
+                let missed = now.saturating_duration_since(due + interval);
+                let skipped = (missed.as_nanos() / u128::from(self.interval_ns.max(1))) as u64;
+                self.offset = (
+                    seq + 1 + skipped,
+                    device_ns + self.interval_ns + missed.as_nanos() as u64,
+                );
+                self.last = Some((seq + skipped, device_ns + missed.as_nanos() as u64, now - interval));
+                if let Some(frame) = &self.pending {
+                    self.first = Some((frame.stamp.seq, frame.stamp.device_ns, now));
+                } else {
+                    self.first = None;
+                }
+            }
+        }
+        false
     }
 
     /// The next recorded frame, from the start again after the last one.
@@ -134,6 +180,9 @@ impl FrameSource for LoopedDepth {
     }
 
     fn next_frame(&mut self, timeout: Duration) -> Result<Option<DepthFrame>, CaptureError> {
+        if self.stall(timeout) {
+            return Ok(None);
+        }
         let mut frame = match self.pending.take() {
             Some(f) => f,
             None => self.next_recorded()?,
@@ -187,6 +236,8 @@ pub const REGISTERED: DepthBackend = Backend {
 struct RawSession {
     /// The session directory to play.
     path: Option<PathBuf>,
+    /// While this file exists, the played camera stalls.
+    stall_while: Option<PathBuf>,
 }
 
 /// A recorded session played as the depth camera; its mode and rig are the session's.
@@ -198,6 +249,8 @@ pub struct SessionCamera {
     pub fps: f64,
     /// The rig the session was recorded or rendered with, if it says.
     pub rig: Option<crate::core::geometry::Rig>,
+    /// While this file exists, no frame is given (a stalled camera, for rehearsing faults).
+    pub stall_while: Option<PathBuf>,
 }
 
 fn read_table(table: toml::Table) -> Result<Arc<dyn DepthConfig>, TableError> {
@@ -220,6 +273,7 @@ fn read_table(table: toml::Table) -> Result<Arc<dyn DepthConfig>, TableError> {
         fps: camera.fps,
         rig: reader.meta().rig,
         path,
+        stall_while: d.stall_while,
     }))
 }
 
@@ -231,7 +285,9 @@ impl CameraConfig for SessionCamera {
     }
 
     fn open(&self) -> Result<Box<dyn FrameSource<Frame = DepthFrame>>, CaptureError> {
-        Ok(Box::new(LoopedDepth::open(&self.path)?))
+        Ok(Box::new(
+            LoopedDepth::open(&self.path)?.stalled_while(self.stall_while.clone()),
+        ))
     }
 
     fn frame_size(&self) -> Option<(u32, u32)> {
@@ -277,5 +333,42 @@ mod tests {
         let span = stamps[stamps.len() - 1].device_ns - stamps[0].device_ns;
         assert!(started.elapsed() >= Duration::from_nanos(span) - Duration::from_millis(50));
         assert_eq!(source.losses(), vec![("corrupt", 0)]);
+    }
+
+    #[test]
+    fn a_stalled_camera_gives_nothing_then_goes_on_at_pace_without_a_burst() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/sessions/synthetic-small");
+        let tmp = tempfile::tempdir().unwrap();
+        let stall = tmp.path().join("stall");
+        let mut source = LoopedDepth::open(&dir).unwrap().stalled_while(Some(stall.clone()));
+        source.start(&Clock::Monotonic).unwrap();
+        let mut next = || loop {
+            if let Some(f) = source.next_frame(Duration::from_millis(100)).unwrap() {
+                return f.stamp;
+            }
+        };
+        let before = next();
+        std::fs::write(&stall, b"").unwrap();
+        let stalled_at = Instant::now();
+        let mut source_frames = 0;
+        while stalled_at.elapsed() < Duration::from_millis(400) {
+            // Nothing while the file is there.
+            source_frames += usize::from(source.next_frame(Duration::from_millis(50)).unwrap().is_some());
+        }
+        assert_eq!(source_frames, 0);
+        std::fs::remove_file(&stall).unwrap();
+        let mut next = || loop {
+            if let Some(f) = source.next_frame(Duration::from_millis(100)).unwrap() {
+                return f.stamp;
+            }
+        };
+        let (after, then) = (next(), next());
+        // The device clock and counter ran on through the stall (about 12 frames at 30 fps);
+        // the frames after it come at camera pace, not in a burst.
+        assert!(after.seq >= before.seq + 10, "{before:?} {after:?}");
+        let gap_ms = (after.device_ns - before.device_ns) as f64 * 1e-6;
+        assert!(gap_ms >= 390.0, "{gap_ms} ms");
+        assert_eq!(then.seq, after.seq + 1);
+        assert!(then.host_ns - after.host_ns >= 25_000_000, "{after:?} {then:?}");
     }
 }

@@ -279,6 +279,9 @@ pub struct ChunkRecorder {
     /// per camera and reason, not yet handed to the accounting
     /// ([`crate::runtime::sink::session::FrameRecorder::take_lost`]).
     lost: Vec<(CameraRole, &'static str, u64)>,
+    /// Sessions (with their chunks) that could not be closed, the disk full: closed once
+    /// frames are written again, or at the end.
+    unclosed: Vec<(usize, SessionWriter)>,
     cameras: Vec<SharedHealth>,
     gauges: Arc<RecorderGauges>,
 }
@@ -295,6 +298,7 @@ impl ChunkRecorder {
             broken: false,
             paused: None,
             lost: Vec::new(),
+            unclosed: Vec::new(),
             cameras,
             gauges,
         }
@@ -376,15 +380,36 @@ impl ChunkRecorder {
     /// Closes the current chunk's session cleanly.
     fn close(&mut self) -> Option<SessionSummary> {
         let writer = self.writer.take()?;
-        match writer.finish() {
+        self.close_or_keep(self.index, writer)
+    }
+
+    /// Closes a session; one that cannot be closed now (a full disk) is kept and closed later
+    /// ([`ChunkRecorder::close_unclosed`]), so that every chunk ends closed.
+    fn close_or_keep(&mut self, index: usize, mut writer: SessionWriter) -> Option<SessionSummary> {
+        match writer.close() {
             Ok(s) => Some(s),
             Err(e) => {
-                tracing::error!(
-                    chunk = self.index,
-                    "cannot close the chunk's session: {}",
+                tracing::warn!(
+                    chunk = index,
+                    "cannot close the chunk's session yet (tried again once frames are written \
+                     again): {}",
                     error_chain(&e)
                 );
+                self.unclosed.push((index, writer));
                 None
+            }
+        }
+    }
+
+    /// Closes the sessions left unclosed (a full disk), now that there is room; one removed or
+    /// moved away meanwhile is counted as lost, as the current one is.
+    fn close_unclosed(&mut self) {
+        for (index, writer) in std::mem::take(&mut self.unclosed) {
+            if let Some(gone) = writer.gone() {
+                let bytes = writer.frame_bytes();
+                self.forget(index, writer, gone, bytes);
+            } else if self.close_or_keep(index, writer).is_some() {
+                tracing::info!(chunk = index, "the chunk's session closed, the disk having room again");
             }
         }
     }
@@ -428,18 +453,26 @@ impl ChunkRecorder {
         let Some(w) = self.writer.take() else {
             return false;
         };
+        let bytes = std::mem::take(&mut self.counted);
+        self.forget(self.index, w, gone, bytes);
+        true
+    }
+
+    /// Counts the frames of a session that is gone (and `bytes` of it that the gauges have
+    /// counted) as lost after recording, and drops it.
+    fn forget(&mut self, index: usize, w: SessionWriter, gone: crate::io::Gone, bytes: u64) {
         let (depth, color) = (w.depth_frames(), w.color_frames());
         let reason = gone.reason();
         match gone {
             crate::io::Gone::Removed => tracing::error!(
-                chunk = self.index,
+                chunk = index,
                 depth_frames = depth,
                 color_frames = color,
                 "the chunk's session was removed from the disk: its frames are lost (counted as lost \
                  after recording: removed); recording goes on in a new chunk"
             ),
             crate::io::Gone::Moved => tracing::info!(
-                chunk = self.index,
+                chunk = index,
                 depth_frames = depth,
                 color_frames = color,
                 "the chunk's session was moved away: nothing more is written into it (its frames \
@@ -455,9 +488,7 @@ impl ChunkRecorder {
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
             .entry(reason)
-            .or_default() += self.counted;
-        self.counted = 0;
-        true
+            .or_default() += bytes;
     }
 
     /// Writes `frame` into its chunk's session, or says why not.
@@ -507,7 +538,12 @@ impl ChunkRecorder {
             None => Ok(false),
         });
         match result {
-            Ok(true) => Ok(None),
+            Ok(true) => {
+                if !self.unclosed.is_empty() {
+                    self.close_unclosed();
+                }
+                Ok(None)
+            }
             Ok(false) => Ok(Some("write_error")),
             Err(e) => {
                 // The frames written so far stay readable: the store appends whole records.
@@ -525,7 +561,9 @@ impl ChunkRecorder {
                             );
                         }
                     } else {
+                        // Closed once the disk has room: its whole frames kept.
                         self.broken = true;
+                        self.unclosed.push((self.index, w));
                     }
                 }
                 Ok(Some("write_error"))
@@ -562,7 +600,16 @@ impl crate::runtime::sink::session::FrameRecorder for ChunkRecorder {
     fn finish(mut self: Box<Self>) -> Result<Option<SessionSummary>, SessionError> {
         // Events of a camera lost at the very end still belong to the last chunk.
         self.log_camera_events()?;
-        Ok(self.close())
+        let summary = self.close();
+        self.close_unclosed();
+        for (index, _) in &self.unclosed {
+            tracing::error!(
+                chunk = index,
+                "the chunk's session is left unclosed (the disk is full): its whole frames read back, \
+                 its indexes are made again when it is read"
+            );
+        }
+        Ok(summary)
     }
 }
 
