@@ -51,17 +51,23 @@ for chunk in chunks:
     events = (chunk / "events.jsonl").read_text() if (chunk / "events.jsonl").is_file() else ""
     if '"session_ended"' not in events:
         fail(f"{chunk.name} was not closed (no session_ended)")
+    frames = {}
+    for name in on_disk:
+        stamps = chunk / name / "timestamps.csv"
+        frames[name] = sum(1 for _ in open(stamps)) - 1 if stamps.is_file() else 0
+        on_disk[name] += frames[name]
+    if frames["depth"] == 0:
+        # Colour frames only (the depth camera away for the chunk's time): nothing to replay.
+        continue
     summary = replayed / chunk.name / "summary.json"
     if not summary.is_file():
         fail(f"{chunk.name} did not replay")
         continue
     s = json.loads(summary.read_text())
     rows = sum(1 for _ in open(replayed / chunk.name / "poses.csv")) - 1
-    depth = s["cameras"].get("depth", {}).get("captured", 0)
-    if rows != depth:
-        fail(f"{chunk.name}: replayed {rows} rows of {depth} depth frames")
-    for name in on_disk:
-        on_disk[name] += s["cameras"].get(name, {}).get("captured", 0)
+    replayed_frames = {n: s["cameras"].get(n, {}).get("captured", 0) for n in on_disk}
+    if rows != frames["depth"] or replayed_frames != frames:
+        fail(f"{chunk.name}: replayed {rows} rows and frames {replayed_frames} of {frames}")
 for name, c in sorted(cameras.items()):
     kept = c.get("recorded", 0) - sum(c.get("lost_after_recording", {}).values())
     if on_disk[name] != kept:
