@@ -216,24 +216,50 @@ impl Cutter {
             return;
         };
         let (rx, ry) = (f64::from(view.region.x0), f64::from(view.region.y0));
-        let mut excluded = Vec::new();
-        for paw in &view.paws {
-            if paw.x1 <= paw.x0 {
-                continue;
-            }
-            let b = [
-                ((f64::from(paw.x0) - rx) / k) as f32 - 1.0,
-                ((f64::from(paw.y0) - ry) / k) as f32 - 1.0,
-                ((f64::from(paw.x1) - rx) / k) as f32 + 1.0,
-                ((f64::from(paw.y1) - ry) / k) as f32 + 1.0,
-            ];
-            excluded.push(b);
-            if !(paw.contact && paw.visible) {
-                continue;
-            }
+        let paws: Vec<PawWindow> = view
+            .paws
+            .iter()
+            .filter(|paw| paw.x1 > paw.x0)
+            .map(|paw| PawWindow {
+                bounds: [
+                    ((f64::from(paw.x0) - rx) / k) as f32,
+                    ((f64::from(paw.y0) - ry) / k) as f32,
+                    ((f64::from(paw.x1) - rx) / k) as f32,
+                    ((f64::from(paw.y1) - ry) / k) as f32,
+                ],
+                centre: (paw.contact && paw.visible).then(|| {
+                    (
+                        (f64::from(paw.x0 + paw.x1) / 2.0 - rx) / k,
+                        (f64::from(paw.y0 + paw.y1) / 2.0 - ry) / k,
+                    )
+                }),
+            })
+            .collect();
+        let hard: Vec<(f64, f64)> = hard_places(sample, camera, &view.marks)
+            .into_iter()
+            .map(|(x, y)| ((x - rx) / k, (y - ry) / k))
+            .collect();
+        self.cut_canonical(set, grey, &paws, &hard);
+    }
+
+    /// Cuts a view already at the canonical scale: a positive (and its augmented copies) at the
+    /// centre of each positive paw, hard negatives around each of `hard` (none touching a
+    /// paw's box), and the view as a background with every paw's box excluded.
+    fn cut_canonical(&mut self, set: &mut TrainingSet, grey: GreyImage, paws: &[PawWindow], hard: &[(f64, f64)]) {
+        // Each box grown by a pixel.
+        let excluded: Vec<[f32; 4]> = paws
+            .iter()
+            .map(|p| {
+                [
+                    p.bounds[0] - 1.0,
+                    p.bounds[1] - 1.0,
+                    p.bounds[2] + 1.0,
+                    p.bounds[3] + 1.0,
+                ]
+            })
+            .collect();
+        for (cx, cy) in paws.iter().filter_map(|p| p.centre) {
             set.paws += 1;
-            let cx = (f64::from(paw.x0 + paw.x1) / 2.0 - rx) / k;
-            let cy = (f64::from(paw.y0 + paw.y1) / 2.0 - ry) / k;
             for a in 0..=self.params.augment {
                 let (angle, scale, dx, dy, gain, offset, noise) = if a == 0 {
                     (0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0)
@@ -262,8 +288,7 @@ impl Cutter {
                 }
             }
         }
-        for (x, y) in hard_places(sample, camera, &view.marks) {
-            let (cx, cy) = ((x - rx) / k, (y - ry) / k);
+        for &(cx, cy) in hard {
             for _ in 0..self.params.hard_per_place {
                 let scale = self.hard_rng.gen_range(0.8..1.25);
                 let warp = Warp {
@@ -293,6 +318,13 @@ impl Cutter {
         }
         set.backgrounds.push(Background { grey, excluded });
     }
+}
+
+/// A paw's box in a view at the canonical scale (x0, y0, x1, y1), kept out of the negatives,
+/// and its centre when it is cut as a positive (on the glass and visible).
+struct PawWindow {
+    bounds: [f32; 4],
+    centre: Option<(f64, f64)>,
 }
 
 /// Why a dataset gives no paw material.
