@@ -24,5 +24,6 @@ mod report;
 mod run;
 mod segment;
 mod session;
+mod stream;
 mod synth;
 mod util;
