@@ -63,12 +63,12 @@ fn issue46_a_stuck_subscriber_holds_at_most_the_high_water_marks_and_every_messa
 
 /// The ```python block of docs/FORMATS.md, as written there.
 fn documented_subscriber() -> String {
-    let text = std::fs::read_to_string(repo_root().join("docs/FORMATS.md")).unwrap();
+    let text = std::fs::read_to_string(repo_root().join("docs/FORMATS.md")).expect("test set-up");
     let start = text
         .find("```python\nimport json, zmq")
         .expect("the subscriber in FORMATS.md")
         + 10;
-    let end = start + text[start..].find("```").unwrap();
+    let end = start + text[start..].find("```").expect("the block ends");
     text[start..end].to_owned()
 }
 

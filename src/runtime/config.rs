@@ -391,7 +391,7 @@ impl Checker<'_> {
             tracing::warn!(config = ?self.path, "the [aravis] table is not used (cameras are opened by their address): remove it");
         }
         let http = self.http(raw.http)?;
-        let stream = raw.stream.map(|s| self.stream(s)).transpose()?.flatten();
+        let stream = raw.stream.as_ref().map(|s| self.stream(s)).transpose()?.flatten();
         Ok(Config {
             path: self.path.to_owned(),
             depth,
@@ -415,7 +415,7 @@ impl Checker<'_> {
     }
 
     /// `[stream]`: an endpoint this machine alone reaches unless `allow_remote`; `"off"`: none.
-    fn stream(&self, s: RawStream) -> Result<Option<StreamConfig>, ConfigError> {
+    fn stream(&self, s: &RawStream) -> Result<Option<StreamConfig>, ConfigError> {
         let endpoint = match s.endpoint.as_deref() {
             Some("off") => return Ok(None),
             Some(text) => text
@@ -644,6 +644,38 @@ mod tests {
         ] {
             let e = parse(&format!("{base}[http]\n{http}")).unwrap_err().to_string();
             assert!(e.contains(key) && e.contains(why), "{http}: {e}");
+        }
+    }
+
+    #[test]
+    fn issue46_the_stream_is_off_without_its_table_on_loopback_by_default_and_checked() {
+        let base = "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n";
+        assert_eq!(parse(base).unwrap().stream, None);
+        let c = parse(&format!("{base}[stream]\n")).unwrap();
+        assert_eq!(c.stream, Some(StreamConfig::at(Endpoint::default_tcp())));
+        let c = parse(&format!("{base}[stream]\nendpoint = \"off\"\n")).unwrap();
+        assert_eq!(c.stream, None);
+        let c = parse(&format!(
+            "{base}[stream]\nendpoint = \"tcp://0.0.0.0:9000\"\nallow_remote = true\nqueue = 8\nhigh_water_mark = 5\n"
+        ))
+        .unwrap()
+        .stream
+        .unwrap();
+        assert_eq!(
+            (c.endpoint.to_string(), c.queue, c.high_water_mark),
+            ("tcp://0.0.0.0:9000".to_owned(), 8, 5)
+        );
+        for (stream, why) in [
+            ("endpoint = \"tcp://0.0.0.0:9000\"\n", "allow_remote"),
+            ("endpoint = \"tcp://localhost:9000\"\n", "IP:PORT"),
+            ("endpoint = \"tcp://127.0.0.1:0\"\n", "port"),
+            ("endpoint = \"ipc://\"\n", "ipc://PATH"),
+            ("queue = 0\n", "from 1 to 4096"),
+            ("high_water_mark = 5000\n", "from 1 to 4096"),
+            ("topic = \"poses\"\n", "unknown field"),
+        ] {
+            let e = parse(&format!("{base}[stream]\n{stream}")).unwrap_err().to_string();
+            assert!(e.contains(why) && !e.contains('\n'), "{stream}: {e}");
         }
     }
 
