@@ -104,7 +104,8 @@ fn issue46_the_documented_python_subscriber_and_listen_read_a_running_daemon() {
     );
     let mut lines = std::io::BufReader::new(child.0.stdout.take().unwrap()).lines();
     let mut poses = Vec::new();
-    while poses.len() < 5 {
+    // Until the mouse is found (the background is learnt live first): at most a minute of poses.
+    while poses.len() < 1800 && (poses.len() < 5 || !poses.iter().any(|l: &String| l.contains(" ok ("))) {
         let line = lines.next().expect("the subscriber ended").unwrap();
         if !line.starts_with("entered") {
             poses.push(line);
@@ -202,4 +203,15 @@ fn issue46_a_bad_or_taken_endpoint_is_refused_in_one_sentence() {
         .unwrap_err()
         .to_string();
     assert!(e.contains(&taken.to_string()), "{e}");
+    // The daemon refuses it at start, before it opens a camera: the user's to fix.
+    let http = format!("address = \"127.0.0.1:0\"\n[stream]\nendpoint = \"{taken}\"\n");
+    let rig = rig_full(tmp.path(), &session_depth(), false, "", &http);
+    let out = mousepose().args(["run", "--config"]).arg(&rig).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("cannot bind the pose stream") && err.contains(&taken.to_string()),
+        "{err}"
+    );
+    drop(holder);
 }

@@ -26,7 +26,7 @@ use crate::runtime::sink::session::FrameRecorder;
 use crate::runtime::stages::segment::{FloorSlot, SegmentStage};
 use crate::runtime::status::{RunInfo, RunReport, Watch, Watched};
 use crate::runtime::stream::message::{self, StreamEvent};
-use crate::runtime::stream::{Publisher, StreamHandle, Topic};
+use crate::runtime::stream::{Publisher, StreamError, StreamHandle, Topic};
 use crate::runtime::topology::{Edges, Processing, Topology};
 use crate::vision::calibrate::RigCalibration;
 use crate::vision::segment::{Segmenter, SegmenterConfig};
@@ -525,7 +525,11 @@ pub fn daemon(options: &DaemonOptions) -> Result<(RunReport, Option<String>), Fa
     let segment = segment_stage(&config, &rig).map_err(Failure::usage)?;
     let stop = Shutdown::default();
     let signals = Signals::install(&stop, false).context("installing the signal handlers")?;
-    let report = serve(&config, models, rig, segment, options.seconds, &stop, Some(&signals))
-        .map_err(|e| Failure::classed(e.is::<CameraUnusable>(), e))?;
+    let report = serve(&config, models, rig, segment, options.seconds, &stop, Some(&signals)).map_err(|e| {
+        let bad_endpoint = e
+            .downcast_ref::<StreamError>()
+            .is_some_and(|s| matches!(s, StreamError::Bind { .. }));
+        Failure::classed(e.is::<CameraUnusable>() || bad_endpoint, e)
+    })?;
     Ok((report, signals.unexpected_stop()))
 }
