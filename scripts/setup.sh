@@ -14,6 +14,8 @@ packages=(
   libopencv-dev opencv-data
   # video export and import
   ffmpeg
+  # the live pose stream (ZeroMQ PUB, linked to Debian's libzmq through pkg-config)
+  libzmq3-dev
   # whole-process wall time and peak memory (/usr/bin/time -v), builds compared back to back
   # (hyperfine): scripts/moseq2-check, scripts/replay-bench
   time hyperfine
@@ -50,9 +52,10 @@ if ((${#missing[@]})); then
 fi
 
 # `mousepose export nwb` writes NWB with the ecosystem's own libraries, pynwb and ndx-pose,
-# in a Python environment of mousepose's own (nwbinspector checks the files in the tests).
+# in a Python environment of mousepose's own (nwbinspector checks the files in the tests, and
+# pyzmq runs the pose stream's documented subscriber).
 nwb_venv=/opt/mousepose/venv
-if ! "$nwb_venv/bin/python3" -c 'import pynwb, ndx_pose, nwbinspector' >/dev/null 2>&1; then
+if ! "$nwb_venv/bin/python3" -c 'import pynwb, ndx_pose, nwbinspector, zmq' >/dev/null 2>&1; then
   if [[ $(id -u) -ne 0 ]]; then
     echo "setup: the Python environment $nwb_venv (pynwb, ndx-pose) is missing and making it needs root" >&2
     exit 1

@@ -574,6 +574,8 @@ const EXTERNAL: &[(&str, &[&str])] = &[
     ("tokio", &["runtime"]),
     ("axum", &["runtime"]),
     ("prometheus_client", &["runtime"]),
+    // The live pose stream (ZeroMQ): its module alone; `listen` reads through its `Subscriber`.
+    ("zmq", &["runtime::stream"]),
     ("crossbeam_channel", &["runtime", "engine", "app"]),
     // Processes, signals, the service manager, logging set-up, progress bars, globs, one error
     // type for everything: the commands (and the runtime's process statistics and log set-up).

@@ -25,5 +25,6 @@ mod run;
 mod segment;
 mod session;
 mod soak;
+mod stream;
 mod synth;
 mod util;

@@ -240,6 +240,7 @@ fn the_camera_comes_from_the_metadata_or_an_intrinsics_file_and_unknown_sizes_ar
     .unwrap();
     let out = tmp.path().join("b");
     let s = replay(&ReplayOptions {
+        stream: None,
         intrinsics: Some(yaml),
         ..options(&dir, &out)
     })
@@ -442,6 +443,7 @@ fn an_arena_a_quarter_of_the_view_is_found_or_given_and_its_floor_fitted() {
     mask.write_png(&roi).unwrap();
     let out = tmp.path().join("given");
     let s = replay(&ReplayOptions {
+        stream: None,
         roi: Some(roi.clone()),
         ..options(&dir, &out)
     })

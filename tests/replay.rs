@@ -164,6 +164,7 @@ fn without_a_paw_cascade_the_limbs_take_their_default_configuration() {
     .unwrap();
     let out = tmp.path().join("o");
     let s = replay(&ReplayOptions {
+        stream: None,
         models: Some(models),
         ..options(&fixture(), &out, 2)
     })
@@ -191,6 +192,7 @@ fn a_calibration_file_replaces_the_sessions_and_must_be_of_its_rig() {
         .save(&same)
         .unwrap();
     let with = replay(&ReplayOptions {
+        stream: None,
         calibration: Some(same),
         ..options(&fixture(), &tmp.path().join("a"), 2)
     })

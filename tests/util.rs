@@ -22,6 +22,7 @@ pub fn replay_options(
     workers: usize,
 ) -> mousepose::engine::replay::ReplayOptions {
     mousepose::engine::replay::ReplayOptions {
+        stream: None,
         session: session.to_owned(),
         out: out.to_owned(),
         models: Some(repo_root().join("fixtures/models")),

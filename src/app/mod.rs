@@ -13,6 +13,7 @@ pub mod devices;
 pub mod eval;
 pub mod experiment;
 pub mod export;
+pub mod listen;
 pub mod output;
 pub mod parse;
 pub mod progress;
@@ -62,6 +63,8 @@ enum Command {
     Run(run::RunArgs),
     /// The running daemon's status (cameras, poses, latency, recording), from its HTTP server.
     Status(status::StatusArgs),
+    /// Print the live pose stream of a running daemon (poses and events), as they come.
+    Listen(listen::ListenArgs),
     /// List the cameras each backend sees (GigE cameras only at configured addresses).
     Devices(devices::DevicesArgs),
     /// Calibrate the cameras: intrinsics of each, then the rig against a board on the glass.
@@ -219,6 +222,7 @@ fn dispatch(cli: Cli) -> Outcome {
         Command::Record(args) => record::command(&args),
         Command::Run(args) => run::command(&args),
         Command::Status(args) => status::command(&args),
+        Command::Listen(args) => listen::command(&args),
         Command::Devices(args) => devices::command(&args),
         Command::Calibrate(command) => calibrate::command(&command),
         Command::Export(command) => export::command(&command),

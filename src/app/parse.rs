@@ -67,3 +67,9 @@ pub fn binning(s: &str) -> Result<u32, String> {
         other => Err(format!("expected a binning factor of 1, 2 or 4, got {other:?}")),
     }
 }
+
+/// A live stream's endpoint: `tcp://IP:PORT` or `ipc://PATH`.
+pub fn endpoint(s: &str) -> Result<crate::runtime::stream::Endpoint, String> {
+    s.parse()
+        .map_err(|e: crate::runtime::stream::EndpointError| e.to_string())
+}

@@ -9,6 +9,7 @@ use crate::engine::batch::{BatchOptions, batch, is_batch};
 use crate::engine::replay::{PICTURE_FILE, ReplayError, ReplayOptions, ReplaySummary, replay_with};
 use crate::engine::{Failure, Interrupt};
 use crate::runtime::sink::poses::POSES_FILE;
+use crate::runtime::stream::{Endpoint, StreamConfig};
 use clap::Args;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -119,6 +120,11 @@ pub struct ReplayArgs {
     /// Deliver the frames at the pace they were recorded instead of as fast as possible.
     #[arg(long)]
     pub realtime: bool,
+    /// Publish each pose on a live stream bound to ENDPOINT (tcp://IP:PORT or ipc://PATH), as
+    /// `run` does with its config's `[stream]`: try `mousepose listen` and closed-loop code
+    /// without cameras (with --realtime).
+    #[arg(long, value_name = "ENDPOINT", value_parser = crate::app::parse::endpoint)]
+    pub stream: Option<Endpoint>,
     /// Body-forest worker threads (0: one per core).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=64))]
     pub workers: u32,
@@ -153,6 +159,10 @@ pub fn command(args: &ReplayArgs) -> Outcome {
     }
     let session = args.sessions.first().cloned().unwrap_or_default();
     let options = ReplayOptions {
+        stream: args.stream.clone().map(|endpoint| StreamConfig {
+            host_clock: "recording",
+            ..StreamConfig::at(endpoint)
+        }),
         session: session.clone(),
         out: args.out.clone(),
         models: args.models.clone(),
@@ -181,9 +191,9 @@ pub fn command(args: &ReplayArgs) -> Outcome {
 
 /// `mousepose replay` with several sessions or a pattern.
 fn replay_many(args: &ReplayArgs) -> Outcome {
-    if args.realtime || args.overlays.is_some() {
+    if args.realtime || args.overlays.is_some() || args.stream.is_some() {
         return Err(Failure::usage(anyhow::anyhow!(
-            "--realtime and --overlays are for one session, not a batch"
+            "--realtime, --overlays and --stream are for one session, not a batch"
         )));
     }
     let options = BatchOptions {

@@ -254,6 +254,7 @@ pub fn run_local(
             }
             let result = replay_until(
                 &ReplayOptions {
+                    stream: None,
                     session: item.session.clone(),
                     out: item.out.clone(),
                     models: options.models.clone(),

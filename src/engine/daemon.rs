@@ -25,6 +25,8 @@ use crate::runtime::sink::chunks::{
 use crate::runtime::sink::session::FrameRecorder;
 use crate::runtime::stages::segment::{FloorSlot, SegmentStage};
 use crate::runtime::status::{RunInfo, RunReport, Watch, Watched};
+use crate::runtime::stream::message::{self, StreamEvent};
+use crate::runtime::stream::{Publisher, StreamError, StreamHandle, Topic};
 use crate::runtime::topology::{Edges, Processing, Topology};
 use crate::vision::calibrate::RigCalibration;
 use crate::vision::segment::{Segmenter, SegmenterConfig};
@@ -162,6 +164,68 @@ struct Lookout<'a> {
     stall_watches: &'a [StallWatch],
     live: &'a Mutex<Live>,
     watch: &'a Watch,
+    /// The events the live stream publishes, when there is one.
+    events: Option<Mutex<StreamEvents<'a>>>,
+}
+
+/// The daemon's events on the live stream's `events` topic: the states seen last (cameras,
+/// chunks, recording), compared with the states now every lookout tick (100 ms).
+struct StreamEvents<'a> {
+    stream: StreamHandle,
+    chunks: &'a Chunks,
+    gauges: Option<&'a RecorderGauges>,
+    cameras: Vec<Option<bool>>,
+    chunk_count: usize,
+    paused: bool,
+}
+
+impl<'a> StreamEvents<'a> {
+    fn new(stream: StreamHandle, chunks: &'a Chunks, gauges: Option<&'a RecorderGauges>) -> Self {
+        Self {
+            stream,
+            chunks,
+            gauges,
+            cameras: Vec::new(),
+            chunk_count: 0,
+            paused: false,
+        }
+    }
+
+    /// Publishes what changed since the last call.
+    fn check(&mut self, healths: &[(&'static str, SharedHealth)]) {
+        let mut events = Vec::new();
+        self.cameras.resize(healths.len(), None);
+        for ((camera, health), seen) in healths.iter().zip(&mut self.cameras) {
+            let streaming = match &lock(health).state {
+                Some(CameraState::Streaming) => Some((true, String::new())),
+                Some(CameraState::Away(why)) => Some((false, why.clone())),
+                _ => None,
+            };
+            let Some((streaming, reason)) = streaming else { continue };
+            match (*seen, streaming) {
+                (Some(true), false) => events.push(StreamEvent::CameraAway { camera, reason }),
+                (Some(false), true) => events.push(StreamEvent::CameraBack { camera }),
+                _ => {}
+            }
+            *seen = Some(streaming);
+        }
+        let chunk_count = self.chunks.count();
+        events.extend((self.chunk_count..chunk_count).map(|chunk| StreamEvent::ChunkBegun { chunk }));
+        self.chunk_count = chunk_count;
+        let paused = self
+            .gauges
+            .is_some_and(|g| g.paused.load(std::sync::atomic::Ordering::Relaxed));
+        if paused != self.paused {
+            events.push(match paused {
+                true => StreamEvent::RecordingPaused,
+                false => StreamEvent::RecordingResumed,
+            });
+            self.paused = paused;
+        }
+        for event in &events {
+            self.stream.publish(Topic::Events, |seq| message::event(seq, event));
+        }
+    }
 }
 
 impl Lookout<'_> {
@@ -204,6 +268,12 @@ impl Lookout<'_> {
             std::thread::sleep(Duration::from_millis(100));
             for watch in self.stall_watches {
                 watch.check();
+            }
+            if let Some(events) = &self.events {
+                events
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .check(self.healths);
             }
             if signals.is_some_and(Signals::take_hangup) {
                 answer_hangup();
@@ -328,6 +398,8 @@ pub fn serve(
     signals: Option<&Signals>,
 ) -> anyhow::Result<RunReport> {
     let listener = config.http.address.map(HttpServer::bind).transpose()?;
+    let publisher = config.stream.as_ref().map(Publisher::start).transpose()?;
+    let stream = publisher.as_ref().map(Publisher::handle);
     let root = create_run_dir(&config.output_dir)?;
     tracing::info!(dir = ?root, record = config.record, "run started");
     let info = RunInfo {
@@ -359,6 +431,7 @@ pub fn serve(
             workers: config.body_workers,
             overlays: None,
             poses: Box::new(ChunkPoses::new(Arc::clone(&sinks.chunks), Arc::clone(&sinks.live))),
+            stream: stream.clone(),
         }),
         recorder: sinks.recorder,
     };
@@ -372,8 +445,9 @@ pub fn serve(
         cameras: healths.clone(),
         live: Arc::clone(&sinks.live),
         chunks: Arc::clone(&sinks.chunks),
-        recorder: sinks.gauges,
+        recorder: sinks.gauges.clone(),
         floor,
+        stream: stream.clone(),
     }));
     let server = match listener.map(|l| HttpServer::start(l, config.http.token.clone(), Arc::clone(&watch), rig)) {
         Some(Err(e)) => {
@@ -389,6 +463,7 @@ pub fn serve(
         stall_watches: &stall_watches,
         live: &sinks.live,
         watch: &watch,
+        events: stream.map(|s| Mutex::new(StreamEvents::new(s, &sinks.chunks, sinks.gauges.as_deref()))),
     };
     lookout.wait_ready(stop);
     let until = seconds.map(|s| started + Duration::from_secs_f64(s));
@@ -410,6 +485,9 @@ pub fn serve(
     }
     if let Some(server) = server {
         server.stop();
+    }
+    if let Some(publisher) = publisher {
+        publisher.stop();
     }
     finished.outcome?;
     let report = watch.report();
@@ -447,7 +525,11 @@ pub fn daemon(options: &DaemonOptions) -> Result<(RunReport, Option<String>), Fa
     let segment = segment_stage(&config, &rig).map_err(Failure::usage)?;
     let stop = Shutdown::default();
     let signals = Signals::install(&stop, false).context("installing the signal handlers")?;
-    let report = serve(&config, models, rig, segment, options.seconds, &stop, Some(&signals))
-        .map_err(|e| Failure::classed(e.is::<CameraUnusable>(), e))?;
+    let report = serve(&config, models, rig, segment, options.seconds, &stop, Some(&signals)).map_err(|e| {
+        let bad_endpoint = e
+            .downcast_ref::<StreamError>()
+            .is_some_and(|s| matches!(s, StreamError::Bind { .. }));
+        Failure::classed(e.is::<CameraUnusable>() || bad_endpoint, e)
+    })?;
     Ok((report, signals.unexpected_stop()))
 }

@@ -12,6 +12,7 @@ pub mod detect;
 pub mod eval;
 pub mod experiment;
 pub mod export;
+pub mod listen;
 pub mod progress;
 pub mod record;
 pub mod replay;

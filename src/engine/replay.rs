@@ -20,6 +20,7 @@ use crate::runtime::pose_record::PoseRecord;
 use crate::runtime::recording::{Recording, RecordingError, RecordingRig};
 use crate::runtime::sink::poses::{POSES_FILE, PoseTally, PoseWriter};
 use crate::runtime::stages::segment::SegmentStage;
+use crate::runtime::stream::{Publisher, StreamConfig, StreamError, StreamSummary};
 use crate::runtime::topology::{Edges, Finished, Processing, Sources, Topology, TopologyError};
 use crate::vision::segment::{ArenaCheck, Background, SegmentError, Segmenter, SegmenterConfig};
 use serde::Serialize;
@@ -52,6 +53,8 @@ pub struct ReplayOptions {
     /// A PNG mask of the arena (non-black = inside), instead of the arena found automatically.
     pub roi: Option<PathBuf>,
     pub force: bool,
+    /// Publish each pose on this live stream as it is made (`--stream`).
+    pub stream: Option<StreamConfig>,
 }
 
 /// Why a replay failed.
@@ -83,6 +86,8 @@ pub enum ReplayError {
     Interrupted,
     #[error("cannot install the signal handlers")]
     Signals(#[source] std::io::Error),
+    #[error(transparent)]
+    Stream(#[from] StreamError),
 }
 
 impl ReplayError {
@@ -92,7 +97,7 @@ impl ReplayError {
         match self {
             Self::Output(OutputError::NotEmpty(_) | OutputError::NotADirectory(_)) => true,
             Self::Recording(r) => r.is_input_problem(),
-            Self::Mask(_) => true,
+            Self::Mask(_) | Self::Stream(StreamError::Bind { .. }) => true,
             _ => false,
         }
     }
@@ -247,6 +252,9 @@ pub struct ReplaySummary {
     pub picture: Option<&'static str>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub picture_error: Option<String>,
+    /// The live stream (`--stream`): subscribers at the end, messages published, sent, dropped.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stream: Option<StreamSummary>,
 }
 
 /// The picture of the frame pair of `pose` (see [`crate::runtime::overlay`]) with
@@ -410,8 +418,18 @@ pub fn replay_with(
         depth_size,
         segmenter,
     } = scene;
-    let topology = replay_topology(&recording, options, depth_size, segmenter, models, rig, writer);
+    let publisher = options.stream.as_ref().map(Publisher::start).transpose()?;
+    let mut topology = replay_topology(&recording, options, depth_size, segmenter, models, rig, writer);
+    if let Some(p) = topology.processing.as_mut() {
+        p.stream = publisher.as_ref().map(Publisher::handle);
+    }
     let finished = run_pipeline(topology, interrupt, &tally, recording.depth_count() as u64, &progress)?;
+    // Stopped once what it queued is sent, so that its counts are final.
+    let stream = publisher.map(|p| {
+        let handle = p.handle();
+        p.stop();
+        handle.summary()
+    });
     let stages = finished.outcome?;
     if interrupt.requested() {
         return Err(ReplayError::Interrupted);
@@ -462,6 +480,7 @@ pub fn replay_with(
         ),
         picture: None,
         picture_error: None,
+        stream,
     };
     for warning in &summary.warnings {
         tracing::warn!(message = "The arena may miss the mouse.", detail = %warning);
@@ -593,6 +612,7 @@ fn replay_topology<'a>(
             workers: options.workers,
             overlays: options.overlays,
             poses: Box::new(writer),
+            stream: None,
         }),
         recorder: None,
     }

@@ -10,6 +10,7 @@ pub use crate::runtime::capture::backend::{ColorCamera, DepthCamera};
 pub use crate::runtime::capture::supervise::Reconnect;
 use crate::runtime::capture::{COLOR_BACKENDS, DEPTH_BACKENDS};
 use crate::runtime::pipeline::{EdgeConfig, WhenFull};
+use crate::runtime::stream::{Endpoint, StreamConfig};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -62,6 +63,8 @@ struct RawConfig {
     reconnect: RawReconnect,
     #[serde(default)]
     http: RawHttp,
+    /// The live pose stream: none without the table.
+    stream: Option<RawStream>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -134,6 +137,15 @@ struct RawHttp {
 
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
+struct RawStream {
+    endpoint: Option<String>,
+    allow_remote: Option<bool>,
+    queue: Option<usize>,
+    high_water_mark: Option<usize>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
 struct RawReconnect {
     stall_ms: Option<f64>,
     max_wait_ms: Option<f64>,
@@ -173,6 +185,8 @@ pub struct Config {
     pub reconnect: Reconnect,
     /// The daemon's HTTP server (live page, metrics, status).
     pub http: Http,
+    /// The live pose stream (`[stream]`), when the config has one.
+    pub stream: Option<StreamConfig>,
 }
 
 /// The `[http]` table: where the daemon serves its live page, metrics and status.
@@ -377,6 +391,7 @@ impl Checker<'_> {
             tracing::warn!(config = ?self.path, "the [aravis] table is not used (cameras are opened by their address): remove it");
         }
         let http = self.http(raw.http)?;
+        let stream = raw.stream.as_ref().map(|s| self.stream(s)).transpose()?.flatten();
         Ok(Config {
             path: self.path.to_owned(),
             depth,
@@ -395,7 +410,36 @@ impl Checker<'_> {
             min_free_share: min_free_percent / 100.0,
             reconnect,
             http,
+            stream,
         })
+    }
+
+    /// `[stream]`: an endpoint this machine alone reaches unless `allow_remote`; `"off"`: none.
+    fn stream(&self, s: &RawStream) -> Result<Option<StreamConfig>, ConfigError> {
+        let endpoint = match s.endpoint.as_deref() {
+            Some("off") => return Ok(None),
+            Some(text) => text
+                .parse::<Endpoint>()
+                .map_err(|e| self.bad("stream.endpoint", format!("is wrong: {e} (or \"off\")")))?,
+            None => Endpoint::default_tcp(),
+        };
+        if !endpoint.is_local() && s.allow_remote != Some(true) {
+            return Err(self.bad(
+                "stream.endpoint",
+                format!(
+                    "{endpoint} is reachable from other machines: set `allow_remote = true` to publish the \
+                     poses beyond this machine (and secure it: see docs/FORMATS.md)"
+                ),
+            ));
+        }
+        let mut config = StreamConfig::at(endpoint);
+        if let Some(queue) = s.queue {
+            config.queue = self.capacity("stream.queue", queue)?;
+        }
+        if let Some(hwm) = s.high_water_mark {
+            config.high_water_mark = i32::try_from(self.capacity("stream.high_water_mark", hwm)?).unwrap_or(4096);
+        }
+        Ok(Some(config))
     }
 
     /// `[http]`: a loopback address unless `allow_remote`, and then a token.
@@ -600,6 +644,38 @@ mod tests {
         ] {
             let e = parse(&format!("{base}[http]\n{http}")).unwrap_err().to_string();
             assert!(e.contains(key) && e.contains(why), "{http}: {e}");
+        }
+    }
+
+    #[test]
+    fn issue46_the_stream_is_off_without_its_table_on_loopback_by_default_and_checked() {
+        let base = "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n";
+        assert_eq!(parse(base).unwrap().stream, None);
+        let c = parse(&format!("{base}[stream]\n")).unwrap();
+        assert_eq!(c.stream, Some(StreamConfig::at(Endpoint::default_tcp())));
+        let c = parse(&format!("{base}[stream]\nendpoint = \"off\"\n")).unwrap();
+        assert_eq!(c.stream, None);
+        let c = parse(&format!(
+            "{base}[stream]\nendpoint = \"tcp://0.0.0.0:9000\"\nallow_remote = true\nqueue = 8\nhigh_water_mark = 5\n"
+        ))
+        .unwrap()
+        .stream
+        .unwrap();
+        assert_eq!(
+            (c.endpoint.to_string(), c.queue, c.high_water_mark),
+            ("tcp://0.0.0.0:9000".to_owned(), 8, 5)
+        );
+        for (stream, why) in [
+            ("endpoint = \"tcp://0.0.0.0:9000\"\n", "allow_remote"),
+            ("endpoint = \"tcp://localhost:9000\"\n", "IP:PORT"),
+            ("endpoint = \"tcp://127.0.0.1:0\"\n", "port"),
+            ("endpoint = \"ipc://\"\n", "ipc://PATH"),
+            ("queue = 0\n", "from 1 to 4096"),
+            ("high_water_mark = 5000\n", "from 1 to 4096"),
+            ("topic = \"poses\"\n", "unknown field"),
+        ] {
+            let e = parse(&format!("{base}[stream]\n{stream}")).unwrap_err().to_string();
+            assert!(e.contains(why) && !e.contains('\n'), "{stream}: {e}");
         }
     }
 

@@ -16,5 +16,6 @@ pub mod recording;
 pub mod sink;
 pub mod stages;
 pub mod status;
+pub mod stream;
 pub mod topology;
 pub mod usage;

@@ -448,7 +448,11 @@ impl Synchronizer {
         let tol = self.tolerance_ns() as i64;
         while let Some(d) = self.depth.front() {
             let td = self.depth_clock.host_time(d.stamp);
-            let decided = end || !self.config.color || self.newest_color.is_some_and(|c| c > td + tol);
+            // Colour frames come in capture order: once one taken at or after this depth frame
+            // is in, every later one is farther from it than that one, so the nearest partner
+            // is among those in (waiting until one is past the tolerance adds up to a frame
+            // interval of latency for nothing).
+            let decided = end || !self.config.color || self.newest_color.is_some_and(|c| c >= td);
             // Waiting given up: the frame waited the longest wait, or the colour camera has
             // been silent that long.
             let given_up = !decided

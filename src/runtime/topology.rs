@@ -43,6 +43,7 @@ use crate::runtime::stages::fuse::FuseStage;
 use crate::runtime::stages::paws::PawStage;
 use crate::runtime::stages::segment::SegmentStage;
 use crate::runtime::stages::sync::SyncStage;
+use crate::runtime::stream::{Published, StreamHandle};
 use crate::vision::fusion::{Fuser, FusionConfig};
 use crossbeam_channel::Receiver;
 use std::collections::BTreeMap;
@@ -110,6 +111,8 @@ pub struct Processing {
     pub overlays: Option<u64>,
     /// Where the poses go: `poses.csv` of one directory, or chunk after chunk.
     pub poses: Box<dyn Sink<In = Fused>>,
+    /// The live pose stream, when one is bound: each pose is published before it is written.
+    pub stream: Option<StreamHandle>,
 }
 
 /// A pipeline to start.
@@ -425,8 +428,13 @@ fn declare_processing(
         rig,
         overlays,
         poses,
+        stream,
         ..
     } = p;
+    let poses = match stream {
+        Some(stream) => Box::new(Published { inner: poses, stream }),
+        None => poses,
+    };
     let fuser = Fuser::new(rig.color, FusionConfig::default());
     chain
         .map(segment)?

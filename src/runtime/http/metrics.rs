@@ -11,6 +11,7 @@ use crate::runtime::capture::supervise::{CameraState, lock};
 use crate::runtime::pipeline::Histogram;
 use crate::runtime::pose_record::PoseStatus;
 use crate::runtime::status::Watch;
+use crate::runtime::stream::{DROP_REASONS, StreamStats, Topic};
 use crate::runtime::usage::{process_cpu_s, process_resident_bytes};
 use prometheus_client::collector::Collector;
 use prometheus_client::encoding::{DescriptorEncoder, EncodeCounterValue, EncodeMetric as _, NoLabelSet};
@@ -341,7 +342,38 @@ impl Families<'_> {
                 &[(Vec::new(), f64::from(u8::from(g.paused.load(Ordering::Relaxed))))],
             )?;
         }
+        if let Some(stream) = &w.parts.stream {
+            self.stream_families(stream.stats())?;
+        }
         Ok(())
+    }
+
+    /// The live pose stream: subscribers, messages sent per topic, dropped per reason.
+    fn stream_families(&mut self, stats: &StreamStats) -> std::fmt::Result {
+        self.gauge(
+            "mousepose_stream_subscribers",
+            "Subscribers connected to the live pose stream.",
+            None,
+            &[(Vec::new(), stats.subscribers() as f64)],
+        )?;
+        self.counter(
+            "mousepose_stream_messages",
+            "Messages the live stream handed to ZeroMQ, by topic.",
+            None,
+            &Topic::ALL
+                .iter()
+                .map(|t| (label("topic", t.name()), stats.sent(*t)))
+                .collect::<Vec<_>>(),
+        )?;
+        self.counter(
+            "mousepose_stream_dropped",
+            "Messages of the live stream dropped before ZeroMQ took them, by reason.",
+            None,
+            &DROP_REASONS
+                .iter()
+                .map(|r| (label("reason", r), stats.dropped(r)))
+                .collect::<Vec<_>>(),
+        )
     }
 
     /// The process: memory, CPU time, uptime, version.

@@ -15,6 +15,7 @@ use crate::runtime::pipeline::{LatencySummary, StageReport, reports_of};
 use crate::runtime::pose_record::{PoseRecord, PoseStatus};
 use crate::runtime::sink::chunks::{Live, RecorderGauges};
 use crate::runtime::stages::segment::FloorSlot;
+use crate::runtime::stream::{StreamHandle, StreamSummary};
 use crate::runtime::topology::PipelineWatch;
 use crate::runtime::usage::{process_cpu_s, process_resident_bytes};
 use serde::{Deserialize, Serialize};
@@ -87,6 +88,9 @@ pub struct RunReport {
     pub resident_memory_bytes: Option<u64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub recording: Option<RecordingReport>,
+    /// The live pose stream (`[stream]`): subscribers connected, messages sent and dropped.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stream: Option<StreamSummary>,
 }
 
 impl RunReport {
@@ -141,6 +145,13 @@ impl RunReport {
                 if r.paused { ", PAUSED" } else { "" }
             );
         }
+        if let Some(s) = &self.stream {
+            let _ = writeln!(
+                text,
+                "stream: {}, {} subscribers, sent {:?}, dropped {:?}",
+                s.endpoint, s.subscribers, s.sent, s.dropped
+            );
+        }
         text
     }
 }
@@ -179,6 +190,8 @@ pub struct Watched {
     pub recorder: Option<Arc<RecorderGauges>>,
     /// The floor the segmenter fitted, for the live view.
     pub floor: FloorSlot,
+    /// The live pose stream, when one is bound.
+    pub stream: Option<StreamHandle>,
 }
 
 /// A running daemon, as its readers see it.
@@ -262,6 +275,7 @@ impl Watch {
                 disk_free_bytes: g.disk_free_bytes.load(Ordering::Relaxed),
                 paused: g.paused.load(Ordering::Relaxed),
             }),
+            stream: self.parts.stream.as_ref().map(StreamHandle::summary),
         }
     }
 

@@ -1,0 +1,217 @@
+//! The live pose stream (issue 46): a stuck subscriber holds at most its queues, the daemon
+//! publishes poses and events that `mousepose listen` and the Python subscriber of
+//! `docs/FORMATS.md` (run as written there) read.
+
+use crate::run::{daemon, rig_full, session_depth, terminate};
+use crate::util::{mousepose, repo_root};
+use mousepose::runtime::stream::{Endpoint, Publisher, StreamConfig, Subscriber, Topic};
+use std::io::BufRead as _;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Waits (at most 30 s) until `publisher` counts `n` subscribers.
+fn wait_for_subscribers(publisher: &Publisher, n: u64) {
+    let start = Instant::now();
+    while publisher.handle().stats().subscribers() != n {
+        assert!(start.elapsed() < Duration::from_secs(30), "no subscriber counted");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A subscriber that never reads: everything published is sent or counted as dropped, and
+/// what waits for it is bounded by the high-water marks (counted, not timed).
+#[test]
+fn issue46_a_stuck_subscriber_holds_at_most_the_high_water_marks_and_every_message_is_counted() {
+    let tmp = tempfile::tempdir().unwrap();
+    let endpoint = Endpoint::Ipc(tmp.path().join("stream.sock"));
+    let config = StreamConfig {
+        queue: 8,
+        high_water_mark: 10,
+        ..StreamConfig::at(endpoint.clone())
+    };
+    let publisher = Publisher::start(&config).unwrap();
+    let handle = publisher.handle();
+    // No subscriber: nothing is even made.
+    handle.publish(Topic::Poses, |_| unreachable!("a message made with no subscriber"));
+    let stuck = Subscriber::connect(&endpoint, &[Topic::Poses]).unwrap();
+    wait_for_subscribers(&publisher, 1);
+    const N: u64 = 5000;
+    for _ in 0..N {
+        handle.publish(Topic::Poses, |seq| format!("{seq:016}").repeat(1024).into_bytes());
+    }
+    publisher.stop();
+    let s = handle.summary();
+    assert_eq!(s.published["poses"], N, "{s:?}");
+    assert_eq!(
+        s.sent["poses"] + s.dropped["queue_full"] + s.dropped["send_failed"],
+        N,
+        "{s:?}"
+    );
+    // Only now does it read: it finds at most what libzmq held for it (the publisher's
+    // high-water mark, its own receive mark of 1000, what the socket buffers carry).
+    let mut got = 0u64;
+    while stuck.next(Duration::from_millis(500)).unwrap().is_some() {
+        got += 1;
+    }
+    assert!(got > 0, "the subscriber got nothing");
+    assert!(
+        got <= 10 + 1000 + 64,
+        "{got} of {N} messages waited for a subscriber that never read"
+    );
+}
+
+/// The ```python block of docs/FORMATS.md, as written there.
+fn documented_subscriber() -> String {
+    let text = std::fs::read_to_string(repo_root().join("docs/FORMATS.md")).expect("test set-up");
+    let start = text
+        .find("```python\nimport json, zmq")
+        .expect("the subscriber in FORMATS.md")
+        + 10;
+    let end = start + text[start..].find("```").expect("the block ends");
+    text[start..end].to_owned()
+}
+
+/// The Python of `export nwb`, which `scripts/setup.sh` gives pyzmq.
+fn python() -> PathBuf {
+    std::env::var_os("MOUSEPOSE_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(mousepose::engine::export::nwb::DEFAULT_PYTHON))
+}
+
+/// A daemon on the fixture session with its stream on a socket file of `dir`.
+fn streaming_daemon(dir: &Path) -> (crate::capture_aravis::ChildGuard, String) {
+    let endpoint = format!("ipc://{}", dir.join("stream.sock").display());
+    let http = format!("address = \"127.0.0.1:0\"\n[stream]\nendpoint = \"{endpoint}\"\n");
+    let rig = rig_full(dir, &session_depth(), false, "min_free_percent = 0\n", &http);
+    (daemon(&rig, None), endpoint)
+}
+
+#[test]
+fn issue46_the_documented_python_subscriber_and_listen_read_a_running_daemon() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (daemon, endpoint) = streaming_daemon(tmp.path());
+    // The subscriber of the docs, word for word but for the endpoint.
+    let script = documented_subscriber().replace("tcp://127.0.0.1:8471", &endpoint);
+    assert!(script.contains(&endpoint), "{script}");
+    let mut child = crate::capture_aravis::ChildGuard(
+        Command::new(python())
+            .args(["-c", &script])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let mut lines = std::io::BufReader::new(child.0.stdout.take().unwrap()).lines();
+    let mut poses = Vec::new();
+    // Until the mouse is found (the background is learnt live first): at most a minute of poses.
+    while poses.len() < 1800 && (poses.len() < 5 || !poses.iter().any(|l: &String| l.contains(" ok ("))) {
+        let line = lines.next().expect("the subscriber ended").unwrap();
+        if !line.starts_with("entered") {
+            poses.push(line);
+        }
+    }
+    drop(child);
+    for line in &poses {
+        let mut words = line.split(' ');
+        assert!(words.next().unwrap().parse::<u64>().is_ok(), "{line}");
+        assert!(
+            ["ok", "no_mouse", "no_background"].contains(&words.next().unwrap()),
+            "{line}"
+        );
+    }
+    assert!(
+        poses.iter().any(|l| l.contains(" ok (")),
+        "no pose of the mouse: {poses:?}"
+    );
+
+    // `listen --json`: poses with their stamps and 24 joints, then a chunk begun (every 3 s).
+    let out = mousepose()
+        .args(["listen", &endpoint, "--json", "--count", "3", "--seconds", "60"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let messages: Vec<serde_json::Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let poses: Vec<_> = messages.iter().filter(|m| m["topic"] == "poses").collect();
+    assert!(!poses.is_empty(), "{messages:?}");
+    for m in poses {
+        assert_eq!(m["version"], 1);
+        assert_eq!(m["host_clock"], "monotonic");
+        assert_eq!(m["joints"].as_object().unwrap().len(), 24, "{m}");
+        let (arrived, published) = (
+            m["depth"]["host_ns"].as_u64().unwrap(),
+            m["published_ns"].as_u64().unwrap(),
+        );
+        assert!(published >= arrived, "{m}");
+    }
+    let out = mousepose()
+        .args([
+            "listen",
+            &endpoint,
+            "--topic",
+            "events",
+            "--count",
+            "1",
+            "--seconds",
+            "60",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.starts_with("events #") && text.contains("chunk_begun chunk="),
+        "{text}"
+    );
+
+    let (status, stdout, err) = terminate(daemon, Duration::from_secs(30));
+    assert!(status.success(), "{status}: {err}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let stream = &report["stream"];
+    assert_eq!(stream["endpoint"], endpoint.as_str(), "{report:#}");
+    assert!(stream["sent"]["poses"].as_u64().unwrap() >= 8, "{stream}");
+    assert!(stream["sent"]["events"].as_u64().unwrap() >= 1, "{stream}");
+}
+
+#[test]
+fn issue46_a_bad_or_taken_endpoint_is_refused_in_one_sentence() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (endpoint, why) in [
+        ("tcp://localhost:8471", "IP:PORT"),
+        ("udp://127.0.0.1:8471", "tcp://IP:PORT or ipc://PATH"),
+        ("tcp://0.0.0.0:8471", "allow_remote"),
+    ] {
+        let http = format!("address = \"127.0.0.1:0\"\n[stream]\nendpoint = \"{endpoint}\"\n");
+        let rig = rig_full(tmp.path(), &session_depth(), false, "", &http);
+        let out = mousepose().args(["run", "--config"]).arg(&rig).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{endpoint}: {err}");
+        assert!(
+            err.contains("stream.endpoint") && err.contains(why),
+            "{endpoint}: {err}"
+        );
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+    // An address in use: refused, naming it.
+    let holder = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let taken = Endpoint::Tcp(holder.local_addr().unwrap());
+    let e = Publisher::start(&StreamConfig::at(taken.clone()))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains(&taken.to_string()), "{e}");
+    // The daemon refuses it at start, before it opens a camera: the user's to fix.
+    let http = format!("address = \"127.0.0.1:0\"\n[stream]\nendpoint = \"{taken}\"\n");
+    let rig = rig_full(tmp.path(), &session_depth(), false, "", &http);
+    let out = mousepose().args(["run", "--config"]).arg(&rig).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("cannot bind the pose stream") && err.contains(&taken.to_string()),
+        "{err}"
+    );
+    drop(holder);
+}
