@@ -11,7 +11,8 @@
 //! When the plane holds fewer than a fifth of the view's readings, the floor is fitted again
 //! to that region alone (otherwise its fit is already the floor's, to the same readings). The arena is the region with its holes
 //! filled (whatever stands on the floor), widened by [`ARENA_MARGIN_MM`] so that a mouse
-//! rearing at the wall stays inside.
+//! rearing at the wall stays inside, and over the mouse-sized movers seen within a mouse's length of it
+//! (a mouse on a sloping rim, which is not flat floor).
 
 use super::SegmentError;
 use super::activity::Blob;
@@ -21,6 +22,9 @@ use super::floor::{FLOOR_MIN_INLIERS, FloorPlane, best_plane, best_plane_local, 
 const MIN_FLOOR_SHARE: f64 = 0.05;
 /// The arena reaches this far (mm on the floor) past its floor region.
 pub const ARENA_MARGIN_MM: f64 = 40.0;
+/// A mouse-sized mover this near the arena (mm on the floor, a mouse's length) and at a
+/// mouse's heights above its floor is taken into it (see [`find_arena`]).
+const MOVER_REACH_MM: f64 = 100.0;
 /// Flat regions besides the largest one weighed against the mouse's whereabouts, at most.
 const MORE_CANDIDATES: usize = 4;
 
@@ -29,6 +33,12 @@ const MORE_CANDIDATES: usize = 4;
 pub(super) struct Heights {
     pub min_mm: f64,
     pub max_mm: f64,
+}
+
+impl Heights {
+    fn holds(&self, height_mm: f64) -> bool {
+        (self.min_mm..=self.max_mm).contains(&height_mm)
+    }
 }
 
 /// The floor and the arena (1 = inside, row-major over the background's region).
@@ -127,7 +137,97 @@ pub(super) fn find_arena(
             best = (n, fit);
         }
     }
-    Ok(best.1)
+    let mut fit = best.1;
+    take_in_movers(&mut fit, evidence, rays, heights, (width, height), focal_px);
+    Ok(fit)
+}
+
+/// Widens the arena over the movers seen beside it: a mouse on a sloping rim, which the flat
+/// floor region leaves out. A mouse-sized mover that the arena does not hold, within
+/// [`MOVER_REACH_MM`] of it and with most of its pixels at a mouse's heights above its floor,
+/// is taken in with [`ARENA_MARGIN_MM`] around it. A mover farther away (a hand beside the
+/// box, a second arena) or higher (the experimenter) is left out.
+fn take_in_movers(
+    fit: &mut FloorFit,
+    evidence: &[Blob],
+    rays: &[[f32; 2]],
+    heights: Heights,
+    (width, height): (usize, usize),
+    focal_px: f64,
+) {
+    let mut taken = vec![false; evidence.len()];
+    // A mover taken in may bring another one within reach (the mouse further up the rim).
+    loop {
+        let mut reach = fit.arena.clone();
+        widen(&mut reach, width, height, reach_px(fit, rays, focal_px));
+        let mut movers = vec![0u8; fit.arena.len()];
+        let mut depths = Vec::new();
+        for (blob, taken) in evidence.iter().zip(taken.iter_mut()) {
+            if *taken || stands_on(blob, fit, rays, heights) {
+                continue;
+            }
+            let touches = blob.pixels.iter().any(|&(i, _)| reach.get(i as usize) == Some(&1));
+            let at_heights = blob
+                .pixels
+                .iter()
+                .filter(|&&(i, z)| {
+                    rays.get(i as usize)
+                        .is_some_and(|r| heights.holds(height_above(fit, r, z)))
+                })
+                .count();
+            if !touches || 2 * at_heights < blob.pixels.len() {
+                continue;
+            }
+            *taken = true;
+            for &(i, z) in &blob.pixels {
+                if let Some(m) = movers.get_mut(i as usize) {
+                    *m = 1;
+                    depths.push(z);
+                }
+            }
+        }
+        if depths.is_empty() {
+            return;
+        }
+        let mid = depths.len() / 2;
+        let depth = f64::from(*depths.select_nth_unstable_by(mid, f32::total_cmp).1);
+        widen(&mut movers, width, height, margin_px(depth, focal_px));
+        for (a, m) in fit.arena.iter_mut().zip(&movers) {
+            *a |= m;
+        }
+    }
+}
+
+/// [`MOVER_REACH_MM`] in pixels at the depth of the arena's farthest floor reading from the
+/// camera (the fewest pixels).
+fn reach_px(fit: &FloorFit, rays: &[[f32; 2]], focal_px: f64) -> usize {
+    // The floor's depth along the optical axis where the arena's rays meet it.
+    let depth = fit
+        .arena
+        .iter()
+        .zip(rays)
+        .filter(|&(&a, _)| a != 0)
+        .map(|(_, r)| {
+            let n = &fit.floor.normal;
+            -fit.floor.offset_mm / n.dot(&nalgebra::Vector3::new(f64::from(r[0]), f64::from(r[1]), 1.0))
+        })
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .fold(0.0, f64::max);
+    (MOVER_REACH_MM * focal_px / depth.max(1.0)).ceil() as usize
+}
+
+/// The height (mm) above the fit's floor of the reading `z` along `ray`.
+fn height_above(fit: &FloorFit, ray: &[f32; 2], z: f32) -> f64 {
+    fit.floor
+        .normal
+        .dot(&nalgebra::Vector3::new(f64::from(ray[0]), f64::from(ray[1]), 1.0))
+        * f64::from(z)
+        + fit.floor.offset_mm
+}
+
+/// [`ARENA_MARGIN_MM`] in pixels at `depth_mm` from the camera.
+fn margin_px(depth_mm: f64, focal_px: f64) -> usize {
+    (ARENA_MARGIN_MM * focal_px / depth_mm.max(1.0)).ceil() as usize
 }
 
 /// 1 where a reading lies within `tolerance` of `plane`.
@@ -156,13 +256,7 @@ fn stands_on(blob: &Blob, fit: &FloorFit, rays: &[[f32; 2]], heights: Heights) -
             let (Some(&inside), Some(r)) = (fit.arena.get(i), rays.get(i)) else {
                 return false;
             };
-            let h = fit
-                .floor
-                .normal
-                .dot(&nalgebra::Vector3::new(f64::from(r[0]), f64::from(r[1]), 1.0))
-                * f64::from(z)
-                + fit.floor.offset_mm;
-            inside != 0 && (heights.min_mm..=heights.max_mm).contains(&h)
+            inside != 0 && heights.holds(height_above(fit, r, z))
         })
         .count();
     2 * on >= blob.pixels.len()
@@ -183,9 +277,8 @@ fn arena_of(depth: &[f32], region: &[u8], width: usize, height: usize, focal_px:
         let mid = floor_depths.len() / 2;
         f64::from(*floor_depths.select_nth_unstable_by(mid, f32::total_cmp).1)
     };
-    let margin_px = (ARENA_MARGIN_MM * focal_px / floor_depth.max(1.0)).ceil() as usize;
     let mut arena = fill_holes(region, width, height);
-    widen(&mut arena, width, height, margin_px);
+    widen(&mut arena, width, height, margin_px(floor_depth, focal_px));
     arena
 }
 
