@@ -8,7 +8,7 @@
 //! `1 / (2 pi f)` seconds at the cut-off `f` its speed gives (see [`SmootherConfig::lag_s`]).
 //!
 //! The filter starts afresh on the first frame of a mouse, after a gap, for a joint that was
-//! not placed in the frame before, and for every joint when the heading turns more than 90
+//! not placed in the frame before or that jumped farther than a mouse moves in a frame, and for every joint when the heading turns more than 90
 //! degrees from the smoothed one between two frames (the tracker took the other end for the
 //! head: the joints swap ends, which no smoothing should blur).
 
@@ -30,6 +30,10 @@ pub struct SmootherConfig {
     pub derivative_cutoff_hz: f64,
     /// A gap between frames longer than this starts the filter afresh (s).
     pub max_gap_s: f64,
+    /// A joint placed this far (mm) from where the filter holds it starts afresh: no mouse
+    /// moves so far in a frame (1,200 mm/s at 30 fps), so the estimate jumped (or the frames
+    /// are not of one continuous scene).
+    pub max_jump_mm: f64,
 }
 
 impl Default for SmootherConfig {
@@ -39,6 +43,7 @@ impl Default for SmootherConfig {
             beta_hz_per_mm_s: 0.07,
             derivative_cutoff_hz: 1.0,
             max_gap_s: 0.5,
+            max_jump_mm: 40.0,
         }
     }
 }
@@ -135,7 +140,7 @@ fn step(
         return None;
     }
     let next = match (state, dt_s) {
-        (Some(s), Some(dt)) => {
+        (Some(s), Some(dt)) if (joint.position_mm - s.position_mm).norm() <= config.max_jump_mm => {
             let raw_velocity = (joint.position_mm - s.position_mm) / dt;
             let velocity_mm_s =
                 s.velocity_mm_s + alpha(config.derivative_cutoff_hz, dt) * (raw_velocity - s.velocity_mm_s);

@@ -8,6 +8,8 @@
 //! connected regions (8-connected) of the readings within the floor tolerance of it. The floor
 //! region is the largest solid one (its centroid on itself: a ring of floor around a round
 //! arena's wall is not the arena), else the largest; it must hold at least one reading in 20.
+//! When the mouse-sized movers seen in the recording do not all stand in it, the same plane's
+//! region holding the most of them is tried too (a small arena standing on the room's floor).
 //! When the plane holds fewer than a fifth of the view's readings, the floor is fitted again
 //! to that region alone (otherwise its fit is already the floor's, to the same readings). The arena is the region with its holes
 //! filled (whatever stands on the floor), widened by [`ARENA_MARGIN_MM`] so that a mouse
@@ -100,6 +102,14 @@ pub(super) fn find_arena(
     if best.0 == evidence.len() {
         return Ok(best.1);
     }
+    // The same plane's other regions: a small arena standing on the room's floor, its own
+    // floor cut off from the room's by its wall.
+    if let Some(fit) = region_holding_movers(depth, rays, (width, height), focal_px, tolerance, &plane, evidence) {
+        let n = carried(&fit);
+        if n > best.0 {
+            best = (n, fit);
+        }
+    }
     // Other flat regions: planes of the readings not yet explained, one after the other.
     let mut left: Vec<u8> = near_plane(depth, rays, &plane, tolerance)
         .iter()
@@ -140,6 +150,53 @@ pub(super) fn find_arena(
     let mut fit = best.1;
     take_in_movers(&mut fit, evidence, rays, heights, (width, height), focal_px);
     Ok(fit)
+}
+
+/// The region of `plane`'s readings (at least one in 20 of the view's) on which the most
+/// mouse-sized movers stand, with its floor fitted; `None` when no such region holds one.
+fn region_holding_movers(
+    depth: &[f32],
+    rays: &[[f32; 2]],
+    (width, height): (usize, usize),
+    focal_px: f64,
+    tolerance: f64,
+    plane: &FloorPlane,
+    evidence: &[Blob],
+) -> Option<FloorFit> {
+    let (labels, stats) = regions(&near_plane(depth, rays, plane, tolerance), width, height);
+    let valid = depth.iter().filter(|&&z| z > 0.0).count();
+    let mut held = vec![0usize; stats.len()];
+    for blob in evidence {
+        let mut on = vec![0usize; stats.len()];
+        for &(i, _) in &blob.pixels {
+            if let Some(n) = labels
+                .get(i as usize)
+                .and_then(|&l| on.get_mut((l as usize).wrapping_sub(1)))
+            {
+                *n += 1;
+            }
+        }
+        if let Some(k) = on.iter().position(|&n| 2 * n >= blob.pixels.len()) {
+            held[k] += 1;
+        }
+    }
+    let (k, _) = held
+        .iter()
+        .enumerate()
+        .filter(|&(k, &n)| {
+            n > 0
+                && stats
+                    .get(k)
+                    .is_some_and(|s| (s.0 as f64) >= MIN_FLOOR_SHARE * valid as f64)
+        })
+        .max_by_key(|&(_, &n)| n)?;
+    let label = k as u32 + 1;
+    let region: Vec<u8> = labels.iter().map(|&l| u8::from(l == label)).collect();
+    let floor = fit_floor(depth, rays, tolerance, Some(&region)).ok()?;
+    Some(FloorFit {
+        arena: arena_of(depth, &region, width, height, focal_px),
+        floor,
+    })
 }
 
 /// Widens the arena over the movers seen beside it: a mouse on a sloping rim, which the flat
@@ -285,6 +342,35 @@ fn arena_of(depth: &[f32], region: &[u8], width: usize, height: usize, focal_px:
 /// The floor region among the connected regions of `mask`: the largest solid one, else the
 /// largest (see the module documentation); all zero when `mask` is.
 fn floor_region(mask: &[u8], width: usize, height: usize) -> Vec<u8> {
+    let (labels, stats) = regions(mask, width, height);
+    let solid = |k: usize, &(n, sx, sy): &(usize, usize, usize)| {
+        let (cx, cy) = (sx / n.max(1), sy / n.max(1));
+        labels.get(cy * width + cx) == Some(&(k as u32 + 1))
+    };
+    let largest = |only_solid: bool| {
+        stats
+            .iter()
+            .enumerate()
+            .filter(|(k, s)| !only_solid || solid(*k, s))
+            .max_by_key(|(_, s)| s.0)
+            .map(|(k, s)| (k, s.0))
+    };
+    let biggest = largest(false);
+    // A solid region that is not tiny beside the largest: the arena's floor inside a ring.
+    let chosen = match (largest(true), biggest) {
+        (Some((k, n)), Some((_, m))) if n * 10 >= m => Some(k),
+        (_, b) => b.map(|(k, _)| k),
+    };
+    let Some(k) = chosen else {
+        return vec![0; mask.len()];
+    };
+    let label = k as u32 + 1;
+    labels.iter().map(|&l| u8::from(l == label)).collect()
+}
+
+/// The connected regions (8-connected) of `mask`: each pixel's region label (0 outside the
+/// mask, `k + 1` for the k-th region), and per region its pixel count and its sums of x and y.
+fn regions(mask: &[u8], width: usize, height: usize) -> (Vec<u32>, Vec<(usize, usize, usize)>) {
     let mut labels = vec![0u32; mask.len()];
     // Per region: pixel count, and sums of x and y.
     let mut stats: Vec<(usize, usize, usize)> = Vec::new();
@@ -317,29 +403,7 @@ fn floor_region(mask: &[u8], width: usize, height: usize) -> Vec<u8> {
             *last = s;
         }
     }
-    let solid = |k: usize, &(n, sx, sy): &(usize, usize, usize)| {
-        let (cx, cy) = (sx / n.max(1), sy / n.max(1));
-        labels.get(cy * width + cx) == Some(&(k as u32 + 1))
-    };
-    let largest = |only_solid: bool| {
-        stats
-            .iter()
-            .enumerate()
-            .filter(|(k, s)| !only_solid || solid(*k, s))
-            .max_by_key(|(_, s)| s.0)
-            .map(|(k, s)| (k, s.0))
-    };
-    let biggest = largest(false);
-    // A solid region that is not tiny beside the largest: the arena's floor inside a ring.
-    let chosen = match (largest(true), biggest) {
-        (Some((k, n)), Some((_, m))) if n * 10 >= m => Some(k),
-        (_, b) => b.map(|(k, _)| k),
-    };
-    let Some(k) = chosen else {
-        return vec![0; mask.len()];
-    };
-    let label = k as u32 + 1;
-    labels.iter().map(|&l| u8::from(l == label)).collect()
+    (labels, stats)
 }
 
 /// `region` with its holes filled: every pixel not reachable from the image's border without
