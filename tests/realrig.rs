@@ -720,7 +720,15 @@ fn varied_mice_keep_their_heads_in_front() {
 /// to `bedding_mm` high, walls 150 mm high) standing in a room whose floor, all around it, is
 /// the plane `z = room_mm + room_slope * x`: the largest flat region of the view is the
 /// room's floor, not the arena's, and the arena's floor is tilted against it.
-fn raised_arena(cam: &Camera, radius_mm: f64, bedding_mm: f64, room_mm: f64, room_slope: f64) -> Vec<f32> {
+/// A round arena of `radius_mm` centred at world x = `centre_x_mm`, y = 0, its wall 150 mm
+/// high, on a room floor `room_mm` below (or above) its own, sloping by `room_slope`.
+fn raised_arena(
+    cam: &Camera,
+    (radius_mm, centre_x_mm): (f64, f64),
+    bedding_mm: f64,
+    room_mm: f64,
+    room_slope: f64,
+) -> Vec<f32> {
     const WALL_MM: f64 = 150.0;
     let i = &cam.intrinsics;
     let o = cam.centre();
@@ -729,7 +737,7 @@ fn raised_arena(cam: &Camera, radius_mm: f64, bedding_mm: f64, room_mm: f64, roo
         for x in 0..i.width {
             let d = cam.world_from_camera.rotation * i.ray(&Point2::new(f64::from(x), f64::from(y)));
             let at = |t: f64| o + d * t;
-            let r = |p: Point3<f64>| (p.x * p.x + p.y * p.y).sqrt();
+            let r = |p: Point3<f64>| ((p.x - centre_x_mm).powi(2) + p.y * p.y).sqrt();
             let (t_floor, t_top) = (-o.z / d.z, (WALL_MM - o.z) / d.z);
             let z = if r(at(t_floor)) <= radius_mm && r(at(t_top)) <= radius_mm {
                 // Bedding: bumps a few pixels across, fixed in time.
@@ -777,7 +785,7 @@ fn arenas_on_tilted_bedded_floors_and_small_arenas_are_found() {
         ("small", 2.0, 175.0, -300.0, 0.0, 0.05..0.2),
     ] {
         let cam = camera(nominal(512, 424), 770.0, tilt_deg);
-        let background = raised_arena(&cam, radius_mm, 3.0, room_mm, slope);
+        let background = raised_arena(&cam, (radius_mm, 0.0), 3.0, room_mm, slope);
         let dir = tmp.path().join(name);
         write_recording(&dir, &cam, &background, &mice, 30.0, &resolution(&cam.intrinsics));
         let out = tmp.path().join(format!("{name}-out"));
@@ -814,6 +822,56 @@ fn arenas_on_tilted_bedded_floors_and_small_arenas_are_found() {
     }
 }
 
+/// Issue 49, item 4: an arena a tenth of the view standing on the room's floor, off to one
+/// side: its floor and the room's are one plane, and the room's is the largest solid region
+/// of it, the first choice. The mice move inside the small arena; seen outside the first
+/// choice, they make the replay choose the region of the plane that holds them. An empty
+/// recording of the same rig finds no mouse.
+#[test]
+fn a_small_arena_on_the_rooms_floor_is_chosen_by_the_mouse_seen_in_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cam = camera(nominal(512, 424), 770.0, 2.0);
+    let centre_x_mm = -300.0;
+    let background = raised_arena(&cam, (175.0, centre_x_mm), 0.0, 0.0, 0.0);
+    let mice: Vec<MouseInstance> = (0..40)
+        .map(|k| {
+            let a = k as f64 * 0.45;
+            mouse(k, centre_x_mm + 70.0 * a.cos(), 70.0 * a.sin(), a + 1.6)
+        })
+        .collect();
+    let dir = tmp.path().join("small");
+    write_recording(&dir, &cam, &background, &mice, 30.0, &resolution(&cam.intrinsics));
+    let out = tmp.path().join("small-out");
+    let s = replay(&options(&dir, &out)).unwrap();
+    assert!(
+        (0.05..0.2).contains(&s.world.arena_share),
+        "arena share {}",
+        s.world.arena_share
+    );
+    let posed = rows(&out).iter().filter(|(status, _)| status == "ok").count();
+    assert!(posed * 100 >= mice.len() * 95, "{posed} of {} frames posed", mice.len());
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    // The same rig without a mouse: no mouse found.
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let frame: Vec<u8> = background
+        .iter()
+        .flat_map(|&z| (z.round() as u16).to_le_bytes())
+        .collect();
+    std::fs::write(empty.join("depth.dat"), frame.repeat(mice.len())).unwrap();
+    let ts: String = (0..mice.len())
+        .map(|k| format!("{:.3}\n", 1000.0 + k as f64 * 1000.0 / 30.0))
+        .collect();
+    std::fs::write(empty.join("depth_ts.txt"), ts).unwrap();
+    std::fs::write(empty.join("metadata.json"), resolution(&cam.intrinsics)).unwrap();
+    let out = tmp.path().join("empty-out");
+    replay(&options(&empty, &out)).unwrap();
+    assert!(
+        rows(&out).iter().all(|(status, _)| status != "ok"),
+        "a mouse in an empty arena"
+    );
+}
+
 /// Issue 27, item 3: when something of a mouse's size moves outside the arena used and no
 /// frame has a mouse, replay says so: a warning on stderr, `warnings` and `world.arena_check`
 /// in `summary.json`, and `frame.png` with the arena's outline.
@@ -821,7 +879,7 @@ fn arenas_on_tilted_bedded_floors_and_small_arenas_are_found() {
 fn a_mouse_outside_the_arena_is_reported() {
     let tmp = tempfile::tempdir().unwrap();
     let cam = camera(nominal(512, 424), 700.0, 4.0);
-    let background = raised_arena(&cam, 230.0, 0.0, -250.0, 0.0);
+    let background = raised_arena(&cam, (230.0, 0.0), 0.0, -250.0, 0.0);
     let mice: Vec<MouseInstance> = (0..10)
         .map(|k| {
             let a = k as f64 * 0.9;

@@ -403,12 +403,11 @@ pub fn replay_with(
         .as_ref()
         .map(|t| t.joints.iter().map(|(seq, _, j)| (*seq, *j)).collect())
         .unwrap_or_default();
-    let writer =
-        PoseWriter::create(staging.path(), truth_joints, recording.depth_count() as u64 / 2).map_err(|source| {
-            ReplayError::Write {
-                path: staging.path().join(POSES_FILE),
-                source,
-            }
+    let writer = PoseWriter::create(staging.path(), truth_joints, recording.depth_count() as u64 / 2)
+        .and_then(PoseWriter::with_raw_file)
+        .map_err(|source| ReplayError::Write {
+            path: staging.path().join(POSES_FILE),
+            source,
         })?;
     let tally = writer.tally();
     let Scene {

@@ -366,6 +366,7 @@ mod tests {
             paws: Vec::new(),
             headings: None,
             orientation: None,
+            raw_body: None,
         };
         let frame = ColorFrame {
             stamp: Stamp::default(),

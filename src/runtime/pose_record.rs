@@ -50,4 +50,7 @@ pub struct PoseRecord {
     pub headings: Option<Box<crate::vision::orientation::Headings>>,
     /// What the tracker chose, for a frame with a mouse.
     pub orientation: Option<crate::vision::orientation::Orientation>,
+    /// The main-body joints as the frame alone placed them, before the fusion stage smoothed
+    /// them over time (see [`crate::vision::smoothing`]); `None` without a mouse.
+    pub raw_body: Option<Box<crate::vision::orientation::BodyJoints>>,
 }

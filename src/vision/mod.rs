@@ -12,4 +12,5 @@ pub mod movement;
 pub mod orientation;
 pub mod paws;
 pub mod segment;
+pub mod smoothing;
 pub mod tail;

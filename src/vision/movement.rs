@@ -111,7 +111,10 @@ pub fn activity(frames: &[FrameInput], b: &Behaviour, smooth_s: f64, config: &Ac
         crate::core::median(&mut steps).unwrap_or(1.0 / 30.0)
     };
     let half = ((smooth_s / dt / 2.0).round() as usize).max(1);
-    let (turned, net) = turning(&unwrapped, half);
+    // The joints come smoothed over time already (`vision::smoothing`): the turning is
+    // summed over half the analysis's window, so that the two do not smooth turns away twice.
+    let turning_half = ((smooth_s / 2.0 / dt / 2.0).round() as usize).max(1);
+    let (turned, net) = turning(&unwrapped, turning_half);
     let angular = angular_speeds(&unwrapped, &t, half);
     let known: Vec<f64> = angular.iter().flatten().map(|a| a.abs()).collect();
     let mean_angular = (!known.is_empty()).then(|| known.iter().sum::<f64>() / known.len() as f64);

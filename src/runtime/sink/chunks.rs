@@ -1011,6 +1011,7 @@ mod tests {
             paws: Vec::new(),
             headings: None,
             orientation: None,
+            raw_body: None,
         };
         let frames = FramePair {
             depth: Arc::new(DepthFrame {

@@ -25,6 +25,9 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 /// The name of the file.
 pub const POSES_FILE: &str = "poses.csv";
+/// The main-body joints as each frame alone placed them, before smoothing over time: the same
+/// columns as `poses.csv`.
+pub const RAW_POSES_FILE: &str = "poses_raw.csv";
 
 /// The directory the pictures of `--overlays` go to, one PNG per pictured frame named by its
 /// depth sequence number.
@@ -126,6 +129,8 @@ pub struct PoseTally {
     pub error_count: [u64; JOINT_COUNT],
     /// Summed error (mm) and count of the paws placed from a detection.
     pub detected_paw_error: (f64, u64),
+    /// Summed error (mm) and count of joints 1-12 before smoothing over time.
+    pub raw_body_error: (f64, u64),
     /// The first pose with a mouse at or after the snapshot row (for a picture).
     pub snapshot: Option<PoseRecord>,
     /// Flipped headings against the truth (frames without truth are not counted).
@@ -159,8 +164,9 @@ impl PoseTally {
             .collect()
     }
 
-    /// Mean error per group of joints: `body` (1-12), `limbs` (13-20), `paws` (21-24), and
-    /// `detected_paws` (paws placed from a detection in the bottom view).
+    /// Mean error per group of joints: `body` (1-12), `limbs` (13-20), `paws` (21-24),
+    /// `detected_paws` (paws placed from a detection in the bottom view), and `body_raw` (1-12
+    /// before smoothing over time).
     pub fn group_error_mm(&self) -> BTreeMap<&'static str, f64> {
         let mean = |sum: f64, count: u64| (count > 0).then(|| sum / count as f64);
         let group = |joints: std::ops::Range<usize>| {
@@ -171,6 +177,7 @@ impl PoseTally {
         };
         [
             ("body", group(0..12)),
+            ("body_raw", mean(self.raw_body_error.0, self.raw_body_error.1)),
             ("limbs", group(12..20)),
             ("paws", group(20..24)),
             (
@@ -228,6 +235,8 @@ impl serde::Serialize for PoseRow<'_> {
 #[derive(Debug)]
 pub struct PoseWriter {
     out: csv::Writer<File>,
+    /// `poses_raw.csv`, when asked for ([`PoseWriter::with_raw_file`]).
+    raw_out: Option<csv::Writer<File>>,
     dir: std::path::PathBuf,
     truth: HashMap<u64, JointPositions>,
     snapshot_row: u64,
@@ -249,12 +258,25 @@ impl PoseWriter {
         out.write_record(columns(true))?;
         Ok(Self {
             out,
+            raw_out: None,
             dir: dir.to_owned(),
             truth,
             snapshot_row,
             tally: Arc::default(),
             whole_len: None,
         })
+    }
+
+    /// Also writes `dir/poses_raw.csv`: the same rows with the main-body joints before
+    /// smoothing over time.
+    ///
+    /// # Errors
+    /// The file cannot be created or its header written.
+    pub fn with_raw_file(mut self) -> std::io::Result<Self> {
+        let mut raw = csv::Writer::from_writer(File::create(self.dir.join(RAW_POSES_FILE))?);
+        raw.write_record(columns(true))?;
+        self.raw_out = Some(raw);
+        Ok(self)
     }
 
     /// Hands each row to the operating system as it is written (a live run's rows, which a
@@ -316,7 +338,27 @@ impl Sink for PoseWriter {
                 }
             }
         }
+        if let Some(raw_out) = &mut self.raw_out {
+            let mut raw = r.clone();
+            for (j, estimate) in raw.pose.joints.iter_mut().zip(r.raw_body.iter().flat_map(|b| b.iter())) {
+                *j = *estimate;
+            }
+            raw_out.serialize(PoseRow {
+                frame: tally.rows,
+                record: &raw,
+            })?;
+        }
         let truth = self.truth.get(&r.depth.seq);
+        if let (Some(t), Some(raw)) = (truth, &r.raw_body) {
+            for (j, t) in raw
+                .iter()
+                .zip(t.iter())
+                .filter(|(j, _)| j.source != JointSource::Missing)
+            {
+                tally.raw_body_error.0 += (j.position_mm - t).norm();
+                tally.raw_body_error.1 += 1;
+            }
+        }
         for (k, j) in r.pose.joints.iter().enumerate() {
             let Some(t) = truth
                 .and_then(|t| t.get(k))
@@ -357,6 +399,9 @@ impl Sink for PoseWriter {
     }
 
     fn flush(&mut self) -> Result<(), StageError> {
+        if let Some(raw_out) = &mut self.raw_out {
+            raw_out.flush()?;
+        }
         self.out.flush()?;
         self.out.get_ref().sync_all()?;
         Ok(())
@@ -510,6 +555,7 @@ fn parse_row(record: &csv::StringRecord, orientation: bool) -> Result<PoseRecord
             shape: None,
             tail: None,
         }),
+        raw_body: None,
     })
 }
 

@@ -181,6 +181,7 @@ impl Map for BodyStage {
             paws: Vec::new(),
             headings: None,
             orientation: None,
+            raw_body: None,
         };
         if let Some(mouse) = mouse {
             let r = mouse.region;

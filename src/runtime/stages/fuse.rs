@@ -1,5 +1,6 @@
 //! The fusion stage: the head's end chosen by the orientation tracker (see
-//! [`crate::vision::orientation`]), paws and limbs added to the body's joints (see
+//! [`crate::vision::orientation`]), the main-body joints smoothed over time (see
+//! [`crate::vision::smoothing`]; the frame's own kept beside them), paws and limbs added to the body's joints (see
 //! [`crate::vision::fusion`]), and the picture of every n-th frame. It carries the tracker's
 //! and the legs' memory from frame to frame, so the runner gives it its frames in order.
 
@@ -10,13 +11,15 @@ use crate::runtime::overlay;
 use crate::runtime::pipeline::{Map, StageError};
 use crate::runtime::pose_record::PoseStatus;
 use crate::vision::fusion::Fuser;
-use crate::vision::orientation::{self, Orientation, Tracker, TrackerConfig};
+use crate::vision::orientation::{self, BodyJoints, Orientation, Tracker, TrackerConfig};
+use crate::vision::smoothing::{Smoother, SmootherConfig};
 
 /// Runs a [`Fuser`] on each pose.
 #[derive(Debug, Clone)]
 pub struct FuseStage {
     fuser: Fuser,
     tracker: Tracker,
+    smoother: Smoother,
     rig: Rig,
     /// Draw a picture of the frames whose depth sequence number is a multiple of this.
     overlay_every: Option<u64>,
@@ -27,6 +30,7 @@ impl FuseStage {
         Self {
             fuser,
             tracker: Tracker::new(TrackerConfig::default()),
+            smoother: Smoother::new(SmootherConfig::default()),
             rig,
             overlay_every: overlay_every.filter(|&n| n > 0),
         }
@@ -42,9 +46,13 @@ impl Map for FuseStage {
         let Posed { pair, mut record } = input;
         if let Some(headings) = record.headings.take() {
             let decision = self.tracker.update(record.depth.device_ns, &headings);
-            for (joint, estimate) in Joint::MAIN_BODY.iter().zip(headings.joints[decision.chosen]) {
+            let raw = headings.joints[decision.chosen];
+            let mut smoothed: BodyJoints = raw;
+            self.smoother.smooth(record.depth.device_ns, &mut smoothed);
+            for (joint, estimate) in Joint::MAIN_BODY.iter().zip(smoothed) {
                 *record.pose.joint_mut(*joint) = estimate;
             }
+            record.raw_body = Some(Box::new(raw));
             record.orientation = Some(Orientation {
                 confidence: decision.confidence,
                 frame_alone: orientation::heading(&headings.joints[decision.frame_alone]),
@@ -56,6 +64,9 @@ impl Map for FuseStage {
                     .then(|| orientation::heading(&headings.joints[usize::from(headings.tail < 0.0)]))
                     .flatten(),
             });
+        }
+        if record.orientation.is_none() {
+            self.smoother.reset();
         }
         // Depth-only pairs keep joints 1-12 (the paper's single depth image mode).
         if record.status == PoseStatus::Ok && pair.color.is_some() {

@@ -111,6 +111,7 @@ mod tests {
                     paws: Vec::new(),
                     headings: None,
                     orientation: None,
+                    raw_body: None,
                 };
                 w.process(Posed { pair, record }).unwrap();
             }

@@ -1,0 +1,251 @@
+//! The main-body joints smoothed over time: a One Euro filter (Casiez, Roussel and Vogel,
+//! CHI 2012) on each joint's position, after the orientation tracker has chosen the head's
+//! end. Each frame's forest estimate wobbles by a few millimetres about the mouse's true pose;
+//! a low-pass filter takes most of that out, and the One Euro filter's cut-off rises with the
+//! joint's speed, so that a still mouse is held steady and a running one is followed closely.
+//! Causal: a frame's smoothed joints depend on that frame and the ones before it only, so the
+//! daemon's latency does not grow by a frame; the cost is a lag behind a moving joint of about
+//! `1 / (2 pi f)` seconds at the cut-off `f` its speed gives (see [`SmootherConfig::lag_s`]).
+//!
+//! The filter starts afresh on the first frame of a mouse, after a gap, for a joint that was
+//! not placed in the frame before or that jumped farther than a mouse moves in a frame, and for every joint when the heading turns more than 90
+//! degrees from the smoothed one between two frames (the tracker took the other end for the
+//! head: the joints swap ends, which no smoothing should blur).
+
+use nalgebra::{Point3, Vector3};
+
+use crate::core::pose::{JointEstimate, JointSource};
+use crate::core::skeleton::Joint;
+use crate::vision::orientation::{self, BodyJoints};
+
+/// The filter's settings. The defaults were chosen on the first half of a real MoSeq session's
+/// frames (its tracker's centroid against `mid_back`; see `docs/FIGURES.md`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SmootherConfig {
+    /// The cut-off of a still joint (Hz): the lower, the steadier and the more lag.
+    pub min_cutoff_hz: f64,
+    /// How much the cut-off rises per mm/s of the joint's speed (Hz per mm/s).
+    pub beta_hz_per_mm_s: f64,
+    /// The cut-off of the speed's own low-pass filter (Hz).
+    pub derivative_cutoff_hz: f64,
+    /// A gap between frames longer than this starts the filter afresh (s).
+    pub max_gap_s: f64,
+    /// A joint placed this far (mm) from where the filter holds it starts afresh: no mouse
+    /// moves so far in a frame (1,200 mm/s at 30 fps), so the estimate jumped (or the frames
+    /// are not of one continuous scene).
+    pub max_jump_mm: f64,
+}
+
+impl Default for SmootherConfig {
+    fn default() -> Self {
+        Self {
+            min_cutoff_hz: 3.0,
+            beta_hz_per_mm_s: 0.07,
+            derivative_cutoff_hz: 1.0,
+            max_gap_s: 0.5,
+            max_jump_mm: 40.0,
+        }
+    }
+}
+
+impl SmootherConfig {
+    /// The lag (s) behind a joint moving steadily at `speed_mm_s`: the time constant of the
+    /// low-pass filter at the cut-off that speed gives.
+    pub fn lag_s(&self, speed_mm_s: f64) -> f64 {
+        1.0 / (2.0 * std::f64::consts::PI * self.cutoff_hz(speed_mm_s))
+    }
+
+    fn cutoff_hz(&self, speed_mm_s: f64) -> f64 {
+        self.min_cutoff_hz + self.beta_hz_per_mm_s * speed_mm_s
+    }
+}
+
+/// The share of a new sample an exponential filter with this cut-off takes after `dt_s`.
+fn alpha(cutoff_hz: f64, dt_s: f64) -> f64 {
+    let tau = 1.0 / (2.0 * std::f64::consts::PI * cutoff_hz);
+    1.0 / (1.0 + tau / dt_s)
+}
+
+/// One joint's filter state: its smoothed position and speed.
+#[derive(Clone, Copy, Debug)]
+struct OneEuro {
+    position_mm: Point3<f64>,
+    velocity_mm_s: Vector3<f64>,
+}
+
+/// Smooths the main-body joints of successive frames of one mouse.
+#[derive(Clone, Debug)]
+pub struct Smoother {
+    config: SmootherConfig,
+    joints: [Option<OneEuro>; 12],
+    last_ns: Option<u64>,
+}
+
+impl Smoother {
+    pub fn new(config: SmootherConfig) -> Self {
+        Self {
+            config,
+            joints: [None; 12],
+            last_ns: None,
+        }
+    }
+
+    /// Forgets every joint: the next frame starts afresh (a frame without a mouse).
+    pub fn reset(&mut self) {
+        *self = Self::new(self.config);
+    }
+
+    /// Smooths `joints`, the frame at `device_ns`'s estimates, in place. Joints that were not
+    /// placed (source `missing`) are left alone and their filter forgotten; so is `tail_tip`,
+    /// which the tail search places where it sees the tail end, and which whips faster than
+    /// the filter follows (on renders 141 mm/s at the median against 15-26 mm/s for the
+    /// body's joints).
+    pub fn smooth(&mut self, device_ns: u64, joints: &mut BodyJoints) {
+        let dt_s = self
+            .last_ns
+            .map(|last| device_ns.saturating_sub(last) as f64 * 1e-9)
+            .filter(|&dt| dt > 0.0 && dt <= self.config.max_gap_s);
+        let smoothed: BodyJoints = std::array::from_fn(|k| {
+            let mut j = joints[k];
+            if let Some(state) = self.joints[k] {
+                j.position_mm = state.position_mm;
+            }
+            j
+        });
+        let turned = match (orientation::heading(&smoothed), orientation::heading(joints)) {
+            (Some(before), Some(now)) => before.dot(&now) < 0.0,
+            _ => false,
+        };
+        if dt_s.is_none() || turned {
+            self.joints = [None; 12];
+        }
+        self.last_ns = Some(device_ns);
+        let config = self.config;
+        for ((state, joint), which) in self.joints.iter_mut().zip(joints.iter_mut()).zip(Joint::MAIN_BODY) {
+            *state = (which != Joint::TailTip)
+                .then(|| step(&config, *state, joint, dt_s))
+                .flatten();
+        }
+    }
+}
+
+/// One joint's step: its new state, with `joint` moved to its smoothed position.
+fn step(
+    config: &SmootherConfig,
+    state: Option<OneEuro>,
+    joint: &mut JointEstimate,
+    dt_s: Option<f64>,
+) -> Option<OneEuro> {
+    if joint.source == JointSource::Missing {
+        return None;
+    }
+    let next = match (state, dt_s) {
+        (Some(s), Some(dt)) if (joint.position_mm - s.position_mm).norm() <= config.max_jump_mm => {
+            let raw_velocity = (joint.position_mm - s.position_mm) / dt;
+            let velocity_mm_s =
+                s.velocity_mm_s + alpha(config.derivative_cutoff_hz, dt) * (raw_velocity - s.velocity_mm_s);
+            let a = alpha(config.cutoff_hz(velocity_mm_s.norm()), dt);
+            OneEuro {
+                position_mm: s.position_mm + a * (joint.position_mm - s.position_mm),
+                velocity_mm_s,
+            }
+        }
+        _ => OneEuro {
+            position_mm: joint.position_mm,
+            velocity_mm_s: Vector3::zeros(),
+        },
+    };
+    joint.position_mm = next.position_mm;
+    Some(next)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const FRAME_NS: u64 = 33_333_333;
+
+    /// A straight mouse along +x (head toward +x), its joints `dx` mm along x.
+    fn body(dx: f64) -> BodyJoints {
+        std::array::from_fn(|k| {
+            let along = f64::from(orientation::end_of(Joint::MAIN_BODY[k])) * 30.0;
+            JointEstimate {
+                position_mm: Point3::new(dx + along, 0.0, 20.0),
+                score: 1.0,
+                source: JointSource::Depth,
+            }
+        })
+    }
+
+    fn x_of(joints: &BodyJoints, joint: Joint) -> f64 {
+        joints[joint.index()].position_mm.x
+    }
+
+    #[test]
+    fn jitter_is_damped_and_a_still_mouse_is_not_moved() {
+        let mut smoother = Smoother::new(SmootherConfig::default());
+        let (mut raw_sq, mut smooth_sq) = (0.0, 0.0);
+        for k in 0..300u64 {
+            // Jitter of +-2 mm, alternating with a period that is not a multiple of two frames.
+            let noise = 2.0 * ((k as f64) * 2.3).sin();
+            let mut joints = body(noise);
+            smoother.smooth(k * FRAME_NS, &mut joints);
+            if k >= 30 {
+                raw_sq += noise * noise;
+                smooth_sq += x_of(&joints, Joint::MidBack).powi(2);
+            }
+        }
+        assert!(smooth_sq < 0.3 * raw_sq, "smoothed {smooth_sq} against raw {raw_sq}");
+    }
+
+    #[test]
+    fn a_moving_mouse_is_followed_with_the_lag_the_config_gives() {
+        let config = SmootherConfig::default();
+        let mut smoother = Smoother::new(config);
+        let speed_mm_s = 200.0;
+        let mut lag_mm = 0.0;
+        for k in 0..60u64 {
+            let x = speed_mm_s * k as f64 * FRAME_NS as f64 * 1e-9;
+            let mut joints = body(x);
+            smoother.smooth(k * FRAME_NS, &mut joints);
+            lag_mm = x - x_of(&joints, Joint::MidBack);
+        }
+        let expected_mm = speed_mm_s * config.lag_s(speed_mm_s);
+        // The discrete filter lags a little more than the continuous one's time constant.
+        assert!(
+            lag_mm > 0.0 && lag_mm < 1.5 * expected_mm + 0.5,
+            "lag {lag_mm} mm, expected {expected_mm} mm"
+        );
+    }
+
+    #[test]
+    fn a_swap_of_ends_a_gap_and_a_missing_joint_start_afresh() {
+        let mut smoother = Smoother::new(SmootherConfig::default());
+        for k in 0..10u64 {
+            smoother.smooth(k * FRAME_NS, &mut body(0.0));
+        }
+        // The tracker takes the other end for the head: the joints are taken as they are.
+        let mut swapped: BodyJoints = body(0.0);
+        for j in &mut swapped {
+            j.position_mm.x = -j.position_mm.x;
+        }
+        let expected = swapped;
+        smoother.smooth(10 * FRAME_NS, &mut swapped);
+        assert_eq!(swapped, expected);
+        // A second later, the mouse has moved 50 mm: taken as it is.
+        let mut later = body(50.0);
+        smoother.smooth(40 * FRAME_NS, &mut later);
+        assert_eq!(later, body(50.0));
+        // The rump missing for one frame is taken as it is when it returns; the tail tip is
+        // never smoothed.
+        let mut rump_gone = body(50.0);
+        rump_gone[Joint::Rump.index()].source = JointSource::Missing;
+        smoother.smooth(41 * FRAME_NS, &mut rump_gone);
+        let mut back = body(52.0);
+        smoother.smooth(42 * FRAME_NS, &mut back);
+        for joint in [Joint::Rump, Joint::TailTip] {
+            assert_eq!(back[joint.index()], body(52.0)[joint.index()], "{joint:?}");
+        }
+        assert!(x_of(&back, Joint::MidBack) < 52.0);
+    }
+}
