@@ -24,9 +24,9 @@
 use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
 use crate::core::geometry::{Camera, Rig};
 use crate::core::skeleton::Joint;
+use crate::io::paw_labels::{LabelTable, LabelledImage, PawMap};
 use crate::synth::dataset::{Dataset, Sample};
 use crate::synth::views::{BottomView, Mark};
-use crate::training::paw_labels::{LabelTable, LabelledImage, PawMap};
 use crate::vision::paws::CANONICAL_PX_PER_MM;
 use crate::vision::paws::grey::{GreyImage, Greyer, ResampleScratch, resample};
 use crate::vision::paws::train::{Background, TrainingSet};
@@ -448,7 +448,7 @@ pub enum PawDataError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::training::paw_labels::{lower_view_top, read_dlc_csv};
+    use crate::io::paw_labels::{lower_view_top, read_dlc_csv};
 
     /// Lightning Pose's mirror-mouse frames (beside the repository when they are there): the
     /// bottom view found, a positive cut at every labelled paw, hard negatives at the nose and
