@@ -207,7 +207,7 @@ pub struct LabelledViews<'a> {
     pub root: &'a Path,
     /// Pixels per millimetre of the bottom view in the images.
     pub px_per_mm: f64,
-    /// The first row of the bottom view ([`super::paw_labels::lower_view_top`]; 0 when the
+    /// The first row of the bottom view ([`crate::io::paw_labels::lower_view_top`]; 0 when the
     /// images are bottom views only).
     pub view_top: u32,
 }
