@@ -4,6 +4,7 @@
 
 pub mod mask;
 pub mod output;
+pub mod paw_labels;
 pub mod session;
 pub mod store;
 pub mod table;

@@ -5,7 +5,6 @@
 //! them), a random subset per image, with the image itself kept for the depth features.
 
 pub mod orientation;
-pub mod paw_labels;
 pub mod paws_data;
 pub mod paws_eval;
 

@@ -73,8 +73,11 @@ impl Families<'_> {
             .0
             .encode_descriptor(name, help, Some(&Unit::Seconds), MetricType::Histogram)?;
         for (labels, h) in samples {
-            let (count, sum_us) = h.totals();
+            let (_, sum_us) = h.totals();
             let counts = h.counts_under(&LATENCY_BOUNDS_US);
+            // The count from the same reading as the buckets: a recording between two readings
+            // would set the `+Inf` bucket apart from `_count`, which a scraper refuses.
+            let count = counts.iter().sum();
             let buckets: Vec<(f64, u64)> = LATENCY_BOUNDS_US
                 .iter()
                 .map(|&us| us as f64 / 1e6)

@@ -78,6 +78,18 @@ impl Chunks {
         self.plan.root.join(format!("chunk-{index:04}"))
     }
 
+    /// The directory of chunk `index`, made (with the run's) if it is not there: one that could
+    /// not be made when the chunk began (a full disk) is made once there is room, so the
+    /// chunk's session and poses begin in it then.
+    ///
+    /// # Errors
+    /// It cannot be made.
+    pub fn make_dir(&self, index: usize) -> std::io::Result<PathBuf> {
+        let dir = self.dir(index);
+        std::fs::create_dir_all(&dir)?;
+        Ok(dir)
+    }
+
     /// Chunks begun so far.
     pub fn count(&self) -> usize {
         self.opened.lock().unwrap_or_else(PoisonError::into_inner).starts.len()
@@ -125,11 +137,13 @@ impl Chunks {
         let index = opened.starts.len();
         let start = opened.starts.last().map_or(host_ns, |&last| host_ns.max(last));
         opened.starts.push(start);
-        let dir = self.dir(index);
-        if let Err(e) = std::fs::create_dir_all(&dir) {
-            tracing::error!(chunk = index, "cannot create {dir:?}: {e}");
-            return;
-        }
+        let dir = match self.make_dir(index) {
+            Ok(dir) => dir,
+            Err(e) => {
+                tracing::error!(chunk = index, "cannot create {:?}: {e}", self.dir(index));
+                return;
+            }
+        };
         tracing::info!(chunk = index, "chunk {dir:?} begun");
         if !self.plan.record {
             return;
@@ -152,7 +166,12 @@ impl Chunks {
         let mut meta = self.plan.meta.clone();
         meta.created = crate::runtime::capture::clock::utc_now();
         meta.cameras = self.plan.cameras.iter().filter_map(|h| lock(h).meta.clone()).collect();
-        let mut w = SessionWriter::create_beside(self.dir(index), &meta)?;
+        let dir = self.make_dir(index).map_err(|source| SessionError::Io {
+            path: self.dir(index),
+            action: "create directory",
+            source,
+        })?;
+        let mut w = SessionWriter::create_beside(dir, &meta)?;
         match w.log_event(&SessionEvent::SessionStarted { host_ns }) {
             Ok(()) => Ok(w),
             Err(e) => {
@@ -825,7 +844,11 @@ impl ChunkPoses {
     /// failure, tries again later.
     fn create(&mut self) {
         let dir = self.chunks.dir(self.index);
-        match PoseWriter::create(&dir, HashMap::new(), u64::MAX).and_then(PoseWriter::handing_over_each_row) {
+        let made = self.chunks.make_dir(self.index);
+        match made
+            .and_then(|dir| PoseWriter::create(&dir, HashMap::new(), u64::MAX))
+            .and_then(PoseWriter::handing_over_each_row)
+        {
             Ok(w) => {
                 if self.retry_at.take().is_some() || self.rows_lost > 0 {
                     tracing::info!(chunk = self.index, "poses written again");
