@@ -16,6 +16,9 @@ packages=(
   ffmpeg
   # the live pose stream (ZeroMQ PUB, linked to Debian's libzmq through pkg-config)
   libzmq3-dev
+  # the soak through faults (scripts/soak): its own ext4 file system, filled at once, and
+  # /metrics scraped
+  e2fsprogs util-linux curl
   # whole-process wall time and peak memory (/usr/bin/time -v), builds compared back to back
   # (hyperfine): scripts/moseq2-check, scripts/replay-bench
   time hyperfine
