@@ -99,23 +99,17 @@ impl LoopedDepth {
             std::thread::sleep(timeout.min(Duration::from_millis(20)));
             return true;
         }
-        if std::mem::take(&mut self.stalled) {
-            if let Some((seq, device_ns, due)) = self.last {
-                let interval = Duration::from_nanos(self.interval_ns);
-                let now = Instant::now();
-                let missed = now.saturating_duration_since(due + interval);
-                let skipped = (missed.as_nanos() / u128::from(self.interval_ns.max(1))) as u64;
-                self.offset = (
-                    seq + 1 + skipped,
-                    device_ns + self.interval_ns + missed.as_nanos() as u64,
-                );
-                self.last = Some((seq + skipped, device_ns + missed.as_nanos() as u64, now - interval));
-                if let Some(frame) = &self.pending {
-                    self.first = Some((frame.stamp.seq, frame.stamp.device_ns, now));
-                } else {
-                    self.first = None;
-                }
-            }
+        if let (true, Some((seq, device_ns, due))) = (std::mem::take(&mut self.stalled), self.last) {
+            // The next frame starts a stretch of its own, due now, its stamps moved on by the
+            // frames missed (as at a loop's end).
+            let interval = Duration::from_nanos(self.interval_ns);
+            let now = Instant::now();
+            let missed = now.saturating_duration_since(due + interval);
+            let skipped = (missed.as_nanos() / u128::from(self.interval_ns.max(1))) as u64;
+            let missed_ns = missed.as_nanos() as u64;
+            self.offset = (seq + 1 + skipped, device_ns + self.interval_ns + missed_ns);
+            self.last = Some((seq + skipped, device_ns + missed_ns, now - interval));
+            self.first = None;
         }
         false
     }

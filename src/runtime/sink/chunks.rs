@@ -619,8 +619,9 @@ impl crate::runtime::sink::session::FrameRecorder for ChunkRecorder {
     fn finish(mut self: Box<Self>) -> Result<Option<SessionSummary>, SessionError> {
         // Events of a camera lost at the very end still belong to the last chunk.
         self.log_camera_events()?;
-        let summary = self.close();
+        // The sessions left by a full disk earlier, then the current one: each tried once.
         self.close_unclosed();
+        let summary = self.close();
         for (index, _) in &self.unclosed {
             tracing::error!(
                 chunk = index,

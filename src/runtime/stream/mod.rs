@@ -444,14 +444,14 @@ impl Subscriber {
         if self.socket.poll(zmq::POLLIN, ms)? == 0 {
             return Ok(None);
         }
-        let frames = self.socket.recv_multipart(0)?;
-        Ok(match frames.as_slice() {
-            [topic, body] => std::str::from_utf8(topic)
-                .ok()
-                .and_then(Topic::from_name)
-                .zip(String::from_utf8(body.clone()).ok()),
-            _ => None,
-        })
+        let mut frames = self.socket.recv_multipart(0)?;
+        let (Some(body), Some(topic), None) = (frames.pop(), frames.pop(), frames.pop()) else {
+            return Ok(None);
+        };
+        Ok(std::str::from_utf8(&topic)
+            .ok()
+            .and_then(Topic::from_name)
+            .zip(String::from_utf8(body).ok()))
     }
 }
 
