@@ -591,6 +591,7 @@ fn eval_bundled(
         bottom_views: false,
         bottom_clutter: false,
         mice: mousepose::synth::Mice::Standard,
+        build: None,
     };
     let library = pose_library();
     let samples: Vec<_> = (0..count).map(|i| render_sample(rig, &spec, &library, i)).collect();
@@ -684,6 +685,7 @@ fn a_hidden_tail_teaches_no_tail_tip() {
         bottom_views: false,
         bottom_clutter: false,
         mice: mousepose::synth::Mice::Standard,
+        build: None,
     };
     let library = pose_library();
     let mut samples: Vec<_> = (0..2).map(|i| render_sample(&rig, &spec, &library, i)).collect();
@@ -746,6 +748,7 @@ fn a_tail_not_seen_gets_no_tail_tip_off_the_mouse() {
         bottom_views: false,
         bottom_clutter: false,
         mice: mousepose::synth::Mice::Standard,
+        build: None,
     };
     let library = pose_library();
     let mut segmenter = MaskSource::for_rig(&rig).unwrap().segmenter().unwrap();
@@ -848,6 +851,7 @@ fn the_body_forest_loaded_for_run_time_and_its_clones_estimate_bit_for_bit_alike
         bottom_views: false,
         bottom_clutter: false,
         mice: mousepose::synth::Mice::Mixed,
+        build: None,
     };
     let library = pose_library();
     let mut segmenter = MaskSource::for_rig(&rig).unwrap().segmenter().unwrap();

@@ -147,6 +147,7 @@ fn paw_cascade_agrees_with_opencv() {
         bottom_views: true,
         bottom_clutter: false,
         mice: mousepose::synth::Mice::Standard,
+        build: None,
     };
     let rig = mousepose::core::geometry::Rig::default_rig();
     let library = mousepose::synth::mouse::pose_library();

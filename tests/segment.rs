@@ -47,6 +47,7 @@ fn spec(noise: DepthNoise, seed: u64) -> DatasetSpec {
         bottom_views: false,
         bottom_clutter: false,
         mice: mousepose::synth::Mice::Standard,
+        build: None,
     }
 }
 

@@ -21,6 +21,7 @@ fn clean_spec(count: u64) -> DatasetSpec {
         bottom_views: true,
         bottom_clutter: false,
         mice: mousepose::synth::Mice::Standard,
+        build: None,
     }
 }
 

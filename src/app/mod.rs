@@ -5,6 +5,7 @@
 //! to an exit code. The only place that knows clap and exit codes; `main.rs` only calls
 //! [`main`]. No command file imports another (`tests/layers.rs`).
 
+pub mod adapt;
 pub mod batch;
 pub mod bench;
 pub mod calibrate;
@@ -49,6 +50,9 @@ enum Command {
     Train(train::TrainArgs),
     /// Evaluate a trained model on a held-back dataset.
     Eval(eval::EvalArgs),
+    /// Fit the body forest and the orientation model to a lab's own mice, from its
+    /// unlabelled recordings, into a models directory of their own.
+    Adapt(adapt::AdaptArgs),
     /// Reproducible experiments from the paper.
     #[command(subcommand)]
     Experiment(experiment::ExperimentCommand),
@@ -216,6 +220,7 @@ fn dispatch(cli: Cli) -> Outcome {
         Command::Synth(command) => synth::command(command),
         Command::Train(args) => train::command(&args),
         Command::Eval(args) => eval::command(&args),
+        Command::Adapt(args) => adapt::command(&args),
         Command::Experiment(command) => experiment::command(&command),
         Command::Bench(args) => bench::command(&args),
         Command::Replay(args) => replay::command(&args),

@@ -19,6 +19,10 @@ pub struct RunArgs {
     /// config's `[segment] background`, or of learning the background live).
     #[arg(long, value_name = "DIR")]
     pub background: Option<PathBuf>,
+    /// The models directory (as `adapt` writes), instead of the config's `[models] dir` or
+    /// the bundled models.
+    #[arg(long, value_name = "DIR")]
+    pub models: Option<PathBuf>,
     /// Print the final report as one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -30,6 +34,7 @@ pub fn command(args: &RunArgs) -> Outcome {
         config: args.config.clone(),
         seconds: args.seconds,
         background: args.background.clone(),
+        models: args.models.clone(),
     })?;
     if args.json {
         print_json(&report)?;

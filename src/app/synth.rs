@@ -80,6 +80,17 @@ pub struct MoseqArgs {
     /// The camera's tilt from looking straight down (degrees).
     #[arg(long, value_name = "DEG", default_value_t = 0.0, value_parser = parse_tilt, allow_negative_numbers = true)]
     tilt_deg: f64,
+    /// A mouse of this size instead of a standard one drawn at random: every length times
+    /// this (the standard mouse: 1). With --girth and --back-height, a known mouse for
+    /// checking what `adapt` measures.
+    #[arg(long, value_name = "FACTOR", value_parser = parse_build_factor, allow_negative_numbers = true)]
+    scale: Option<f64>,
+    /// With --scale: the body's width beyond the scale (the standard mouse: 1).
+    #[arg(long, value_name = "FACTOR", requires = "scale", default_value_t = 1.0, value_parser = parse_build_factor, allow_negative_numbers = true)]
+    girth: f64,
+    /// With --scale: the back's height beyond the scale (the standard mouse: 1).
+    #[arg(long, value_name = "FACTOR", requires = "scale", default_value_t = 1.0, value_parser = parse_build_factor, allow_negative_numbers = true)]
+    back_height: f64,
     #[command(flatten)]
     noise: NoiseArgs,
     /// Depth camera noise model: none, structured-light or tof.
@@ -103,6 +114,10 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 
 fn parse_camera_height(s: &str) -> Result<f64, String> {
     parse::ranged(s, "a camera height in millimetres", 300.0, 2000.0)
+}
+
+fn parse_build_factor(s: &str) -> Result<f64, String> {
+    parse::ranged(s, "a factor of the standard mouse's size", 0.5, 2.0)
 }
 
 fn parse_tilt(s: &str) -> Result<f64, String> {
@@ -244,6 +259,12 @@ fn synth_moseq(args: &MoseqArgs) -> Outcome {
         height: args.size.1,
         camera_height_mm: args.camera_height_mm,
         tilt_deg: args.tilt_deg,
+        build: args.scale.map(|scale| crate::synth::Build {
+            scale,
+            girth: args.girth,
+            height: args.back_height,
+            tail_shown: 1.0,
+        }),
     };
     engine::synth_moseq(
         &MoseqOptions {
@@ -267,6 +288,7 @@ fn synth_dataset(args: &DatasetArgs) -> Outcome {
         bottom_views: !args.no_bottom,
         bottom_clutter: args.bottom_clutter,
         mice: args.mice,
+        build: None,
     };
     let summary = engine::synth_dataset(
         &DatasetOptions {
@@ -295,6 +317,7 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         color_format: PixelFormat::BayerRg8,
         color: !args.no_color,
         mice: args.mice,
+        build: None,
         activity: args.activity,
         tail: args.tail,
     };

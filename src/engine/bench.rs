@@ -113,6 +113,7 @@ fn clean_top_views(count: u64, seed: u64) -> DatasetSpec {
         bottom_views: false,
         bottom_clutter: false,
         mice: crate::synth::Mice::Standard,
+        build: None,
     }
 }
 

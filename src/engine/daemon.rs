@@ -362,6 +362,7 @@ impl ChunkSinks {
             meta: chunk_meta(notes, config.calibration.as_ref().map(|_| rig), latency),
             body_model: models.body_path(),
             paw_model: models.paws_path(),
+            models: Some(models.used()),
         });
         let gauges = config.record.then(|| Arc::new(RecorderGauges::default()));
         let recorder = gauges.as_ref().map(|gauges| {
@@ -505,6 +506,9 @@ pub struct DaemonOptions {
     /// A session recorded with the cage empty, as the background reference (instead of the
     /// config's `[segment] background`).
     pub background: Option<PathBuf>,
+    /// A models directory (an adapted one: `mousepose adapt`) instead of the config's
+    /// `[models] dir`.
+    pub models: Option<PathBuf>,
 }
 
 /// Loads the configuration, the models, the rig and the background, then runs the daemon
@@ -519,6 +523,9 @@ pub fn daemon(options: &DaemonOptions) -> Result<(RunReport, Option<String>), Fa
     let mut config = Config::load(&options.config).map_err(Failure::usage)?;
     if let Some(dir) = &options.background {
         config.background = Some(dir.clone());
+    }
+    if let Some(dir) = &options.models {
+        config.models_dir = Some(dir.clone());
     }
     let models = Models::load(config.models_dir.as_deref()).map_err(Failure::usage)?;
     let rig = live_rig(&config).map_err(Failure::usage)?;

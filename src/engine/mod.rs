@@ -3,6 +3,7 @@
 //! struct in and a summary out. They know no command line: `app` parses the arguments into
 //! the options, calls an engine, prints its summary and maps its [`Failure`] to an exit code.
 
+pub mod adapt;
 pub mod batch;
 pub mod bench;
 pub mod calibrate;

@@ -211,6 +211,8 @@ pub struct ReplaySummary {
     /// The orientation model (which end is the head from the body's shape), when the models
     /// directory has one.
     pub orientation_model: Option<PathBuf>,
+    /// Which models made the poses: their directory and each file's checksum.
+    pub models: crate::runtime::models::ModelsUsed,
     pub realtime: bool,
     pub world: WorldSummary,
     /// Lines of a MoSeq `depth_ts.txt` repeating the timestamp before them: their frames are
@@ -394,8 +396,8 @@ pub fn replay_with(
 ) -> Result<ReplaySummary, ReplayError> {
     let recording = Recording::open(&options.session)?;
     let (models, chosen, background) = load_models_and_scene(options, &recording)?;
-    let (body_model, paw_model, orientation_model) =
-        (models.body_path(), models.paws_path(), models.orientation_path());
+    let (body_model, paw_model, orientation_model, models_used) =
+        (models.body_path(), models.paws_path(), models.orientation_path(), models.used());
     let scene = Scene::place(options, chosen, background)?;
     let truth = recording.truth()?;
     let staging = Staging::new(&options.out, options.force)?;
@@ -454,6 +456,7 @@ pub fn replay_with(
         body_model,
         paw_model,
         orientation_model,
+        models: models_used,
         realtime: options.realtime,
         world: world.clone(),
         duplicate_timestamps: recording.duplicate_timestamps(),
@@ -504,25 +507,7 @@ fn load_models_and_scene(
     let color = recording.has_color();
     let (models, scene) = std::thread::scope(|scope| {
         let models = scope.spawn(|| Models::load_for(options.models.as_deref(), color));
-        let scene = (|| {
-            let chosen = match &options.calibration {
-                Some(path) => RecordingRig {
-                    rig: recording.calibrated_rig(path)?,
-                    calibrated: true,
-                    intrinsics_from: "rig calibration".to_owned(),
-                },
-                None => recording.rig(options.intrinsics.as_deref())?,
-            };
-            let roi = match &options.roi {
-                Some(path) => {
-                    let (w, h) = recording.depth_size();
-                    Some(read_mask_png(path, w, h)?)
-                }
-                None => None,
-            };
-            let background = background_in(recording, &chosen.rig, roi.as_deref())?;
-            Ok::<_, ReplayError>((chosen, background))
-        })();
+        let scene = rig_and_background(options, recording);
         let models = models.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
         (models, scene)
     });
@@ -531,14 +516,49 @@ fn load_models_and_scene(
     Ok((models, chosen, background))
 }
 
+/// The recording's rig (its calibration, `--calibration`, or uncalibrated with `--intrinsics`
+/// or the camera table's) and the empty cage modelled from it (in `--roi` when given).
+fn rig_and_background(
+    options: &ReplayOptions,
+    recording: &Recording,
+) -> Result<(RecordingRig, Background), ReplayError> {
+    let chosen = match &options.calibration {
+        Some(path) => RecordingRig {
+            rig: recording.calibrated_rig(path)?,
+            calibrated: true,
+            intrinsics_from: "rig calibration".to_owned(),
+        },
+        None => recording.rig(options.intrinsics.as_deref())?,
+    };
+    let roi = match &options.roi {
+        Some(path) => {
+            let (w, h) = recording.depth_size();
+            Some(read_mask_png(path, w, h)?)
+        }
+        None => None,
+    };
+    let background = background_in(recording, &chosen.rig, roi.as_deref())?;
+    Ok((chosen, background))
+}
+
+/// The world a replay of `recording` with `options` works in, without its models: what
+/// `adapt` measures the mouse in.
+///
+/// # Errors
+/// As [`replay`]'s, for the rig, the background and the arena.
+pub(crate) fn scene_of(options: &ReplayOptions, recording: &Recording) -> Result<Scene, ReplayError> {
+    let (chosen, background) = rig_and_background(options, recording)?;
+    Scene::place(options, chosen, background)
+}
+
 /// The replay's world: the rig placed (on the fitted floor when uncalibrated), the arena, and
 /// the segmenter built on the background.
-struct Scene {
-    rig: Rig,
-    world: WorldSummary,
-    arena: Vec<u8>,
-    depth_size: (u32, u32),
-    segmenter: Segmenter,
+pub(crate) struct Scene {
+    pub(crate) rig: Rig,
+    pub(crate) world: WorldSummary,
+    pub(crate) arena: Vec<u8>,
+    pub(crate) depth_size: (u32, u32),
+    pub(crate) segmenter: Segmenter,
 }
 
 impl Scene {

@@ -80,6 +80,21 @@ pub struct ArenaUsed {
     pub from: &'static str,
 }
 
+/// The run's `summary.json` (a replay's or a chunk's), when it reads.
+fn run_summary(run: &Path) -> Option<serde_json::Value> {
+    std::fs::read(run.join(crate::engine::replay::SUMMARY_FILE))
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+}
+
+/// Which models made the run, as its `summary.json` names them (absent in runs made before
+/// outputs named them).
+fn models_of(run: &Path) -> Option<crate::runtime::models::ModelsUsed> {
+    run_summary(run)
+        .and_then(|v| v.get("models").cloned())
+        .and_then(|m| serde_json::from_value(m).ok())
+}
+
 /// The arena of `options`, else the run's summary's, else the synthetic cage.
 fn arena_of(run: &Path, options: &ReportOptions) -> ArenaUsed {
     if let Some(arena) = options.arena {
@@ -89,10 +104,7 @@ fn arena_of(run: &Path, options: &ReportOptions) -> ArenaUsed {
             from: "flag",
         };
     }
-    let world = std::fs::read(run.join(crate::engine::replay::SUMMARY_FILE))
-        .ok()
-        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-        .and_then(|v| v.get("world").cloned());
+    let world = run_summary(run).and_then(|v| v.get("world").cloned());
     let outline = world
         .as_ref()
         .and_then(|w| w.get("arena_outline_mm"))
@@ -434,6 +446,9 @@ fn gait_section(h: &mut String, b: &Behaviour, a: &Activity) {
 #[derive(Debug, serde::Serialize)]
 pub struct Summary<'a> {
     run: &'a Path,
+    /// Which models made the run's poses (from its `summary.json`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    models: Option<crate::runtime::models::ModelsUsed>,
     config: &'a BehaviourConfig,
     arena: &'a ArenaUsed,
     duration_s: f64,
@@ -635,6 +650,7 @@ pub fn summary<'a>(options: &'a ReportOptions, r: &'a Reported) -> Summary<'a> {
     let (config, arena, b, a) = (&options.config, &r.arena, &r.behaviour, &r.activity);
     Summary {
         run: &options.run,
+        models: models_of(&options.run),
         config,
         arena,
         duration_s: b.duration_s,

@@ -4,6 +4,8 @@
 use crate::vision::forest::infer::{BodyEstimator, VoteSettings};
 use crate::vision::forest::model::ModelError;
 use crate::vision::paws::{PawDetector, PawError};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The body forest's file name in a models directory.
@@ -114,6 +116,73 @@ impl Models {
     /// The paw cascade's file, when there is one.
     pub fn paws_path(&self) -> Option<PathBuf> {
         self.paws.is_some().then(|| self.dir.join(PAWS_MODEL))
+    }
+
+    /// Which models these are, for the outputs they make: the directory, whether it is the
+    /// bundled one, and each file loaded with its size and checksum.
+    pub fn used(&self) -> ModelsUsed {
+        let files = [
+            Some(self.body_path()),
+            self.paws_path(),
+            self.orientation_path(),
+        ]
+        .into_iter()
+        .flatten()
+        .filter_map(|path| {
+            let name = path.file_name()?.to_string_lossy().into_owned();
+            Some((name, ModelFile::of(&path)?))
+        })
+        .collect();
+        let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+        let dir = canonical(&self.dir);
+        ModelsUsed {
+            bundled: default_models_dir().is_ok_and(|d| canonical(&d) == dir),
+            dir,
+            files,
+        }
+    }
+}
+
+/// Which models made an output: written into every `summary.json` (replay, each chunk of
+/// `run`, and `report`, which copies its run's).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ModelsUsed {
+    /// The models directory (absolute).
+    pub dir: PathBuf,
+    /// Whether it is the bundled models' directory.
+    pub bundled: bool,
+    /// Each model file loaded, by name (`body.forest`, `paws.xml`, `orientation.json`).
+    pub files: BTreeMap<String, ModelFile>,
+}
+
+/// A model file's size and content checksum (CRC-32 of its bytes, hex): the same file
+/// anywhere has the same checksum, and an adapted model differs from a bundled one.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ModelFile {
+    pub bytes: u64,
+    pub crc32: String,
+}
+
+impl ModelFile {
+    /// The file's size and checksum; `None` when it cannot be read.
+    pub fn of(path: &Path) -> Option<Self> {
+        use std::io::Read as _;
+        let mut file = std::fs::File::open(path).ok()?;
+        let mut hasher = crc32fast::Hasher::new();
+        let mut buffer = vec![0u8; 1 << 16];
+        let mut bytes = 0u64;
+        loop {
+            let n = file.read(&mut buffer).ok()?;
+            if n == 0 {
+                break;
+            }
+            hasher.update(buffer.get(..n)?);
+            bytes += n as u64;
+        }
+        Some(Self {
+            bytes,
+            crc32: format!("{:08x}", hasher.finalize()),
+        })
     }
 }
 

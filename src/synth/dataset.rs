@@ -56,6 +56,9 @@ pub struct DatasetMeta {
     /// Which mice (datasets written before this key have the standard ones).
     #[serde(default)]
     pub mice: Mice,
+    /// The build the mice were drawn around instead (`adapt`'s measured mice), when one was.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub build: Option<super::Build>,
     #[serde(with = "crate::io::session::meta::rig_repr")]
     pub rig: Option<Rig>,
 }
@@ -71,6 +74,8 @@ pub struct DatasetSpec {
     /// the paw detector).
     pub bottom_clutter: bool,
     pub mice: Mice,
+    /// Mice drawn around this build ([`super::Build::around`]) instead of `mice`.
+    pub build: Option<super::Build>,
 }
 
 /// One rendered instant.
@@ -111,9 +116,14 @@ pub fn render_sample(rig: &Rig, spec: &DatasetSpec, library: &[super::mouse::Pos
     let mut rng = item_rng(spec.seed, STREAM, index);
     let pose_id = rng.gen_range(0..library.len());
     let mut params = jitter_pose(&library[pose_id], &mut rng);
-    let placement = match spec.mice.of_item(index) {
-        Mice::Standard | Mice::Mixed => random_placement(&mut rng),
-        Mice::Varied => {
+    let placement = match (spec.build, spec.mice.of_item(index)) {
+        (Some(build), _) => {
+            let (placement, carriage) = build.around(&mut rng);
+            carriage.apply(&mut params);
+            placement
+        }
+        (None, Mice::Standard | Mice::Mixed) => random_placement(&mut rng),
+        (None, Mice::Varied) => {
             let (placement, carriage) = varied_build(&mut rng);
             carriage.apply(&mut params);
             placement
@@ -191,6 +201,7 @@ pub fn write_dataset(
         bottom_views: spec.bottom_views,
         bottom_clutter: spec.bottom_views && spec.bottom_clutter,
         mice: spec.mice,
+        build: spec.build,
         rig: Some(*rig),
     };
     let path = dir.join(META_FILE);

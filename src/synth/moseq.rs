@@ -45,6 +45,8 @@ pub struct MoseqSpec {
     /// (degrees, towards world +x).
     pub camera_height_mm: f64,
     pub tilt_deg: f64,
+    /// A mouse of exactly this build instead of a standard one ([`super::Build::exact`]).
+    pub build: Option<super::Build>,
 }
 
 impl Default for MoseqSpec {
@@ -61,6 +63,7 @@ impl Default for MoseqSpec {
             height: 424,
             camera_height_mm: 670.0,
             tilt_deg: 0.0,
+            build: None,
         }
     }
 }
@@ -109,7 +112,7 @@ pub fn write_moseq(dir: &Path, spec: &MoseqSpec, mut progress: impl FnMut(u64, u
         move |source| SynthMoseqError::Write { path, source }
     };
     let background = Cage::new(&camera).depth(Region::full(&camera.intrinsics));
-    let (mut animator, carriage) = session_mouse(spec.seed, Mice::Standard);
+    let (mut animator, carriage) = session_mouse(spec.seed, Mice::Standard, spec.build);
     let period = 1.0 / spec.fps;
     let mut mice = Vec::with_capacity(spec.frames as usize);
     for k in 0..spec.frames {

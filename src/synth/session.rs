@@ -41,6 +41,8 @@ pub struct SessionSpec {
     pub color: bool,
     /// The standard mice, mice well outside the training range, or either by the seed.
     pub mice: Mice,
+    /// A mouse of exactly this build instead ([`super::Build::exact`]).
+    pub build: Option<super::Build>,
     /// What the mouse does (anything, stay in place, walk).
     pub activity: super::animate::Activity,
     /// How the depth camera shows the tail (the truth keeps the tail's joints).
@@ -82,6 +84,7 @@ impl Default for SessionSpec {
             color_format: PixelFormat::BayerRg8,
             color: true,
             mice: Mice::Standard,
+            build: None,
             activity: super::animate::Activity::Mixed,
             tail: TailLook::Visible,
         }
@@ -91,13 +94,17 @@ impl Default for SessionSpec {
 /// The animated mouse of the session of a seed, at its start: what [`write_session`] renders
 /// (tests read its behaviour, e.g. its walking, without rendering).
 pub fn session_animator(seed: u64) -> Animator {
-    session_mouse(seed, Mice::Standard).0
+    session_mouse(seed, Mice::Standard, None).0
 }
 
 /// The animated mouse of a seed and its carriage: the standard mice's build comes from the
 /// mouse's own random stream (as it always did), a varied mouse's from a stream of its own.
-pub(crate) fn session_mouse(seed: u64, mice: Mice) -> (Animator, Carriage) {
+pub(crate) fn session_mouse(seed: u64, mice: Mice, exact: Option<super::Build>) -> (Animator, Carriage) {
     let mut mouse_rng = item_rng(seed, STREAM_MOUSE, 0);
+    if let Some(exact) = exact {
+        let (build, carriage) = exact.exact(&mut mouse_rng);
+        return (Animator::new(mouse_rng, build), carriage);
+    }
     let build = random_placement(&mut mouse_rng);
     match mice.of_item(seed) {
         Mice::Standard | Mice::Mixed => (Animator::new(mouse_rng, build), Carriage::default()),
@@ -218,7 +225,7 @@ fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
         .collect();
     times.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
 
-    let (animator, carriage) = session_mouse(spec.seed, spec.mice);
+    let (animator, carriage) = session_mouse(spec.seed, spec.mice, spec.build);
     let mut animator = animator.with_activity(spec.activity);
     let mut now = 0.0;
     let mut shots = Vec::with_capacity(times.len());

@@ -260,15 +260,22 @@ impl Recording {
     pub fn sample_depth(&self, n: usize) -> Result<Vec<DepthFrame>, RecordingError> {
         let count = self.depth_count();
         let picks = n.min(count);
+        let indices: Vec<usize> = (0..picks).map(|k| k * count / picks).collect();
+        self.depth_frames_at(&indices)
+    }
+
+    /// The depth frames at `indices` (positions in the recording, in increasing order); a
+    /// session's frames that do not decode are left out.
+    ///
+    /// # Errors
+    /// The MoSeq recording cannot be read.
+    pub fn depth_frames_at(&self, indices: &[usize]) -> Result<Vec<DepthFrame>, RecordingError> {
         match self {
-            Recording::Session(r) => Ok((0..picks)
-                .filter_map(|k| r.depth_frame(k * count / picks).ok())
-                .collect()),
+            Recording::Session(r) => Ok(indices.iter().filter_map(|&k| r.depth_frame(k).ok()).collect()),
             Recording::Moseq { config: c, .. } => {
                 // Seeking: `depth.dat` directly, `depth.avi` by an ffmpeg per frame or, short, in one pass.
                 let source = Self::moseq(c)?;
-                let indices: Vec<usize> = (0..picks).map(|k| k * count / picks).collect();
-                source.frames_at(&indices).map_err(RecordingError::Moseq)
+                source.frames_at(indices).map_err(RecordingError::Moseq)
             }
         }
     }

@@ -48,6 +48,8 @@ pub struct ChunkPlan {
     /// `summary.json` (as a replay's names them).
     pub body_model: PathBuf,
     pub paw_model: Option<PathBuf>,
+    /// Which models, with each file's checksum.
+    pub models: Option<crate::runtime::models::ModelsUsed>,
 }
 
 #[derive(Debug, Default)]
@@ -647,6 +649,9 @@ pub struct ChunkSummary {
     pub software_version: &'static str,
     pub body_model: PathBuf,
     pub paw_model: Option<PathBuf>,
+    /// Which models made the poses: their directory and each file's checksum.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub models: Option<crate::runtime::models::ModelsUsed>,
     /// In how many of its frames with a heading chosen a tail was seen (as a replay's
     /// `summary.json` says); absent when no frame had a mouse.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -803,6 +808,7 @@ impl ChunkPoses {
             software_version: env!("CARGO_PKG_VERSION"),
             body_model: self.chunks.plan.body_model.clone(),
             paw_model: self.chunks.plan.paw_model.clone(),
+            models: self.chunks.plan.models.clone(),
             tails: (tally.tails.frames > 0).then_some(tally.tails),
         };
         let path = self.chunks.dir(self.index).join(CHUNK_SUMMARY_FILE);
@@ -1084,6 +1090,7 @@ mod tests {
             meta: chunk_meta(String::new(), None, None),
             body_model: PathBuf::from("body.forest"),
             paw_model: None,
+            models: None,
         });
         let mut sink = ChunkPoses::new(Arc::clone(&chunks), Arc::default());
         let write = |sink: &mut ChunkPoses, seq| {
