@@ -1,6 +1,7 @@
 //! The one integration test binary: each module tests one area through the public API or the
 //! built `mousepose` binary.
 
+mod adapt;
 mod batch;
 mod calibrate;
 mod capture_aravis;

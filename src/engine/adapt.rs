@@ -58,7 +58,7 @@ const PROBE_IMAGES: u64 = 240;
 /// Rounds of the build's fit.
 const FIT_ROUNDS: usize = 3;
 /// The build's factors stay within this range of the standard mouse's.
-const BUILD_RANGE: (f64, f64) = (0.6, 1.7);
+const BUILD_RANGE: (f64, f64) = (0.5, 2.0);
 /// Frames read from a recording at a time.
 const READ_CHUNK: usize = 64;
 /// The joints that lie on the body seen from above (the tail tip and the limbs left out).

@@ -186,6 +186,7 @@ fn leg_skin(m: &MouseInstance, out: &mut Vec<Primitive>) {
 fn head_skin(m: &MouseInstance, out: &mut Vec<Primitive>) {
     let s = m.scale;
     let g = m.girth;
+    let t = m.stature;
     let head = m.joint(Joint::Head);
     let snout = m.joint(Joint::Snout);
     let head_frame = *m.frame(Joint::Head);
@@ -194,7 +195,7 @@ fn head_skin(m: &MouseInstance, out: &mut Vec<Primitive>) {
         shape: ellipsoid(
             head - head_frame * Vector3::new(1.0 * s, 0.0, 0.0),
             head_frame,
-            [8.5 * s, 7.8 * s * g, 6.0 * s],
+            [8.5 * s, 7.8 * s * g, 6.0 * s * t],
         ),
         labeller: Labeller::Fixed(Part::Head),
         material: Material::Fur,
@@ -203,7 +204,7 @@ fn head_skin(m: &MouseInstance, out: &mut Vec<Primitive>) {
         shape: ellipsoid(
             head + (snout - head) * 0.5 - head_frame * Vector3::new(0.0, 0.0, 0.6 * s),
             head_frame,
-            [0.5 * muzzle_len + 1.6 * s, 4.6 * s * g, 4.0 * s],
+            [0.5 * muzzle_len + 1.6 * s, 4.6 * s * g, 4.0 * s * t],
         ),
         labeller: Labeller::Fixed(Part::Head),
         material: Material::Fur,
@@ -228,6 +229,7 @@ fn head_skin(m: &MouseInstance, out: &mut Vec<Primitive>) {
 fn trunk_skin(m: &MouseInstance, out: &mut Vec<Primitive>) {
     let s = m.scale;
     let g = m.girth;
+    let t = m.stature;
     let spine = [
         Joint::TailBase,
         Joint::Rump,
@@ -247,10 +249,10 @@ fn trunk_skin(m: &MouseInstance, out: &mut Vec<Primitive>) {
         let u = 0.04 + 0.96 * k as f64 / (SAMPLES - 1) as f64;
         let (centre_on_spine, frame) = along(&spine, &lengths, total * u, m);
         let [ry, rz] = trunk_profile(u);
-        let centre = centre_on_spine - frame * Vector3::new(0.0, 0.0, 1.8 * s);
+        let centre = centre_on_spine - frame * Vector3::new(0.0, 0.0, 1.8 * s * t);
         let step = total / (SAMPLES - 1) as f64;
         out.push(Primitive {
-            shape: ellipsoid(centre, frame, [1.2 * step.max(6.0 * s), ry * s * g, rz * s]),
+            shape: ellipsoid(centre, frame, [1.2 * step.max(6.0 * s), ry * s * g, rz * s * t]),
             labeller: Labeller::Trunk {
                 mid: mid_back,
                 forward: front_normal,

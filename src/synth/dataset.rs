@@ -117,11 +117,7 @@ pub fn render_sample(rig: &Rig, spec: &DatasetSpec, library: &[super::mouse::Pos
     let pose_id = rng.gen_range(0..library.len());
     let mut params = jitter_pose(&library[pose_id], &mut rng);
     let placement = match (spec.build, spec.mice.of_item(index)) {
-        (Some(build), _) => {
-            let (placement, carriage) = build.around(&mut rng);
-            carriage.apply(&mut params);
-            placement
-        }
+        (Some(build), _) => build.around(&mut rng),
         (None, Mice::Standard | Mice::Mixed) => random_placement(&mut rng),
         (None, Mice::Varied) => {
             let (placement, carriage) = varied_build(&mut rng);

@@ -40,6 +40,7 @@ pub fn random_placement(rng: &mut impl Rng) -> Placement {
         scale: rng.gen_range(0.85..=1.15),
         bones,
         girth: rng.gen_range(0.9..=1.1),
+        stature: 1.0,
     }
 }
 
@@ -160,8 +161,8 @@ pub fn jitter_pose(p: &PoseParams, rng: &mut impl Rng) -> PoseParams {
 
 /// A mouse's build relative to the standard mouse (every factor 1): what `adapt` measures of a
 /// lab's mice and renders training data with. `scale` multiplies every length (the body's
-/// length grows with it), `girth` the trunk's and head's width beyond that, `height` the back's
-/// height above the floor beyond that (the rump carried higher or lower), and `tail_shown` is
+/// length grows with it), `girth` the trunk's and head's width beyond that, `height` the body's
+/// height beyond that ([`Placement::stature`]), and `tail_shown` is
 /// the share of mice whose tail the depth camera shows (the others' tails are 4 mm long, as a
 /// camera that does not see a thin tail shows them).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -190,37 +191,30 @@ const BUILD_SPREAD: f64 = 0.06;
 impl Build {
     /// A mouse of exactly this build, placed at random in the cage (a session's or a test's
     /// mouse): the standard bones, no spread.
-    pub fn exact(&self, rng: &mut impl Rng) -> (Placement, Carriage) {
+    pub fn exact(&self, rng: &mut impl Rng) -> Placement {
         let mut placement = random_placement(rng);
         placement.scale = self.scale;
         placement.girth = self.girth;
+        placement.stature = self.height;
         placement.bones = crate::core::skeleton::BoneLengths::default();
         if self.tail_shown < 0.5 {
             placement.bones.tail = 4.0;
         }
-        let carriage = Carriage {
-            rump_height: self.height,
-            ..Carriage::default()
-        };
-        (placement, carriage)
+        placement
     }
 
     /// A training image's mouse of about this build: each factor and bone within
     /// [`BUILD_SPREAD`] of it, the tail shown with probability `tail_shown`.
-    pub fn around(&self, rng: &mut impl Rng) -> (Placement, Carriage) {
+    pub fn around(&self, rng: &mut impl Rng) -> Placement {
         let mut placement = random_placement(rng);
         let mut spread = |v: f64| v * rng.gen_range(1.0 - BUILD_SPREAD..=1.0 + BUILD_SPREAD);
         placement.scale = spread(self.scale);
         placement.girth = spread(self.girth);
-        let height = spread(self.height);
+        placement.stature = spread(self.height);
         placement.bones = crate::core::skeleton::BoneLengths::default().map(&mut spread);
         if !rng.gen_bool(self.tail_shown.clamp(0.0, 1.0)) {
             placement.bones.tail = 4.0;
         }
-        let carriage = Carriage {
-            rump_height: height,
-            ..Carriage::default()
-        };
-        (placement, carriage)
+        placement
     }
 }

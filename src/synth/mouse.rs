@@ -131,6 +131,14 @@ pub struct Placement {
     pub bones: BoneLengths,
     /// Body girth relative to the default (how plump the mouse is).
     pub girth: f64,
+    /// How tall the body is relative to the default beyond its scale: the back's height above
+    /// the floor and the trunk's and head's depth (1 for every mouse but `adapt`'s).
+    #[serde(default = "unit")]
+    pub stature: f64,
+}
+
+fn unit() -> f64 {
+    1.0
 }
 
 impl Default for Placement {
@@ -144,6 +152,7 @@ impl Default for Placement {
             scale: 1.0,
             bones: BoneLengths::default(),
             girth: 1.0,
+            stature: 1.0,
         }
     }
 }
@@ -165,6 +174,8 @@ pub struct MouseInstance {
     /// Size factor of the skin (the placement's scale).
     pub scale: f64,
     pub girth: f64,
+    /// [`Placement::stature`].
+    pub stature: f64,
     pub behaviour: Behaviour,
 }
 
@@ -227,7 +238,7 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
         joints: [Point3::origin(); crate::core::skeleton::JOINT_COUNT],
         frames: [Rotation3::identity(); crate::core::skeleton::JOINT_COUNT],
     };
-    let rump = Point3::new(0.0, 0.0, params.rump_height * s);
+    let rump = Point3::new(0.0, 0.0, params.rump_height * s * placement.stature);
     pose_spine(&mut posing, params, &b, s, rump);
     let tail = pose_tail(&mut posing, params, &b, s, rump);
 
@@ -258,6 +269,7 @@ pub fn pose_mouse(params: &PoseParams, placement: &Placement) -> MouseInstance {
             shoulders,
             scale: s,
             girth: placement.girth,
+            stature: placement.stature,
             behaviour: params.behaviour,
         },
         placement,

@@ -102,8 +102,8 @@ pub fn session_animator(seed: u64) -> Animator {
 pub(crate) fn session_mouse(seed: u64, mice: Mice, exact: Option<super::Build>) -> (Animator, Carriage) {
     let mut mouse_rng = item_rng(seed, STREAM_MOUSE, 0);
     if let Some(exact) = exact {
-        let (build, carriage) = exact.exact(&mut mouse_rng);
-        return (Animator::new(mouse_rng, build), carriage);
+        let build = exact.exact(&mut mouse_rng);
+        return (Animator::new(mouse_rng, build), Carriage::default());
     }
     let build = random_placement(&mut mouse_rng);
     match mice.of_item(seed) {
