@@ -497,7 +497,10 @@ fn fit_build(
     let clamp = |v: f64| v.clamp(BUILD_RANGE.0, BUILD_RANGE.1);
     let standard = measure_rendered(rig, noise, Build::default(), seed)?;
     progress.advance(1);
-    let mut build = Build::default();
+    let mut build = Build {
+        tail_shown: (target.tail_seen / standard.tail_seen.max(0.01)).clamp(0.0, 1.0),
+        ..Build::default()
+    };
     let mut current = standard;
     for _ in 0..FIT_ROUNDS {
         let l = target.length_mm.p50 / current.length_mm.p50;
@@ -509,7 +512,6 @@ fn fit_build(
         current = measure_rendered(rig, noise, build, seed)?;
         progress.advance(1);
     }
-    build.tail_shown = (target.tail_seen / standard.tail_seen.max(0.01)).clamp(0.0, 1.0);
     Ok((build, standard, current))
 }
 
@@ -599,8 +601,9 @@ fn train_models(
     })
 }
 
-/// A frame of a run judged against its segmented mouse: `None` without a pose or its body's
-/// axis.
+/// A frame of a run judged against its segmented mouse (whose centroid, not the pose's, says
+/// where it travels, so that both models are judged on the same travel): `None` without a
+/// pose or its body's axis.
 fn judged_frame(record: &PoseRecord, mouse: &Mouse, rig: &Rig) -> Option<JudgedFrame> {
     if record.status != PoseStatus::Ok {
         return None;
@@ -609,7 +612,7 @@ fn judged_frame(record: &PoseRecord, mouse: &Mouse, rig: &Rig) -> Option<JudgedF
         let e = record.pose.joint(j);
         (e.source != JointSource::Missing).then_some(e.position_mm)
     };
-    let (mid, snout, tail) = (at(Joint::MidBack)?, at(Joint::Snout)?, at(Joint::TailBase)?);
+    let (snout, tail) = (at(Joint::Snout)?, at(Joint::TailBase)?);
     let forward = Vector2::new(snout.x - tail.x, snout.y - tail.y);
     let (mut on, mut given) = (0, 0);
     for p in ON_BODY.iter().filter_map(|&j| at(j)) {
@@ -629,7 +632,7 @@ fn judged_frame(record: &PoseRecord, mouse: &Mouse, rig: &Rig) -> Option<JudgedF
         .then(|| axis_angle_deg(&forward, &Vector2::new(mouse.heading_rad.cos(), mouse.heading_rad.sin())));
     Some(JudgedFrame {
         time_s: record.depth.device_ns as f64 / 1e9,
-        centre_mm: Point2::new(mid.x, mid.y),
+        centre_mm: Point2::new(mouse.centroid_mm.x, mouse.centroid_mm.y),
         forward,
         joints_on_mask: on,
         joints: given,

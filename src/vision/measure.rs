@@ -157,7 +157,8 @@ pub fn floor_noise_mm(
 pub struct JudgedFrame {
     /// The frame's time (s).
     pub time_s: f64,
-    /// `mid_back` on the floor (mm), and the body's direction `tail_base -> snout` (mm).
+    /// The segmented body's centroid on the floor (mm), and the pose's direction
+    /// `tail_base -> snout` (mm).
     pub centre_mm: Point2<f64>,
     pub forward: Vector2<f64>,
     /// How many of the body's joints fall on the mask (widened by a pixel), of those given.
