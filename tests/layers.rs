@@ -611,6 +611,8 @@ const EXTERNAL: &[(&str, &[&str])] = &[
     ("png", ALL),
     ("image", ALL),
     ("crc32fast", ALL),
+    // The models' content hashes that outputs record.
+    ("sha2", &["runtime::models"]),
     ("roxmltree", ALL),
     ("safe_arch", ALL),
     ("wide", ALL),

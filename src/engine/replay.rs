@@ -211,7 +211,7 @@ pub struct ReplaySummary {
     /// The orientation model (which end is the head from the body's shape), when the models
     /// directory has one.
     pub orientation_model: Option<PathBuf>,
-    /// Which models made the poses: their directory and each file's checksum.
+    /// Which models made the poses: their directory and each file's hash.
     pub models: crate::runtime::models::ModelsUsed,
     pub realtime: bool,
     pub world: WorldSummary,

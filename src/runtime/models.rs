@@ -119,7 +119,7 @@ impl Models {
     }
 
     /// Which models these are, for the outputs they make: the directory, whether it is the
-    /// bundled one, and each file loaded with its size and checksum.
+    /// bundled one, and each file loaded with its size and SHA-256.
     pub fn used(&self) -> ModelsUsed {
         let files = [
             Some(self.body_path()),
@@ -155,20 +155,23 @@ pub struct ModelsUsed {
     pub files: BTreeMap<String, ModelFile>,
 }
 
-/// A model file's size and content checksum (CRC-32 of its bytes, hex): the same file
-/// anywhere has the same checksum, and an adapted model differs from a bundled one.
+/// A model file's size and content hash (SHA-256 of its bytes, hex): the same file anywhere
+/// has the same hash, and an adapted model differs from a bundled one. (Not a CRC-32: a forest
+/// file ends with the CRC-32 of what comes before, so the CRC-32 of every whole forest file is
+/// the same constant.)
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ModelFile {
     pub bytes: u64,
-    pub crc32: String,
+    pub sha256: String,
 }
 
 impl ModelFile {
-    /// The file's size and checksum; `None` when it cannot be read.
+    /// The file's size and hash; `None` when it cannot be read.
     pub fn of(path: &Path) -> Option<Self> {
+        use sha2::Digest as _;
         use std::io::Read as _;
         let mut file = std::fs::File::open(path).ok()?;
-        let mut hasher = crc32fast::Hasher::new();
+        let mut hasher = sha2::Sha256::new();
         let mut buffer = vec![0u8; 1 << 16];
         let mut bytes = 0u64;
         loop {
@@ -179,10 +182,12 @@ impl ModelFile {
             hasher.update(buffer.get(..n)?);
             bytes += n as u64;
         }
-        Some(Self {
-            bytes,
-            crc32: format!("{:08x}", hasher.finalize()),
-        })
+        let sha256 = hasher.finalize().iter().fold(String::with_capacity(64), |mut s, b| {
+            use std::fmt::Write as _;
+            let _ = write!(s, "{b:02x}");
+            s
+        });
+        Some(Self { bytes, sha256 })
     }
 }
 
@@ -221,4 +226,23 @@ pub fn load_orientation(models: &Path) -> Result<Option<crate::vision::body_shap
     crate::vision::body_shape::ShapeModel::load(&path)
         .map(Some)
         .map_err(|e| ModelsError::Orientation(Box::new(e)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_model_files_hash_is_its_contents_sha256() {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let path = dir.path().join("m");
+        std::fs::write(&path, b"abc").unwrap_or_else(|e| panic!("{e}"));
+        let file = ModelFile::of(&path).unwrap_or_else(|| panic!("readable"));
+        assert_eq!(file.bytes, 3);
+        assert_eq!(
+            file.sha256,
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+        assert!(ModelFile::of(&dir.path().join("none")).is_none());
+    }
 }

@@ -48,7 +48,7 @@ pub struct ChunkPlan {
     /// `summary.json` (as a replay's names them).
     pub body_model: PathBuf,
     pub paw_model: Option<PathBuf>,
-    /// Which models, with each file's checksum.
+    /// Which models, with each file's hash.
     pub models: Option<crate::runtime::models::ModelsUsed>,
 }
 
@@ -649,7 +649,7 @@ pub struct ChunkSummary {
     pub software_version: &'static str,
     pub body_model: PathBuf,
     pub paw_model: Option<PathBuf>,
-    /// Which models made the poses: their directory and each file's checksum.
+    /// Which models made the poses: their directory and each file's hash.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub models: Option<crate::runtime::models::ModelsUsed>,
     /// In how many of its frames with a heading chosen a tail was seen (as a replay's
