@@ -24,7 +24,9 @@ fn adapt(args: &[&std::ffi::OsStr]) -> (bool, String, String) {
     let out = mousepose()
         .arg("adapt")
         .args(args)
-        .args(["--images", "80", "--trees", "1", "--depth", "10", "--frames", "60", "--json"])
+        .args([
+            "--images", "80", "--trees", "1", "--depth", "10", "--frames", "60", "--json",
+        ])
         .output()
         .unwrap();
     (
@@ -59,8 +61,14 @@ fn adapt_measures_a_larger_rendered_mouse_and_writes_models_that_the_replays_nam
     assert!((f(&s["build"]["girth"]) - 1.15).abs() <= 0.06, "{}", s["build"]);
     let measured = f(&s["measured"]["length_mm"]["p50"]);
     let standard = f(&s["standard"]["length_mm"]["p50"]);
-    assert!((measured / standard - 1.2).abs() <= 0.08, "{measured} against {standard}");
-    assert!((f(&s["fitted"]["length_mm"]["p50"]) / measured - 1.0).abs() <= 0.05, "{s}");
+    assert!(
+        (measured / standard - 1.2).abs() <= 0.08,
+        "{measured} against {standard}"
+    );
+    assert!(
+        (f(&s["fitted"]["length_mm"]["p50"]) / measured - 1.0).abs() <= 0.05,
+        "{s}"
+    );
     // The camera the recording was rendered with: 670 mm above the floor, fx 365 px.
     let r = &s["recordings"][0];
     assert!((f(&r["camera_height_mm"]) - 670.0).abs() <= 10.0, "{r}");
@@ -76,7 +84,12 @@ fn adapt_measures_a_larger_rendered_mouse_and_writes_models_that_the_replays_nam
     let bundled = json(&Path::new(judged["bundled_run"].as_str().unwrap()).join("summary.json"));
     assert_eq!(adapted["models"]["bundled"], false, "{}", adapted["models"]);
     assert_eq!(bundled["models"]["bundled"], true, "{}", bundled["models"]);
-    let hash = |v: &serde_json::Value| v["models"]["files"]["body.forest"]["sha256"].as_str().unwrap().to_owned();
+    let hash = |v: &serde_json::Value| {
+        v["models"]["files"]["body.forest"]["sha256"]
+            .as_str()
+            .unwrap()
+            .to_owned()
+    };
     let bytes = std::fs::read(models.join("body.forest")).unwrap().len() as u64;
     assert_eq!(adapted["models"]["files"]["body.forest"]["bytes"], bytes);
     assert_eq!(hash(&adapted).len(), 64);
@@ -102,7 +115,9 @@ fn adapt_refuses_a_recording_too_short_or_without_a_mouse_in_one_sentence() {
     // An empty arena: a flat floor 670 mm away in every frame.
     let empty = tmp.path().join("empty");
     std::fs::create_dir_all(&empty).unwrap();
-    let frame: Vec<u8> = (0..512 * 424).flat_map(|k: u32| (670 + (k % 3) as u16).to_le_bytes()).collect();
+    let frame: Vec<u8> = (0..512 * 424)
+        .flat_map(|k: u32| (670 + (k % 3) as u16).to_le_bytes())
+        .collect();
     std::fs::write(empty.join("depth.dat"), frame.repeat(40)).unwrap();
     let ts: String = (0..40).map(|k| format!("{}\n", 1000 + k * 33)).collect();
     std::fs::write(empty.join("depth_ts.txt"), ts).unwrap();

@@ -129,12 +129,20 @@ pub fn text(s: &AdaptSummary) -> String {
             r.found,
             r.camera_height_mm,
             r.mm_per_px,
-            r.floor_noise_mm.map_or_else(|| "unknown".to_owned(), |n| format!("{n:.1} mm"))
+            r.floor_noise_mm
+                .map_or_else(|| "unknown".to_owned(), |n| format!("{n:.1} mm"))
         );
     }
-    let _ = writeln!(t, "{:>10} {:>22} {:>22} {:>22}", "mm", "your mice", "our standard mouse", "fitted");
+    let _ = writeln!(
+        t,
+        "{:>10} {:>22} {:>22} {:>22}",
+        "mm", "your mice", "our standard mouse", "fitted"
+    );
     for (name, get) in [
-        ("length", (|b: &crate::vision::measure::BodySummary| b.length_mm) as fn(&_) -> Spread),
+        (
+            "length",
+            (|b: &crate::vision::measure::BodySummary| b.length_mm) as fn(&_) -> Spread,
+        ),
         ("width", |b| b.width_mm),
         ("height", |b| b.height_mm),
     ] {
@@ -176,7 +184,11 @@ pub fn text(s: &AdaptSummary) -> String {
         s.trained.orientation_training_accuracy
     );
     for j in &s.judged {
-        let _ = writeln!(t, "judged on frames {}..{} of {:?}, without labels:", j.frames.start, j.frames.end, j.recording);
+        let _ = writeln!(
+            t,
+            "judged on frames {}..{} of {:?}, without labels:",
+            j.frames.start, j.frames.end, j.recording
+        );
         if let Some(b) = &j.bundled {
             let _ = writeln!(t, "  bundled: {}", figures(b));
         }

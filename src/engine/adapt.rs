@@ -241,6 +241,12 @@ pub fn adapt(options: &AdaptOptions, progress: &dyn Progress) -> Result<AdaptSum
             )));
         }
     }
+    if options.judge_models {
+        // Refused now rather than after the training.
+        for path in &options.recordings {
+            open(path, options.judge, "judge on")?;
+        }
+    }
     let mut measured = Vec::new();
     for path in &options.recordings {
         measured.push(measure_recording(path, options, progress)?);
@@ -332,7 +338,10 @@ fn replay_options(recording: &Path, options: &AdaptOptions, out: PathBuf, models
 fn open(path: &Path, range: FrameRange, what: &str) -> Result<(Recording, Range<usize>), Failure> {
     let recording = Recording::open(path).map_err(|e| {
         let usage = e.is_input_problem();
-        Failure::classed(usage, anyhow::Error::new(e).context(format!("cannot read the recording {path:?}")))
+        Failure::classed(
+            usage,
+            anyhow::Error::new(e).context(format!("cannot read the recording {path:?}")),
+        )
     })?;
     let count = recording.depth_count();
     let frames = range.within(count);
@@ -381,7 +390,8 @@ fn measure_recording(path: &Path, options: &AdaptOptions, progress: &dyn Progres
     progress.start("measuring", indices.len() as u64);
     progress.label(&format!(
         "measuring {}",
-        path.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+        path.file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
     ));
     for_frames(&recording, &indices, |_, frame| {
         progress.advance(1);
@@ -401,7 +411,10 @@ fn measure_recording(path: &Path, options: &AdaptOptions, progress: &dyn Progres
         {
             noises.push(n);
         }
-        if let Some(m) = mouse.as_ref().and_then(|m| measure_mouse(m, &rig.depth.world_from_camera, fx)) {
+        if let Some(m) = mouse
+            .as_ref()
+            .and_then(|m| measure_mouse(m, &rig.depth.world_from_camera, fx))
+        {
             found += 1;
             frames.push(m);
         }
@@ -585,7 +598,10 @@ fn train_models(
         };
     progress.finish();
     std::fs::remove_dir_all(&data).with_context(|| format!("removing {data:?}"))?;
-    let paws = default_models_dir().ok().map(|d| d.join(PAWS_MODEL)).filter(|p| p.is_file());
+    let paws = default_models_dir()
+        .ok()
+        .map(|d| d.join(PAWS_MODEL))
+        .filter(|p| p.is_file());
     if let Some(p) = &paws {
         std::fs::copy(p, dir.join(PAWS_MODEL)).with_context(|| format!("copying {p:?}"))?;
     }
@@ -628,8 +644,12 @@ fn judged_frame(record: &PoseRecord, mouse: &Mouse, rig: &Rig) -> Option<JudgedF
             on += usize::from(near);
         }
     }
-    let axis_deg = (mouse.frame == PoseFrame::World)
-        .then(|| axis_angle_deg(&forward, &Vector2::new(mouse.heading_rad.cos(), mouse.heading_rad.sin())));
+    let axis_deg = (mouse.frame == PoseFrame::World).then(|| {
+        axis_angle_deg(
+            &forward,
+            &Vector2::new(mouse.heading_rad.cos(), mouse.heading_rad.sin()),
+        )
+    });
     Some(JudgedFrame {
         time_s: record.depth.device_ns as f64 / 1e9,
         centre_mm: Point2::new(mouse.centroid_mm.x, mouse.centroid_mm.y),
@@ -642,7 +662,12 @@ fn judged_frame(record: &PoseRecord, mouse: &Mouse, rig: &Rig) -> Option<JudgedF
 
 /// Replays `path` with the bundled models and with the adapted ones in `models`, and judges
 /// both on the frames to judge.
-fn judge_recording(path: &Path, options: &AdaptOptions, models: &Path, progress: &dyn Progress) -> Result<Judged, Failure> {
+fn judge_recording(
+    path: &Path,
+    options: &AdaptOptions,
+    models: &Path,
+    progress: &dyn Progress,
+) -> Result<Judged, Failure> {
     let (recording, range) = open(path, options.judge, "judge on")?;
     let name = path
         .canonicalize()
@@ -677,7 +702,9 @@ fn judge_recording(path: &Path, options: &AdaptOptions, models: &Path, progress:
     progress.start("judging", indices.len() as u64);
     for_frames(&recording, &indices, |_, frame| {
         progress.advance(1);
-        let Ok(Some(mouse)) = segmenter.segment(frame) else { return };
+        let Ok(Some(mouse)) = segmenter.segment(frame) else {
+            return;
+        };
         for ((_, table), out) in tables.iter().zip(judged.iter_mut()) {
             if let Some(j) = table.get(&frame.stamp.seq).and_then(|r| judged_frame(r, &mouse, &rig)) {
                 out.push(j);

@@ -395,9 +395,9 @@ pub fn replay_with(
     progress: impl Fn(u64, u64) + Sync,
 ) -> Result<ReplaySummary, ReplayError> {
     let recording = Recording::open(&options.session)?;
-    let (models, chosen, background) = load_models_and_scene(options, &recording)?;
-    let (body_model, paw_model, orientation_model, models_used) =
-        (models.body_path(), models.paws_path(), models.orientation_path(), models.used());
+    let (models, models_used, chosen, background) = load_models_and_scene(options, &recording)?;
+    let (body_model, paw_model, orientation_model) =
+        (models.body_path(), models.paws_path(), models.orientation_path());
     let scene = Scene::place(options, chosen, background)?;
     let truth = recording.truth()?;
     let staging = Staging::new(&options.out, options.force)?;
@@ -496,24 +496,30 @@ pub fn replay_with(
     Ok(summary)
 }
 
-/// Loads the models on a thread of their own while the rig is chosen and the empty cage is
-/// modelled from the recording (the two longest steps of a MoSeq recording's start-up); the
-/// models' errors come first, as when they were loaded first. Without colour frames the paw
-/// cascade is not read.
+/// Loads the models (and hashes their files) on a thread of their own while the rig is chosen
+/// and the empty cage is modelled from the recording (the two longest steps of a MoSeq
+/// recording's start-up); the models' errors come first, as when they were loaded first.
+/// Without colour frames the paw cascade is not read.
 fn load_models_and_scene(
     options: &ReplayOptions,
     recording: &Recording,
-) -> Result<(Models, RecordingRig, Background), ReplayError> {
+) -> Result<(Models, crate::runtime::models::ModelsUsed, RecordingRig, Background), ReplayError> {
     let color = recording.has_color();
     let (models, scene) = std::thread::scope(|scope| {
-        let models = scope.spawn(|| Models::load_for(options.models.as_deref(), color));
+        // The models' files hashed there too (the body forest's 28 MB), beside the background.
+        let models = scope.spawn(|| {
+            Models::load_for(options.models.as_deref(), color).map(|m| {
+                let used = m.used();
+                (m, used)
+            })
+        });
         let scene = rig_and_background(options, recording);
         let models = models.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
         (models, scene)
     });
-    let models = models?;
+    let (models, used) = models?;
     let (chosen, background) = scene?;
-    Ok((models, chosen, background))
+    Ok((models, used, chosen, background))
 }
 
 /// The recording's rig (its calibration, `--calibration`, or uncalibrated with `--intrinsics`

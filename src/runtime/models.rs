@@ -121,18 +121,14 @@ impl Models {
     /// Which models these are, for the outputs they make: the directory, whether it is the
     /// bundled one, and each file loaded with its size and SHA-256.
     pub fn used(&self) -> ModelsUsed {
-        let files = [
-            Some(self.body_path()),
-            self.paws_path(),
-            self.orientation_path(),
-        ]
-        .into_iter()
-        .flatten()
-        .filter_map(|path| {
-            let name = path.file_name()?.to_string_lossy().into_owned();
-            Some((name, ModelFile::of(&path)?))
-        })
-        .collect();
+        let files = [Some(self.body_path()), self.paws_path(), self.orientation_path()]
+            .into_iter()
+            .flatten()
+            .filter_map(|path| {
+                let name = path.file_name()?.to_string_lossy().into_owned();
+                Some((name, ModelFile::of(&path)?))
+            })
+            .collect();
         let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
         let dir = canonical(&self.dir);
         ModelsUsed {

@@ -222,7 +222,8 @@ pub fn unlabelled(frames: &[JudgedFrame]) -> Unlabelled {
                 continue;
             }
             let (before, after) = (dirs[a - 1], dirs[a + length]);
-            if before.dot(&after) > 0.0 && (0..length).all(|j| dirs[a + j].dot(&before) < 0.0 && dirs[a + j].dot(&after) < 0.0)
+            if before.dot(&after) > 0.0
+                && (0..length).all(|j| dirs[a + j].dot(&before) < 0.0 && dirs[a + j].dot(&after) < 0.0)
             {
                 for j in 0..length {
                     reversed[a + j] = true;
@@ -272,7 +273,9 @@ mod tests {
     #[test]
     fn a_mouse_walking_head_first_leads_and_one_flipped_frame_is_a_brief_reversal() {
         // 200 mm/s along +x, facing +x, one frame facing back.
-        let mut frames: Vec<JudgedFrame> = (0..30).map(|i| frame(i as f64 / 30.0, 200.0 * i as f64 / 30.0, (1.0, 0.0))).collect();
+        let mut frames: Vec<JudgedFrame> = (0..30)
+            .map(|i| frame(i as f64 / 30.0, 200.0 * i as f64 / 30.0, (1.0, 0.0)))
+            .collect();
         frames[15].forward = Vector2::new(-1.0, 0.0);
         let u = unlabelled(&frames);
         assert_eq!(u.frames, 30);
@@ -294,7 +297,10 @@ mod tests {
         let arena = vec![1u8; 400];
         let sigma = floor_noise_mm(&depth, &background, &arena, 20, None, 1).unwrap_or(0.0);
         assert!((sigma - 2.0 * 1.4826).abs() < 1e-9, "{sigma}");
-        assert_eq!(floor_noise_mm(&depth, &background, &arena, 20, Some((0, 0, 20, 19)), 1), None);
+        assert_eq!(
+            floor_noise_mm(&depth, &background, &arena, 20, Some((0, 0, 20, 19)), 1),
+            None
+        );
         assert!((axis_angle_deg(&Vector2::new(1.0, 0.0), &Vector2::new(-1.0, 1.0)) - 45.0).abs() < 1e-9);
     }
 }
