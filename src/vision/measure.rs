@@ -293,7 +293,8 @@ mod tests {
         assert_eq!((s.p25, s.p50, s.p75), (2.0, 3.0, 4.0));
         assert!(Spread::of([]).is_none());
         let background = vec![600.0f32; 400];
-        let depth: Vec<u16> = (0..400).map(|k| if k % 2 == 0 { 598 } else { 602 }).collect();
+        // Readings 2 mm below, at and above the floor in turn: the deviations' median is 2 mm.
+        let depth: Vec<u16> = (0..400).map(|k| 598 + 2 * (k % 3) as u16).collect();
         let arena = vec![1u8; 400];
         let sigma = floor_noise_mm(&depth, &background, &arena, 20, None, 1).unwrap_or(0.0);
         assert!((sigma - 2.0 * 1.4826).abs() < 1e-9, "{sigma}");
