@@ -260,7 +260,8 @@ pub fn adapt(options: &AdaptOptions, progress: &dyn Progress) -> Result<AdaptSum
     let first = &measured[0];
     let noises: Vec<f64> = measured.iter().filter_map(|m| m.summary.floor_noise_mm).collect();
     let noise_mm = crate::vision::measure::Spread::of(noises).map_or(0.0, |s| s.p50);
-    let rig = render_rig(first.rig.depth.intrinsics, first.summary.camera_height_mm);
+    let camera_height_mm = first.summary.camera_height_mm;
+    let rig = render_rig(first.rig.depth.intrinsics, camera_height_mm);
     let noise = DepthNoise {
         model: NoiseModel::None,
         gaussian_mm: noise_mm,
@@ -287,7 +288,7 @@ pub fn adapt(options: &AdaptOptions, progress: &dyn Progress) -> Result<AdaptSum
         standard,
         fitted,
         build,
-        render_camera_height_mm: first_height(&rig),
+        render_camera_height_mm: camera_height_mm,
         render_fx: rig.depth.intrinsics.fx,
         render_noise_mm: noise_mm,
         trained,
@@ -303,10 +304,6 @@ pub fn adapt(options: &AdaptOptions, progress: &dyn Progress) -> Result<AdaptSum
         write_summary(&mut summary, started)?;
     }
     Ok(summary)
-}
-
-fn first_height(rig: &Rig) -> f64 {
-    rig.depth.world_from_camera.translation.vector.z
 }
 
 fn write_summary(summary: &mut AdaptSummary, started: std::time::Instant) -> Result<(), Failure> {
@@ -356,18 +353,18 @@ fn open(path: &Path, range: FrameRange, what: &str) -> Result<(Recording, Range<
     Ok((recording, frames))
 }
 
-/// Frames `range` read a chunk at a time, each handed to `each` with its index.
+/// The frames at `indices` read a chunk at a time, each handed to `each`.
 fn for_frames(
     recording: &Recording,
     indices: &[usize],
-    mut each: impl FnMut(usize, &crate::core::frame::DepthFrame),
+    mut each: impl FnMut(&crate::core::frame::DepthFrame),
 ) -> Result<(), Failure> {
     for chunk in indices.chunks(READ_CHUNK) {
         let frames = recording
             .depth_frames_at(chunk)
             .with_context(|| format!("reading frames of {:?}", recording.dir()))?;
-        for (&k, frame) in chunk.iter().zip(&frames) {
-            each(k, frame);
+        for frame in &frames {
+            each(frame);
         }
     }
     Ok(())
@@ -393,7 +390,7 @@ fn measure_recording(path: &Path, options: &AdaptOptions, progress: &dyn Progres
         path.file_name()
             .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
     ));
-    for_frames(&recording, &indices, |_, frame| {
+    for_frames(&recording, &indices, |frame| {
         progress.advance(1);
         let Ok(mouse) = segmenter.segment(frame) else { return };
         let keep_out = mouse.as_ref().map(|m| {
@@ -700,7 +697,7 @@ fn judge_recording(
     let indices: Vec<usize> = range.clone().collect();
     let mut judged: Vec<Vec<JudgedFrame>> = vec![Vec::new(); tables.len()];
     progress.start("judging", indices.len() as u64);
-    for_frames(&recording, &indices, |_, frame| {
+    for_frames(&recording, &indices, |frame| {
         progress.advance(1);
         let Ok(Some(mouse)) = segmenter.segment(frame) else {
             return;
