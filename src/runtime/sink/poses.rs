@@ -282,7 +282,8 @@ impl PoseWriter {
     /// Hands each row to the operating system as it is written (a live run's rows, which a
     /// process killed next must not lose), and counts it only then: a row cut by a write error
     /// (a full disk) is cut off the file again, so that the file holds whole rows only and the
-    /// tally counts exactly those.
+    /// tally counts exactly those. `poses_raw.csv`'s rows are handed over too, after the
+    /// row of `poses.csv` (a write error may leave its last row cut).
     ///
     /// # Errors
     /// The header cannot be written.
@@ -347,6 +348,9 @@ impl Sink for PoseWriter {
                 frame: tally.rows,
                 record: &raw,
             })?;
+            if self.whole_len.is_some() {
+                raw_out.flush()?;
+            }
         }
         let truth = self.truth.get(&r.depth.seq);
         if let (Some(t), Some(raw)) = (truth, &r.raw_body) {
