@@ -63,7 +63,7 @@ fn figures(results: &Path, no_reading: &str, dir: &Path) -> (serde_json::Value, 
 fn figures_with(results: &Path, options: &[&str], dir: &Path) -> (serde_json::Value, serde_json::Value) {
     let (recording, run, report) = (dir.join("rec"), dir.join("run"), dir.join("report"));
     let mut args: Vec<&std::ffi::OsStr> = vec!["build".as_ref(), results.as_os_str(), recording.as_os_str()];
-    args.extend(options.iter().map(|o| o.as_ref()));
+    args.extend(options.iter().map(std::ffi::OsStr::new));
     script(&args);
     replay(&replay_options(&recording, &run, 2)).unwrap();
     let status = mousepose()
