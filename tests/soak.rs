@@ -146,7 +146,7 @@ fn issue48_a_short_soak_through_every_fault_loses_nothing_unaccounted() {
                 .map(|e| e.unwrap().file_name().into_string().unwrap())
                 .collect();
             entries.sort();
-            assert_eq!(entries, ["poses.csv", "summary.json"], "{chunk:?}");
+            assert_eq!(entries, ["poses.csv", "poses_raw.csv", "summary.json"], "{chunk:?}");
         }
     }
     // Back where they were: the cameras' reconnections, the disk's pauses and the reload left

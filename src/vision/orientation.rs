@@ -18,6 +18,10 @@
 //! recursion for as long, but no longer the output: a real mouse turns around in hundreds of
 //! milliseconds, through a curled body, never in 33 ms. A real turn-around is followed
 //! `confirm_frames - 1` frames later than the recursion alone follows it (67 ms at 30 fps).
+//! A heading that a seen tail backed within the last half second holds longer
+//! ([`TrackerConfig::tail_confirm_frames`]) unless the tail is seen at its other end: a real
+//! Kinect's tail reads broken and goes unseen for a few frames, and the tail's stump left on
+//! the body makes its rear look like a head meanwhile.
 //! It decides each frame when it comes (no look-ahead, so the daemon's latency does not
 //! grow), and its margin between the two hypotheses is the frame's orientation confidence.
 
@@ -94,6 +98,13 @@ pub struct TrackerConfig {
     /// A visible tail's log-odds at least this large, on the side the recursion prefers,
     /// turns a confident heading at once (where a tail is seen, its end has been right).
     pub decisive_tail: f64,
+    /// A confident heading that a seen tail backed within the last `tail_memory_ns` turns only
+    /// after `tail_confirm_frames` frames of evidence against it (instead of
+    /// `confirm_frames`), unless a tail is seen at its other end: a real tail reads broken and
+    /// goes unseen for a few frames, and the body's shape with the tail's stump left on it
+    /// points the wrong way meanwhile.
+    pub tail_memory_ns: u64,
+    pub tail_confirm_frames: u32,
 }
 
 impl Default for TrackerConfig {
@@ -112,6 +123,8 @@ impl Default for TrackerConfig {
             confident_margin: 3.0,
             confirm_frames: 3,
             decisive_tail: 8.0,
+            tail_memory_ns: 500_000_000,
+            tail_confirm_frames: 9,
         }
     }
 }
@@ -165,6 +178,8 @@ pub struct Tracker {
     last: Option<(u64, Vector2<f64>, Point2<f64>)>,
     /// The heading given (index as [`Decision::chosen`], for the latest frame's axis).
     held: Hold,
+    /// When a seen tail last backed the held heading.
+    tail_backed_ns: Option<u64>,
 }
 
 /// The heading the tracker gives, and how sure it has been of it.
@@ -213,6 +228,7 @@ impl Tracker {
             _ => {
                 self.cost = [0.0; 2];
                 self.held = Hold::default();
+                self.tail_backed_ns = None;
                 evidence += still_extra;
             }
         }
@@ -231,8 +247,23 @@ impl Tracker {
         let margin = (self.cost[0] - self.cost[1]).abs();
         let decisive_tail = c.tail_weight * h.tail * if preferred == 0 { 1.0 } else { -1.0 } >= c.decisive_tail;
         // The frame's own evidence (travel included) for the held end or against it.
-        let toward_held = evidence * if self.held.chosen == 0 { 1.0 } else { -1.0 } > 0.0;
-        self.held = self.held.next(&c, first, preferred, margin, decisive_tail, toward_held);
+        let held_sign = if self.held.chosen == 0 { 1.0 } else { -1.0 };
+        let toward_held = evidence * held_sign > 0.0;
+        if h.tail * held_sign > 0.0 {
+            self.tail_backed_ns = Some(time_ns);
+        }
+        let confirm = if self.tail_backed_ns.is_some_and(|t| time_ns - t <= c.tail_memory_ns) {
+            c.tail_confirm_frames
+        } else {
+            c.confirm_frames
+        };
+        let before = self.held.chosen;
+        self.held = self
+            .held
+            .next(&c, first, preferred, margin, decisive_tail, toward_held, confirm);
+        if self.held.chosen != before {
+            self.tail_backed_ns = None;
+        }
         Decision {
             chosen: self.held.chosen,
             frame_alone: usize::from(c.frame_evidence(h) < 0.0),
@@ -247,7 +278,9 @@ impl Tracker {
 
 impl Hold {
     /// The held heading after a frame whose recursion prefers `preferred` by `margin`; the
-    /// frame's own evidence points `toward_held` or not.
+    /// frame's own evidence points `toward_held` or not; `confirm` frames against a confident
+    /// heading turn it.
+    #[allow(clippy::too_many_arguments)]
     fn next(
         self,
         c: &TrackerConfig,
@@ -256,6 +289,7 @@ impl Hold {
         margin: f64,
         decisive_tail: bool,
         toward_held: bool,
+        confirm: u32,
     ) -> Self {
         let take = |chosen| Self {
             chosen,
@@ -277,7 +311,7 @@ impl Hold {
             };
         }
         let against = self.against + 1;
-        if !self.confident || decisive_tail || against >= c.confirm_frames {
+        if !self.confident || decisive_tail || against >= confirm {
             take(preferred)
         } else {
             Self { against, ..self }
@@ -467,6 +501,55 @@ mod tests {
         let mut h = contrary(k, axis);
         h.tail = -16.0;
         assert_eq!(tracker.update(k * 33_000_000, &h).chosen, 1);
+    }
+
+    /// Issue 49: a real Kinect's tail, seen behind a confident heading, goes unseen for a few
+    /// frames (broken by noise), while the body's shape with the tail's stump left on it points
+    /// firmly the wrong way: the heading holds for `tail_confirm_frames - 1` such frames; it
+    /// turns at once when the tail is seen at the other end, and after `confirm_frames` once
+    /// the tail has not been seen for `tail_memory_ns`.
+    #[test]
+    fn a_tail_seen_a_moment_ago_holds_the_heading_while_it_goes_unseen() {
+        let axis = Vector2::new(1.0, 0.0);
+        let c = TrackerConfig::default();
+        let held_for = |unseen: u64| {
+            let mut tracker = Tracker::new(c);
+            let mut k = settled(&mut tracker, axis);
+            let mut h = frame(axis, Point2::new(k as f64 * 4.0, 0.0), 0.3);
+            h.tail = 16.0;
+            assert_eq!(tracker.update(k * 33_000_000, &h).chosen, 0);
+            k += 1;
+            (k..k + unseen)
+                .map(|k| tracker.update(k * 33_000_000, &contrary(k, axis)).chosen)
+                .position(|chosen| chosen == 1)
+        };
+        let confirm = u64::from(c.tail_confirm_frames);
+        assert_eq!(held_for(confirm - 1), None);
+        assert_eq!(held_for(confirm + 5), Some(confirm as usize - 1));
+        // The tail seen at the other end turns it at once.
+        let mut tracker = Tracker::new(c);
+        let k = settled(&mut tracker, axis);
+        let mut h = frame(axis, Point2::new(k as f64 * 4.0, 0.0), 0.3);
+        h.tail = 16.0;
+        tracker.update(k * 33_000_000, &h);
+        let mut h = contrary(k + 1, axis);
+        h.tail = -16.0;
+        assert_eq!(tracker.update((k + 1) * 33_000_000, &h).chosen, 1);
+        // A tail seen long ago holds it no longer than `confirm_frames`.
+        let mut tracker = Tracker::new(c);
+        let k = settled(&mut tracker, axis);
+        let mut h = frame(axis, Point2::new(k as f64 * 4.0, 0.0), 0.3);
+        h.tail = 16.0;
+        tracker.update(k * 33_000_000, &h);
+        let quiet = k + 1 + c.tail_memory_ns / 33_000_000 + 1;
+        for k in k + 1..quiet {
+            let h = frame(axis, Point2::new(k as f64 * 4.0, 0.0), 0.3);
+            assert_eq!(tracker.update(k * 33_000_000, &h).chosen, 0);
+        }
+        let turned = (quiet..quiet + 30)
+            .map(|k| tracker.update(k * 33_000_000, &contrary(k, axis)).chosen)
+            .position(|chosen| chosen == 1);
+        assert_eq!(turned, Some(c.confirm_frames as usize - 1));
     }
 
     /// A real turn-around: the mouse walks toward `+x` head first, stops and curls for a third

@@ -24,18 +24,21 @@ pub struct TailSearch {
     pub min_length_px: f64,
     /// The widest mean width a tail may have (its area over its length).
     pub max_width_px: f64,
+    /// The widest gap between two pieces of one tail.
+    pub gap_px: f64,
 }
 
 impl TailSearch {
     /// The search for a mouse seen at `mm_per_px` millimetres a pixel: an opening of
     /// [`OPENING_RADIUS_MM`] (at least 1.5 pixels), tails of at least [`MIN_TAIL_MM`] and at
-    /// most [`MAX_TAIL_WIDTH_MM`] wide.
+    /// most [`MAX_TAIL_WIDTH_MM`] wide, cut by gaps of at most [`MAX_GAP_MM`].
     pub fn at_scale(mm_per_px: f64) -> Self {
         let mm_per_px = mm_per_px.max(1e-3);
         Self {
             radius_px: (OPENING_RADIUS_MM / mm_per_px).max(1.5),
             min_length_px: MIN_TAIL_MM / mm_per_px,
             max_width_px: (MAX_TAIL_WIDTH_MM / mm_per_px).max(2.0),
+            gap_px: MAX_GAP_MM / mm_per_px,
         }
     }
 }
@@ -47,6 +50,11 @@ pub const OPENING_RADIUS_MM: f64 = 4.0;
 pub const MIN_TAIL_MM: f64 = 20.0;
 /// A tail's mean width is at most this (mm).
 pub const MAX_TAIL_WIDTH_MM: f64 = 9.0;
+/// A tail's mean width is at least this (pixels): a chain of specks of noise a gap apart
+/// fills less.
+const MIN_TAIL_WIDTH_PX: f64 = 1.0;
+/// A tail's pieces may lie this far apart (mm): a Kinect's tail reads broken by noise.
+pub const MAX_GAP_MM: f64 = 8.0;
 /// The tail leaves the body within this share of the body's half-length from one of its ends.
 const END_SHARE: f64 = 0.5;
 
@@ -86,34 +94,60 @@ pub fn find_tail_in(image: &DepthImage, fx: f64) -> Option<(Tail, f64)> {
 
 /// The tail of the mouse in `mask` (`width` x `height`, row-major), or `None` when no thin
 /// piece of it is long enough, or it does not leave the body near an end.
+///
+/// A real depth camera's tail is often cut by noise into pieces a few pixels apart: the tail is
+/// measured along itself across gaps up to [`TailSearch::gap_px`] wide, from a piece that
+/// touches the body to pieces beyond it (the segmenter keeps such pieces, `vision::segment`).
+/// Its pixels are the pieces it passes through; where it leaves the body, the pixels of its
+/// first piece that touch the body.
 pub fn find_tail(mask: &[bool], width: usize, height: usize, search: &TailSearch) -> Option<Tail> {
     if width == 0 || mask.len() != width * height {
         return None;
     }
-    let body = opening(mask, width, height, search.radius_px);
+    // Where a tail reads a pixel wider, a disc fits in it here and there: those blobs, apart
+    // from the body's main part, are not body.
+    let body = largest_part(&opening(mask, width, height, search.radius_px), width, height);
     if !body.iter().any(|&b| b) {
         return None;
     }
     let body_axis = body_axis(&body, width)?;
-    let mut seen = vec![false; mask.len()];
-    // Each pixel's place in the piece being measured (usize::MAX: not in it).
-    let mut place = vec![usize::MAX; mask.len()];
+    let pieces = removed_pieces(mask, &body, width, height);
+    let reach = measure_pieces(&pieces, &body, width, height, search.gap_px);
     let mut best: Option<Tail> = None;
-    for start in 0..mask.len() {
-        if !mask[start] || body[start] || seen[start] {
-            continue;
-        }
-        let piece = removed_piece(start, mask, &body, &mut seen, width, height);
-        // A piece as long as the shortest tail has at least that length over sqrt 2 pixels
-        // (all steps diagonal): most pieces (the rim's noise) have far fewer.
-        if piece.len() as f64 * std::f64::consts::SQRT_2 < search.min_length_px {
-            continue;
-        }
-        let Some((base, far, length)) = measure_piece(&piece, &body, &mut place, width, height) else {
+    for (root, base) in reach.bases.iter().enumerate() {
+        let Some(base) = *base else { continue };
+        // The farthest pixel reached from this piece, and the pieces on the way to it.
+        let Some((far, length)) = reach
+            .distance
+            .iter()
+            .enumerate()
+            .filter(|&(i, d)| d.is_finite() && reach.root[i] == root)
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, d)| (i, *d))
+        else {
             continue;
         };
-        let width_px = piece.len() as f64 / length.max(1.0);
-        if length < search.min_length_px || width_px > search.max_width_px {
+        // The gaps do not count: the pieces themselves must be as long as a tail (specks of
+        // noise a gap apart are not a tail).
+        let solid = length - reach.gaps[far];
+        if solid < search.min_length_px {
+            continue;
+        }
+        let mut on_path = vec![pieces.piece_of[pieces.pixels[far]]];
+        let mut at = far;
+        while let Some(before) = reach.before[at] {
+            let piece = pieces.piece_of[pieces.pixels[before]];
+            if on_path.last() != Some(&piece) {
+                on_path.push(piece);
+            }
+            at = before;
+        }
+        let pixels: Vec<usize> = on_path
+            .iter()
+            .flat_map(|&p| pieces.pieces[p].iter().map(|&i| pieces.pixels[i]))
+            .collect();
+        let width_px = pixels.len() as f64 / solid.max(1.0);
+        if !(MIN_TAIL_WIDTH_PX..=search.max_width_px).contains(&width_px) {
             continue;
         }
         let base_xy = (base.0 / base.2 as f64, base.1 / base.2 as f64);
@@ -124,10 +158,11 @@ pub fn find_tail(mask: &[bool], width: usize, height: usize, search: &TailSearch
             continue;
         }
         if best.as_ref().is_none_or(|b| length > b.length_px) {
+            let k = pieces.pixels[far];
             best = Some(Tail {
-                pixels: piece,
+                pixels,
                 base: base_xy,
-                tip: ((far % width) as f64, (far / width) as f64),
+                tip: ((k % width) as f64, (k / width) as f64),
                 length_px: length,
             });
         }
@@ -146,79 +181,151 @@ fn neighbours(k: usize, width: usize, height: usize) -> impl Iterator<Item = (us
     })
 }
 
-/// One piece of what the opening removed from the mask: the 8-connected pixels of `mask`
-/// off the `body` around `start`, marked in `seen`.
-fn removed_piece(
-    start: usize,
-    mask: &[bool],
-    body: &[bool],
-    seen: &mut [bool],
-    width: usize,
-    height: usize,
-) -> Vec<usize> {
-    let mut piece = Vec::new();
-    let mut queue = VecDeque::from([start]);
-    seen[start] = true;
-    while let Some(k) = queue.pop_front() {
-        piece.push(k);
-        for (n, _) in neighbours(k, width, height) {
-            if mask[n] && !body[n] && !seen[n] {
-                seen[n] = true;
-                queue.push_back(n);
-            }
-        }
-    }
-    piece
-}
-
-/// A piece's length along itself from the pixels that touch the body (Dijkstra, steps of 1
-/// and sqrt 2): the sum of those pixels' coordinates and their count, the farthest pixel and
-/// its distance. `None` for a piece that does not touch the body (not a tail of this mouse).
-/// `place` is each pixel's place in the piece (`usize::MAX`: not in it).
-fn measure_piece(
-    piece: &[usize],
-    body: &[bool],
-    place: &mut [usize],
-    width: usize,
-    height: usize,
-) -> Option<((f64, f64, usize), usize, f64)> {
-    let mut distance = vec![f64::INFINITY; piece.len()];
-    // (A pixel of an earlier piece keeps its place, but is never a neighbour of this
-    // one's: the pieces are 8-connected components.)
-    for (i, &k) in piece.iter().enumerate() {
-        place[k] = i;
-    }
-    let mut heap = BinaryHeap::new();
-    let mut base = (0.0, 0.0, 0usize);
-    for (i, &k) in piece.iter().enumerate() {
-        if neighbours(k, width, height).any(|(n, _)| body[n]) {
-            distance[i] = 0.0;
-            heap.push(Reverse(0.0, i));
-            base = (base.0 + (k % width) as f64, base.1 + (k / width) as f64, base.2 + 1);
-        }
-    }
-    if base.2 == 0 {
-        return None;
-    }
-    while let Some(Reverse(d, i)) = heap.pop() {
-        if d > distance[i] {
+/// The largest 8-connected part of `set` (all false when it is empty).
+fn largest_part(set: &[bool], width: usize, height: usize) -> Vec<bool> {
+    let mut part = vec![usize::MAX; set.len()];
+    let (mut best, mut best_size, mut count) = (usize::MAX, 0, 0);
+    for start in 0..set.len() {
+        if !set[start] || part[start] != usize::MAX {
             continue;
         }
-        for (n, step) in neighbours(piece[i], width, height) {
-            let j = place[n];
-            if j != usize::MAX && d + step < distance[j] {
-                distance[j] = d + step;
+        let mut size = 0;
+        let mut queue = VecDeque::from([start]);
+        part[start] = count;
+        while let Some(k) = queue.pop_front() {
+            size += 1;
+            for (n, _) in neighbours(k, width, height) {
+                if set[n] && part[n] == usize::MAX {
+                    part[n] = count;
+                    queue.push_back(n);
+                }
+            }
+        }
+        if size > best_size {
+            (best, best_size) = (count, size);
+        }
+        count += 1;
+    }
+    part.iter().map(|&p| p == best).collect()
+}
+
+/// What the opening removed from the mask, in pieces (8-connected).
+struct Pieces {
+    /// The removed pixels (indices into the mask).
+    pixels: Vec<usize>,
+    /// Each mask pixel's index into `pixels` (`usize::MAX`: not removed).
+    place: Vec<usize>,
+    /// Each removed mask pixel's piece (by mask index; `usize::MAX` elsewhere).
+    piece_of: Vec<usize>,
+    /// Each piece's pixels (indices into `pixels`).
+    pieces: Vec<Vec<usize>>,
+}
+
+/// The pixels of `mask` off the `body`, in 8-connected pieces.
+fn removed_pieces(mask: &[bool], body: &[bool], width: usize, height: usize) -> Pieces {
+    let mut out = Pieces {
+        pixels: Vec::new(),
+        place: vec![usize::MAX; mask.len()],
+        piece_of: vec![usize::MAX; mask.len()],
+        pieces: Vec::new(),
+    };
+    for start in 0..mask.len() {
+        if !mask[start] || body[start] || out.piece_of[start] != usize::MAX {
+            continue;
+        }
+        let piece = out.pieces.len();
+        let mut members = Vec::new();
+        let mut queue = VecDeque::from([start]);
+        out.piece_of[start] = piece;
+        while let Some(k) = queue.pop_front() {
+            out.place[k] = out.pixels.len();
+            members.push(out.pixels.len());
+            out.pixels.push(k);
+            for (n, _) in neighbours(k, width, height) {
+                if mask[n] && !body[n] && out.piece_of[n] == usize::MAX {
+                    out.piece_of[n] = piece;
+                    queue.push_back(n);
+                }
+            }
+        }
+        out.pieces.push(members);
+    }
+    out
+}
+
+/// How far along itself each removed pixel lies from the body.
+struct Reach {
+    /// Per removed pixel (as [`Pieces::pixels`]): its distance, the pixel before it on the
+    /// way (`None` at the body) and the piece the way starts from.
+    distance: Vec<f64>,
+    /// How much of `distance` is gaps leapt.
+    gaps: Vec<f64>,
+    before: Vec<Option<usize>>,
+    root: Vec<usize>,
+    /// Per piece: the sum of the coordinates of its pixels that touch the body, and their
+    /// count (`None`: it does not touch the body).
+    bases: Vec<Option<(f64, f64, usize)>>,
+}
+
+/// Each removed pixel's distance from the body along the pieces (Dijkstra, steps of 1 and
+/// sqrt 2 within a piece; from a piece to another, a leap across a gap of at most `gap_px`,
+/// counted at its length), from the pixels that touch the body.
+fn measure_pieces(pieces: &Pieces, body: &[bool], width: usize, height: usize, gap_px: f64) -> Reach {
+    let n = pieces.pixels.len();
+    let mut reach = Reach {
+        distance: vec![f64::INFINITY; n],
+        gaps: vec![0.0; n],
+        before: vec![None; n],
+        root: vec![usize::MAX; n],
+        bases: vec![None; pieces.pieces.len()],
+    };
+    let mut heap = BinaryHeap::new();
+    for (i, &k) in pieces.pixels.iter().enumerate() {
+        if neighbours(k, width, height).any(|(m, _)| body[m]) {
+            let piece = pieces.piece_of[k];
+            reach.distance[i] = 0.0;
+            reach.root[i] = piece;
+            heap.push(Reverse(0.0, i));
+            let b = reach.bases[piece].get_or_insert((0.0, 0.0, 0));
+            *b = (b.0 + (k % width) as f64, b.1 + (k / width) as f64, b.2 + 1);
+        }
+    }
+    let leap = gap_px.max(0.0).floor() as isize;
+    while let Some(Reverse(d, i)) = heap.pop() {
+        if d > reach.distance[i] {
+            continue;
+        }
+        let k = pieces.pixels[i];
+        let mut relax = |m: usize, step: f64, leap: bool, heap: &mut BinaryHeap<Reverse>| {
+            let j = pieces.place[m];
+            if j != usize::MAX && d + step < reach.distance[j] {
+                reach.distance[j] = d + step;
+                reach.gaps[j] = reach.gaps[i] + if leap { step } else { 0.0 };
+                reach.before[j] = Some(i);
+                reach.root[j] = reach.root[i];
                 heap.push(Reverse(d + step, j));
+            }
+        };
+        for (m, step) in neighbours(k, width, height) {
+            relax(m, step, false, &mut heap);
+        }
+        // Leaps to the other pieces within the gap.
+        let (x, y) = ((k % width) as isize, (k / width) as isize);
+        for dy in -leap..=leap {
+            for dx in -leap..=leap {
+                let (nx, ny) = (x + dx, y + dy);
+                let step = ((dx * dx + dy * dy) as f64).sqrt();
+                if nx < 0 || ny < 0 || nx as usize >= width || ny as usize >= height || step > gap_px || step < 1.5 {
+                    continue;
+                }
+                let m = ny as usize * width + nx as usize;
+                if pieces.piece_of[m] != usize::MAX && pieces.piece_of[m] != pieces.piece_of[k] {
+                    relax(m, step, true, &mut heap);
+                }
             }
         }
     }
-    let (far, length) = distance
-        .iter()
-        .enumerate()
-        .filter(|(_, d)| d.is_finite())
-        .max_by(|a, b| a.1.total_cmp(b.1))
-        .map(|(i, d)| (piece[i], *d))?;
-    Some((base, far, length))
+    reach
 }
 
 /// The 8 neighbours of a pixel and the length of the step to each.
@@ -407,6 +514,70 @@ mod tests {
             }
         }
         mask
+    }
+
+    /// Clears the pixels of `mask` (`width` wide) in columns `from..to` (a gap across a tail
+    /// running along +x).
+    fn cut(mask: &mut [bool], width: usize, from: usize, to: usize) {
+        for (k, m) in mask.iter_mut().enumerate() {
+            if (from..to).contains(&(k % width)) {
+                *m = false;
+            }
+        }
+    }
+
+    /// Issue 49: tails as a real Kinect reads them (the real-depth versions are in the
+    /// integration tests, on the real MoSeq mouse with such tails drawn on): cut by noise into
+    /// two or three pieces, 2 px wide, a pixel wider here and there; and specks of noise a gap
+    /// apart are no tail.
+    #[test]
+    fn a_tail_broken_thin_or_uneven_is_found_whole_and_specks_are_not_a_tail() {
+        let (w, h) = (140, 60);
+        let search = TailSearch::at_scale(1.6);
+        let (cx, a) = (w as f64 / 3.0, 28.0);
+        let end = (cx + a) as usize;
+        let whole = find_tail(&mouse(w, h, 28.0, 11.0, 60, 3), w, h, &search).expect("the whole tail");
+        // Two gaps of 3 px (4.8 mm): three pieces, found as one tail as long as the whole.
+        let mut broken = mouse(w, h, 28.0, 11.0, 60, 3);
+        cut(&mut broken, w, end + 15, end + 18);
+        cut(&mut broken, w, end + 35, end + 38);
+        let tail = find_tail(&broken, w, h, &search).expect("the broken tail");
+        assert!(
+            (tail.length_px - whole.length_px).abs() < 2.0,
+            "{} against {}",
+            tail.length_px,
+            whole.length_px
+        );
+        assert_eq!(tail.pixels.len(), whole.pixels.len() - 3 * 3 * 2);
+        assert!(tail.tip.0 > cx + a + 55.0, "{:?}", tail.tip);
+        // A gap wider than a tail's (6 px, 9.6 mm): the tail ends before it.
+        let mut apart = mouse(w, h, 28.0, 11.0, 60, 3);
+        cut(&mut apart, w, end + 25, end + 31);
+        let tail = find_tail(&apart, w, h, &search).expect("the tail before the gap");
+        assert!(tail.tip.0 < (end + 25) as f64, "{:?}", tail.tip);
+        // 2 px wide.
+        let thin = find_tail(&mouse(w, h, 28.0, 11.0, 60, 2), w, h, &search).expect("the thin tail");
+        assert!((thin.length_px - 60.0).abs() < 6.0, "{}", thin.length_px);
+        // A pixel wider for a stretch, so that the opening's disc fits in it: still one tail,
+        // and the blob is no body.
+        let mut uneven = mouse(w, h, 28.0, 11.0, 60, 3);
+        let cy = h / 2;
+        for x in end + 20..end + 26 {
+            for y in cy - 3..=cy + 3 {
+                uneven[y * w + x] = true;
+            }
+        }
+        let tail = find_tail(&uneven, w, h, &search).expect("the uneven tail");
+        assert!(
+            tail.tip.0 > cx + a + 55.0 && (tail.length_px - 60.0).abs() < 6.0,
+            "{tail:?}"
+        );
+        // Specks a gap apart leaving the body's end: too little of them to be a tail.
+        let mut specks = mouse(w, h, 28.0, 11.0, 0, 3);
+        for x in (end + 1..end + 60).step_by(4) {
+            specks[cy * w + x] = true;
+        }
+        assert_eq!(find_tail(&specks, w, h, &search), None);
     }
 
     /// The opening by its definition: every offset of the disc checked.

@@ -847,13 +847,14 @@ impl ChunkPoses {
         }
     }
 
-    /// Creates the current chunk's `poses.csv` (anew: what was there holds no row); on
-    /// failure, tries again later.
+    /// Creates the current chunk's `poses.csv` and `poses_raw.csv` (anew: what was there holds
+    /// no row); on failure, tries again later.
     fn create(&mut self) {
         let dir = self.chunks.dir(self.index);
         let made = self.chunks.make_dir(self.index);
         match made
             .and_then(|dir| PoseWriter::create(&dir, HashMap::new(), u64::MAX))
+            .and_then(PoseWriter::with_raw_file)
             .and_then(PoseWriter::handing_over_each_row)
         {
             Ok(w) => {
@@ -1131,6 +1132,9 @@ mod tests {
                 let summary: serde_json::Value =
                     serde_json::from_slice(&std::fs::read(dir.join(CHUNK_SUMMARY_FILE)).unwrap()).unwrap();
                 assert_eq!(summary["rows"].as_u64(), Some(lines - 1), "chunk {k}");
+                // Issue 49: the joints before smoothing beside them, row for row, as a replay.
+                let raw = std::fs::read_to_string(dir.join(crate::runtime::sink::poses::RAW_POSES_FILE)).unwrap();
+                assert_eq!(raw.lines().count() as u64, lines, "chunk {k}");
                 summary
             })
             .collect();

@@ -282,7 +282,9 @@ impl PoseWriter {
     /// Hands each row to the operating system as it is written (a live run's rows, which a
     /// process killed next must not lose), and counts it only then: a row cut by a write error
     /// (a full disk) is cut off the file again, so that the file holds whole rows only and the
-    /// tally counts exactly those.
+    /// tally counts exactly those. `poses_raw.csv`'s rows are handed over too, each before
+    /// its row of `poses.csv` (after a write error it may hold a row, or part of one,
+    /// that `poses.csv` does not).
     ///
     /// # Errors
     /// The header cannot be written.
@@ -322,6 +324,21 @@ impl Sink for PoseWriter {
             picture.write_png(&dir.join(format!("{:06}.png", r.depth.seq)))?;
         }
         let mut tally = self.tally.lock().unwrap_or_else(PoisonError::into_inner);
+        // The joints before smoothing first: a row it cannot take is not written to
+        // `poses.csv` either, whose rows the tally counts.
+        if let Some(raw_out) = &mut self.raw_out {
+            let mut raw = r.clone();
+            for (j, estimate) in raw.pose.joints.iter_mut().zip(r.raw_body.iter().flat_map(|b| b.iter())) {
+                *j = *estimate;
+            }
+            raw_out.serialize(PoseRow {
+                frame: tally.rows,
+                record: &raw,
+            })?;
+            if self.whole_len.is_some() {
+                raw_out.flush()?;
+            }
+        }
         self.out.serialize(PoseRow {
             frame: tally.rows,
             record: &r,
@@ -337,16 +354,6 @@ impl Sink for PoseWriter {
                     return Err(e.into());
                 }
             }
-        }
-        if let Some(raw_out) = &mut self.raw_out {
-            let mut raw = r.clone();
-            for (j, estimate) in raw.pose.joints.iter_mut().zip(r.raw_body.iter().flat_map(|b| b.iter())) {
-                *j = *estimate;
-            }
-            raw_out.serialize(PoseRow {
-                frame: tally.rows,
-                record: &raw,
-            })?;
         }
         let truth = self.truth.get(&r.depth.seq);
         if let (Some(t), Some(raw)) = (truth, &r.raw_body) {

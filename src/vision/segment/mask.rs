@@ -1,7 +1,8 @@
 //! Steps 1 to 4 of a frame: the strong mask with its pixels counted in tiles, the box of the
 //! densest cluster of tiles, the pixels on depth jumps around it, the floor's noise, the
-//! largest strong component in the box (OpenCV), and that component grown into the tail. What
-//! comes out is the grown mask, left in the segmenter's buffers for the last steps.
+//! largest strong component in the box (OpenCV), and that component grown into the tail
+//! (across the gaps noise cuts in a tail). What comes out is the grown mask, left in the
+//! segmenter's buffers for the last steps.
 
 use super::{
     Background, Bounds, FloorPlane, Grid, Scratch, SegmentError, Segmenter, cv_err, mat_over, mat_over_mut, same_buffer,
@@ -222,6 +223,7 @@ impl Segmenter {
             margin: grow_mm.min(self.config.background_margin_mm),
             grow_mm,
             ridge_mm,
+            gap_at_1mm: (crate::vision::tail::MAX_GAP_MM * self.background.intrinsics.fx) as f32,
         };
         let s = &mut self.scratch;
         let mut b = s.seed_mask(g, search, seed);
@@ -242,6 +244,8 @@ struct Growth<'a> {
     margin: f32,
     grow_mm: f32,
     ridge_mm: f32,
+    /// The widest gap in a tail (`vision::tail::MAX_GAP_MM`) in pixels, times the depth (mm).
+    gap_at_1mm: f32,
 }
 
 impl Growth<'_> {
@@ -293,6 +297,33 @@ impl Growth<'_> {
             return false;
         }
         self.ridge_height(i, strong, jump) >= self.ridge_mm
+    }
+
+    /// A tail cut by noise: the first strong pixel beyond the refused pixel `n` on the line
+    /// from the mask's pixel `i` through it, within the widest gap of a tail, when it is not
+    /// in the mask yet and would join it.
+    fn across_gap(&self, i: usize, n: usize, strong: &[u8], jump: &[u8], mask: &[u8]) -> Option<usize> {
+        let (g, d) = (self.g, self.depth[i]);
+        if d == 0 {
+            return None;
+        }
+        let reach = (self.gap_at_1mm / f32::from(d)).floor() as isize + 1;
+        let (x, y) = ((i % g.w) as isize, (i / g.w) as isize);
+        let (dx, dy) = ((n % g.w) as isize - x, (n / g.w) as isize - y);
+        for k in 2..=reach {
+            let (px, py) = (x + k * dx, y + k * dy);
+            if px < 0 || py < 0 || px >= g.w as isize || py >= g.h as isize {
+                return None;
+            }
+            let p = py as usize * g.w + px as usize;
+            if matches!(mask[p], 1..=3) {
+                return None;
+            }
+            if strong[p] != 0 && jump[p] == 0 && self.accepts(p, strong, jump) {
+                return Some(p);
+            }
+        }
+        None
     }
 
     /// A ridge: along some direction, the median height of the five pixels centred at `i`
@@ -348,8 +379,8 @@ impl Scratch {
         b
     }
 
-    /// Grows the mask from the stack into the neighbours `growth` accepts, noting them in
-    /// `grown`. Mask values while growing: 1 seed, 2 grown, 4 tried and refused (cleared at
+    /// Grows the mask from the stack into the neighbours `growth` accepts, and across the
+    /// gaps of a tail cut by noise to the pieces beyond them, noting them in `grown`. Mask values while growing: 1 seed, 2 grown, 4 tried and refused (cleared at
     /// the end).
     fn grow_from_seed(&mut self, g: &Grid, growth: &Growth<'_>) {
         let s = self;
@@ -359,16 +390,25 @@ impl Scratch {
             let mut around = [0; 8];
             let count = neighbours8(i as usize, g.w, g.h, &mut around);
             for &n in &around[..count] {
-                if s.mask[n] != 0 {
-                    continue;
+                match s.mask[n] {
+                    0 if growth.accepts(n, &s.strong, &s.jump) => {
+                        s.mask[n] = 2;
+                        s.stack.push(n as u32);
+                        s.grown.push(n as u32);
+                        continue;
+                    }
+                    0 => {
+                        s.mask[n] = 4;
+                        s.refused.push(n as u32);
+                    }
+                    4 => {}
+                    _ => continue,
                 }
-                if growth.accepts(n, &s.strong, &s.jump) {
-                    s.mask[n] = 2;
-                    s.stack.push(n as u32);
-                    s.grown.push(n as u32);
-                } else {
-                    s.mask[n] = 4;
-                    s.refused.push(n as u32);
+                // Refused: a piece of a tail cut by noise may lie beyond it.
+                if let Some(p) = growth.across_gap(i as usize, n, &s.strong, &s.jump, &s.mask) {
+                    s.mask[p] = 2;
+                    s.stack.push(p as u32);
+                    s.grown.push(p as u32);
                 }
             }
         }
