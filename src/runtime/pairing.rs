@@ -266,8 +266,10 @@ pub struct Synchronizer {
     backwards: [u32; 2],
     /// Smallest interval between depth frames per step of their frame counter (device time).
     depth_interval_ns: Option<u64>,
-    /// The same of the colour frames: the least a next colour frame can be taken after the
-    /// newest one, which tells when the nearest partner of a depth frame is already in.
+    /// The colour frames' last intervals per step of their frame counter (device time), and
+    /// their median: about when the next colour frame is taken after the newest, which tells
+    /// when the nearest partner of a depth frame is already in.
+    color_intervals: VecDeque<u64>,
     color_interval_ns: Option<u64>,
     /// The newest capture time seen from each camera (host time line).
     newest_depth: Option<i64>,
@@ -295,6 +297,7 @@ impl Synchronizer {
             last_color: None,
             backwards: [0; 2],
             depth_interval_ns: None,
+            color_intervals: VecDeque::new(),
             color_interval_ns: None,
             newest_depth: None,
             newest_color: None,
@@ -353,7 +356,8 @@ impl Synchronizer {
             return;
         }
         if let Some(last) = self.last_depth {
-            self.depth_interval_ns = Some(min_interval(self.depth_interval_ns, last, stamp));
+            let dt = per_step(last, stamp);
+            self.depth_interval_ns = Some(self.depth_interval_ns.map_or(dt, |i| i.min(dt)));
         }
         self.last_depth = Some(stamp);
         self.first_depth_arrival.get_or_insert(stamp.host_ns);
@@ -372,7 +376,12 @@ impl Synchronizer {
             return;
         }
         if let Some(last) = self.last_color {
-            self.color_interval_ns = Some(min_interval(self.color_interval_ns, last, stamp));
+            self.color_intervals.push_back(per_step(last, stamp));
+            if self.color_intervals.len() > COLOR_INTERVALS {
+                self.color_intervals.pop_front();
+            }
+            let mut v: Vec<f64> = self.color_intervals.iter().map(|&i| i as f64).collect();
+            self.color_interval_ns = crate::core::median(&mut v).map(|m| m as u64);
         }
         self.last_color = Some(stamp);
         self.last_color_arrival = Some(self.last_color_arrival.map_or(stamp.host_ns, |t| t.max(stamp.host_ns)));
@@ -429,6 +438,7 @@ impl Synchronizer {
                 self.color_clock = ClockModel::default();
                 self.last_color = None;
                 // A reopened camera may run at another rate.
+                self.color_intervals.clear();
                 self.color_interval_ns = None;
             }
         }
@@ -458,8 +468,8 @@ impl Synchronizer {
             // is in, every later one is farther from it than that one, so the nearest partner
             // is among those in (waiting until one is past the tolerance adds up to a frame
             // interval of latency for nothing). So it is too once the next colour frame, taken
-            // at least nearly a colour frame interval after the newest, cannot be nearer than
-            // the newest nor within the tolerance: waiting for it cost up to a whole interval.
+            // about a colour frame interval after the newest, cannot be nearer than the newest
+            // nor within the tolerance: waiting for it cost up to a whole interval.
             let decided = end || !self.config.color || self.nearest_color_in(td, tol);
             // Waiting given up: the frame waited the longest wait, or the colour camera has
             // been silent that long.
@@ -540,9 +550,9 @@ impl Synchronizer {
 
     /// Whether no colour frame still to come can be a nearer partner of a depth frame taken
     /// at `td` (host time line) than those in: one taken at or after it is in, or the next
-    /// one, at least [`NEXT_COLOR_SHARE`] of the smallest colour interval after the newest,
-    /// would be farther than the newest or out of the tolerance `tol`. A tie goes to the
-    /// earlier frame, as the choice among pending frames does.
+    /// one, at least [`NEXT_COLOR_SHARE`] of the usual colour interval after the newest, would
+    /// be farther than the newest or out of the tolerance `tol`. A tie goes to the earlier
+    /// frame, as the choice among pending frames does.
     fn nearest_color_in(&self, td: i64, tol: i64) -> bool {
         let Some(newest) = self.newest_color else {
             return false;
@@ -563,19 +573,23 @@ impl Synchronizer {
     }
 }
 
-/// The share of the smallest colour frame interval seen that the next colour frame is taken
-/// after the newest at the least: below 1 for the device clock's jitter and its drift against
-/// the host's (an interval of 10 % less than any seen yet would pair a frame wrongly; one
-/// shorter than expected only makes a frame wait for it).
+/// The share of the usual colour frame interval (the median of the last [`COLOR_INTERVALS`])
+/// that the next colour frame is taken after the newest at the least: below 1 for the jitter
+/// of the device's stamps and its drift against the host's clock. A camera stamping at the
+/// sensor is microseconds off; one stamping in software (Aravis's fake camera) was 10 ms off
+/// now and then, so the smallest interval seen would soon stop the early decision. Only a
+/// next interval more than 10 % shorter than usual can then pair a depth frame (one within 5 %
+/// of an interval of the midpoint between two colour frames) with the farther of the two.
 const NEXT_COLOR_SHARE: f64 = 0.9;
 
-/// The smallest interval between two frames of a camera per step of the frame counter (device
-/// time), `last` then `stamp`, given the smallest so far: per step, so that dropped frames do
-/// not widen it.
-fn min_interval(so_far: Option<u64>, last: Stamp, stamp: Stamp) -> u64 {
+/// Colour frame intervals the usual one is the median of.
+const COLOR_INTERVALS: usize = 31;
+
+/// The interval between two frames of a camera, `last` then `stamp`, per step of the frame
+/// counter (device time), so that dropped frames do not widen it.
+fn per_step(last: Stamp, stamp: Stamp) -> u64 {
     let steps = stamp.seq.saturating_sub(last.seq).max(1);
-    let dt = stamp.device_ns.saturating_sub(last.device_ns) / steps;
-    so_far.map_or(dt, |i| i.min(dt))
+    stamp.device_ns.saturating_sub(last.device_ns) / steps
 }
 
 /// Most colour frames held while waiting for depth frames.
