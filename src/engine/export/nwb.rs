@@ -319,15 +319,17 @@ fn metadata<'a>(
     }
 }
 
+/// The project's Python: `$MOUSEPOSE_PYTHON`, else [`DEFAULT_PYTHON`] (also where pylsl, which
+/// ships liblsl, is installed).
+pub fn project_python() -> PathBuf {
+    std::env::var_os("MOUSEPOSE_PYTHON").map_or_else(|| PathBuf::from(DEFAULT_PYTHON), PathBuf::from)
+}
+
 /// Runs the helper with `options`'s Python on `poses` and `meta` (both written with a copy of
 /// the helper into a temporary directory, removed after), into a hidden file renamed to
 /// `options.out` when it succeeds.
 fn write_with_helper(options: &NwbOptions, poses: &Path, meta: &Meta<'_>) -> Result<(), Failure> {
-    let python = options
-        .python
-        .clone()
-        .or_else(|| std::env::var_os("MOUSEPOSE_PYTHON").map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from(DEFAULT_PYTHON));
+    let python = options.python.clone().unwrap_or_else(project_python);
     let work = std::env::temp_dir().join(format!("mousepose-nwb-{}", std::process::id()));
     std::fs::create_dir_all(&work).with_context(|| format!("creating {work:?}"))?;
     let result = (|| -> Result<(), Failure> {

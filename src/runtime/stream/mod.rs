@@ -9,6 +9,7 @@
 //! `seq` lets a subscriber see). With no subscriber connected (the socket's monitor counts
 //! them) no message is even made. The message format is in `docs/FORMATS.md`; [`message`].
 
+pub mod lsl;
 pub mod message;
 
 use crossbeam_channel::{Receiver, Sender, TrySendError};
@@ -455,11 +456,13 @@ impl Subscriber {
     }
 }
 
-/// Wraps a pose sink: each pose is published before it is written.
+/// Wraps a pose sink: each pose is published (on the ZeroMQ stream, the LSL outlet, or both)
+/// before it is written.
 #[derive(Debug)]
 pub struct Published<S> {
     pub inner: S,
-    pub stream: StreamHandle,
+    pub stream: Option<StreamHandle>,
+    pub lsl: Option<lsl::LslHandle>,
 }
 
 impl<S: crate::runtime::pipeline::Sink<In = crate::runtime::stages::Fused>> crate::runtime::pipeline::Sink
@@ -468,9 +471,13 @@ impl<S: crate::runtime::pipeline::Sink<In = crate::runtime::stages::Fused>> crat
     type In = crate::runtime::stages::Fused;
 
     fn write(&mut self, item: Self::In) -> Result<(), crate::runtime::pipeline::StageError> {
-        let host_clock = self.stream.host_clock;
-        self.stream
-            .publish(Topic::Poses, |seq| message::pose(seq, &item.record, host_clock));
+        if let Some(stream) = &self.stream {
+            let host_clock = stream.host_clock;
+            stream.publish(Topic::Poses, |seq| message::pose(seq, &item.record, host_clock));
+        }
+        if let Some(lsl) = &self.lsl {
+            lsl.publish(&item.record);
+        }
         self.inner.write(item)
     }
 
