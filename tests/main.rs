@@ -14,6 +14,7 @@ mod fuzz;
 mod hostile;
 mod http;
 mod layers;
+mod lsl;
 mod packaging;
 mod paws;
 mod realdata;
