@@ -14,7 +14,7 @@ use std::process::Command;
 
 /// The project's Python (`scripts/setup.sh` gives it pylsl).
 fn python() -> PathBuf {
-    mousepose::engine::export::nwb::project_python()
+    mousepose::engine::project_python()
 }
 
 /// Why the test cannot run here, if it cannot.

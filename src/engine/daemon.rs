@@ -8,8 +8,7 @@
 //! makes progress, and STATUS= with the frame rate and counts every few seconds.
 
 use crate::core::geometry::Rig;
-use crate::engine::export::nwb::project_python;
-use crate::engine::{Failure, Signals, signal_name};
+use crate::engine::{Failure, Signals, project_python, signal_name};
 use crate::io::session::CameraRole;
 use crate::runtime::capture::rig::RigCameras;
 use crate::runtime::capture::supervise::{CameraState, SharedHealth, StallWatch, lock};

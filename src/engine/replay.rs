@@ -9,8 +9,7 @@
 use crate::core::frame::DepthFrame;
 use crate::core::geometry::Rig;
 use crate::core::image::RgbImage;
-use crate::engine::Interrupt;
-use crate::engine::export::nwb::project_python;
+use crate::engine::{Interrupt, project_python};
 use crate::io::mask::{MaskError, read_mask_png};
 use crate::io::output::{OutputError, Staging};
 use crate::io::session::SessionSource;

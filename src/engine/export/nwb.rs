@@ -23,8 +23,8 @@ use std::process::Command;
 
 /// The helper, run with the environment's Python.
 const HELPER: &str = include_str!("../../../python/nwb.py");
-/// Where `scripts/nwb-env` puts the Python environment with pynwb and ndx-pose.
-pub const DEFAULT_PYTHON: &str = "/opt/mousepose/venv/bin/python3";
+pub use crate::engine::DEFAULT_PYTHON;
+use crate::engine::project_python;
 
 /// What `export nwb` writes, from what (see its `--help`; the subject's fields are checked
 /// by [`check_subject`]).
@@ -317,12 +317,6 @@ fn metadata<'a>(
         software_version: env!("CARGO_PKG_VERSION"),
         videos,
     }
-}
-
-/// The project's Python: `$MOUSEPOSE_PYTHON`, else [`DEFAULT_PYTHON`] (also where pylsl, which
-/// ships liblsl, is installed).
-pub fn project_python() -> PathBuf {
-    std::env::var_os("MOUSEPOSE_PYTHON").map_or_else(|| PathBuf::from(DEFAULT_PYTHON), PathBuf::from)
 }
 
 /// Runs the helper with `options`'s Python on `poses` and `meta` (both written with a copy of

@@ -244,6 +244,10 @@ pub struct LslOutlet {
 /// How often the `lsl` thread asks whether a reader is connected when no sample comes.
 const CONSUMER_PERIOD: Duration = Duration::from_millis(100);
 
+/// How long the outlet stays after its last sample when a reader is connected: liblsl cuts
+/// off what it has not yet sent when an outlet goes (as ZeroMQ's linger, but bounded).
+const LINGER: Duration = Duration::from_millis(500);
+
 impl LslOutlet {
     /// Loads liblsl (the config's, else [`find_library`] in the environment of `python`),
     /// offers the stream and starts the `lsl` thread.
@@ -312,7 +316,8 @@ impl LslOutlet {
         self.handle.clone()
     }
 
-    /// Ends the `lsl` thread (samples still queued are sent first) and withdraws the stream.
+    /// Ends the `lsl` thread (samples still queued are sent first, and a connected reader gets
+    /// [`LINGER`] to receive them) and withdraws the stream.
     pub fn stop(mut self) {
         self.end();
     }
@@ -352,7 +357,12 @@ fn push_loop(outlet: &Outlet, rx: &Receiver<Outgoing>, stats: &LslStats, stop: &
                     }
                 }
             },
-            Err(_) if stop.load(Ordering::Relaxed) && rx.is_empty() => return,
+            Err(_) if stop.load(Ordering::Relaxed) && rx.is_empty() => {
+                if outlet.has_consumers() {
+                    std::thread::sleep(LINGER);
+                }
+                return;
+            }
             Err(_) => {}
         }
     }
