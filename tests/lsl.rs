@@ -228,15 +228,20 @@ impl std::ops::Index<&str> for Row {
 }
 
 fn poses_by_seq(path: &Path) -> std::collections::HashMap<u64, Row> {
-    let mut reader = csv::Reader::from_path(path).unwrap();
-    let header: Vec<String> = reader.headers().unwrap().iter().map(str::to_owned).collect();
-    let column = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let mut reader = csv::Reader::from_path(path).expect("poses.csv is there");
+    let header: Vec<String> = reader
+        .headers()
+        .expect("poses.csv has a header")
+        .iter()
+        .map(str::to_owned)
+        .collect();
+    let column = |name: &str| header.iter().position(|h| h == name).expect("a column of poses.csv");
     let (seq, status, confidence) = (column("depth_seq"), column("status"), column("orientation_confidence"));
-    let number = |f: &str| (!f.is_empty()).then(|| f.parse::<f64>().unwrap());
+    let number = |f: &str| (!f.is_empty()).then(|| f.parse::<f64>().expect("a number in poses.csv"));
     reader
         .records()
         .map(|r| {
-            let r = r.unwrap();
+            let r = r.expect("a row of poses.csv");
             let values = header
                 .iter()
                 .zip(r.iter())
@@ -248,7 +253,7 @@ fn poses_by_seq(path: &Path) -> std::collections::HashMap<u64, Row> {
                 status: r[status].to_owned(),
                 confidence: number(&r[confidence]),
             };
-            (r[seq].parse().unwrap(), row)
+            (r[seq].parse().expect("a depth frame counter"), row)
         })
         .collect()
 }

@@ -91,7 +91,7 @@ impl<E: Into<anyhow::Error>> From<E> for Failure {
 /// Refused to overwrite a file (the user's: see [`Failure`]).
 #[derive(Debug, thiserror::Error)]
 #[error("{0:?} exists (use --force to replace it)")]
-pub struct Exists(pub std::path::PathBuf);
+pub struct Exists(pub PathBuf);
 
 /// A staged output that cannot be made: the user's when the directory is in the way.
 pub fn output_failure(e: crate::io::output::OutputError) -> Failure {

@@ -367,3 +367,58 @@ fn push_loop(outlet: &Outlet, rx: &Receiver<Outgoing>, stats: &LslStats, stop: &
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::frame::Stamp;
+    use crate::core::pose::{JointSource, Pose};
+
+    #[test]
+    fn a_sample_has_a_value_per_channel_in_the_channels_order() {
+        let mut pose = Pose::default();
+        let snout = pose.joint_mut(Joint::ALL[0]);
+        snout.position_mm = nalgebra::Point3::new(1.5, -2.0, 30.25);
+        snout.source = JointSource::Depth;
+        let record = PoseRecord {
+            depth: Stamp {
+                seq: 77,
+                device_ns: 1,
+                host_ns: 2,
+            },
+            color: None,
+            skew_ns: 0,
+            status: PoseStatus::NoMouse,
+            pose,
+            paws: Vec::new(),
+            headings: None,
+            orientation: None,
+            raw_body: None,
+        };
+        let values = sample(&record);
+        let labels: Vec<String> = channels().into_iter().map(|c| c.label).collect();
+        assert_eq!((values.len(), labels.len()), (CHANNELS, CHANNELS));
+        assert_eq!(&values[..3], [1.5, -2.0, 30.25]);
+        assert_eq!(labels[0], format!("{}_x", Joint::ALL[0].name()));
+        // A joint not estimated, and no orientation: NaN.
+        assert!(values[3..72].iter().all(|v| v.is_nan()));
+        assert_eq!(labels[72..], ["status", "orientation_confidence", "depth_seq"]);
+        assert_eq!(values[72], 1.0);
+        assert!(values[73].is_nan());
+        assert_eq!(values[74], 77.0);
+    }
+
+    #[test]
+    fn liblsl_is_pylsls_copy_unless_the_config_names_one() {
+        let tmp = tempfile::tempdir().unwrap();
+        let python = tmp.path().join("bin/python3");
+        let bare = find_library(None, &python);
+        assert_eq!(bare, PathBuf::from("liblsl.so"));
+        let lib = tmp.path().join("lib/python3.11/site-packages/pylsl/lib");
+        std::fs::create_dir_all(&lib).unwrap();
+        std::fs::write(lib.join("liblsl.so"), b"").unwrap();
+        assert_eq!(find_library(None, &python), lib.join("liblsl.so"));
+        let own = Path::new("/usr/local/lib/liblsl.so");
+        assert_eq!(find_library(Some(own), &python), own);
+    }
+}
