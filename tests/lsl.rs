@@ -257,3 +257,36 @@ fn poses_by_seq(path: &Path) -> std::collections::HashMap<u64, Row> {
         })
         .collect()
 }
+
+/// A liblsl that cannot be loaded (or a file that is not liblsl) stops the daemon at start in
+/// one sentence, the user's to fix (exit code 1), before any camera is opened.
+#[test]
+fn issue46_a_missing_or_wrong_liblsl_is_refused_in_one_sentence() {
+    let tmp = tempfile::tempdir().unwrap();
+    let not_lsl = tmp.path().join("libnotlsl.so");
+    // A shared library that is not liblsl: the C library itself.
+    let libc = ["/lib/x86_64-linux-gnu/libc.so.6", "/lib/aarch64-linux-gnu/libc.so.6"]
+        .into_iter()
+        .find(|p| Path::new(p).exists());
+    let mut cases = vec![(tmp.path().join("nowhere/liblsl.so"), "cannot load liblsl")];
+    if let Some(libc) = libc {
+        std::fs::copy(libc, &not_lsl).unwrap();
+        cases.push((not_lsl, "is not liblsl"));
+    }
+    for (library, why) in cases {
+        let http = format!(
+            "address = \"127.0.0.1:0\"\n[lsl]\nlibrary = \"{}\"\n",
+            library.display()
+        );
+        let rig = crate::run::rig_full(tmp.path(), &crate::run::session_depth(), false, "", &http);
+        let out = crate::util::mousepose()
+            .args(["run", "--config"])
+            .arg(&rig)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains(why) && err.contains("[lsl] library"), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+}

@@ -52,7 +52,7 @@ struct Fns {
 /// Why liblsl could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum LslError {
-    #[error("cannot load liblsl from {path}: {source}")]
+    #[error("cannot load liblsl from {path}")]
     Load {
         path: String,
         #[source]

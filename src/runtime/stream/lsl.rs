@@ -70,13 +70,13 @@ impl LslConfig {
 #[derive(Debug, thiserror::Error)]
 pub enum LslStartError {
     #[error(
-        "cannot use liblsl for the LSL outlet: {source} (install pylsl with scripts/setup.sh, or name the library in [lsl] library)"
+        "cannot use liblsl for the LSL outlet (install pylsl with scripts/setup.sh, or name the library in [lsl] library)"
     )]
     Library {
         #[source]
         source: LslError,
     },
-    #[error("cannot make the LSL outlet {name:?}: {source}")]
+    #[error("cannot make the LSL outlet {name:?}")]
     Outlet {
         name: String,
         #[source]
