@@ -12,6 +12,7 @@
 //! with no reader connected no sample is even made. liblsl keeps at most
 //! [`MAX_BUFFERED_SAMPLES`] per reader and drops the oldest past that.
 
+use super::SendThread;
 use crate::core::skeleton::Joint;
 use crate::runtime::capture::clock::monotonic_ns;
 use crate::runtime::pose_record::{PoseRecord, PoseStatus};
@@ -237,8 +238,7 @@ pub fn find_library(configured: Option<&Path>, python: &Path) -> PathBuf {
 #[derive(Debug)]
 pub struct LslOutlet {
     handle: LslHandle,
-    stop: Arc<AtomicBool>,
-    thread: Option<std::thread::JoinHandle<()>>,
+    thread: SendThread,
 }
 
 /// How often the `lsl` thread asks whether a reader is connected when no sample comes.
@@ -291,12 +291,9 @@ impl LslOutlet {
         );
         let (tx, rx) = crossbeam_channel::bounded(config.queue);
         let stats = Arc::new(LslStats::default());
-        let stop = Arc::new(AtomicBool::new(false));
         let thread = {
-            let (stats, stop) = (Arc::clone(&stats), Arc::clone(&stop));
-            std::thread::Builder::new()
-                .name("lsl".into())
-                .spawn(move || push_loop(&outlet, &rx, &stats, &stop))
+            let stats = Arc::clone(&stats);
+            SendThread::spawn("lsl", move |stop| push_loop(&outlet, &rx, &stats, stop))
                 .map_err(LslStartError::Thread)?
         };
         Ok(Self {
@@ -307,8 +304,7 @@ impl LslOutlet {
                 clock_offset_s,
                 live_clock: config.live_clock,
             },
-            stop,
-            thread: Some(thread),
+            thread,
         })
     }
 
@@ -319,22 +315,7 @@ impl LslOutlet {
     /// Ends the `lsl` thread (samples still queued are sent first, and a connected reader gets
     /// [`LINGER`] to receive them) and withdraws the stream.
     pub fn stop(mut self) {
-        self.end();
-    }
-
-    fn end(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(thread) = self.thread.take()
-            && thread.join().is_err()
-        {
-            tracing::error!("the LSL outlet's thread panicked");
-        }
-    }
-}
-
-impl Drop for LslOutlet {
-    fn drop(&mut self) {
-        self.end();
+        self.thread.end();
     }
 }
 
