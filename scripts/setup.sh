@@ -56,9 +56,10 @@ fi
 
 # `mousepose export nwb` writes NWB with the ecosystem's own libraries, pynwb and ndx-pose,
 # in a Python environment of mousepose's own (nwbinspector checks the files in the tests, and
-# pyzmq runs the pose stream's documented subscriber).
+# pyzmq runs the pose stream's documented subscriber; pylsl ships the liblsl that the LSL
+# outlet loads, and reads it in the tests).
 nwb_venv=/opt/mousepose/venv
-if ! "$nwb_venv/bin/python3" -c 'import pynwb, ndx_pose, nwbinspector, zmq' >/dev/null 2>&1; then
+if ! "$nwb_venv/bin/python3" -c 'import pynwb, ndx_pose, nwbinspector, zmq, pylsl' >/dev/null 2>&1; then
   if [[ $(id -u) -ne 0 ]]; then
     echo "setup: the Python environment $nwb_venv (pynwb, ndx-pose) is missing and making it needs root" >&2
     exit 1

@@ -21,6 +21,7 @@ fn fixture() -> PathBuf {
 fn replay_to(session: &Path, out: &Path, calibration: Option<PathBuf>) {
     replay(&ReplayOptions {
         stream: None,
+        lsl: None,
         calibration,
         ..crate::util::replay_options(session, out, 1)
     })

@@ -576,6 +576,8 @@ const EXTERNAL: &[(&str, &[&str])] = &[
     ("prometheus_client", &["runtime"]),
     // The live pose stream (ZeroMQ): its module alone; `listen` reads through its `Subscriber`.
     ("zmq", &["runtime::stream"]),
+    // The LSL outlet (liblsl loaded at run time): the stream module alone.
+    ("lsl_outlet", &["runtime::stream"]),
     ("crossbeam_channel", &["runtime", "engine", "app"]),
     // Processes, signals, the service manager, logging set-up, progress bars, globs, one error
     // type for everything: the commands (and the runtime's process statistics and log set-up).

@@ -15,6 +15,7 @@ mod fuzz;
 mod hostile;
 mod http;
 mod layers;
+mod lsl;
 mod packaging;
 mod paws;
 mod realdata;

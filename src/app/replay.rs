@@ -9,6 +9,7 @@ use crate::engine::batch::{BatchOptions, batch, is_batch};
 use crate::engine::replay::{PICTURE_FILE, ReplayError, ReplayOptions, ReplaySummary, replay_with};
 use crate::engine::{Failure, Interrupt};
 use crate::runtime::sink::poses::POSES_FILE;
+use crate::runtime::stream::lsl::LslConfig;
 use crate::runtime::stream::{Endpoint, StreamConfig};
 use clap::Args;
 use std::fmt::Write as _;
@@ -125,6 +126,10 @@ pub struct ReplayArgs {
     /// without cameras (with --realtime).
     #[arg(long, value_name = "ENDPOINT", value_parser = crate::app::parse::endpoint)]
     pub stream: Option<Endpoint>,
+    /// Offer each pose as a Lab Streaming Layer stream called NAME (default `mousepose`), as
+    /// `run` does with its config's `[lsl]`: what LabRecorder records (with --realtime).
+    #[arg(long, value_name = "NAME", num_args = 0..=1, default_missing_value = "mousepose")]
+    pub lsl: Option<String>,
     /// Body-forest worker threads (0: one per core).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=64))]
     pub workers: u32,
@@ -163,6 +168,10 @@ pub fn command(args: &ReplayArgs) -> Outcome {
             host_clock: "recording",
             ..StreamConfig::at(endpoint)
         }),
+        lsl: args.lsl.as_deref().map(|name| LslConfig {
+            live_clock: false,
+            ..LslConfig::named(name)
+        }),
         session: session.clone(),
         out: args.out.clone(),
         models: args.models.clone(),
@@ -191,9 +200,9 @@ pub fn command(args: &ReplayArgs) -> Outcome {
 
 /// `mousepose replay` with several sessions or a pattern.
 fn replay_many(args: &ReplayArgs) -> Outcome {
-    if args.realtime || args.overlays.is_some() || args.stream.is_some() {
+    if args.realtime || args.overlays.is_some() || args.stream.is_some() || args.lsl.is_some() {
         return Err(Failure::usage(anyhow::anyhow!(
-            "--realtime, --overlays and --stream are for one session, not a batch"
+            "--realtime, --overlays, --stream and --lsl are for one session, not a batch"
         )));
     }
     let options = BatchOptions {

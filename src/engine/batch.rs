@@ -255,6 +255,7 @@ pub fn run_local(
             let result = replay_until(
                 &ReplayOptions {
                     stream: None,
+                    lsl: None,
                     session: item.session.clone(),
                     out: item.out.clone(),
                     models: options.models.clone(),

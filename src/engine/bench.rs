@@ -437,6 +437,7 @@ fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Erro
     write_session(&session, &spec, |_, _| {})?;
     let options = |out: &str, realtime: bool| ReplayOptions {
         stream: None,
+        lsl: None,
         session: session.clone(),
         out: root.join(out),
         models: None,

@@ -8,7 +8,7 @@
 //! makes progress, and STATUS= with the frame rate and counts every few seconds.
 
 use crate::core::geometry::Rig;
-use crate::engine::{Failure, Signals, signal_name};
+use crate::engine::{Failure, Signals, project_python, signal_name};
 use crate::io::session::CameraRole;
 use crate::runtime::capture::rig::RigCameras;
 use crate::runtime::capture::supervise::{CameraState, SharedHealth, StallWatch, lock};
@@ -25,6 +25,7 @@ use crate::runtime::sink::chunks::{
 use crate::runtime::sink::session::FrameRecorder;
 use crate::runtime::stages::segment::{FloorSlot, SegmentStage};
 use crate::runtime::status::{RunInfo, RunReport, Watch, Watched};
+use crate::runtime::stream::lsl::{LslOutlet, LslStartError};
 use crate::runtime::stream::message::{self, StreamEvent};
 use crate::runtime::stream::{Publisher, StreamError, StreamHandle, Topic};
 use crate::runtime::topology::{Edges, Processing, Topology};
@@ -401,6 +402,10 @@ pub fn serve(
     let listener = config.http.address.map(HttpServer::bind).transpose()?;
     let publisher = config.stream.as_ref().map(Publisher::start).transpose()?;
     let stream = publisher.as_ref().map(Publisher::handle);
+    let outlet = (config.lsl.as_ref())
+        .map(|c| LslOutlet::start(c, &project_python()))
+        .transpose()?;
+    let lsl = outlet.as_ref().map(LslOutlet::handle);
     let root = create_run_dir(&config.output_dir)?;
     tracing::info!(dir = ?root, record = config.record, "run started");
     let info = RunInfo {
@@ -433,6 +438,7 @@ pub fn serve(
             overlays: None,
             poses: Box::new(ChunkPoses::new(Arc::clone(&sinks.chunks), Arc::clone(&sinks.live))),
             stream: stream.clone(),
+            lsl: lsl.clone(),
         }),
         recorder: sinks.recorder,
     };
@@ -449,6 +455,7 @@ pub fn serve(
         recorder: sinks.gauges.clone(),
         floor,
         stream: stream.clone(),
+        lsl,
     }));
     let server = match listener.map(|l| HttpServer::start(l, config.http.token.clone(), Arc::clone(&watch), rig)) {
         Some(Err(e)) => {
@@ -489,6 +496,9 @@ pub fn serve(
     }
     if let Some(publisher) = publisher {
         publisher.stop();
+    }
+    if let Some(outlet) = outlet {
+        outlet.stop();
     }
     finished.outcome?;
     let report = watch.report();
@@ -536,7 +546,7 @@ pub fn daemon(options: &DaemonOptions) -> Result<(RunReport, Option<String>), Fa
         let bad_endpoint = e
             .downcast_ref::<StreamError>()
             .is_some_and(|s| matches!(s, StreamError::Bind { .. }));
-        Failure::classed(e.is::<CameraUnusable>() || bad_endpoint, e)
+        Failure::classed(e.is::<CameraUnusable>() || bad_endpoint || e.is::<LslStartError>(), e)
     })?;
     Ok((report, signals.unexpected_stop()))
 }

@@ -23,7 +23,17 @@ pub mod synth;
 pub mod train;
 
 use anyhow::Context as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// Where `scripts/nwb-env` puts the project's Python environment (pynwb and ndx-pose for
+/// `export nwb`, pyzmq, pylsl).
+pub const DEFAULT_PYTHON: &str = "/opt/mousepose/venv/bin/python3";
+
+/// The project's Python: `$MOUSEPOSE_PYTHON`, else [`DEFAULT_PYTHON`] (also where pylsl, which
+/// ships liblsl, is installed).
+pub fn project_python() -> PathBuf {
+    std::env::var_os("MOUSEPOSE_PYTHON").map_or_else(|| PathBuf::from(DEFAULT_PYTHON), PathBuf::from)
+}
 
 /// Why an engine failed, and whose fault it is: the user's when what they asked for cannot
 /// work (an argument, a config, a file in the way), the work's when it failed on the way. Each
@@ -82,7 +92,7 @@ impl<E: Into<anyhow::Error>> From<E> for Failure {
 /// Refused to overwrite a file (the user's: see [`Failure`]).
 #[derive(Debug, thiserror::Error)]
 #[error("{0:?} exists (use --force to replace it)")]
-pub struct Exists(pub std::path::PathBuf);
+pub struct Exists(pub PathBuf);
 
 /// A staged output that cannot be made: the user's when the directory is in the way.
 pub fn output_failure(e: crate::io::output::OutputError) -> Failure {

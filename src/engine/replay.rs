@@ -9,7 +9,7 @@
 use crate::core::frame::DepthFrame;
 use crate::core::geometry::Rig;
 use crate::core::image::RgbImage;
-use crate::engine::Interrupt;
+use crate::engine::{Interrupt, project_python};
 use crate::io::mask::{MaskError, read_mask_png};
 use crate::io::output::{OutputError, Staging};
 use crate::io::session::SessionSource;
@@ -20,6 +20,7 @@ use crate::runtime::pose_record::PoseRecord;
 use crate::runtime::recording::{Recording, RecordingError, RecordingRig};
 use crate::runtime::sink::poses::{POSES_FILE, PoseTally, PoseWriter};
 use crate::runtime::stages::segment::SegmentStage;
+use crate::runtime::stream::lsl::{LslConfig, LslOutlet, LslStartError, LslSummary};
 use crate::runtime::stream::{Publisher, StreamConfig, StreamError, StreamSummary};
 use crate::runtime::topology::{Edges, Finished, Processing, Sources, Topology, TopologyError};
 use crate::vision::segment::{ArenaCheck, Background, SegmentError, Segmenter, SegmenterConfig};
@@ -55,6 +56,8 @@ pub struct ReplayOptions {
     pub force: bool,
     /// Publish each pose on this live stream as it is made (`--stream`).
     pub stream: Option<StreamConfig>,
+    /// Offer each pose as this LSL stream as it is made (`--lsl`).
+    pub lsl: Option<LslConfig>,
 }
 
 /// Why a replay failed.
@@ -88,6 +91,8 @@ pub enum ReplayError {
     Signals(#[source] std::io::Error),
     #[error(transparent)]
     Stream(#[from] StreamError),
+    #[error(transparent)]
+    Lsl(#[from] LslStartError),
 }
 
 impl ReplayError {
@@ -97,7 +102,7 @@ impl ReplayError {
         match self {
             Self::Output(OutputError::NotEmpty(_) | OutputError::NotADirectory(_)) => true,
             Self::Recording(r) => r.is_input_problem(),
-            Self::Mask(_) | Self::Stream(StreamError::Bind { .. }) => true,
+            Self::Mask(_) | Self::Stream(StreamError::Bind { .. }) | Self::Lsl(_) => true,
             _ => false,
         }
     }
@@ -257,6 +262,10 @@ pub struct ReplaySummary {
     /// The live stream (`--stream`): subscribers at the end, messages published, sent, dropped.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stream: Option<StreamSummary>,
+    /// The LSL outlet (`--lsl`): whether a reader was connected at the end, samples sent,
+    /// dropped.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lsl: Option<LslSummary>,
 }
 
 /// The picture of the frame pair of `pose` (see [`crate::runtime::overlay`]) with
@@ -421,14 +430,23 @@ pub fn replay_with(
     } = scene;
     let publisher = options.stream.as_ref().map(Publisher::start).transpose()?;
     let mut topology = replay_topology(&recording, options, depth_size, segmenter, models, rig, writer);
+    let outlet = (options.lsl.as_ref())
+        .map(|c| LslOutlet::start(c, &project_python()))
+        .transpose()?;
     if let Some(p) = topology.processing.as_mut() {
         p.stream = publisher.as_ref().map(Publisher::handle);
+        p.lsl = outlet.as_ref().map(LslOutlet::handle);
     }
     let finished = run_pipeline(topology, interrupt, &tally, recording.depth_count() as u64, &progress)?;
     // Stopped once what it queued is sent, so that its counts are final.
     let stream = publisher.map(|p| {
         let handle = p.handle();
         p.stop();
+        handle.summary()
+    });
+    let lsl = outlet.map(|o| {
+        let handle = o.handle();
+        o.stop();
         handle.summary()
     });
     let stages = finished.outcome?;
@@ -483,6 +501,7 @@ pub fn replay_with(
         picture: None,
         picture_error: None,
         stream,
+        lsl,
     };
     for warning in &summary.warnings {
         tracing::warn!(message = "The arena may miss the mouse.", detail = %warning);
@@ -638,6 +657,7 @@ fn replay_topology<'a>(
             overlays: options.overlays,
             poses: Box::new(writer),
             stream: None,
+            lsl: None,
         }),
         recorder: None,
     }

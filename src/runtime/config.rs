@@ -10,6 +10,7 @@ pub use crate::runtime::capture::backend::{ColorCamera, DepthCamera};
 pub use crate::runtime::capture::supervise::Reconnect;
 use crate::runtime::capture::{COLOR_BACKENDS, DEPTH_BACKENDS};
 use crate::runtime::pipeline::{EdgeConfig, WhenFull};
+use crate::runtime::stream::lsl::LslConfig;
 use crate::runtime::stream::{Endpoint, StreamConfig};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -65,6 +66,8 @@ struct RawConfig {
     http: RawHttp,
     /// The live pose stream: none without the table.
     stream: Option<RawStream>,
+    /// The LSL outlet: none without the table.
+    lsl: Option<RawLsl>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -146,6 +149,18 @@ struct RawStream {
 
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
+struct RawLsl {
+    enabled: Option<bool>,
+    name: Option<String>,
+    #[serde(rename = "type")]
+    kind: Option<String>,
+    source_id: Option<String>,
+    library: Option<PathBuf>,
+    queue: Option<usize>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
 struct RawReconnect {
     stall_ms: Option<f64>,
     max_wait_ms: Option<f64>,
@@ -187,6 +202,8 @@ pub struct Config {
     pub http: Http,
     /// The live pose stream (`[stream]`), when the config has one.
     pub stream: Option<StreamConfig>,
+    /// The LSL outlet (`[lsl]`), when the config has one and it is enabled.
+    pub lsl: Option<LslConfig>,
 }
 
 /// The `[http]` table: where the daemon serves its live page, metrics and status.
@@ -392,6 +409,7 @@ impl Checker<'_> {
         }
         let http = self.http(raw.http)?;
         let stream = raw.stream.as_ref().map(|s| self.stream(s)).transpose()?.flatten();
+        let lsl = raw.lsl.map(|l| self.lsl(l)).transpose()?.flatten();
         Ok(Config {
             path: self.path.to_owned(),
             depth,
@@ -411,7 +429,34 @@ impl Checker<'_> {
             reconnect,
             http,
             stream,
+            lsl,
         })
+    }
+
+    /// `[lsl]`: the outlet, unless `enabled = false`; names must be non-empty.
+    fn lsl(&self, l: RawLsl) -> Result<Option<LslConfig>, ConfigError> {
+        if l.enabled == Some(false) {
+            return Ok(None);
+        }
+        let mut config = LslConfig::named("mousepose");
+        for (key, value, slot) in [
+            ("lsl.name", l.name, &mut config.name),
+            ("lsl.type", l.kind, &mut config.kind),
+            ("lsl.source_id", l.source_id, &mut config.source_id),
+        ] {
+            match value {
+                Some(v) if v.trim().is_empty() || v.contains('\0') => {
+                    return Err(self.bad(key, "must be a name of at least one character"));
+                }
+                Some(v) => *slot = v,
+                None => {}
+            }
+        }
+        config.library = l.library;
+        if let Some(queue) = l.queue {
+            config.queue = self.capacity("lsl.queue", queue)?;
+        }
+        Ok(Some(config))
     }
 
     /// `[stream]`: an endpoint this machine alone reaches unless `allow_remote`; `"off"`: none.
@@ -644,6 +689,36 @@ mod tests {
         ] {
             let e = parse(&format!("{base}[http]\n{http}")).unwrap_err().to_string();
             assert!(e.contains(key) && e.contains(why), "{http}: {e}");
+        }
+    }
+
+    #[test]
+    fn issue46_the_lsl_outlet_is_off_without_its_table_and_its_names_are_checked() {
+        let base = "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n";
+        assert_eq!(parse(base).unwrap().lsl, None);
+        assert_eq!(
+            parse(&format!("{base}[lsl]\n")).unwrap().lsl,
+            Some(LslConfig::named("mousepose"))
+        );
+        assert_eq!(parse(&format!("{base}[lsl]\nenabled = false\n")).unwrap().lsl, None);
+        let c = parse(&format!(
+            "{base}[lsl]\nname = \"rig2\"\ntype = \"Pose\"\nsource_id = \"rig2-top\"\nlibrary = \"/usr/lib/liblsl.so\"\n"
+        ))
+        .unwrap()
+        .lsl
+        .unwrap();
+        assert_eq!(
+            (c.name.as_str(), c.kind.as_str(), c.source_id.as_str()),
+            ("rig2", "Pose", "rig2-top")
+        );
+        assert_eq!(c.library.as_deref(), Some(Path::new("/usr/lib/liblsl.so")));
+        for (lsl, key) in [
+            ("name = \" \"\n", "lsl.name"),
+            ("queue = 0\n", "lsl.queue"),
+            ("port = 1\n", "port"),
+        ] {
+            let e = parse(&format!("{base}[lsl]\n{lsl}")).unwrap_err().to_string();
+            assert!(e.contains(key), "{lsl}: {e}");
         }
     }
 

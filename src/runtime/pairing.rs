@@ -266,6 +266,11 @@ pub struct Synchronizer {
     backwards: [u32; 2],
     /// Smallest interval between depth frames per step of their frame counter (device time).
     depth_interval_ns: Option<u64>,
+    /// The colour frames' last intervals per step of their frame counter (device time), and
+    /// their median: about when the next colour frame is taken after the newest, which tells
+    /// when the nearest partner of a depth frame is already in.
+    color_intervals: VecDeque<u64>,
+    color_interval_ns: Option<u64>,
     /// The newest capture time seen from each camera (host time line).
     newest_depth: Option<i64>,
     newest_color: Option<i64>,
@@ -292,6 +297,8 @@ impl Synchronizer {
             last_color: None,
             backwards: [0; 2],
             depth_interval_ns: None,
+            color_intervals: VecDeque::new(),
+            color_interval_ns: None,
             newest_depth: None,
             newest_color: None,
             first_depth_arrival: None,
@@ -349,9 +356,7 @@ impl Synchronizer {
             return;
         }
         if let Some(last) = self.last_depth {
-            // Per step of the frame counter, so that dropped frames do not widen it.
-            let steps = stamp.seq.saturating_sub(last.seq).max(1);
-            let dt = (stamp.device_ns - last.device_ns) / steps;
+            let dt = per_step(last, stamp);
             self.depth_interval_ns = Some(self.depth_interval_ns.map_or(dt, |i| i.min(dt)));
         }
         self.last_depth = Some(stamp);
@@ -369,6 +374,14 @@ impl Synchronizer {
         let stamp = frame.stamp;
         if !self.admit(Role::Color, stamp, out) {
             return;
+        }
+        if let Some(last) = self.last_color {
+            self.color_intervals.push_back(per_step(last, stamp));
+            if self.color_intervals.len() > COLOR_INTERVALS {
+                self.color_intervals.pop_front();
+            }
+            let mut v: Vec<f64> = self.color_intervals.iter().map(|&i| i as f64).collect();
+            self.color_interval_ns = crate::core::median(&mut v).map(|m| m as u64);
         }
         self.last_color = Some(stamp);
         self.last_color_arrival = Some(self.last_color_arrival.map_or(stamp.host_ns, |t| t.max(stamp.host_ns)));
@@ -424,6 +437,9 @@ impl Synchronizer {
             Role::Color => {
                 self.color_clock = ClockModel::default();
                 self.last_color = None;
+                // A reopened camera may run at another rate.
+                self.color_intervals.clear();
+                self.color_interval_ns = None;
             }
         }
     }
@@ -451,8 +467,10 @@ impl Synchronizer {
             // Colour frames come in capture order: once one taken at or after this depth frame
             // is in, every later one is farther from it than that one, so the nearest partner
             // is among those in (waiting until one is past the tolerance adds up to a frame
-            // interval of latency for nothing).
-            let decided = end || !self.config.color || self.newest_color.is_some_and(|c| c >= td);
+            // interval of latency for nothing). So it is too once the next colour frame, taken
+            // about a colour frame interval after the newest, cannot be nearer than the newest
+            // nor within the tolerance: waiting for it cost up to a whole interval.
+            let decided = end || !self.config.color || self.nearest_color_in(td, tol);
             // Waiting given up: the frame waited the longest wait, or the colour camera has
             // been silent that long.
             let given_up = !decided
@@ -530,10 +548,48 @@ impl Synchronizer {
         }
     }
 
+    /// Whether no colour frame still to come can be a nearer partner of a depth frame taken
+    /// at `td` (host time line) than those in: one taken at or after it is in, or the next
+    /// one, at least [`NEXT_COLOR_SHARE`] of the usual colour interval after the newest, would
+    /// be farther than the newest or out of the tolerance `tol`. A tie goes to the earlier
+    /// frame, as the choice among pending frames does.
+    fn nearest_color_in(&self, td: i64, tol: i64) -> bool {
+        let Some(newest) = self.newest_color else {
+            return false;
+        };
+        if newest >= td {
+            return true;
+        }
+        let Some(interval) = self.color_interval_ns else {
+            return false;
+        };
+        let next = newest + (interval as f64 * NEXT_COLOR_SHARE) as i64;
+        next - td >= td - newest || next - td > tol
+    }
+
     /// Frames waiting for a decision (depth, colour).
     pub fn pending(&self) -> (usize, usize) {
         (self.depth.len(), self.color.len())
     }
+}
+
+/// The share of the usual colour frame interval (the median of the last [`COLOR_INTERVALS`])
+/// that the next colour frame is taken after the newest at the least: below 1 for the jitter
+/// of the device's stamps and its drift against the host's clock. A camera stamping at the
+/// sensor is microseconds off; one stamping in software (Aravis's fake camera) was 10 ms off
+/// now and then, so the smallest interval seen would soon stop the early decision. Only a
+/// next interval more than 10 % shorter than usual can then pair a depth frame (one within 5 %
+/// of an interval of the midpoint between two colour frames) with the farther of the two.
+const NEXT_COLOR_SHARE: f64 = 0.9;
+
+/// Colour frame intervals the usual one is the median of.
+const COLOR_INTERVALS: usize = 31;
+
+/// The interval between two frames of a camera, `last` then `stamp`, per step of the frame
+/// counter (device time), so that dropped frames do not widen it.
+fn per_step(last: Stamp, stamp: Stamp) -> u64 {
+    let steps = stamp.seq.saturating_sub(last.seq).max(1);
+    stamp.device_ns.saturating_sub(last.device_ns) / steps
 }
 
 /// Most colour frames held while waiting for depth frames.
@@ -826,6 +882,53 @@ mod tests {
             &mut out,
         );
         assert!(matches!(&out[..], [SyncOutput::Pair(p)] if p.color.is_none()));
+    }
+
+    /// Both cameras at 30 frames/s, each colour frame taken `lead_ms` before its depth frame
+    /// and in first: for each depth frame, the colour frames out of the synchroniser when it
+    /// arrives (`None`: not decided yet).
+    fn decided_on_arrival(lead_ms: u64) -> Vec<Option<Option<u64>>> {
+        let mut sync = Synchronizer::new(SyncConfig::default());
+        let ms = 1_000_000;
+        (0..20u64)
+            .map(|k| {
+                let t = 1_000 * ms + k * 33 * ms;
+                let mut out = Vec::new();
+                let c = Stamp {
+                    seq: k,
+                    device_ns: t - lead_ms * ms,
+                    host_ns: t - lead_ms * ms + 2 * ms,
+                };
+                sync.push_color(color(c), &mut out);
+                let d = Stamp {
+                    seq: k,
+                    device_ns: t,
+                    host_ns: t + 2 * ms,
+                };
+                sync.push_depth(depth(d), &mut out);
+                out.iter().find_map(|o| match o {
+                    SyncOutput::Pair(p) if p.depth.stamp.seq == k => Some(p.color.as_ref().map(|c| c.stamp.seq)),
+                    _ => None,
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_depth_frame_whose_nearest_colour_frame_is_in_goes_out_at_once() {
+        // 9 ms: the next colour frame (24 ms after) cannot be nearer; once the colour interval
+        // is known (two colour frames) each depth frame goes out on arrival with its partner.
+        let early = decided_on_arrival(9);
+        assert_eq!(early[0], None);
+        assert!(
+            early[1..]
+                .iter()
+                .enumerate()
+                .all(|(k, d)| *d == Some(Some(k as u64 + 1))),
+            "{early:?}"
+        );
+        // 20 ms: the next colour frame, 13 ms after, is nearer: it is waited for.
+        assert!(decided_on_arrival(20).iter().all(Option::is_none));
     }
 
     #[test]

@@ -43,6 +43,7 @@ use crate::runtime::stages::fuse::FuseStage;
 use crate::runtime::stages::paws::PawStage;
 use crate::runtime::stages::segment::SegmentStage;
 use crate::runtime::stages::sync::SyncStage;
+use crate::runtime::stream::lsl::LslHandle;
 use crate::runtime::stream::{Published, StreamHandle};
 use crate::vision::fusion::{Fuser, FusionConfig};
 use crossbeam_channel::Receiver;
@@ -113,6 +114,8 @@ pub struct Processing {
     pub poses: Box<dyn Sink<In = Fused>>,
     /// The live pose stream, when one is bound: each pose is published before it is written.
     pub stream: Option<StreamHandle>,
+    /// The LSL outlet, when one is offered: the same.
+    pub lsl: Option<LslHandle>,
 }
 
 /// A pipeline to start.
@@ -429,11 +432,17 @@ fn declare_processing(
         overlays,
         poses,
         stream,
+        lsl,
         ..
     } = p;
-    let poses = match stream {
-        Some(stream) => Box::new(Published { inner: poses, stream }),
-        None => poses,
+    let poses = if stream.is_some() || lsl.is_some() {
+        Box::new(Published {
+            inner: poses,
+            stream,
+            lsl,
+        })
+    } else {
+        poses
     };
     let fuser = Fuser::new(rig.color, FusionConfig::default());
     chain

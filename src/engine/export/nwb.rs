@@ -23,8 +23,8 @@ use std::process::Command;
 
 /// The helper, run with the environment's Python.
 const HELPER: &str = include_str!("../../../python/nwb.py");
-/// Where `scripts/nwb-env` puts the Python environment with pynwb and ndx-pose.
-pub const DEFAULT_PYTHON: &str = "/opt/mousepose/venv/bin/python3";
+pub use crate::engine::DEFAULT_PYTHON;
+use crate::engine::project_python;
 
 /// What `export nwb` writes, from what (see its `--help`; the subject's fields are checked
 /// by [`check_subject`]).
@@ -323,11 +323,7 @@ fn metadata<'a>(
 /// the helper into a temporary directory, removed after), into a hidden file renamed to
 /// `options.out` when it succeeds.
 fn write_with_helper(options: &NwbOptions, poses: &Path, meta: &Meta<'_>) -> Result<(), Failure> {
-    let python = options
-        .python
-        .clone()
-        .or_else(|| std::env::var_os("MOUSEPOSE_PYTHON").map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from(DEFAULT_PYTHON));
+    let python = options.python.clone().unwrap_or_else(project_python);
     let work = std::env::temp_dir().join(format!("mousepose-nwb-{}", std::process::id()));
     std::fs::create_dir_all(&work).with_context(|| format!("creating {work:?}"))?;
     let result = (|| -> Result<(), Failure> {

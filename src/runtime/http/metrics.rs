@@ -11,6 +11,7 @@ use crate::runtime::capture::supervise::{CameraState, lock};
 use crate::runtime::pipeline::Histogram;
 use crate::runtime::pose_record::PoseStatus;
 use crate::runtime::status::Watch;
+use crate::runtime::stream::lsl::{DROP_REASONS as LSL_DROP_REASONS, LslStats};
 use crate::runtime::stream::{DROP_REASONS, StreamStats, Topic};
 use crate::runtime::usage::{process_cpu_s, process_resident_bytes};
 use prometheus_client::collector::Collector;
@@ -348,7 +349,35 @@ impl Families<'_> {
         if let Some(stream) = &w.parts.stream {
             self.stream_families(stream.stats())?;
         }
+        if let Some(lsl) = &w.parts.lsl {
+            self.lsl_families(lsl.stats())?;
+        }
         Ok(())
+    }
+
+    /// The LSL outlet: whether a reader is connected, samples sent, dropped per reason.
+    fn lsl_families(&mut self, stats: &LslStats) -> std::fmt::Result {
+        self.gauge(
+            "mousepose_lsl_consumers",
+            "1 while a reader (LabRecorder, an inlet) is connected to the LSL outlet.",
+            None,
+            &[(Vec::new(), f64::from(u8::from(stats.has_consumers())))],
+        )?;
+        self.counter(
+            "mousepose_lsl_samples",
+            "Samples the LSL outlet handed to liblsl.",
+            None,
+            &[(Vec::new(), stats.sent())],
+        )?;
+        self.counter(
+            "mousepose_lsl_dropped",
+            "Samples of the LSL outlet dropped before liblsl took them, by reason.",
+            None,
+            &LSL_DROP_REASONS
+                .iter()
+                .map(|r| (label("reason", r), stats.dropped(r)))
+                .collect::<Vec<_>>(),
+        )
     }
 
     /// The live pose stream: subscribers, messages sent per topic, dropped per reason.

@@ -15,6 +15,7 @@ use crate::runtime::pipeline::{LatencySummary, StageReport, reports_of};
 use crate::runtime::pose_record::{PoseRecord, PoseStatus};
 use crate::runtime::sink::chunks::{Live, RecorderGauges};
 use crate::runtime::stages::segment::FloorSlot;
+use crate::runtime::stream::lsl::{LslHandle, LslSummary};
 use crate::runtime::stream::{StreamHandle, StreamSummary};
 use crate::runtime::topology::PipelineWatch;
 use crate::runtime::usage::{process_cpu_s, process_resident_bytes};
@@ -91,6 +92,9 @@ pub struct RunReport {
     /// The live pose stream (`[stream]`): subscribers connected, messages sent and dropped.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stream: Option<StreamSummary>,
+    /// The LSL outlet (`[lsl]`): whether a reader is connected, samples sent and dropped.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lsl: Option<LslSummary>,
 }
 
 impl RunReport {
@@ -152,6 +156,16 @@ impl RunReport {
                 s.endpoint, s.subscribers, s.sent, s.dropped
             );
         }
+        if let Some(l) = &self.lsl {
+            let _ = writeln!(
+                text,
+                "lsl: {}, {}, sent {}, dropped {:?}",
+                l.name,
+                if l.consumers { "a reader connected" } else { "no reader" },
+                l.sent,
+                l.dropped
+            );
+        }
         text
     }
 }
@@ -192,6 +206,8 @@ pub struct Watched {
     pub floor: FloorSlot,
     /// The live pose stream, when one is bound.
     pub stream: Option<StreamHandle>,
+    /// The LSL outlet, when one is offered.
+    pub lsl: Option<LslHandle>,
 }
 
 /// A running daemon, as its readers see it.
@@ -276,6 +292,7 @@ impl Watch {
                 paused: g.paused.load(Ordering::Relaxed),
             }),
             stream: self.parts.stream.as_ref().map(StreamHandle::summary),
+            lsl: self.parts.lsl.as_ref().map(LslHandle::summary),
         }
     }
 

@@ -9,6 +9,7 @@
 //! `seq` lets a subscriber see). With no subscriber connected (the socket's monitor counts
 //! them) no message is even made. The message format is in `docs/FORMATS.md`; [`message`].
 
+pub mod lsl;
 pub mod message;
 
 use crossbeam_channel::{Receiver, Sender, TrySendError};
@@ -264,8 +265,51 @@ impl StreamHandle {
 #[derive(Debug)]
 pub struct Publisher {
     handle: StreamHandle,
+    thread: SendThread,
+}
+
+/// The thread that sends what a bounded queue brings (the ZeroMQ stream's and the LSL
+/// outlet's) until told to stop; stopped and joined when this is stopped or dropped.
+#[derive(Debug)]
+struct SendThread {
+    name: &'static str,
     stop: Arc<std::sync::atomic::AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl SendThread {
+    /// Starts the thread `name` running `body`, which returns once the flag it is given is
+    /// set and its queue is empty.
+    fn spawn(
+        name: &'static str,
+        body: impl FnOnce(&std::sync::atomic::AtomicBool) + Send + 'static,
+    ) -> std::io::Result<Self> {
+        let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = Arc::clone(&stop);
+        let thread = std::thread::Builder::new()
+            .name(name.into())
+            .spawn(move || body(&flag))?;
+        Ok(Self {
+            name,
+            stop,
+            thread: Some(thread),
+        })
+    }
+
+    fn end(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take()
+            && thread.join().is_err()
+        {
+            tracing::error!(thread = self.name, "the {} thread panicked", self.name);
+        }
+    }
+}
+
+impl Drop for SendThread {
+    fn drop(&mut self) {
+        self.end();
+    }
 }
 
 /// How often the `stream` thread looks at its monitor when no message comes.
@@ -306,18 +350,15 @@ impl Publisher {
         }
         let (tx, rx) = crossbeam_channel::bounded(config.queue);
         let stats = Arc::new(StreamStats::default());
-        let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
         let thread = {
-            let (stats, stop) = (Arc::clone(&stats), Arc::clone(&stop));
-            std::thread::Builder::new()
-                .name("stream".into())
-                .spawn(move || {
-                    send_loop(&socket, &monitor, &rx, &stats, &stop);
-                    // The sockets close before their context ends.
-                    drop((monitor, socket));
-                    drop(context);
-                })
-                .map_err(StreamError::Thread)?
+            let stats = Arc::clone(&stats);
+            SendThread::spawn("stream", move |stop| {
+                send_loop(&socket, &monitor, &rx, &stats, stop);
+                // The sockets close before their context ends.
+                drop((monitor, socket));
+                drop(context);
+            })
+            .map_err(StreamError::Thread)?
         };
         Ok(Self {
             handle: StreamHandle {
@@ -327,8 +368,7 @@ impl Publisher {
                 endpoint: endpoint.into(),
                 host_clock: config.host_clock,
             },
-            stop,
-            thread: Some(thread),
+            thread,
         })
     }
 
@@ -338,22 +378,7 @@ impl Publisher {
 
     /// Ends the `stream` thread (messages still queued are sent first) and closes the socket.
     pub fn stop(mut self) {
-        self.end();
-    }
-
-    fn end(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(thread) = self.thread.take()
-            && thread.join().is_err()
-        {
-            tracing::error!("the pose stream's thread panicked");
-        }
-    }
-}
-
-impl Drop for Publisher {
-    fn drop(&mut self) {
-        self.end();
+        self.thread.end();
     }
 }
 
@@ -455,11 +480,13 @@ impl Subscriber {
     }
 }
 
-/// Wraps a pose sink: each pose is published before it is written.
+/// Wraps a pose sink: each pose is published (on the ZeroMQ stream, the LSL outlet, or both)
+/// before it is written.
 #[derive(Debug)]
 pub struct Published<S> {
     pub inner: S,
-    pub stream: StreamHandle,
+    pub stream: Option<StreamHandle>,
+    pub lsl: Option<lsl::LslHandle>,
 }
 
 impl<S: crate::runtime::pipeline::Sink<In = crate::runtime::stages::Fused>> crate::runtime::pipeline::Sink
@@ -468,9 +495,13 @@ impl<S: crate::runtime::pipeline::Sink<In = crate::runtime::stages::Fused>> crat
     type In = crate::runtime::stages::Fused;
 
     fn write(&mut self, item: Self::In) -> Result<(), crate::runtime::pipeline::StageError> {
-        let host_clock = self.stream.host_clock;
-        self.stream
-            .publish(Topic::Poses, |seq| message::pose(seq, &item.record, host_clock));
+        if let Some(stream) = &self.stream {
+            let host_clock = stream.host_clock;
+            stream.publish(Topic::Poses, |seq| message::pose(seq, &item.record, host_clock));
+        }
+        if let Some(lsl) = &self.lsl {
+            lsl.publish(&item.record);
+        }
         self.inner.write(item)
     }
 
