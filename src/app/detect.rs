@@ -27,7 +27,7 @@ pub struct DetectPawsArgs {
     pub model: Option<PathBuf>,
     /// How many image pixels a millimetre on the glass spans (the default rig's colour camera:
     /// 2 at full resolution).
-    #[arg(long, value_name = "S", default_value_t = default_px_per_mm(), value_parser = parse_px_per_mm, allow_negative_numbers = true)]
+    #[arg(long, value_name = "S", default_value_t = default_px_per_mm(), value_parser = crate::app::parse::px_per_mm, allow_negative_numbers = true)]
     pub px_per_mm: f64,
     /// Print the detections as one JSON object.
     #[arg(long)]
@@ -41,10 +41,6 @@ pub struct DetectPawsArgs {
 fn default_px_per_mm() -> f64 {
     let c = Rig::default_rig().color;
     c.intrinsics.fx / c.centre().coords.norm()
-}
-
-fn parse_px_per_mm(s: &str) -> Result<f64, String> {
-    crate::app::parse::ranged(s, "pixels per millimetre", 0.05, 50.0)
 }
 
 /// `mousepose detect ...`.

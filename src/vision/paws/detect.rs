@@ -258,6 +258,16 @@ const STRIDE_STEP: usize = 16;
 /// The object scales run by default: paws up to 30 % smaller or larger than the window's.
 pub const DEFAULT_SCALES: [f64; 3] = [0.8, 1.0, 1.25];
 
+/// Candidate scales per octave that [`PawDetector::find_scale`] tries.
+pub const SCALE_STEPS_PER_OCTAVE: u32 = 8;
+
+/// A scale [`PawDetector::find_scale`] found and how sure: the summed scores it chose by.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct FoundScale {
+    pub px_per_mm: f64,
+    pub evidence: f64,
+}
+
 /// Raw windows a group needs beyond the first to be reported, by default.
 pub const DEFAULT_MIN_NEIGHBORS: usize = 1;
 
@@ -351,6 +361,39 @@ impl PawDetector {
             }
         }
         self.group(place, out);
+    }
+
+    /// Finds the scale (pixels per millimetre on the glass, between `lowest` and `highest`) at
+    /// which the regions of `frames`, taken with one camera, show paws: the scale whose
+    /// detections are surest, their four best scores in each frame (a mouse has four paws)
+    /// summed over the frames. Candidates are [`SCALE_STEPS_PER_OCTAVE`] to an octave apart.
+    /// `None` when the range is empty or nothing is detected at any scale.
+    pub fn find_scale(
+        &mut self,
+        frames: &[(&ColorFrame, (u32, u32, u32, u32))],
+        lowest: f64,
+        highest: f64,
+    ) -> Option<FoundScale> {
+        if !(lowest > 0.0 && highest >= lowest && highest.is_finite()) {
+            return None;
+        }
+        let step = 2f64.powf(1.0 / f64::from(SCALE_STEPS_PER_OCTAVE));
+        let mut best: Option<FoundScale> = None;
+        let mut found = Vec::new();
+        let mut px_per_mm = lowest;
+        while px_per_mm <= highest * 1.000_001 {
+            let mut evidence = 0.0;
+            for &(frame, roi) in frames {
+                self.detect(frame, roi, px_per_mm, &mut found);
+                found.sort_by(|a, b| b.score.total_cmp(&a.score));
+                evidence += found.iter().take(4).map(|d| f64::from(d.score)).sum::<f64>();
+            }
+            if evidence > 0.0 && best.is_none_or(|b| evidence > b.evidence) {
+                best = Some(FoundScale { px_per_mm, evidence });
+            }
+            px_per_mm *= step;
+        }
+        best
     }
 
     /// Scans one image (`scaled` or `canonical`) and appends its accepted windows to `raw`.

@@ -54,6 +54,20 @@ impl TrainingSet {
     pub fn hard_count(&self) -> usize {
         self.hard.len() / (self.width * self.height).max(1)
     }
+
+    /// Adds `other`'s windows and backgrounds (cut at the same window size; an empty set takes
+    /// `other`'s size).
+    pub fn append(&mut self, other: TrainingSet) {
+        if self.width * self.height == 0 {
+            self.width = other.width;
+            self.height = other.height;
+        }
+        debug_assert_eq!((self.width, self.height), (other.width, other.height));
+        self.positives.extend(other.positives);
+        self.hard.extend(other.hard);
+        self.backgrounds.extend(other.backgrounds);
+        self.paws += other.paws;
+    }
 }
 
 /// Training parameters (all of them; seeded and serialisable into the report).
