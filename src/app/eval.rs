@@ -65,7 +65,7 @@ pub fn command(args: &EvalArgs) -> crate::app::Outcome {
                 renders: args.data.clone(),
                 stages: args.stages,
                 seed: args.seed,
-                scale_range: SCALE_RANGE,
+                scale_range: crate::vision::paws::detect::FIND_SCALE_RANGE,
                 report: args.report.clone(),
             },
             &crate::app::progress::Bars::default(),
@@ -144,15 +144,15 @@ fn parts_text(report: &training::PartsReport) -> String {
     t
 }
 
-/// The scales (px/mm) the detector looks for a view's scale between when it is not told.
-pub const SCALE_RANGE: (f64, f64) = (0.5, 8.0);
-
 fn real_paws_text(f: &RealPawsFigures) -> String {
     let mut t = String::new();
     let how = if f.folds > 0 {
         format!("cross-validated over {} folds of frames", f.folds)
     } else {
-        format!("the cascade {:?}", f.model.as_deref().unwrap_or(std::path::Path::new("?")))
+        format!(
+            "the cascade {:?}",
+            f.model.as_deref().unwrap_or(std::path::Path::new("?"))
+        )
     };
     let _ = writeln!(t, "{how}, on {:?}", f.label_file);
     let _ = writeln!(t, "bottom view: {}", f.bottom_view);
@@ -161,12 +161,22 @@ fn real_paws_text(f: &RealPawsFigures) -> String {
     let _ = writeln!(t, "{:<22} {:>12} {:>12}", "frames", a.frames, b.frames);
     let _ = writeln!(t, "{:<22} {:>12} {:>12}", "labelled paws", a.paws, b.paws);
     let _ = writeln!(t, "{:<22} {:>12} {:>12}", "found", a.found, b.found);
-    let _ = writeln!(t, "{:<22} {:>12} {:>12}", "false detections", a.false_detections, b.false_detections);
+    let _ = writeln!(
+        t,
+        "{:<22} {:>12} {:>12}",
+        "false detections", a.false_detections, b.false_detections
+    );
     let _ = writeln!(t, "{:<22} {:>12.3} {:>12.3}", "recall", a.recall, b.recall);
     let _ = writeln!(t, "{:<22} {:>12.3} {:>12.3}", "precision", a.precision, b.precision);
     for (paw, told) in &a.per_paw {
         let found = b.per_paw.get(paw).map_or(0.0, |p| p.recall);
-        let _ = writeln!(t, "{:<22} {:>12.3} {:>12.3}", format!("recall {paw}"), told.recall, found);
+        let _ = writeln!(
+            t,
+            "{:<22} {:>12.3} {:>12.3}",
+            format!("recall {paw}"),
+            told.recall,
+            found
+        );
     }
     let scales: Vec<String> = b.px_per_mm.iter().map(|s| format!("{s:.2}")).collect();
     let _ = writeln!(

@@ -360,6 +360,17 @@ pub struct RealPawsFigures {
     pub told_scale: training::paws_real::RealPawReport,
     pub found_scale: training::paws_real::RealPawReport,
     pub training_seconds: f64,
+    /// Per frame (told the scale): its image, paws found and missed, false detections.
+    pub per_frame: Vec<RealPawsFrame>,
+}
+
+/// One judged frame's counts in [`RealPawsFigures`].
+#[derive(Debug, serde::Serialize)]
+pub struct RealPawsFrame {
+    pub image: PathBuf,
+    pub found: usize,
+    pub missed: usize,
+    pub false_detections: usize,
 }
 
 /// `mousepose eval paws --labels`: a cascade's figures on labelled real frames, or
@@ -389,6 +400,7 @@ pub fn eval_real_paws(
         told_scale: RealPawReport::default(),
         found_scale: RealPawReport::default(),
         training_seconds: 0.0,
+        per_frame: Vec::new(),
     };
     let mut outcomes = Vec::new();
     match (&options.model, options.folds) {
@@ -418,12 +430,19 @@ pub fn eval_real_paws(
                 if let Some(r) = &renders {
                     set.append(r.clone());
                 }
-                tracing::info!(message = "Training a fold's cascade.", fold = fold + 1, folds, judged = judged.len());
+                tracing::info!(
+                    message = "Training a fold's cascade.",
+                    fold = fold + 1,
+                    folds,
+                    judged = judged.len()
+                );
                 let trained = crate::engine::train::fit_paw_cascade(&set, options.stages, options.seed, progress)?;
                 let mut detector = PawDetector::from_cascade(trained.cascade);
                 let (told, frames) = judge(&mut detector, &views, &judged, Scale::Told);
                 figures.told_scale.merge(&told);
-                figures.found_scale.merge(&judge(&mut detector, &views, &judged, found).0);
+                figures
+                    .found_scale
+                    .merge(&judge(&mut detector, &views, &judged, found).0);
                 outcomes.extend(frames);
             }
             figures.training_seconds = started.elapsed().as_secs_f64();
@@ -434,13 +453,22 @@ pub fn eval_real_paws(
             )));
         }
     }
+    figures.per_frame = outcomes
+        .iter()
+        .map(|o| RealPawsFrame {
+            image: views.labels.images[o.frame].image.clone(),
+            found: o.found.len(),
+            missed: o.missed.len(),
+            false_detections: o.false_detections.len(),
+        })
+        .collect();
     if let Some(dir) = &options.report {
         report_dir(dir)?;
         for outcome in &outcomes {
-            let name = views.labels.images[outcome.frame]
-                .image
-                .file_stem()
-                .map_or_else(|| format!("frame{}", outcome.frame), |s| s.to_string_lossy().into_owned());
+            let name = views.labels.images[outcome.frame].image.file_stem().map_or_else(
+                || format!("frame{}", outcome.frame),
+                |s| s.to_string_lossy().into_owned(),
+            );
             let path = dir.join(format!("{:03}-{name}.png", outcome.frame));
             real_paws_picture(&views.frames[outcome.frame], outcome, views.px_per_mm)
                 .write_png(&path)

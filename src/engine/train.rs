@@ -155,7 +155,9 @@ pub fn train(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSum
         )));
     }
     let Some(data) = &options.data else {
-        return Err(Failure::usage(anyhow::anyhow!("train needs --data DIR, the training dataset")));
+        return Err(Failure::usage(anyhow::anyhow!(
+            "train needs --data DIR, the training dataset"
+        )));
     };
     if options.target == ModelTarget::Orientation {
         return Ok(train_orientation(options, data)?);
@@ -269,13 +271,18 @@ const PAW_MIN_HIT_RATE: f64 = 0.998;
 /// hundred paws, renders give thousands.
 const REAL_PAW_AUGMENT: usize = 15;
 
-/// The cutting of paw windows: `augment` copies of each paw.
-fn paw_cut(augment: usize, seed: u64) -> training::paws_data::CutParams {
+/// Hard negative windows cut around each body part a lab labelled in the bottom view that is
+/// not a paw (the nose, the tail): a few labelled frames give few places.
+const REAL_HARD_PER_PLACE: usize = 8;
+
+/// The cutting of paw windows: `augment` copies of each paw, `hard_per_place` windows around
+/// each look-alike.
+fn paw_cut(augment: usize, hard_per_place: usize, seed: u64) -> training::paws_data::CutParams {
     training::paws_data::CutParams {
         width: crate::vision::paws::WINDOW_PX as usize,
         height: crate::vision::paws::WINDOW_PX as usize,
         augment,
-        hard_per_place: HARD_PER_PLACE,
+        hard_per_place,
         binnings: PAW_BINNINGS,
         seed,
     }
@@ -293,13 +300,13 @@ pub fn paw_material(
 ) -> Result<crate::vision::paws::train::TrainingSet> {
     use crate::training::paws_data as renders;
     let mut set = match data {
-        Some(dir) => renders::load(dir, paw_cut(PAW_AUGMENT, seed))
+        Some(dir) => renders::load(dir, paw_cut(PAW_AUGMENT, HARD_PER_PLACE, seed))
             .with_context(|| format!("reading training dataset {dir:?}"))?,
         None => crate::vision::paws::train::TrainingSet::default(),
     };
     if let Some((views, which)) = real {
         let more = views
-            .material(which, paw_cut(REAL_PAW_AUGMENT, seed))
+            .material(which, paw_cut(REAL_PAW_AUGMENT, REAL_HARD_PER_PLACE, seed))
             .with_context(|| format!("cutting the labelled frames of {:?}", views.labels.path))?;
         set.append(more);
     }
@@ -369,7 +376,11 @@ fn train_paws(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSu
         )));
     }
     let all: Vec<usize> = real.as_ref().map_or_else(Vec::new, |v| (0..v.frames.len()).collect());
-    let set = paw_material(options.data.as_deref(), real.as_ref().map(|v| (v, all.as_slice())), options.seed)?;
+    let set = paw_material(
+        options.data.as_deref(),
+        real.as_ref().map(|v| (v, all.as_slice())),
+        options.seed,
+    )?;
     let started = std::time::Instant::now();
     let trained = fit_paw_cascade(&set, options.stages, options.seed, progress)?;
     if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
@@ -405,8 +416,7 @@ const ORIENTATION_L2: f64 = 1.0;
 fn train_orientation(options: &TrainOptions, data: &std::path::Path) -> Result<TrainSummary> {
     use crate::training::orientation::views;
     use crate::vision::body_shape::{Provenance, ShapeModel};
-    let (ds, samples) =
-        training::load(data).with_context(|| format!("reading training dataset {data:?}"))?;
+    let (ds, samples) = training::load(data).with_context(|| format!("reading training dataset {data:?}"))?;
     if samples.is_empty() {
         anyhow::bail!("training dataset {data:?} has no images");
     }

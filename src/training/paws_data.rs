@@ -249,7 +249,13 @@ impl Cutter {
     /// Cuts a view already at the canonical scale: a positive (and its augmented copies) at the
     /// centre of each positive paw, hard negatives around each of `hard` (none touching a
     /// paw's box), and the view as a background with every paw's box excluded.
-    pub(crate) fn cut_canonical(&mut self, set: &mut TrainingSet, grey: GreyImage, paws: &[PawWindow], hard: &[(f64, f64)]) {
+    pub(crate) fn cut_canonical(
+        &mut self,
+        set: &mut TrainingSet,
+        grey: GreyImage,
+        paws: &[PawWindow],
+        hard: &[(f64, f64)],
+    ) {
         // Each box grown by a pixel.
         let excluded: Vec<[f32; 4]> = paws
             .iter()

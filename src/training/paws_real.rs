@@ -74,7 +74,10 @@ impl RealViews {
             frames.push(luma);
         }
         if let Some(first) = frames.first()
-            && let Some((k, other)) = frames.iter().enumerate().find(|(_, f)| f.dimensions() != first.dimensions())
+            && let Some((k, other)) = frames
+                .iter()
+                .enumerate()
+                .find(|(_, f)| f.dimensions() != first.dimensions())
         {
             return Err(PawDataError::Image {
                 path: labels.images[k].image.clone(),
@@ -159,7 +162,7 @@ impl RealViews {
     /// Training material from the frames `which`: a positive at each labelled paw (and its
     /// augmented copies), hard negatives around the other body parts labelled in the bottom
     /// view (the nose, the tail's base...), and each view as a background with the paws' boxes
-    /// kept out.
+    /// kept out, also turned and mirrored ([`crate::vision::paws::train::Background::dihedral`]).
     ///
     /// # Errors
     /// [`PawDataError::NoPaws`] when the frames hold no labelled paw.
@@ -203,7 +206,13 @@ impl RealViews {
                 })
                 .map(|(_, &(x, y))| canonical(x, y))
                 .collect();
+            let first = set.backgrounds.len();
             cutter.cut_canonical(&mut set, grey, &paws, &hard);
+            let turned: Vec<_> = set.backgrounds[first..]
+                .iter()
+                .flat_map(|b| b.dihedral().into_iter().skip(1))
+                .collect();
+            set.backgrounds.extend(turned);
         }
         if set.paws == 0 {
             return Err(PawDataError::NoPaws {
@@ -229,10 +238,14 @@ fn image_path(file: &Path, image: &Path) -> Option<PathBuf> {
 }
 
 /// Where the bottom view begins in frames that may stack two views (a side view above a
-/// bottom view through a mirror), and how it was found. Body parts whose every label lies
-/// above every labelled paw belong to the upper view; the bottom view begins at the edge
-/// between the lowest of those and the highest paw ([`lower_view_top`]). With no such part,
-/// the frames are bottom views only.
+/// bottom view through a mirror), and how it was found.
+///
+/// The upper view's parts are told by their names: when every paw's name ends in one view's
+/// tag (`paw2LF_bot`) and the same part is labelled with another tag (`paw2LF_top`), every
+/// part with that other tag is of the upper view. Without such names, the parts whose every
+/// label lies above every labelled paw are. The bottom view begins at the edge between the
+/// lowest of the upper view's labels and the highest paw ([`lower_view_top`]); with no upper
+/// view, the frames are bottom views only.
 fn stacked_view_top(labels: &LabelTable, paws: &PawMap, frames: &[image::GrayImage]) -> (u32, String) {
     let is_paw = |part: &str| paws.paws.iter().any(|(p, _)| p == part);
     let all = || labels.images.iter().flat_map(|i: &LabelledImage| i.points.iter());
@@ -240,27 +253,56 @@ fn stacked_view_top(labels: &LabelTable, paws: &PawMap, frames: &[image::GrayIma
         .filter(|(p, _)| is_paw(p))
         .map(|(_, &(_, y))| y)
         .fold(f64::MAX, f64::min);
-    let mut lowest: BTreeMap<&str, f64> = BTreeMap::new();
-    for (part, &(_, y)) in all().filter(|(p, _)| !is_paw(p)) {
-        let e = lowest.entry(part.as_str()).or_insert(f64::MIN);
-        *e = e.max(y);
-    }
-    let upper: Vec<&str> = lowest
-        .iter()
-        .filter(|&(_, &y)| y < highest_paw)
-        .map(|(p, _)| *p)
-        .collect();
-    let above = upper.iter().map(|p| lowest[p]).fold(f64::MIN, f64::max);
-    match (upper.is_empty(), lower_view_top(frames, above, highest_paw)) {
+    let tagged = upper_view_tag(&labels.parts, paws);
+    let upper = |part: &str| match &tagged {
+        Some(tag) => part.rsplit_once('_').is_some_and(|(_, t)| t == tag),
+        None => {
+            !is_paw(part)
+                && all()
+                    .filter(|(p, _)| p.as_str() == part)
+                    .all(|(_, &(_, y))| y < highest_paw)
+        }
+    };
+    let uppers: Vec<&String> = labels.parts.iter().filter(|p| upper(p)).collect();
+    let above = all()
+        .filter(|(p, _)| uppers.contains(p))
+        .map(|(_, &(_, y))| y)
+        .fold(f64::MIN, f64::max);
+    let why = match &tagged {
+        Some(tag) => format!("the parts tagged `_{tag}`, twins of the paws' own"),
+        None => "the parts always above every paw".to_owned(),
+    };
+    match (uppers.is_empty(), lower_view_top(frames, above, highest_paw)) {
         (false, Some(row)) => (
             row,
             format!(
-                "row {row}: the strongest edge across the frames between the upper view's lowest label (y {above:.0}, {} parts always above every paw) and the highest paw (y {highest_paw:.0})",
-                upper.len()
+                "row {row}: the strongest edge across the frames between the upper view's lowest label (y {above:.0}; {why}) and the highest paw (y {highest_paw:.0})"
             ),
         ),
-        _ => (0, "row 0: no labelled part lies above every paw, so the frames are bottom views only".into()),
+        _ => (
+            0,
+            "row 0: no part is labelled in a view above the paws', so the frames are bottom views only".into(),
+        ),
     }
+}
+
+/// The tag of the other view when the paws' names carry a view's tag after their last `_`
+/// (all the same) and some paw's name is also labelled with another tag.
+fn upper_view_tag(parts: &[String], paws: &PawMap) -> Option<String> {
+    let split: Vec<(&str, &str)> = paws
+        .paws
+        .iter()
+        .map(|(p, _)| p.rsplit_once('_'))
+        .collect::<Option<_>>()?;
+    let own = split.first()?.1;
+    if split.iter().any(|(_, t)| *t != own) {
+        return None;
+    }
+    parts
+        .iter()
+        .filter_map(|p| p.rsplit_once('_'))
+        .find(|(stem, tag)| *tag != own && split.iter().any(|(s, _)| s == stem))
+        .map(|(_, tag)| tag.to_owned())
 }
 
 /// The scale a judged frame was searched at.
@@ -300,6 +342,12 @@ pub struct RealPawReport {
     pub px_per_mm: Vec<f64>,
     /// The view's true scale (px/mm), as the user gave it for the labels.
     pub true_px_per_mm: f64,
+    /// Recall and precision had only detections of at least each whole score been kept
+    /// (a detection's score counts the raw windows grouped into it).
+    pub curve: Vec<super::paws_eval::CurvePoint>,
+    /// Every detection's score and whether it found a paw, for the curve.
+    #[serde(skip)]
+    scored: Vec<(f32, bool)>,
 }
 
 /// What one frame gave: paws found and missed, detections that were false.
@@ -326,6 +374,9 @@ impl RealPawReport {
         } else {
             mean + (error_mm - mean * found as f64) / self.found as f64
         };
+        self.scored.extend(outcome.found.iter().map(|(_, d)| (d.score, true)));
+        self.scored
+            .extend(outcome.false_detections.iter().map(|d| (d.score, false)));
         for (joint, _) in &outcome.found {
             let t = self.per_paw.entry(joint.name().to_owned()).or_default();
             t.labelled += 1;
@@ -346,7 +397,11 @@ impl RealPawReport {
         self.found += other.found;
         self.detections += other.detections;
         self.false_detections += other.false_detections;
-        self.mean_centre_error_mm = if self.found == 0 { 0.0 } else { errors / self.found as f64 };
+        self.mean_centre_error_mm = if self.found == 0 {
+            0.0
+        } else {
+            errors / self.found as f64
+        };
         for (paw, t) in &other.per_paw {
             let mine = self.per_paw.entry(paw.clone()).or_default();
             mine.labelled += t.labelled;
@@ -354,6 +409,7 @@ impl RealPawReport {
         }
         self.px_per_mm.extend(&other.px_per_mm);
         self.true_px_per_mm = other.true_px_per_mm;
+        self.scored.extend(&other.scored);
         self.finish();
     }
 
@@ -369,6 +425,18 @@ impl RealPawReport {
         for t in self.per_paw.values_mut() {
             t.recall = ratio(t.found, t.labelled);
         }
+        let top = self.scored.iter().map(|(s, _)| s.floor() as u32).max().unwrap_or(0);
+        self.curve = (1..=top)
+            .map(|min| {
+                let kept = self.scored.iter().filter(|(s, _)| *s >= min as f32);
+                let (all, found) = kept.fold((0, 0), |(a, f), (_, t)| (a + 1, f + usize::from(*t)));
+                super::paws_eval::CurvePoint {
+                    min_score: f64::from(min),
+                    precision: ratio(found, all),
+                    recall: ratio(found, self.paws),
+                }
+            })
+            .collect();
     }
 }
 
@@ -427,12 +495,7 @@ pub fn judge(
                 None => outcome.false_detections.push(*d),
             }
         }
-        outcome.missed = paws
-            .iter()
-            .zip(&taken)
-            .filter(|(_, t)| !**t)
-            .map(|(p, _)| *p)
-            .collect();
+        outcome.missed = paws.iter().zip(&taken).filter(|(_, t)| !**t).map(|(p, _)| *p).collect();
         report.add(views, &outcome, error);
         outcomes.push(outcome);
     }
@@ -481,7 +544,7 @@ mod tests {
         let set = views.material(&all, params).unwrap();
         assert_eq!(set.paws, views.paw_count(&all));
         assert_eq!(set.positive_count(), set.paws * 3);
-        assert_eq!(set.backgrounds.len(), 45);
+        assert_eq!(set.backgrounds.len(), 45 * 8);
         // 406 x (396 - 168) pixels at 3.5 px/mm: about 116 x 65 mm.
         let b = &set.backgrounds[0].grey;
         assert!(
@@ -494,7 +557,7 @@ mod tests {
         // The first fold alone: fewer paws, never one of the other folds'.
         let first = fold_frames(45, 5, 0);
         let half = views.material(&first, params).unwrap();
-        assert!(half.paws < set.paws && half.backgrounds.len() == first.len());
+        assert!(half.paws < set.paws && half.backgrounds.len() == first.len() * 8);
     }
 
     #[test]

@@ -258,6 +258,28 @@ const STRIDE_STEP: usize = 16;
 /// The object scales run by default: paws up to 30 % smaller or larger than the window's.
 pub const DEFAULT_SCALES: [f64; 3] = [0.8, 1.0, 1.25];
 
+/// Drops each detection whose centre lies in the box of a surer one: one paw found twice by
+/// groups the grouping kept apart (a paw's toes and its heel). Surest first.
+fn suppress_repeats(found: &mut Vec<PawDetection>) {
+    found.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let mut kept = 0;
+    for i in 0..found.len() {
+        let (cx, cy) = found[i].centre();
+        let repeat = found[..kept].iter().any(|k| {
+            (f64::from(k.x0)..=f64::from(k.x1)).contains(&cx) && (f64::from(k.y0)..=f64::from(k.y1)).contains(&cy)
+        });
+        if !repeat {
+            found.swap(kept, i);
+            kept += 1;
+        }
+    }
+    found.truncate(kept);
+}
+
+/// The scales (px/mm on the glass) [`PawDetector::find_scale`] searches by default when a view's
+/// scale is not told: from a binned camera far away to a close macro view.
+pub const FIND_SCALE_RANGE: (f64, f64) = (0.5, 8.0);
+
 /// Candidate scales per octave that [`PawDetector::find_scale`] tries.
 pub const SCALE_STEPS_PER_OCTAVE: u32 = 8;
 
@@ -331,7 +353,8 @@ impl PawDetector {
     /// Detects paws in `frame` within `roi` = (x0, y0, x1, y1) pixel bounds in the frame, the
     /// glass seen at `px_per_mm` pixels per mm. Clears `out`, then pushes the detections, boxes
     /// in the frame's own pixel coordinates, overlapping raw windows grouped (like OpenCV's
-    /// groupRectangles), `score` higher for surer detections.
+    /// groupRectangles), one paw found twice kept once (the surer), `score` higher for surer
+    /// detections, surest first.
     ///
     /// The score of a detection is the number of raw windows grouped into it plus
     /// `m / (1 + m)`, `m` their mean margin over the last stage's threshold: whole numbers
@@ -503,5 +526,35 @@ impl PawDetector {
                 score: a.count as f32 + m / (1.0 + m),
             });
         }
+        suppress_repeats(out);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn det(x0: f32, y0: f32, size: f32, score: f32) -> PawDetection {
+        PawDetection {
+            x0,
+            y0,
+            x1: x0 + size,
+            y1: y0 + size,
+            score,
+        }
+    }
+
+    /// A paw found twice (its toes and its heel) is kept once, the surer; paws apart stay.
+    #[test]
+    fn one_paw_found_twice_is_kept_once() {
+        let mut found = vec![
+            det(0.0, 0.0, 10.0, 2.5),
+            det(4.0, 3.0, 10.0, 5.2),
+            det(30.0, 0.0, 10.0, 3.1),
+            det(31.0, 9.0, 10.0, 1.2),
+        ];
+        suppress_repeats(&mut found);
+        let scores: Vec<f32> = found.iter().map(|d| d.score).collect();
+        assert_eq!(scores, vec![5.2, 3.1, 1.2]);
     }
 }
