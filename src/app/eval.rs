@@ -35,6 +35,10 @@ pub struct EvalArgs {
     /// With `--folds`: the training's seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// With `--labels`: group with this `minNeighbors` instead of the cascade's own (or the
+    /// detector's default, 1); the score curve shows every choice.
+    #[arg(long, value_name = "N", requires = "labels", value_parser = clap::value_parser!(u32).range(0..=50))]
+    pub min_neighbors: Option<u32>,
     /// Write tables and PNG charts into this directory.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
@@ -65,6 +69,7 @@ pub fn command(args: &EvalArgs) -> crate::app::Outcome {
                 renders: args.data.clone(),
                 stages: args.stages,
                 seed: args.seed,
+                min_neighbors: args.min_neighbors,
                 scale_range: crate::vision::paws::detect::FIND_SCALE_RANGE,
                 report: args.report.clone(),
             },
@@ -156,6 +161,7 @@ fn real_paws_text(f: &RealPawsFigures) -> String {
     };
     let _ = writeln!(t, "{how}, on {:?}", f.label_file);
     let _ = writeln!(t, "bottom view: {}", f.bottom_view);
+    let _ = writeln!(t, "grouping: minNeighbors {}", f.min_neighbors);
     let _ = writeln!(t, "{:<22} {:>12} {:>12}", "", "scale told", "scale found");
     let (a, b) = (&f.told_scale, &f.found_scale);
     let _ = writeln!(t, "{:<22} {:>12} {:>12}", "frames", a.frames, b.frames);

@@ -86,6 +86,11 @@ pub struct TrainArgs {
     /// Cascade stages at most (paws).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=50))]
     pub stages: u32,
+    /// Paws: the grouping the detector runs the cascade with (raw windows a detection needs
+    /// beyond the first, as OpenCV's `minNeighbors`), kept in the cascade's file; choose it from
+    /// `eval paws --labels --folds`' curve. The detector's default (1) when not given.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=50))]
+    pub min_neighbors: Option<u32>,
     /// Replace the model file if it exists.
     #[arg(long)]
     pub force: bool,
@@ -163,6 +168,7 @@ pub fn command(args: &TrainArgs) -> Outcome {
         pixels: args.pixels,
         seed: args.seed,
         stages: args.stages,
+        min_neighbors: args.min_neighbors,
         force: args.force,
     };
     let summary = crate::engine::train::train(&options, &Bars::default())?;

@@ -340,6 +340,8 @@ pub struct RealPawsOptions {
     /// Cascade stages at most, and the training's seed (with `folds`).
     pub stages: u32,
     pub seed: u64,
+    /// Group with this `minNeighbors` instead of the cascade's own.
+    pub min_neighbors: Option<u32>,
     /// Where the detector looks for the scale it is not told (px/mm).
     pub scale_range: (f64, f64),
     /// Write `summary.json` and each frame with its paws found, missed and false drawn here.
@@ -360,6 +362,8 @@ pub struct RealPawsFigures {
     pub told_scale: training::paws_real::RealPawReport,
     pub found_scale: training::paws_real::RealPawReport,
     pub training_seconds: f64,
+    /// The grouping the figures were judged with (`minNeighbors`).
+    pub min_neighbors: usize,
     /// Per frame (told the scale): its image, paws found and missed, false detections.
     pub per_frame: Vec<RealPawsFrame>,
 }
@@ -400,6 +404,9 @@ pub fn eval_real_paws(
         told_scale: RealPawReport::default(),
         found_scale: RealPawReport::default(),
         training_seconds: 0.0,
+        min_neighbors: options
+            .min_neighbors
+            .map_or(crate::vision::paws::detect::DEFAULT_MIN_NEIGHBORS, |n| n as usize),
         per_frame: Vec::new(),
     };
     let mut outcomes = Vec::new();
@@ -408,6 +415,10 @@ pub fn eval_real_paws(
             let mut detector = PawDetector::load(model)
                 .map_err(Failure::usage)
                 .map_err(|f| f.context(format!("loading the paw cascade {model:?}")))?;
+            if let Some(n) = options.min_neighbors {
+                detector.set_min_neighbors(n as usize);
+            }
+            figures.min_neighbors = detector.min_neighbors();
             let all: Vec<usize> = (0..n).collect();
             let (told, frames) = judge(&mut detector, &views, &all, Scale::Told);
             figures.told_scale = told;
@@ -420,16 +431,13 @@ pub fn eval_real_paws(
             let renders = options
                 .renders
                 .as_deref()
-                .map(|dir| crate::engine::train::paw_material(Some(dir), None, options.seed))
+                .map(|dir| crate::engine::train::render_material(dir, options.seed))
                 .transpose()?;
             let started = std::time::Instant::now();
             for fold in 0..folds as usize {
                 let judged = fold_frames(n, folds as usize, fold);
                 let learnt: Vec<usize> = (0..n).filter(|k| !judged.contains(k)).collect();
-                let mut set = crate::engine::train::paw_material(None, Some((&views, &learnt)), options.seed)?;
-                if let Some(r) = &renders {
-                    set.append(r.clone());
-                }
+                let set = crate::engine::train::paw_material(renders.as_ref(), Some((&views, &learnt)), options.seed)?;
                 tracing::info!(
                     message = "Training a fold's cascade.",
                     fold = fold + 1,
@@ -437,7 +445,9 @@ pub fn eval_real_paws(
                     judged = judged.len()
                 );
                 let trained = crate::engine::train::fit_paw_cascade(&set, options.stages, options.seed, progress)?;
-                let mut detector = PawDetector::from_cascade(trained.cascade);
+                let mut cascade = trained.cascade;
+                cascade.min_neighbors = options.min_neighbors;
+                let mut detector = PawDetector::from_cascade(cascade);
                 let (told, frames) = judge(&mut detector, &views, &judged, Scale::Told);
                 figures.told_scale.merge(&told);
                 figures

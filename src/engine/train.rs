@@ -56,6 +56,8 @@ pub struct TrainOptions {
     pub seed: u64,
     /// Cascade stages at most (paws).
     pub stages: u32,
+    /// Paws: the grouping kept in the cascade's file ([`crate::vision::paws::Cascade::min_neighbors`]).
+    pub min_neighbors: Option<u32>,
     /// Replace the model file if it exists.
     pub force: bool,
 }
@@ -149,9 +151,9 @@ pub fn train(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSum
     if options.target == ModelTarget::Paws {
         return train_paws(options, progress);
     }
-    if options.labels.is_some() {
+    if options.labels.is_some() || options.min_neighbors.is_some() {
         return Err(Failure::usage(anyhow::anyhow!(
-            "--labels trains paws only (the body, part and orientation models learn from renders)"
+            "--labels and --min-neighbors are for paws only (the body, part and orientation models learn from renders)"
         )));
     }
     let Some(data) = &options.data else {
@@ -267,8 +269,8 @@ const PAW_BINNINGS: &[u32] = &[1, 2, 4];
 /// views binned 4x4 and 99.6 % at full size; at 0.998 and 25 stages 88 % and 99.8 %).
 const PAW_MIN_HIT_RATE: f64 = 0.998;
 
-/// Augmented copies of each labelled real paw besides the plain one: a lab labels a few
-/// hundred paws, renders give thousands.
+/// Augmented copies of each labelled real paw besides the plain one, at least: a lab labels a
+/// few hundred paws.
 const REAL_PAW_AUGMENT: usize = 15;
 
 /// Hard negative windows cut around each body part a lab labelled in the bottom view that is
@@ -288,25 +290,33 @@ fn paw_cut(augment: usize, hard_per_place: usize, seed: u64) -> training::paws_d
     }
 }
 
-/// The paw cascade's training material: the renders of `data` and the labelled real frames
-/// `which` of `real`, together.
+/// The rendered bottom views of the dataset `dir` cut into paw training material.
 ///
 /// # Errors
 /// A dataset that cannot be read or holds no paw.
+pub fn render_material(dir: &std::path::Path, seed: u64) -> Result<crate::vision::paws::train::TrainingSet> {
+    training::paws_data::load(dir, paw_cut(PAW_AUGMENT, HARD_PER_PLACE, seed))
+        .with_context(|| format!("reading training dataset {dir:?}"))
+}
+
+/// The paw cascade's training material: `renders` ([`render_material`]) and the labelled real
+/// frames `which` of `real`, together. Mixed, each real paw is copied (turned, resized,
+/// shifted) until the real paws give about as many positives as the renders: a lab's few
+/// hundred paws weigh as much as the renders' thousands.
+///
+/// # Errors
+/// Labelled frames that hold no paw.
 pub fn paw_material(
-    data: Option<&std::path::Path>,
+    renders: Option<&crate::vision::paws::train::TrainingSet>,
     real: Option<(&RealViews, &[usize])>,
     seed: u64,
 ) -> Result<crate::vision::paws::train::TrainingSet> {
-    use crate::training::paws_data as renders;
-    let mut set = match data {
-        Some(dir) => renders::load(dir, paw_cut(PAW_AUGMENT, HARD_PER_PLACE, seed))
-            .with_context(|| format!("reading training dataset {dir:?}"))?,
-        None => crate::vision::paws::train::TrainingSet::default(),
-    };
+    let mut set = renders.cloned().unwrap_or_default();
     if let Some((views, which)) = real {
+        let balanced = set.positive_count() / views.paw_count(which).max(1);
+        let augment = REAL_PAW_AUGMENT.max(balanced.saturating_sub(1));
         let more = views
-            .material(which, paw_cut(REAL_PAW_AUGMENT, REAL_HARD_PER_PLACE, seed))
+            .material(which, paw_cut(augment, REAL_HARD_PER_PLACE, seed))
             .with_context(|| format!("cutting the labelled frames of {:?}", views.labels.path))?;
         set.append(more);
     }
@@ -376,13 +386,19 @@ fn train_paws(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSu
         )));
     }
     let all: Vec<usize> = real.as_ref().map_or_else(Vec::new, |v| (0..v.frames.len()).collect());
+    let renders = options
+        .data
+        .as_deref()
+        .map(|dir| render_material(dir, options.seed))
+        .transpose()?;
     let set = paw_material(
-        options.data.as_deref(),
+        renders.as_ref(),
         real.as_ref().map(|v| (v, all.as_slice())),
         options.seed,
     )?;
     let started = std::time::Instant::now();
-    let trained = fit_paw_cascade(&set, options.stages, options.seed, progress)?;
+    let mut trained = fit_paw_cascade(&set, options.stages, options.seed, progress)?;
+    trained.cascade.min_neighbors = options.min_neighbors;
     if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
     }

@@ -17,7 +17,7 @@ use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
 use crate::core::skeleton::Joint;
 use crate::io::paw_labels::{LabelTable, LabelledImage, PawMap, lower_view_top, read_dlc_csv};
 use crate::vision::paws::grey::{GreyImage, Greyer};
-use crate::vision::paws::train::TrainingSet;
+use crate::vision::paws::train::{Background, TrainingSet};
 use crate::vision::paws::{CANONICAL_PX_PER_MM, PawDetection, PawDetector};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -159,10 +159,38 @@ impl RealViews {
         Some((grey, place))
     }
 
+    /// The view above the bottom view in frame `k` (the side view of a mirror rig), as a
+    /// background at the bottom view's scale with a box kept out around every point labelled
+    /// in it (its paws among them): nothing in it is a paw of the bottom view. `None` when the
+    /// frames hold one view.
+    fn upper_background(&self, k: usize, greyer: &mut Greyer) -> Option<Background> {
+        if self.view_top == 0 {
+            return None;
+        }
+        let frame = &self.frames[k];
+        let mut grey = GreyImage::default();
+        let region = (0, 0, frame.width, self.view_top);
+        let place = greyer.convert(frame, region, self.px_per_mm, CANONICAL_PX_PER_MM, &mut grey)?;
+        let half = (LABELLED_PAW_HALF_MM * CANONICAL_PX_PER_MM) as f32 + 1.0;
+        let excluded = self.labels.images[k]
+            .points
+            .values()
+            .filter(|&&(_, y)| y < f64::from(self.view_top))
+            .map(|&(x, y)| {
+                let (cx, cy) = (
+                    ((x - place.x0) / place.frame_px_per_px) as f32,
+                    ((y - place.y0) / place.frame_px_per_px) as f32,
+                );
+                [cx - half, cy - half, cx + half, cy + half]
+            })
+            .collect();
+        Some(Background { grey, excluded })
+    }
+
     /// Training material from the frames `which`: a positive at each labelled paw (and its
     /// augmented copies), hard negatives around the other body parts labelled in the bottom
     /// view (the nose, the tail's base...), and each view as a background with the paws' boxes
-    /// kept out, also turned and mirrored ([`crate::vision::paws::train::Background::dihedral`]).
+    /// kept out (the view above it too, in frames that stack two), also turned and mirrored ([`crate::vision::paws::train::Background::dihedral`]).
     ///
     /// # Errors
     /// [`PawDataError::NoPaws`] when the frames hold no labelled paw.
@@ -208,6 +236,9 @@ impl RealViews {
                 .collect();
             let first = set.backgrounds.len();
             cutter.cut_canonical(&mut set, grey, &paws, &hard);
+            if let Some(upper) = self.upper_background(k, &mut greyer) {
+                set.backgrounds.push(upper);
+            }
             let turned: Vec<_> = set.backgrounds[first..]
                 .iter()
                 .flat_map(|b| b.dihedral().into_iter().skip(1))
@@ -544,7 +575,7 @@ mod tests {
         let set = views.material(&all, params).unwrap();
         assert_eq!(set.paws, views.paw_count(&all));
         assert_eq!(set.positive_count(), set.paws * 3);
-        assert_eq!(set.backgrounds.len(), 45 * 8);
+        assert_eq!(set.backgrounds.len(), 45 * 2 * 8);
         // 406 x (396 - 168) pixels at 3.5 px/mm: about 116 x 65 mm.
         let b = &set.backgrounds[0].grey;
         assert!(
@@ -557,7 +588,7 @@ mod tests {
         // The first fold alone: fewer paws, never one of the other folds'.
         let first = fold_frames(45, 5, 0);
         let half = views.material(&first, params).unwrap();
-        assert!(half.paws < set.paws && half.backgrounds.len() == first.len() * 8);
+        assert!(half.paws < set.paws && half.backgrounds.len() == first.len() * 2 * 8);
     }
 
     #[test]

@@ -302,15 +302,15 @@ impl PawDetector {
         Ok(Self::from_cascade(super::xml::load(path)?))
     }
 
-    /// A detector running `cascade` at [`DEFAULT_SCALES`], grouping with
-    /// [`DEFAULT_MIN_NEIGHBORS`].
+    /// A detector running `cascade` at [`DEFAULT_SCALES`], grouping as the cascade says
+    /// ([`Cascade::min_neighbors`]) or else with [`DEFAULT_MIN_NEIGHBORS`].
     pub fn from_cascade(cascade: Cascade) -> Self {
         Self {
+            min_neighbors: cascade.min_neighbors.map_or(DEFAULT_MIN_NEIGHBORS, |n| n as usize),
             runner: CascadeScan::new(&cascade),
             cascade,
             scales: DEFAULT_SCALES.to_vec(),
             step: 1,
-            min_neighbors: DEFAULT_MIN_NEIGHBORS,
             greyer: Greyer::default(),
             canonical: GreyImage::default(),
             scaled: GreyImage::default(),

@@ -261,6 +261,7 @@ pub fn train(
         },
         stages: Vec::new(),
         features: features.clone(),
+        min_neighbors: None,
     };
     let mut reports = Vec::new();
     let mut stop = StopReason::Done;
