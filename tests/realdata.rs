@@ -15,18 +15,23 @@ use mousepose::engine::replay::replay;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// moseq2-extract's results file of the real session, when it is there.
-fn moseq_results() -> Option<PathBuf> {
+/// A file of the real data, when it is there.
+fn real_file(name: &str) -> Option<PathBuf> {
     let dir = std::env::var_os("MOUSEPOSE_REALDATA")
         .map(PathBuf::from)
         .unwrap_or_else(|| repo_root().join("../shared/realdata"));
-    let file = dir.join("moseq2-viz/results_00.h5");
+    let file = dir.join(name);
     if file.is_file() {
         Some(file)
     } else {
         eprintln!("skipped: no real data at {} (set MOUSEPOSE_REALDATA)", file.display());
         None
     }
+}
+
+/// moseq2-extract's results file of the real session, when it is there.
+fn moseq_results() -> Option<PathBuf> {
+    real_file("moseq2-viz/results_00.h5")
 }
 
 /// The Python with numpy and h5py: the one `export nwb` uses, which `scripts/setup.sh` makes.
@@ -157,4 +162,75 @@ fn a_real_mouse_with_a_kinects_tail_is_seen_with_it_and_never_flips_for_a_frame(
         assert_eq!(get("swapped_alone"), 0.0, "{kind}: {f}");
         assert_eq!(get("brief_reversals"), 0.0, "{kind}: {f}");
     }
+}
+
+/// Paws learnt from a lab's labelled real frames (Lightning Pose's mirror-mouse bottom views,
+/// MIT), judged only on frames each cascade did not learn from: two folds of contiguous
+/// frames, a short cascade (the full figures, five folds and 20 stages, are in FIGURES.md).
+/// The bottom view is found from the labels, and the scale when not told.
+#[test]
+fn paws_learnt_from_labelled_real_frames_are_found_on_frames_held_out() {
+    let Some(labels) = real_file("mirror-mouse/CollectedData.csv") else {
+        return;
+    };
+    let out = mousepose()
+        .args(["eval", "paws", "--labels"])
+        .arg(&labels)
+        .args([
+            "--paws",
+            "paw1LH_bot=left_hind_paw,paw2LF_bot=left_fore_paw,paw3RF_bot=right_fore_paw,paw4RH_bot=right_hind_paw",
+            "--label-px-per-mm",
+            "3.5",
+            "--folds",
+            "2",
+            "--stages",
+            "12",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let f: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    eprintln!("{f:#}");
+    assert!(
+        f["bottom_view"].as_str().unwrap().starts_with("row 16"),
+        "{}",
+        f["bottom_view"]
+    );
+    let (told, found) = (&f["told_scale"], &f["found_scale"]);
+    assert_eq!(told["paws"], 180);
+    for (what, r) in [("told", told), ("found", found)] {
+        let (recall, precision) = (r["recall"].as_f64().unwrap(), r["precision"].as_f64().unwrap());
+        assert!(
+            recall >= 0.85 && precision >= 0.5,
+            "scale {what}: recall {recall}, precision {precision}"
+        );
+    }
+    for s in found["px_per_mm"].as_array().unwrap() {
+        let s = s.as_f64().unwrap();
+        assert!((3.0..4.1).contains(&s), "scale found {s} px/mm, true 3.5");
+    }
+}
+
+/// A label file that is wrong is refused in one sentence naming the file and the line.
+#[test]
+fn a_wrong_label_file_is_one_sentence_naming_the_file_and_the_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("CollectedData_lab.csv");
+    std::fs::write(
+        &file,
+        "scorer,lab,lab\nbodyparts,LF,LF\ncoords,x,y\nlabeled-data/v/img0.png,1,two\n",
+    )
+    .unwrap();
+    let out = mousepose()
+        .args(["train", "paws", "--labels"])
+        .arg(&file)
+        .args(["--label-px-per-mm", "3.5", "--out"])
+        .arg(tmp.path().join("paws.xml"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("CollectedData_lab.csv") && err.contains("line 4"), "{err}");
+    assert!(!tmp.path().join("paws.xml").exists());
 }

@@ -2,8 +2,8 @@
 //! [`crate::engine::detect`], and the detections printed.
 
 use crate::app::output::{print, print_json};
-use crate::core::geometry::Rig;
-use crate::engine::detect::{DETECTIONS_FILE, DetectPawsOptions};
+use crate::engine::detect::{DETECTIONS_FILE, DetectPawsOptions, ScaleSource};
+use crate::vision::paws::detect::FIND_SCALE_RANGE;
 use clap::{Args, Subcommand};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -25,26 +25,20 @@ pub struct DetectPawsArgs {
     /// The paw cascade (OpenCV cascade XML); the bundled one by default.
     #[arg(long, value_name = "FILE")]
     pub model: Option<PathBuf>,
-    /// How many image pixels a millimetre on the glass spans (the default rig's colour camera:
-    /// 2 at full resolution).
-    #[arg(long, value_name = "S", default_value_t = default_px_per_mm(), value_parser = parse_px_per_mm, allow_negative_numbers = true)]
-    pub px_per_mm: f64,
+    /// How many image pixels a millimetre on the glass spans; without it (and without
+    /// --calibration) the cascade finds the scale over all the images together, taken to
+    /// come from one camera, between 0.5 and 8 px/mm, and says what it found.
+    #[arg(long, value_name = "S", value_parser = crate::app::parse::px_per_mm, allow_negative_numbers = true)]
+    pub px_per_mm: Option<f64>,
+    /// Take the scale from a rig calibration's colour camera (`calibrate extrinsics`).
+    #[arg(long, value_name = "FILE", conflicts_with = "px_per_mm")]
+    pub calibration: Option<PathBuf>,
     /// Print the detections as one JSON object.
     #[arg(long)]
     pub json: bool,
     /// Replace the output directory if it is not empty.
     #[arg(long)]
     pub force: bool,
-}
-
-/// The default rig's colour camera: its focal length over its distance to the glass.
-fn default_px_per_mm() -> f64 {
-    let c = Rig::default_rig().color;
-    c.intrinsics.fx / c.centre().coords.norm()
-}
-
-fn parse_px_per_mm(s: &str) -> Result<f64, String> {
-    crate::app::parse::ranged(s, "pixels per millimetre", 0.05, 50.0)
 }
 
 /// `mousepose detect ...`.
@@ -67,7 +61,14 @@ fn paws(args: &DetectPawsArgs) -> crate::app::Outcome {
         images: args.images.clone(),
         out: args.out.clone(),
         model: args.model.clone(),
-        px_per_mm: args.px_per_mm,
+        scale: match (args.px_per_mm, &args.calibration) {
+            (Some(s), _) => ScaleSource::Told(s),
+            (None, Some(path)) => ScaleSource::Calibration(path.clone()),
+            (None, None) => ScaleSource::Find {
+                lowest: FIND_SCALE_RANGE.0,
+                highest: FIND_SCALE_RANGE.1,
+            },
+        },
         force: args.force,
     })?;
     if args.json {
@@ -77,6 +78,12 @@ fn paws(args: &DetectPawsArgs) -> crate::app::Outcome {
     for i in &detections.images {
         let _ = writeln!(text, "{:?}: {} paws", i.image, i.paws.len());
     }
-    let _ = writeln!(text, "boxes in {:?}", args.out.join(DETECTIONS_FILE));
+    let _ = writeln!(
+        text,
+        "scale {:.2} px/mm ({}); boxes in {:?}",
+        detections.px_per_mm,
+        detections.scale_from,
+        args.out.join(DETECTIONS_FILE)
+    );
     Ok(print(&text)?)
 }

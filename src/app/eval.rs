@@ -3,7 +3,7 @@
 
 use crate::app::ModelTarget;
 use crate::app::output::{print, print_json};
-use crate::engine::eval::{BodyFigures, EvalOptions, EvalSummary};
+use crate::engine::eval::{BodyFigures, EvalOptions, EvalSummary, RealPawsFigures, RealPawsOptions};
 use crate::training;
 use clap::Args;
 use std::fmt::Write as _;
@@ -14,12 +14,31 @@ pub struct EvalArgs {
     /// Which model.
     #[arg(value_enum)]
     pub target: ModelTarget,
-    /// The model file.
+    /// The model file (with `--labels`: the cascade judged on every labelled frame).
     #[arg(long, value_name = "FILE")]
-    pub model: PathBuf,
-    /// The held-back test dataset.
+    pub model: Option<PathBuf>,
+    /// The held-back test dataset (with `--labels --folds`: rendered views mixed into each
+    /// fold's training).
     #[arg(long, value_name = "DIR")]
-    pub data: PathBuf,
+    pub data: Option<PathBuf>,
+    /// Paws: judge on real frames a lab labelled instead of a rendered dataset, told the view's
+    /// scale and not told it (then found between 0.5 and 8 px/mm).
+    #[command(flatten)]
+    pub labels: crate::app::train::LabelArgs,
+    /// With `--labels`: cross-validate over the frames instead of judging `--model`: train a
+    /// cascade on all folds but one (contiguous runs of frames) and judge it on that one.
+    #[arg(long, value_name = "K", requires = "labels", value_parser = clap::value_parser!(u32).range(2..=100))]
+    pub folds: Option<u32>,
+    /// With `--folds`: cascade stages at most.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=50))]
+    pub stages: u32,
+    /// With `--folds`: the training's seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// With `--labels`: group with this `minNeighbors` instead of the cascade's own (or the
+    /// detector's default, 1); the score curve shows every choice.
+    #[arg(long, value_name = "N", requires = "labels", value_parser = clap::value_parser!(u32).range(0..=50))]
+    pub min_neighbors: Option<u32>,
     /// Write tables and PNG charts into this directory.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
@@ -37,10 +56,39 @@ pub struct EvalArgs {
 
 /// `mousepose eval body|parts|paws`.
 pub fn command(args: &EvalArgs) -> crate::app::Outcome {
+    use crate::engine::Failure;
+    if let Some(labels) = args.labels.options().map_err(Failure::usage)? {
+        if args.target != ModelTarget::Paws {
+            return Err(Failure::usage(anyhow::anyhow!("--labels judges paws only")));
+        }
+        let figures = crate::engine::eval::eval_real_paws(
+            &RealPawsOptions {
+                labels,
+                model: args.model.clone(),
+                folds: args.folds,
+                renders: args.data.clone(),
+                stages: args.stages,
+                seed: args.seed,
+                min_neighbors: args.min_neighbors,
+                scale_range: crate::vision::paws::detect::FIND_SCALE_RANGE,
+                report: args.report.clone(),
+            },
+            &crate::app::progress::Bars::default(),
+        )?;
+        if args.json {
+            return Ok(print_json(&figures)?);
+        }
+        return Ok(print(&real_paws_text(&figures))?);
+    }
+    let (Some(model), Some(data)) = (&args.model, &args.data) else {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "eval needs --model FILE and --data DIR (for paws, or --labels FILE)"
+        )));
+    };
     let summary = crate::engine::eval::eval(&EvalOptions {
         target: args.target.into(),
-        model: args.model.clone(),
-        data: args.data.clone(),
+        model: model.clone(),
+        data: data.clone(),
         report: args.report.clone(),
         baseline: args.baseline.clone(),
         color_binning: args.color_binning,
@@ -98,6 +146,52 @@ fn parts_text(report: &training::PartsReport) -> String {
     }
     let _ = writeln!(t, "{:<12} {:>8.1}%", "mean", 100.0 * report.mean_class_accuracy);
     let _ = writeln!(t, "{:<12} {:>8.1}%", "all pixels", 100.0 * report.pixel_accuracy);
+    t
+}
+
+fn real_paws_text(f: &RealPawsFigures) -> String {
+    let mut t = String::new();
+    let how = if f.folds > 0 {
+        format!("cross-validated over {} folds of frames", f.folds)
+    } else {
+        format!(
+            "the cascade {:?}",
+            f.model.as_deref().unwrap_or(std::path::Path::new("?"))
+        )
+    };
+    let _ = writeln!(t, "{how}, on {:?}", f.label_file);
+    let _ = writeln!(t, "bottom view: {}", f.bottom_view);
+    let _ = writeln!(t, "grouping: minNeighbors {}", f.min_neighbors);
+    let _ = writeln!(t, "{:<22} {:>12} {:>12}", "", "scale told", "scale found");
+    let (a, b) = (&f.told_scale, &f.found_scale);
+    let _ = writeln!(t, "{:<22} {:>12} {:>12}", "frames", a.frames, b.frames);
+    let _ = writeln!(t, "{:<22} {:>12} {:>12}", "labelled paws", a.paws, b.paws);
+    let _ = writeln!(t, "{:<22} {:>12} {:>12}", "found", a.found, b.found);
+    let _ = writeln!(
+        t,
+        "{:<22} {:>12} {:>12}",
+        "false detections", a.false_detections, b.false_detections
+    );
+    let _ = writeln!(t, "{:<22} {:>12.3} {:>12.3}", "recall", a.recall, b.recall);
+    let _ = writeln!(t, "{:<22} {:>12.3} {:>12.3}", "precision", a.precision, b.precision);
+    for (paw, told) in &a.per_paw {
+        let found = b.per_paw.get(paw).map_or(0.0, |p| p.recall);
+        let _ = writeln!(
+            t,
+            "{:<22} {:>12.3} {:>12.3}",
+            format!("recall {paw}"),
+            told.recall,
+            found
+        );
+    }
+    let scales: Vec<String> = b.px_per_mm.iter().map(|s| format!("{s:.2}")).collect();
+    let _ = writeln!(
+        t,
+        "scale found: {} px/mm (true {:.2}); centre error {:.2} mm",
+        scales.join(", "),
+        a.true_px_per_mm,
+        a.mean_centre_error_mm
+    );
     t
 }
 

@@ -59,6 +59,11 @@ pub fn square_mm(s: &str) -> Result<f64, String> {
 }
 
 /// A binning factor: 1, 2 or 4.
+/// Pixels per millimetre on the glass or floor.
+pub fn px_per_mm(s: &str) -> Result<f64, String> {
+    ranged(s, "pixels per millimetre", 0.05, 50.0)
+}
+
 pub fn binning(s: &str) -> Result<u32, String> {
     match s.trim() {
         "1" => Ok(1),

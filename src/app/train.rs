@@ -14,9 +14,12 @@ pub struct TrainArgs {
     /// Which model.
     #[arg(value_enum)]
     pub target: ModelTarget,
-    /// The training dataset (D_t).
+    /// The training dataset (D_t); for paws, rendered views (optional with --labels, then
+    /// mixed with the labelled frames).
     #[arg(long, value_name = "DIR")]
-    pub data: PathBuf,
+    pub data: Option<PathBuf>,
+    #[command(flatten)]
+    pub labels: LabelArgs,
     /// The model file to write.
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
@@ -83,6 +86,11 @@ pub struct TrainArgs {
     /// Cascade stages at most (paws).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=50))]
     pub stages: u32,
+    /// Paws: the grouping the detector runs the cascade with (raw windows a detection needs
+    /// beyond the first, as OpenCV's `minNeighbors`), kept in the cascade's file; choose it from
+    /// `eval paws --labels --folds`' curve. The detector's default (1) when not given.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=50))]
+    pub min_neighbors: Option<u32>,
     /// Replace the model file if it exists.
     #[arg(long)]
     pub force: bool,
@@ -92,11 +100,56 @@ pub struct TrainArgs {
     pub json: bool,
 }
 
+/// Real frames a lab labelled (paws), as `train paws` and `eval paws` take them.
+#[derive(Debug, Args)]
+pub struct LabelArgs {
+    /// Paws: real frames a lab labelled, in DeepLabCut's `CollectedData_*.csv` (the frames'
+    /// paths in it are found from the file's folder or a folder above it).
+    #[arg(long, value_name = "FILE")]
+    pub labels: Option<PathBuf>,
+    /// Which labelled body parts are our paws: `NAME=PAW,...`, PAW one of left_fore_paw,
+    /// right_fore_paw, left_hind_paw, right_hind_paw; guessed from the names (`LF`,
+    /// `right_hind`...) when not given.
+    #[arg(long, value_name = "MAP", requires = "labels")]
+    pub paws: Option<String>,
+    /// How many pixels a millimetre on the floor spans in the labelled frames' bottom view.
+    #[arg(long = "label-px-per-mm", value_name = "S", requires = "labels", value_parser = parse::px_per_mm)]
+    pub px_per_mm: Option<f64>,
+    /// The first row of the bottom view in frames that stack a side view above it; found from
+    /// the labels when not given (0 when no part is labelled above every paw).
+    #[arg(long, value_name = "ROW", requires = "labels")]
+    pub view_top: Option<u32>,
+}
+
+impl LabelArgs {
+    /// The labels to read, if any.
+    ///
+    /// # Errors
+    /// `--labels` without `--label-px-per-mm`.
+    pub fn options(&self) -> anyhow::Result<Option<crate::engine::train::LabelOptions>> {
+        let Some(file) = &self.labels else {
+            return Ok(None);
+        };
+        let Some(px_per_mm) = self.px_per_mm else {
+            anyhow::bail!(
+                "--labels needs --label-px-per-mm S, the labelled frames' pixels per millimetre on the floor (measure a known length in one frame)"
+            );
+        };
+        Ok(Some(crate::engine::train::LabelOptions {
+            file: file.clone(),
+            map: self.paws.clone(),
+            px_per_mm,
+            view_top: self.view_top,
+        }))
+    }
+}
+
 /// `mousepose train body|parts|paws`.
 pub fn command(args: &TrainArgs) -> Outcome {
     let options = TrainOptions {
         target: args.target.into(),
         data: args.data.clone(),
+        labels: args.labels.options().map_err(crate::engine::Failure::usage)?,
         out: args.out.clone(),
         trees: args.trees,
         depth: args.depth,
@@ -115,6 +168,7 @@ pub fn command(args: &TrainArgs) -> Outcome {
         pixels: args.pixels,
         seed: args.seed,
         stages: args.stages,
+        min_neighbors: args.min_neighbors,
         force: args.force,
     };
     let summary = crate::engine::train::train(&options, &Bars::default())?;

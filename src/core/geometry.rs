@@ -102,6 +102,14 @@ impl Camera {
     pub fn centre(&self) -> Point3<f64> {
         Point3::from(self.world_from_camera.translation.vector)
     }
+
+    /// How many image pixels a millimetre on the glass (the world's z = 0 plane) spans right
+    /// below the camera; `None` when that point is not in front of it.
+    pub fn glass_px_per_mm(&self) -> Option<f64> {
+        let c = self.centre();
+        let depth = (self.camera_from_world() * Point3::new(c.x, c.y, 0.0)).z;
+        (depth > 0.0).then(|| self.intrinsics.fx / depth)
+    }
 }
 
 /// A camera at `centre` whose optical axis points at `target`, with the image's "down"

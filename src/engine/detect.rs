@@ -24,10 +24,22 @@ pub struct DetectPawsOptions {
     pub out: PathBuf,
     /// The paw cascade; the bundled one when `None`.
     pub model: Option<PathBuf>,
-    /// How many image pixels a millimetre on the glass spans.
-    pub px_per_mm: f64,
+    /// How many image pixels a millimetre on the glass spans, or where to learn it.
+    pub scale: ScaleSource,
     /// Replace the output directory if it is not empty.
     pub force: bool,
+}
+
+/// Where `detect paws` takes the images' scale on the glass from.
+#[derive(Clone, Debug)]
+pub enum ScaleSource {
+    /// The user said it (px/mm).
+    Told(f64),
+    /// A rig calibration's colour camera (from `calibrate extrinsics`).
+    Calibration(PathBuf),
+    /// Found by the cascade over all the images together, between these px/mm
+    /// ([`PawDetector::find_scale`]): the images are taken to come from one camera.
+    Find { lowest: f64, highest: f64 },
 }
 
 /// One image's detections.
@@ -46,6 +58,8 @@ pub struct ImageDetections {
 pub struct Detections {
     pub model: PathBuf,
     pub px_per_mm: f64,
+    /// Where the scale came from: `told`, `calibration` or `found`.
+    pub scale_from: &'static str,
     pub images: Vec<ImageDetections>,
 }
 
@@ -101,11 +115,40 @@ pub fn paws(options: &DetectPawsOptions) -> Result<Detections, Failure> {
         .map(|p| read_image(p))
         .collect::<anyhow::Result<Vec<_>>>()
         .map_err(Failure::usage)?;
+    let (px_per_mm, scale_from) = match &options.scale {
+        ScaleSource::Told(s) => (*s, "told"),
+        ScaleSource::Calibration(path) => {
+            let rig = crate::vision::calibrate::RigCalibration::load(path)
+                .map_err(Failure::usage)?
+                .rig();
+            let s = rig.color.glass_px_per_mm().ok_or_else(|| {
+                Failure::usage(anyhow::anyhow!(
+                    "the calibration {path:?} puts the colour camera on or below the glass: it gives no scale"
+                ))
+            })?;
+            (s, "calibration")
+        }
+        &ScaleSource::Find { lowest, highest } => {
+            let whole: Vec<(&ColorFrame, (u32, u32, u32, u32))> =
+                frames.iter().map(|f| (f, (0, 0, f.width, f.height))).collect();
+            let found = detector.find_scale(&whole, lowest, highest).ok_or_else(|| {
+                Failure::usage(anyhow::anyhow!(
+                    "the cascade finds no paw in these images at any scale from {lowest} to {highest} px/mm: say the scale with --px-per-mm"
+                ))
+            })?;
+            tracing::info!(
+                message = "Scale found from the paws' own size.",
+                px_per_mm = format!("{:.2}", found.px_per_mm),
+                images = frames.len(),
+            );
+            (found.px_per_mm, "found")
+        }
+    };
     let staging = Staging::new(&options.out, options.force).map_err(output_failure)?;
     let mut found = Vec::new();
     let mut images = Vec::new();
     for (k, (path, frame)) in options.images.iter().zip(&frames).enumerate() {
-        detector.detect(frame, (0, 0, frame.width, frame.height), options.px_per_mm, &mut found);
+        detector.detect(frame, (0, 0, frame.width, frame.height), px_per_mm, &mut found);
         let stem = path.file_stem().map_or_else(|| "image".into(), |s| s.to_string_lossy());
         let name = format!("{k:03}-{stem}.png");
         let out = staging.path().join(&name);
@@ -122,7 +165,8 @@ pub fn paws(options: &DetectPawsOptions) -> Result<Detections, Failure> {
     }
     let detections = Detections {
         model,
-        px_per_mm: options.px_per_mm,
+        px_per_mm,
+        scale_from,
         images,
     };
     let path = staging.path().join(DETECTIONS_FILE);

@@ -325,3 +325,208 @@ fn eval_orientation(options: &EvalOptions) -> Result<EvalSummary, Failure> {
     };
     Ok(EvalSummary::Orientation(figures))
 }
+
+/// What `eval paws --labels` judges: a cascade, or a cascade trained per fold, on real frames
+/// a lab labelled (see its `--help`).
+#[derive(Clone, Debug)]
+pub struct RealPawsOptions {
+    pub labels: crate::engine::train::LabelOptions,
+    /// The cascade to judge on every labelled frame; `None` with `folds`.
+    pub model: Option<PathBuf>,
+    /// Cross-validate over frames: train a cascade on all folds but one, judge it on that one.
+    pub folds: Option<u32>,
+    /// Rendered views mixed into each fold's training.
+    pub renders: Option<PathBuf>,
+    /// Cascade stages at most, and the training's seed (with `folds`).
+    pub stages: u32,
+    pub seed: u64,
+    /// Group with this `minNeighbors` instead of the cascade's own.
+    pub min_neighbors: Option<u32>,
+    /// Where the detector looks for the scale it is not told (px/mm).
+    pub scale_range: (f64, f64),
+    /// Write `summary.json` and each frame with its paws found, missed and false drawn here.
+    pub report: Option<PathBuf>,
+}
+
+/// What `eval paws --labels` reports: the figures told the view's scale and not told it.
+#[derive(Debug, serde::Serialize)]
+pub struct RealPawsFigures {
+    pub label_file: PathBuf,
+    /// How the bottom view was found in the frames.
+    pub bottom_view: String,
+    pub model: Option<PathBuf>,
+    /// Folds of the cross-validation (frames in contiguous runs); 0 when a given cascade was
+    /// judged.
+    pub folds: u32,
+    pub renders: Option<PathBuf>,
+    pub told_scale: training::paws_real::RealPawReport,
+    pub found_scale: training::paws_real::RealPawReport,
+    pub training_seconds: f64,
+    /// The grouping the figures were judged with (`minNeighbors`).
+    pub min_neighbors: usize,
+    /// Per frame (told the scale): its image, paws found and missed, false detections.
+    pub per_frame: Vec<RealPawsFrame>,
+}
+
+/// One judged frame's counts in [`RealPawsFigures`].
+#[derive(Debug, serde::Serialize)]
+pub struct RealPawsFrame {
+    pub image: PathBuf,
+    pub found: usize,
+    pub missed: usize,
+    pub false_detections: usize,
+}
+
+/// `mousepose eval paws --labels`: a cascade's figures on labelled real frames, or
+/// cross-validated cascades' (each judged on frames it did not learn from).
+///
+/// # Errors
+/// A label file, frame or model that cannot be read (the user's); training that fails; a
+/// report that cannot be written.
+pub fn eval_real_paws(
+    options: &RealPawsOptions,
+    progress: &dyn crate::engine::progress::Progress,
+) -> Result<RealPawsFigures, Failure> {
+    use crate::training::paws_real::{RealPawReport, Scale, fold_frames, judge};
+    use crate::vision::paws::PawDetector;
+    let views = options.labels.open()?;
+    let n = views.frames.len();
+    let found = Scale::Found {
+        lowest: options.scale_range.0,
+        highest: options.scale_range.1,
+    };
+    let mut figures = RealPawsFigures {
+        label_file: options.labels.file.clone(),
+        bottom_view: views.view_top_how.clone(),
+        model: options.model.clone(),
+        folds: 0,
+        renders: options.renders.clone(),
+        told_scale: RealPawReport::default(),
+        found_scale: RealPawReport::default(),
+        training_seconds: 0.0,
+        min_neighbors: options
+            .min_neighbors
+            .map_or(crate::vision::paws::detect::DEFAULT_MIN_NEIGHBORS, |n| n as usize),
+        per_frame: Vec::new(),
+    };
+    let mut outcomes = Vec::new();
+    match (&options.model, options.folds) {
+        (Some(model), None) => {
+            let mut detector = PawDetector::load(model)
+                .map_err(Failure::usage)
+                .map_err(|f| f.context(format!("loading the paw cascade {model:?}")))?;
+            if let Some(n) = options.min_neighbors {
+                detector.set_min_neighbors(n as usize);
+            }
+            figures.min_neighbors = detector.min_neighbors();
+            let all: Vec<usize> = (0..n).collect();
+            let (told, frames) = judge(&mut detector, &views, &all, Scale::Told);
+            figures.told_scale = told;
+            figures.found_scale = judge(&mut detector, &views, &all, found).0;
+            outcomes = frames;
+        }
+        (None, Some(folds)) => {
+            let folds = folds.clamp(2, n.max(2) as u32);
+            figures.folds = folds;
+            let renders = options
+                .renders
+                .as_deref()
+                .map(|dir| crate::engine::train::render_material(dir, options.seed))
+                .transpose()?;
+            let started = std::time::Instant::now();
+            for fold in 0..folds as usize {
+                let judged = fold_frames(n, folds as usize, fold);
+                let learnt: Vec<usize> = (0..n).filter(|k| !judged.contains(k)).collect();
+                let set = crate::engine::train::paw_material(renders.as_ref(), Some((&views, &learnt)), options.seed)?;
+                tracing::info!(
+                    message = "Training a fold's cascade.",
+                    fold = fold + 1,
+                    folds,
+                    judged = judged.len()
+                );
+                let trained = crate::engine::train::fit_paw_cascade(&set, options.stages, options.seed, progress)?;
+                let mut cascade = trained.cascade;
+                cascade.min_neighbors = options.min_neighbors;
+                let mut detector = PawDetector::from_cascade(cascade);
+                let (told, frames) = judge(&mut detector, &views, &judged, Scale::Told);
+                figures.told_scale.merge(&told);
+                figures
+                    .found_scale
+                    .merge(&judge(&mut detector, &views, &judged, found).0);
+                outcomes.extend(frames);
+            }
+            figures.training_seconds = started.elapsed().as_secs_f64();
+        }
+        _ => {
+            return Err(Failure::usage(anyhow::anyhow!(
+                "eval paws --labels judges either a cascade (--model FILE) or cascades trained per fold (--folds K), one of them"
+            )));
+        }
+    }
+    figures.per_frame = outcomes
+        .iter()
+        .map(|o| RealPawsFrame {
+            image: views.labels.images[o.frame].image.clone(),
+            found: o.found.len(),
+            missed: o.missed.len(),
+            false_detections: o.false_detections.len(),
+        })
+        .collect();
+    if let Some(dir) = &options.report {
+        report_dir(dir)?;
+        for outcome in &outcomes {
+            let name = views.labels.images[outcome.frame].image.file_stem().map_or_else(
+                || format!("frame{}", outcome.frame),
+                |s| s.to_string_lossy().into_owned(),
+            );
+            let path = dir.join(format!("{:03}-{name}.png", outcome.frame));
+            real_paws_picture(&views.frames[outcome.frame], outcome, views.px_per_mm)
+                .write_png(&path)
+                .with_context(|| format!("writing {path:?}"))?;
+        }
+        write_report_file(dir, "summary.json", serde_json::to_string_pretty(&figures)?.as_bytes())?;
+    }
+    Ok(figures)
+}
+
+/// A judged frame: found paws' boxes in green, false detections' in red, missed paws circled
+/// in blue at their labels.
+fn real_paws_picture(
+    frame: &crate::core::frame::ColorFrame,
+    outcome: &training::paws_real::FrameOutcome,
+    px_per_mm: f64,
+) -> crate::core::image::RgbImage {
+    let mut img = crate::core::image::RgbImage {
+        width: frame.width,
+        height: frame.height,
+        data: frame.data.iter().flat_map(|&v| [v, v, v]).collect(),
+    };
+    let corners = |d: &crate::vision::paws::PawDetection| {
+        ((f64::from(d.x0), f64::from(d.y0)), (f64::from(d.x1), f64::from(d.y1)))
+    };
+    for (_, d) in &outcome.found {
+        let (a, b) = corners(d);
+        img.rect(a, b, [60, 220, 60], 2.0);
+    }
+    for d in &outcome.false_detections {
+        let (a, b) = corners(d);
+        img.rect(a, b, [230, 50, 50], 2.0);
+    }
+    let r = training::paws_real::MATCH_RADIUS_MM * px_per_mm;
+    for &(_, x, y) in &outcome.missed {
+        let steps = 24;
+        for s in 0..steps {
+            let (a0, a1) = (
+                std::f64::consts::TAU * f64::from(s) / f64::from(steps),
+                std::f64::consts::TAU * f64::from(s + 1) / f64::from(steps),
+            );
+            img.line(
+                (x + r * a0.cos(), y + r * a0.sin()),
+                (x + r * a1.cos(), y + r * a1.sin()),
+                [70, 120, 255],
+                2.0,
+            );
+        }
+    }
+    img
+}

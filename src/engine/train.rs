@@ -3,6 +3,7 @@
 
 use crate::engine::progress::Progress;
 use crate::engine::{Exists, Failure};
+use crate::training::paws_real::RealViews;
 use crate::training::{self, PixelParams, Target, TrainJob, TrainProgress};
 use crate::vision::forest::discriminative::{DiscriminativeParams, ErrorScope, Scoring};
 use crate::vision::forest::model::{self, Model, ModelKind};
@@ -29,8 +30,10 @@ pub enum ModelTarget {
 #[derive(Clone, Debug)]
 pub struct TrainOptions {
     pub target: ModelTarget,
-    /// The training dataset (D_t).
-    pub data: PathBuf,
+    /// The training dataset (D_t); for paws, renders mixed with `labels` (either or both).
+    pub data: Option<PathBuf>,
+    /// Paws: real frames a lab labelled.
+    pub labels: Option<LabelOptions>,
     /// The model file to write.
     pub out: PathBuf,
     pub trees: u32,
@@ -53,8 +56,42 @@ pub struct TrainOptions {
     pub seed: u64,
     /// Cascade stages at most (paws).
     pub stages: u32,
+    /// Paws: the grouping kept in the cascade's file ([`crate::vision::paws::Cascade::min_neighbors`]).
+    pub min_neighbors: Option<u32>,
     /// Replace the model file if it exists.
     pub force: bool,
+}
+
+/// Real frames a lab labelled, for `train paws` and `eval paws`.
+#[derive(Clone, Debug)]
+pub struct LabelOptions {
+    /// DeepLabCut's `CollectedData_*.csv`.
+    pub file: PathBuf,
+    /// `NAME=PAW,...`; guessed from the body parts' names when `None`.
+    pub map: Option<String>,
+    /// Pixels per millimetre of the frames' bottom view.
+    pub px_per_mm: f64,
+    /// The first row of the bottom view; found from the labels when `None`.
+    pub view_top: Option<u32>,
+}
+
+impl LabelOptions {
+    /// Reads the label file and its frames.
+    ///
+    /// # Errors
+    /// One sentence naming the file and what is wrong ([`RealViews::open`]).
+    pub fn open(&self) -> Result<RealViews, Failure> {
+        let views = RealViews::open(&self.file, self.map.as_deref(), self.px_per_mm, self.view_top)
+            .map_err(|e| Failure::usage(anyhow::Error::new(e)))?;
+        tracing::info!(
+            message = "Labelled frames read.",
+            file = %self.file.display(),
+            frames = views.frames.len(),
+            paws = views.paw_count(&(0..views.frames.len()).collect::<Vec<_>>()),
+            bottom_view = %views.view_top_how,
+        );
+        Ok(views)
+    }
 }
 
 /// What `train` wrote.
@@ -112,10 +149,20 @@ pub fn train(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSum
         return Err(Failure::usage(Exists(options.out.clone())));
     }
     if options.target == ModelTarget::Paws {
-        return Ok(train_paws(options, progress)?);
+        return train_paws(options, progress);
     }
+    if options.labels.is_some() || options.min_neighbors.is_some() {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "--labels and --min-neighbors are for paws only (the body, part and orientation models learn from renders)"
+        )));
+    }
+    let Some(data) = &options.data else {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "train needs --data DIR, the training dataset"
+        )));
+    };
     if options.target == ModelTarget::Orientation {
-        return Ok(train_orientation(options)?);
+        return Ok(train_orientation(options, data)?);
     }
     let params = TrainParams {
         trees: options.trees as usize,
@@ -130,7 +177,7 @@ pub fn train(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSum
             ModelTarget::Body => Target::Body,
             ModelTarget::Parts | ModelTarget::Paws | ModelTarget::Orientation => Target::Parts,
         },
-        train: &options.data,
+        train: data,
         discriminative: options.discriminative.as_deref(),
         params,
         disc: DiscriminativeParams {
@@ -209,16 +256,6 @@ fn counts<F, L>(f: &Forest<F, L>) -> (usize, usize, usize) {
     )
 }
 
-/// The training parameters `train paws` uses besides its arguments.
-fn paw_params(options: &TrainOptions) -> crate::vision::paws::train::TrainParams {
-    crate::vision::paws::train::TrainParams {
-        stages: options.stages as usize,
-        seed: options.seed,
-        min_hit_rate: PAW_MIN_HIT_RATE,
-        ..crate::vision::paws::train::TrainParams::default()
-    }
-}
-
 /// Augmented copies of each paw window besides the plain one.
 const PAW_AUGMENT: usize = 3;
 /// Hard negative windows cut around each of a view's look-alikes of paws.
@@ -232,22 +269,57 @@ const PAW_BINNINGS: &[u32] = &[1, 2, 4];
 /// views binned 4x4 and 99.6 % at full size; at 0.998 and 25 stages 88 % and 99.8 %).
 const PAW_MIN_HIT_RATE: f64 = 0.998;
 
-/// `mousepose train paws`.
-fn train_paws(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSummary> {
-    use crate::training::paws_data as data;
-    use crate::vision::paws::{WINDOW_PX, train, xml};
-    let set = data::load(
-        &options.data,
-        data::CutParams {
-            width: WINDOW_PX as usize,
-            height: WINDOW_PX as usize,
-            augment: PAW_AUGMENT,
-            hard_per_place: HARD_PER_PLACE,
-            binnings: PAW_BINNINGS,
-            seed: options.seed,
-        },
-    )
-    .with_context(|| format!("reading training dataset {:?}", options.data))?;
+/// Augmented copies of each labelled real paw besides the plain one, at least: a lab labels a
+/// few hundred paws.
+const REAL_PAW_AUGMENT: usize = 15;
+
+/// Hard negative windows cut around each body part a lab labelled in the bottom view that is
+/// not a paw (the nose, the tail): a few labelled frames give few places.
+const REAL_HARD_PER_PLACE: usize = 8;
+
+/// The cutting of paw windows: `augment` copies of each paw, `hard_per_place` windows around
+/// each look-alike.
+fn paw_cut(augment: usize, hard_per_place: usize, seed: u64) -> training::paws_data::CutParams {
+    training::paws_data::CutParams {
+        width: crate::vision::paws::WINDOW_PX as usize,
+        height: crate::vision::paws::WINDOW_PX as usize,
+        augment,
+        hard_per_place,
+        binnings: PAW_BINNINGS,
+        seed,
+    }
+}
+
+/// The rendered bottom views of the dataset `dir` cut into paw training material.
+///
+/// # Errors
+/// A dataset that cannot be read or holds no paw.
+pub fn render_material(dir: &std::path::Path, seed: u64) -> Result<crate::vision::paws::train::TrainingSet> {
+    training::paws_data::load(dir, paw_cut(PAW_AUGMENT, HARD_PER_PLACE, seed))
+        .with_context(|| format!("reading training dataset {dir:?}"))
+}
+
+/// The paw cascade's training material: `renders` ([`render_material`]) and the labelled real
+/// frames `which` of `real`, together. Mixed, each real paw is copied (turned, resized,
+/// shifted) until the real paws give about as many positives as the renders: a lab's few
+/// hundred paws weigh as much as the renders' thousands.
+///
+/// # Errors
+/// Labelled frames that hold no paw.
+pub fn paw_material(
+    renders: Option<&crate::vision::paws::train::TrainingSet>,
+    real: Option<(&RealViews, &[usize])>,
+    seed: u64,
+) -> Result<crate::vision::paws::train::TrainingSet> {
+    let mut set = renders.cloned().unwrap_or_default();
+    if let Some((views, which)) = real {
+        let balanced = set.positive_count() / views.paw_count(which).max(1);
+        let augment = REAL_PAW_AUGMENT.max(balanced.saturating_sub(1));
+        let more = views
+            .material(which, paw_cut(augment, REAL_HARD_PER_PLACE, seed))
+            .with_context(|| format!("cutting the labelled frames of {:?}", views.labels.path))?;
+        set.append(more);
+    }
     tracing::info!(
         message = "Training windows cut.",
         paws = set.paws,
@@ -255,10 +327,28 @@ fn train_paws(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSu
         hard_negatives = set.hard_count(),
         backgrounds = set.backgrounds.len(),
     );
-    let params = paw_params(options);
+    Ok(set)
+}
+
+/// Trains the paw cascade on `set`, its stages counted on `progress`.
+///
+/// # Errors
+/// When training stops for want of positives.
+pub fn fit_paw_cascade(
+    set: &crate::vision::paws::train::TrainingSet,
+    stages: u32,
+    seed: u64,
+    progress: &dyn Progress,
+) -> Result<crate::vision::paws::train::Trained> {
+    use crate::vision::paws::train;
+    let params = train::TrainParams {
+        stages: stages as usize,
+        seed,
+        min_hit_rate: PAW_MIN_HIT_RATE,
+        ..train::TrainParams::default()
+    };
     progress.start("stages", params.stages as u64);
-    let started = std::time::Instant::now();
-    let trained = train::train(&set, &params, &mut |r| {
+    let trained = train::train(set, &params, &mut |r| {
         progress.advance(1);
         progress.label(&format!("fa {:.4}", r.false_alarm));
         tracing::debug!(
@@ -276,11 +366,6 @@ fn train_paws(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSu
     })
     .context("training the paw cascade")?;
     progress.finish();
-    if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
-    }
-    xml::save(&trained.cascade, &options.out)?;
-    let weak: usize = trained.cascade.stages.iter().map(|s| s.weak.len()).sum();
     if let train::StopReason::NoNegatives { found, scanned } = &trained.stop {
         tracing::info!(
             message = "Training stopped early: the backgrounds no longer yield enough windows the cascade accepts.",
@@ -288,6 +373,37 @@ fn train_paws(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSu
             scanned,
         );
     }
+    Ok(trained)
+}
+
+/// `mousepose train paws`.
+fn train_paws(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSummary, Failure> {
+    use crate::vision::paws::xml;
+    let real = options.labels.as_ref().map(LabelOptions::open).transpose()?;
+    if options.data.is_none() && real.is_none() {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "train paws needs --data DIR (rendered views), --labels FILE (real frames a lab labelled) or both"
+        )));
+    }
+    let all: Vec<usize> = real.as_ref().map_or_else(Vec::new, |v| (0..v.frames.len()).collect());
+    let renders = options
+        .data
+        .as_deref()
+        .map(|dir| render_material(dir, options.seed))
+        .transpose()?;
+    let set = paw_material(
+        renders.as_ref(),
+        real.as_ref().map(|v| (v, all.as_slice())),
+        options.seed,
+    )?;
+    let started = std::time::Instant::now();
+    let mut trained = fit_paw_cascade(&set, options.stages, options.seed, progress)?;
+    trained.cascade.min_neighbors = options.min_neighbors;
+    if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
+    }
+    xml::save(&trained.cascade, &options.out)?;
+    let weak: usize = trained.cascade.stages.iter().map(|s| s.weak.len()).sum();
     let last = trained.stages.last();
     let training_seconds = started.elapsed().as_secs_f64();
     tracing::info!(
@@ -313,13 +429,12 @@ fn train_paws(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSu
 /// L2 penalty on the orientation model's scaled weights.
 const ORIENTATION_L2: f64 = 1.0;
 
-fn train_orientation(options: &TrainOptions) -> Result<TrainSummary> {
+fn train_orientation(options: &TrainOptions, data: &std::path::Path) -> Result<TrainSummary> {
     use crate::training::orientation::views;
     use crate::vision::body_shape::{Provenance, ShapeModel};
-    let (ds, samples) =
-        training::load(&options.data).with_context(|| format!("reading training dataset {:?}", options.data))?;
+    let (ds, samples) = training::load(data).with_context(|| format!("reading training dataset {data:?}"))?;
     if samples.is_empty() {
-        anyhow::bail!("training dataset {:?} has no images", options.data);
+        anyhow::bail!("training dataset {data:?} has no images");
     }
     let rig = ds.meta.rig.unwrap_or_else(crate::core::geometry::Rig::default_rig);
     let views = views(&samples, &rig, options.seed).context("segmenting the dataset's mice")?;

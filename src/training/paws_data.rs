@@ -24,11 +24,10 @@
 use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
 use crate::core::geometry::{Camera, Rig};
 use crate::core::skeleton::Joint;
-use crate::io::paw_labels::{LabelTable, LabelledImage, PawMap};
 use crate::synth::dataset::{Dataset, Sample};
 use crate::synth::views::{BottomView, Mark};
 use crate::vision::paws::CANONICAL_PX_PER_MM;
-use crate::vision::paws::grey::{GreyImage, Greyer, ResampleScratch, resample};
+use crate::vision::paws::grey::{GreyImage, Greyer};
 use crate::vision::paws::train::{Background, TrainingSet};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -194,110 +193,8 @@ pub fn load(dir: &Path, params: CutParams) -> Result<TrainingSet, PawDataError> 
     Ok(set)
 }
 
-/// Half the side of the box kept out of the negatives around a labelled paw (a paw's pad seen
-/// from below is 5-8 mm long).
-const LABELLED_PAW_HALF_MM: f64 = 4.5;
-
-/// Where labelled real frames' bottom views are, and which of their images to take.
-#[derive(Clone, Copy, Debug)]
-pub struct LabelledViews<'a> {
-    pub labels: &'a LabelTable,
-    pub paws: &'a PawMap,
-    /// The folder the label file's image paths start from.
-    pub root: &'a Path,
-    /// Pixels per millimetre of the bottom view in the images.
-    pub px_per_mm: f64,
-    /// The first row of the bottom view ([`crate::io::paw_labels::lower_view_top`]; 0 when the
-    /// images are bottom views only).
-    pub view_top: u32,
-}
-
-/// A labelled real frame's bottom view in grey at the canonical scale, and the scale from its
-/// pixels to the canonical ones (`px / ratio`).
-///
-/// # Errors
-/// [`PawDataError::Image`] when the image cannot be read, or holds no row at `view_top`.
-pub fn labelled_view(views: &LabelledViews<'_>, image: &LabelledImage) -> Result<(GreyImage, f64), PawDataError> {
-    let path = views.root.join(&image.image);
-    let bad = |why: String| PawDataError::Image {
-        path: path.clone(),
-        why,
-    };
-    let luma = image::open(&path).map_err(|e| bad(e.to_string()))?.to_luma8();
-    let (width, height) = luma.dimensions();
-    if views.view_top >= height {
-        return Err(bad(format!(
-            "it has {height} rows, and the bottom view was to begin at row {}",
-            views.view_top
-        )));
-    }
-    let start = views.view_top as usize * width as usize;
-    let view = GreyImage {
-        width: width as usize,
-        height: (height - views.view_top) as usize,
-        data: luma.into_raw().split_off(start),
-    };
-    let ratio = views.px_per_mm / CANONICAL_PX_PER_MM;
-    let mut grey = GreyImage::default();
-    resample(&view, ratio, &mut grey, &mut ResampleScratch::default());
-    Ok((grey, ratio))
-}
-
-/// Training material from labelled real frames (the images `which` of the label file): a
-/// positive at each labelled paw, hard negatives around the other body parts labelled in the
-/// bottom view (the nose, the tail's base...), and each view as a background with the paws'
-/// boxes kept out.
-///
-/// # Errors
-/// [`PawDataError::Image`] when an image cannot be read; [`PawDataError::NoPaws`] when the
-/// images hold no labelled paw.
-pub fn load_labelled(
-    views: &LabelledViews<'_>,
-    which: &[usize],
-    params: CutParams,
-) -> Result<TrainingSet, PawDataError> {
-    let mut set = TrainingSet {
-        width: params.width,
-        height: params.height,
-        ..TrainingSet::default()
-    };
-    let mut cutter = Cutter::new(params);
-    let top = f64::from(views.view_top);
-    for image in which.iter().filter_map(|&k| views.labels.images.get(k)) {
-        let (grey, ratio) = labelled_view(views, image)?;
-        let canonical = |(x, y): (f64, f64)| (x / ratio, (y - top) / ratio);
-        let half = (LABELLED_PAW_HALF_MM * CANONICAL_PX_PER_MM) as f32;
-        let paws: Vec<PawWindow> = views
-            .paws
-            .paws_in(image)
-            .into_iter()
-            .map(|(_, x, y)| {
-                let (cx, cy) = canonical((x, y));
-                let (fx, fy) = (cx as f32, cy as f32);
-                PawWindow {
-                    bounds: [fx - half, fy - half, fx + half, fy + half],
-                    centre: Some((cx, cy)),
-                }
-            })
-            .collect();
-        let hard: Vec<(f64, f64)> = image
-            .points
-            .iter()
-            .filter(|&(part, &(_, y))| y >= top && !views.paws.paws.iter().any(|(p, _)| p == part))
-            .map(|(_, &point)| canonical(point))
-            .collect();
-        cutter.cut_canonical(&mut set, grey, &paws, &hard);
-    }
-    if set.paws == 0 {
-        return Err(PawDataError::NoPaws {
-            path: views.labels.path.clone(),
-        });
-    }
-    Ok(set)
-}
-
 /// Cuts the training material of one view after another, its random draws in order.
-struct Cutter {
+pub(crate) struct Cutter {
     params: CutParams,
     greyer: Greyer,
     rng: ChaCha8Rng,
@@ -306,7 +203,7 @@ struct Cutter {
 }
 
 impl Cutter {
-    fn new(params: CutParams) -> Self {
+    pub(crate) fn new(params: CutParams) -> Self {
         Self {
             params,
             greyer: Greyer::default(),
@@ -352,7 +249,13 @@ impl Cutter {
     /// Cuts a view already at the canonical scale: a positive (and its augmented copies) at the
     /// centre of each positive paw, hard negatives around each of `hard` (none touching a
     /// paw's box), and the view as a background with every paw's box excluded.
-    fn cut_canonical(&mut self, set: &mut TrainingSet, grey: GreyImage, paws: &[PawWindow], hard: &[(f64, f64)]) {
+    pub(crate) fn cut_canonical(
+        &mut self,
+        set: &mut TrainingSet,
+        grey: GreyImage,
+        paws: &[PawWindow],
+        hard: &[(f64, f64)],
+    ) {
         // Each box grown by a pixel.
         let excluded: Vec<[f32; 4]> = paws
             .iter()
@@ -429,9 +332,9 @@ impl Cutter {
 
 /// A paw's box in a view at the canonical scale (x0, y0, x1, y1), kept out of the negatives,
 /// and its centre when it is cut as a positive (on the glass and visible).
-struct PawWindow {
-    bounds: [f32; 4],
-    centre: Option<(f64, f64)>,
+pub(crate) struct PawWindow {
+    pub(crate) bounds: [f32; 4],
+    pub(crate) centre: Option<(f64, f64)>,
 }
 
 /// Why a dataset gives no paw material.
@@ -441,74 +344,8 @@ pub enum PawDataError {
     Dataset(#[from] crate::synth::dataset::DatasetError),
     #[error("{path:?} has no bottom views with paws to train or test on")]
     NoPaws { path: std::path::PathBuf },
+    #[error(transparent)]
+    Labels(#[from] crate::io::paw_labels::LabelError),
     #[error("cannot take the bottom view of the labelled image {path:?}: {why}")]
     Image { path: std::path::PathBuf, why: String },
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::io::paw_labels::{lower_view_top, read_dlc_csv};
-
-    /// Lightning Pose's mirror-mouse frames (beside the repository when they are there): the
-    /// bottom view found, a positive cut at every labelled paw, hard negatives at the nose and
-    /// the tail labelled in the bottom view, one background per frame.
-    #[test]
-    fn labelled_real_frames_give_positives_hard_negatives_and_backgrounds() {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/realdata/mirror-mouse");
-        let Ok(labels) = read_dlc_csv(&root.join("CollectedData.csv")) else {
-            eprintln!("skipped: the real data is not beside the repository");
-            return;
-        };
-        let paws = PawMap::parse(
-            "paw1LH_bot=left_hind_paw,paw2LF_bot=left_fore_paw,paw3RF_bot=right_fore_paw,paw4RH_bot=right_hind_paw",
-            &labels.parts,
-        )
-        .unwrap();
-        let frames: Vec<image::GrayImage> = labels
-            .images
-            .iter()
-            .map(|i| image::open(root.join(&i.image)).unwrap().to_luma8())
-            .collect();
-        let highest_paw = labels
-            .images
-            .iter()
-            .flat_map(|i| paws.paws_in(i))
-            .map(|(_, _, y)| y)
-            .fold(f64::MAX, f64::min);
-        let view_top = lower_view_top(&frames, 150.0, highest_paw).unwrap();
-        let views = LabelledViews {
-            labels: &labels,
-            paws: &paws,
-            root: &root,
-            px_per_mm: 3.5,
-            view_top,
-        };
-        let params = CutParams {
-            width: 12,
-            height: 12,
-            augment: 2,
-            hard_per_place: 2,
-            binnings: &[1],
-            seed: 1,
-        };
-        let all: Vec<usize> = (0..labels.images.len()).collect();
-        let set = load_labelled(&views, &all, params).unwrap();
-        let labelled: usize = labels.images.iter().map(|i| paws.paws_in(i).len()).sum();
-        assert_eq!(set.paws, labelled);
-        assert_eq!(set.positive_count(), labelled * 3);
-        assert_eq!(set.backgrounds.len(), 45);
-        // 406 x (396 - 168) pixels at 3.5 px/mm: about 116 x 65 mm.
-        let b = &set.backgrounds[0].grey;
-        assert!(
-            (110..120).contains(&b.width) && (60..70).contains(&b.height),
-            "{}x{}",
-            b.width,
-            b.height
-        );
-        assert!(set.hard_count() > 45, "{} hard negatives", set.hard_count());
-        // The first half alone: fewer paws, never one of the other half's.
-        let half = load_labelled(&views, &all[..22], params).unwrap();
-        assert!(half.paws < set.paws && half.backgrounds.len() == 22);
-    }
 }

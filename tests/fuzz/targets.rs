@@ -783,6 +783,7 @@ fn tiny_cascade() -> Cascade {
     Cascade {
         width: 6,
         height: 5,
+        min_neighbors: None,
         params: CascadeParams::default(),
         stages: vec![
             BoostStage {

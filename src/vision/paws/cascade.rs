@@ -96,6 +96,10 @@ pub struct Cascade {
     pub params: CascadeParams,
     pub stages: Vec<BoostStage>,
     pub features: Vec<HaarFeature>,
+    /// The grouping its trainer chose (raw windows a detection needs beyond the first, as
+    /// OpenCV's `minNeighbors`), kept in the XML after the cascade where OpenCV does not look
+    /// ([`super::xml`]); the detector's default when `None`.
+    pub min_neighbors: Option<u32>,
 }
 
 /// A window's fate: rejected by its contrast, rejected at a stage, or accepted.

@@ -258,6 +258,38 @@ const STRIDE_STEP: usize = 16;
 /// The object scales run by default: paws up to 30 % smaller or larger than the window's.
 pub const DEFAULT_SCALES: [f64; 3] = [0.8, 1.0, 1.25];
 
+/// Drops each detection whose centre lies in the box of a surer one: one paw found twice by
+/// groups the grouping kept apart (a paw's toes and its heel). Surest first.
+fn suppress_repeats(found: &mut Vec<PawDetection>) {
+    found.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let mut kept = 0;
+    for i in 0..found.len() {
+        let (cx, cy) = found[i].centre();
+        let repeat = found[..kept].iter().any(|k| {
+            (f64::from(k.x0)..=f64::from(k.x1)).contains(&cx) && (f64::from(k.y0)..=f64::from(k.y1)).contains(&cy)
+        });
+        if !repeat {
+            found.swap(kept, i);
+            kept += 1;
+        }
+    }
+    found.truncate(kept);
+}
+
+/// The scales (px/mm on the glass) [`PawDetector::find_scale`] searches by default when a view's
+/// scale is not told: from a binned camera far away to a close macro view.
+pub const FIND_SCALE_RANGE: (f64, f64) = (0.5, 8.0);
+
+/// Candidate scales per octave that [`PawDetector::find_scale`] tries.
+pub const SCALE_STEPS_PER_OCTAVE: u32 = 8;
+
+/// A scale [`PawDetector::find_scale`] found and how sure: the summed scores it chose by.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct FoundScale {
+    pub px_per_mm: f64,
+    pub evidence: f64,
+}
+
 /// Raw windows a group needs beyond the first to be reported, by default.
 pub const DEFAULT_MIN_NEIGHBORS: usize = 1;
 
@@ -270,15 +302,15 @@ impl PawDetector {
         Ok(Self::from_cascade(super::xml::load(path)?))
     }
 
-    /// A detector running `cascade` at [`DEFAULT_SCALES`], grouping with
-    /// [`DEFAULT_MIN_NEIGHBORS`].
+    /// A detector running `cascade` at [`DEFAULT_SCALES`], grouping as the cascade says
+    /// ([`Cascade::min_neighbors`]) or else with [`DEFAULT_MIN_NEIGHBORS`].
     pub fn from_cascade(cascade: Cascade) -> Self {
         Self {
+            min_neighbors: cascade.min_neighbors.map_or(DEFAULT_MIN_NEIGHBORS, |n| n as usize),
             runner: CascadeScan::new(&cascade),
             cascade,
             scales: DEFAULT_SCALES.to_vec(),
             step: 1,
-            min_neighbors: DEFAULT_MIN_NEIGHBORS,
             greyer: Greyer::default(),
             canonical: GreyImage::default(),
             scaled: GreyImage::default(),
@@ -321,7 +353,8 @@ impl PawDetector {
     /// Detects paws in `frame` within `roi` = (x0, y0, x1, y1) pixel bounds in the frame, the
     /// glass seen at `px_per_mm` pixels per mm. Clears `out`, then pushes the detections, boxes
     /// in the frame's own pixel coordinates, overlapping raw windows grouped (like OpenCV's
-    /// groupRectangles), `score` higher for surer detections.
+    /// groupRectangles), one paw found twice kept once (the surer), `score` higher for surer
+    /// detections, surest first.
     ///
     /// The score of a detection is the number of raw windows grouped into it plus
     /// `m / (1 + m)`, `m` their mean margin over the last stage's threshold: whole numbers
@@ -351,6 +384,39 @@ impl PawDetector {
             }
         }
         self.group(place, out);
+    }
+
+    /// Finds the scale (pixels per millimetre on the glass, between `lowest` and `highest`) at
+    /// which the regions of `frames`, taken with one camera, show paws: the scale whose
+    /// detections are surest, their four best scores in each frame (a mouse has four paws)
+    /// summed over the frames. Candidates are [`SCALE_STEPS_PER_OCTAVE`] to an octave apart.
+    /// `None` when the range is empty or nothing is detected at any scale.
+    pub fn find_scale(
+        &mut self,
+        frames: &[(&ColorFrame, (u32, u32, u32, u32))],
+        lowest: f64,
+        highest: f64,
+    ) -> Option<FoundScale> {
+        if !(lowest > 0.0 && highest >= lowest && highest.is_finite()) {
+            return None;
+        }
+        let step = 2f64.powf(1.0 / f64::from(SCALE_STEPS_PER_OCTAVE));
+        let mut best: Option<FoundScale> = None;
+        let mut found = Vec::new();
+        let mut px_per_mm = lowest;
+        while px_per_mm <= highest * 1.000_001 {
+            let mut evidence = 0.0;
+            for &(frame, roi) in frames {
+                self.detect(frame, roi, px_per_mm, &mut found);
+                found.sort_by(|a, b| b.score.total_cmp(&a.score));
+                evidence += found.iter().take(4).map(|d| f64::from(d.score)).sum::<f64>();
+            }
+            if evidence > 0.0 && best.is_none_or(|b| evidence > b.evidence) {
+                best = Some(FoundScale { px_per_mm, evidence });
+            }
+            px_per_mm *= step;
+        }
+        best
     }
 
     /// Scans one image (`scaled` or `canonical`) and appends its accepted windows to `raw`.
@@ -460,5 +526,35 @@ impl PawDetector {
                 score: a.count as f32 + m / (1.0 + m),
             });
         }
+        suppress_repeats(out);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn det(x0: f32, y0: f32, size: f32, score: f32) -> PawDetection {
+        PawDetection {
+            x0,
+            y0,
+            x1: x0 + size,
+            y1: y0 + size,
+            score,
+        }
+    }
+
+    /// A paw found twice (its toes and its heel) is kept once, the surer; paws apart stay.
+    #[test]
+    fn one_paw_found_twice_is_kept_once() {
+        let mut found = vec![
+            det(0.0, 0.0, 10.0, 2.5),
+            det(4.0, 3.0, 10.0, 5.2),
+            det(30.0, 0.0, 10.0, 3.1),
+            det(31.0, 9.0, 10.0, 1.2),
+        ];
+        suppress_repeats(&mut found);
+        let scores: Vec<f32> = found.iter().map(|d| d.score).collect();
+        assert_eq!(scores, vec![5.2, 3.1, 1.2]);
     }
 }

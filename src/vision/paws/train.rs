@@ -30,6 +30,58 @@ pub struct Background {
     pub excluded: Vec<[f32; 4]>,
 }
 
+impl Background {
+    /// The background turned and mirrored in the 8 ways a square's symmetries allow (itself
+    /// first), its excluded boxes with it: more negatives from the few frames a lab labels,
+    /// none of them made up.
+    pub fn dihedral(&self) -> Vec<Background> {
+        let (w, h) = (self.grey.width, self.grey.height);
+        (0..8)
+            .map(|k| {
+                let transpose = k & 4 != 0;
+                let (flip_x, flip_y) = (k & 1 != 0, k & 2 != 0);
+                let (ow, oh) = if transpose { (h, w) } else { (w, h) };
+                // Where an output point (u, v) comes from in the input, for pixels and edges.
+                let source = |u: f64, v: f64, ew: f64, eh: f64| {
+                    let (x, y) = if transpose { (v, u) } else { (u, v) };
+                    let x = if flip_x { ew - x } else { x };
+                    let y = if flip_y { eh - y } else { y };
+                    (x, y)
+                };
+                let mut data = Vec::with_capacity(w * h);
+                for v in 0..oh {
+                    for u in 0..ow {
+                        let (x, y) = source(u as f64, v as f64, (w - 1) as f64, (h - 1) as f64);
+                        data.push(self.grey.data[y as usize * w + x as usize]);
+                    }
+                }
+                // Boxes map corner to corner (edges run 0..w): the inverse of `source`.
+                let excluded = self
+                    .excluded
+                    .iter()
+                    .map(|b| {
+                        let corner = |x: f32, y: f32| {
+                            let x = if flip_x { w as f32 - x } else { x };
+                            let y = if flip_y { h as f32 - y } else { y };
+                            if transpose { (y, x) } else { (x, y) }
+                        };
+                        let (a, c) = (corner(b[0], b[1]), corner(b[2], b[3]));
+                        [a.0.min(c.0), a.1.min(c.1), a.0.max(c.0), a.1.max(c.1)]
+                    })
+                    .collect();
+                Background {
+                    grey: GreyImage {
+                        width: ow,
+                        height: oh,
+                        data,
+                    },
+                    excluded,
+                }
+            })
+            .collect()
+    }
+}
+
 /// Positive windows (each `width * height` bytes, concatenated) and background images.
 #[derive(Clone, Debug, Default)]
 pub struct TrainingSet {
@@ -54,6 +106,20 @@ impl TrainingSet {
     pub fn hard_count(&self) -> usize {
         self.hard.len() / (self.width * self.height).max(1)
     }
+
+    /// Adds `other`'s windows and backgrounds (cut at the same window size; an empty set takes
+    /// `other`'s size).
+    pub fn append(&mut self, other: TrainingSet) {
+        if self.width * self.height == 0 {
+            self.width = other.width;
+            self.height = other.height;
+        }
+        debug_assert_eq!((self.width, self.height), (other.width, other.height));
+        self.positives.extend(other.positives);
+        self.hard.extend(other.hard);
+        self.backgrounds.extend(other.backgrounds);
+        self.paws += other.paws;
+    }
 }
 
 /// Training parameters (all of them; seeded and serialisable into the report).
@@ -67,7 +133,8 @@ pub struct TrainParams {
     pub positives: usize,
     /// Negatives per stage (at most).
     pub negatives: usize,
-    /// Negatives taken from one background image per stage (at most).
+    /// Negatives taken from one background image per stage (at most; more when there are too
+    /// few backgrounds to give a stage's negatives twice over at this rate).
     pub per_image: usize,
     /// The share of a stage's negatives that hard negatives may take (at most).
     pub hard_share: f64,
@@ -170,6 +237,10 @@ pub fn train(
     progress: &mut dyn FnMut(&StageReport),
 ) -> Result<Trained, PawError> {
     let (w, h) = (set.width, set.height);
+    let per_image = params
+        .per_image
+        .max((2 * params.negatives).div_ceil(set.backgrounds.len().max(1)));
+    let params = &TrainParams { per_image, ..*params };
     let features = basic_features(w as u32, h as u32);
     let mut rng = ChaCha8Rng::seed_from_u64(params.seed);
     let mut ii = Integral::default();
@@ -190,6 +261,7 @@ pub fn train(
         },
         stages: Vec::new(),
         features: features.clone(),
+        min_neighbors: None,
     };
     let mut reports = Vec::new();
     let mut stop = StopReason::Done;
@@ -487,6 +559,46 @@ fn negatives_of(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every turn and mirror of a background keeps its pixels and carries its excluded box with
+    /// them: the box's pixels, and only they, stay inside it.
+    #[test]
+    fn turned_backgrounds_carry_their_excluded_boxes() {
+        let (w, h) = (7usize, 4usize);
+        let bg = Background {
+            grey: GreyImage {
+                width: w,
+                height: h,
+                data: (0..w * h).map(|i| i as u8).collect(),
+            },
+            excluded: vec![[1.0, 0.0, 3.0, 2.0]],
+        };
+        let inside = |b: &Background, x: usize, y: usize| {
+            let e = b.excluded[0];
+            (x as f32) >= e[0] && (x as f32) < e[2] && (y as f32) >= e[1] && (y as f32) < e[3]
+        };
+        let boxed: Vec<u8> = (0..w * h)
+            .filter(|&i| inside(&bg, i % w, i / w))
+            .map(|i| bg.grey.data[i])
+            .collect();
+        let turned = bg.dihedral();
+        assert_eq!(turned.len(), 8);
+        assert_eq!(turned[0].grey, bg.grey);
+        let mut seen = std::collections::BTreeSet::new();
+        for t in &turned {
+            let mut sorted = t.grey.data.clone();
+            sorted.sort_unstable();
+            assert_eq!(sorted, bg.grey.data, "every pixel kept once");
+            let mut inner: Vec<u8> = (0..t.grey.width * t.grey.height)
+                .filter(|&i| inside(t, i % t.grey.width, i / t.grey.width))
+                .map(|i| t.grey.data[i])
+                .collect();
+            inner.sort_unstable();
+            assert_eq!(inner, boxed, "{:?}", t.excluded);
+            seen.insert(t.grey.data.clone());
+        }
+        assert_eq!(seen.len(), 8, "eight different images");
+    }
 
     /// Bright blobs on a dark, noisy floor: a tiny cascade learns them in a moment.
     #[test]

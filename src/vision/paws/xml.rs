@@ -103,8 +103,24 @@ pub fn parse(text: &str, path: &Path) -> Result<Cascade, PawError> {
         Some(other) => return Err(p.bad(format!("its top node has type_id {other:?}"))),
     };
     p.check(&cascade)?;
-    Ok(cascade)
+    let min_neighbors = match child(root, DETECTION_NODE).and_then(|d| child(d, "minNeighbors")) {
+        Some(n) => Some(self::text(n).parse::<u32>().map_err(|_| {
+            p.bad(format!(
+                "<{DETECTION_NODE}><minNeighbors> is {:?}, not a whole number",
+                self::text(n)
+            ))
+        })?),
+        None => None,
+    };
+    Ok(Cascade {
+        min_neighbors,
+        ..cascade
+    })
 }
+
+/// The node after the cascade that keeps what mousepose's detector should run it with (the
+/// grouping chosen in training); OpenCV reads only the first node and skips it.
+const DETECTION_NODE: &str = "mousepose_detection";
 
 struct Parser<'a> {
     path: &'a Path,
@@ -236,6 +252,7 @@ impl Parser<'_> {
             params,
             stages,
             features,
+            min_neighbors: None,
         })
     }
 
@@ -353,6 +370,7 @@ impl Parser<'_> {
             params: CascadeParams::default(),
             stages,
             features,
+            min_neighbors: None,
         })
     }
 
@@ -478,7 +496,14 @@ pub fn to_xml(c: &Cascade) -> String {
         }
         s.push_str("      </rects>\n      <tilted>0</tilted></_>\n");
     }
-    s.push_str("  </features>\n</cascade>\n</opencv_storage>\n");
+    s.push_str("  </features>\n</cascade>\n");
+    if let Some(n) = c.min_neighbors {
+        let _ = writeln!(
+            s,
+            "<{DETECTION_NODE}>\n  <minNeighbors>{n}</minNeighbors>\n</{DETECTION_NODE}>"
+        );
+    }
+    s.push_str("</opencv_storage>\n");
     s
 }
 
@@ -513,6 +538,7 @@ mod tests {
         Cascade {
             width: 6,
             height: 5,
+            min_neighbors: None,
             params: CascadeParams::default(),
             stages: vec![
                 BoostStage {
@@ -580,6 +606,17 @@ mod tests {
         let c = tiny();
         let back = parse(&to_xml(&c), Path::new("tiny.xml")).unwrap();
         assert_eq!(back, c);
+        // The grouping chosen in training rides after the cascade.
+        let grouped = Cascade {
+            min_neighbors: Some(4),
+            ..tiny()
+        };
+        let xml = to_xml(&grouped);
+        assert!(xml.find("</cascade>") < xml.find("<mousepose_detection>"));
+        assert_eq!(parse(&xml, Path::new("g.xml")).unwrap(), grouped);
+        let bad = xml.replace("<minNeighbors>4", "<minNeighbors>four");
+        let e = parse(&bad, Path::new("g.xml")).unwrap_err().to_string();
+        assert!(e.contains("minNeighbors") && e.contains("g.xml"), "{e}");
     }
 
     #[test]
