@@ -328,6 +328,7 @@ fn replay_options(recording: &Path, options: &AdaptOptions, out: PathBuf, models
         roi: options.roi.clone(),
         force: true,
         stream: None,
+        lsl: None,
     }
 }
 
@@ -553,7 +554,8 @@ fn train_models(
     let render_seconds = render_started.elapsed().as_secs_f64();
     let train_options = |target: ModelTarget, out: &str| TrainOptions {
         target,
-        data: data.clone(),
+        data: Some(data.clone()),
+        labels: None,
         out: dir.join(out),
         trees: options.trees,
         depth: options.depth,
@@ -572,6 +574,7 @@ fn train_models(
         pixels: options.pixels,
         seed: options.seed,
         stages: 20,
+        min_neighbors: None,
         force: true,
     };
     let (body_trees, body_nodes, body_seconds) = match train(&train_options(ModelTarget::Body, BODY_MODEL), progress)? {
