@@ -129,7 +129,7 @@ pub fn paws(options: &DetectPawsOptions) -> Result<Detections, Failure> {
             (s, "calibration")
         }
         &ScaleSource::Find { lowest, highest } => {
-            let whole: Vec<(&ColorFrame, (u32, u32, u32, u32))> =
+            let whole: Vec<crate::vision::paws::detect::FrameRegion<'_>> =
                 frames.iter().map(|f| (f, (0, 0, f.width, f.height))).collect();
             let found = detector.find_scale(&whole, lowest, highest).ok_or_else(|| {
                 Failure::usage(anyhow::anyhow!(

@@ -483,7 +483,7 @@ pub fn judge(
     let px_per_mm = match scale {
         Scale::Told => views.px_per_mm,
         Scale::Found { lowest, highest } => {
-            let frames: Vec<(&ColorFrame, (u32, u32, u32, u32))> =
+            let frames: Vec<crate::vision::paws::detect::FrameRegion<'_>> =
                 which.iter().map(|&k| (&views.frames[k], views.roi(k))).collect();
             detector
                 .find_scale(&frames, lowest, highest)

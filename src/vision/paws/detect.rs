@@ -280,6 +280,9 @@ fn suppress_repeats(found: &mut Vec<PawDetection>) {
 /// scale is not told: from a binned camera far away to a close macro view.
 pub const FIND_SCALE_RANGE: (f64, f64) = (0.5, 8.0);
 
+/// A frame and the region of it to look in, `(x0, y0, x1, y1)` pixel bounds.
+pub type FrameRegion<'a> = (&'a ColorFrame, (u32, u32, u32, u32));
+
 /// Candidate scales per octave that [`PawDetector::find_scale`] tries.
 pub const SCALE_STEPS_PER_OCTAVE: u32 = 8;
 
@@ -391,12 +394,7 @@ impl PawDetector {
     /// detections are surest, their four best scores in each frame (a mouse has four paws)
     /// summed over the frames. Candidates are [`SCALE_STEPS_PER_OCTAVE`] to an octave apart.
     /// `None` when the range is empty or nothing is detected at any scale.
-    pub fn find_scale(
-        &mut self,
-        frames: &[(&ColorFrame, (u32, u32, u32, u32))],
-        lowest: f64,
-        highest: f64,
-    ) -> Option<FoundScale> {
+    pub fn find_scale(&mut self, frames: &[FrameRegion<'_>], lowest: f64, highest: f64) -> Option<FoundScale> {
         if !(lowest > 0.0 && highest >= lowest && highest.is_finite()) {
             return None;
         }
