@@ -534,9 +534,13 @@ pub fn judge(
 }
 
 /// The frames of fold `fold` of `folds` over `n` frames: contiguous runs, since neighbouring
-/// frames of a video look alike and must not be split between training and judging.
+/// frames of a video look alike and must not be split between training and judging. More
+/// folds than frames are as many folds as frames; a fold past the last is empty.
 pub fn fold_frames(n: usize, folds: usize, fold: usize) -> Vec<usize> {
     let folds = folds.clamp(1, n.max(1));
+    if fold >= folds {
+        return Vec::new();
+    }
     (n * fold / folds..n * (fold + 1) / folds).collect()
 }
 
@@ -597,7 +601,8 @@ mod tests {
         assert_eq!(fold_frames(45, 5, 0), (0..9).collect::<Vec<_>>());
         all.sort_unstable();
         assert_eq!(all, (0..45).collect::<Vec<_>>());
-        assert_eq!(fold_frames(3, 5, 4), vec![2]);
+        assert_eq!(fold_frames(3, 5, 2), vec![2]);
+        assert!(fold_frames(3, 5, 4).is_empty());
     }
 
     #[test]
