@@ -24,7 +24,7 @@ pub struct EvalArgs {
     /// Paws: judge on real frames a lab labelled instead of a rendered dataset, told the view's
     /// scale and not told it (then found between 0.5 and 8 px/mm).
     #[command(flatten)]
-    pub labels: crate::app::train::LabelArgs,
+    pub labels: crate::app::parse::LabelArgs,
     /// With `--labels`: cross-validate over the frames instead of judging `--model`: train a
     /// cascade on all folds but one (contiguous runs of frames) and judge it on that one.
     #[arg(long, value_name = "K", requires = "labels", value_parser = clap::value_parser!(u32).range(2..=100))]

@@ -19,7 +19,7 @@ pub struct TrainArgs {
     #[arg(long, value_name = "DIR")]
     pub data: Option<PathBuf>,
     #[command(flatten)]
-    pub labels: LabelArgs,
+    pub labels: parse::LabelArgs,
     /// The model file to write.
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
@@ -98,50 +98,6 @@ pub struct TrainArgs {
     /// `training_seconds`).
     #[arg(long)]
     pub json: bool,
-}
-
-/// Real frames a lab labelled (paws), as `train paws` and `eval paws` take them.
-#[derive(Debug, Args)]
-pub struct LabelArgs {
-    /// Paws: real frames a lab labelled, in DeepLabCut's `CollectedData_*.csv` (the frames'
-    /// paths in it are found from the file's folder or a folder above it).
-    #[arg(long, value_name = "FILE")]
-    pub labels: Option<PathBuf>,
-    /// Which labelled body parts are our paws: `NAME=PAW,...`, PAW one of left_fore_paw,
-    /// right_fore_paw, left_hind_paw, right_hind_paw; guessed from the names (`LF`,
-    /// `right_hind`...) when not given.
-    #[arg(long, value_name = "MAP", requires = "labels")]
-    pub paws: Option<String>,
-    /// How many pixels a millimetre on the floor spans in the labelled frames' bottom view.
-    #[arg(long = "label-px-per-mm", value_name = "S", requires = "labels", value_parser = parse::px_per_mm)]
-    pub px_per_mm: Option<f64>,
-    /// The first row of the bottom view in frames that stack a side view above it; found from
-    /// the labels when not given (0 when no part is labelled above every paw).
-    #[arg(long, value_name = "ROW", requires = "labels")]
-    pub view_top: Option<u32>,
-}
-
-impl LabelArgs {
-    /// The labels to read, if any.
-    ///
-    /// # Errors
-    /// `--labels` without `--label-px-per-mm`.
-    pub fn options(&self) -> anyhow::Result<Option<crate::engine::train::LabelOptions>> {
-        let Some(file) = &self.labels else {
-            return Ok(None);
-        };
-        let Some(px_per_mm) = self.px_per_mm else {
-            anyhow::bail!(
-                "--labels needs --label-px-per-mm S, the labelled frames' pixels per millimetre on the floor (measure a known length in one frame)"
-            );
-        };
-        Ok(Some(crate::engine::train::LabelOptions {
-            file: file.clone(),
-            map: self.paws.clone(),
-            px_per_mm,
-            view_top: self.view_top,
-        }))
-    }
 }
 
 /// `mousepose train body|parts|paws`.
