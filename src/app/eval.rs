@@ -184,7 +184,11 @@ fn real_paws_text(f: &RealPawsFigures) -> String {
             found
         );
     }
-    let scales: Vec<String> = b.px_per_mm.iter().map(|s| format!("{s:.2}")).collect();
+    let scales: Vec<String> = b
+        .px_per_mm
+        .iter()
+        .map(|s| s.map_or_else(|| "none".to_owned(), |s| format!("{s:.2}")))
+        .collect();
     let _ = writeln!(
         t,
         "scale found: {} px/mm (true {:.2}); centre error {:.2} mm",

@@ -369,8 +369,9 @@ pub struct RealPawReport {
     /// Mean distance of a found paw's detection from its label (mm).
     pub mean_centre_error_mm: f64,
     /// The scale the frames' bottom view was searched at (px/mm), per group of frames judged
-    /// together (one when not cross-validated).
-    pub px_per_mm: Vec<f64>,
+    /// together (one when not cross-validated); `None` (JSON null) where no scale was found,
+    /// and then no paw either.
+    pub px_per_mm: Vec<Option<f64>>,
     /// The view's true scale (px/mm), as the user gave it for the labels.
     pub true_px_per_mm: f64,
     /// Recall and precision had only detections of at least each whole score been kept
@@ -481,13 +482,11 @@ pub fn judge(
     scale: Scale,
 ) -> (RealPawReport, Vec<FrameOutcome>) {
     let px_per_mm = match scale {
-        Scale::Told => views.px_per_mm,
+        Scale::Told => Some(views.px_per_mm),
         Scale::Found { lowest, highest } => {
             let frames: Vec<crate::vision::paws::detect::FrameRegion<'_>> =
                 which.iter().map(|&k| (&views.frames[k], views.roi(k))).collect();
-            detector
-                .find_scale(&frames, lowest, highest)
-                .map_or(views.px_per_mm, |f| f.px_per_mm)
+            detector.find_scale(&frames, lowest, highest).map(|f| f.px_per_mm)
         }
     };
     let mut report = RealPawReport {
@@ -499,7 +498,11 @@ pub fn judge(
     let mut outcomes = Vec::with_capacity(which.len());
     let mut dets = Vec::new();
     for &k in which {
-        detector.detect(&views.frames[k], views.roi(k), px_per_mm, &mut dets);
+        // No scale found: nothing is found either.
+        dets.clear();
+        if let Some(s) = px_per_mm {
+            detector.detect(&views.frames[k], views.roi(k), s, &mut dets);
+        }
         dets.sort_by(|a, b| b.score.total_cmp(&a.score));
         let paws = views.paws_in(k);
         let mut taken = vec![false; paws.len()];
