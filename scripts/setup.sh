@@ -16,6 +16,8 @@ packages=(
   ffmpeg
   # the live pose stream (ZeroMQ PUB, linked to Debian's libzmq through pkg-config)
   libzmq3-dev
+  # label files kept as HDF5 (DeepLabCut's .h5, SLEAP's .slp), linked through pkg-config
+  libhdf5-dev
   # the soak through faults (scripts/soak): its own ext4 file system, filled at once, and
   # /metrics scraped
   e2fsprogs util-linux curl
@@ -59,7 +61,7 @@ fi
 # pyzmq runs the pose stream's documented subscriber; pylsl ships the liblsl that the LSL
 # outlet loads, and reads it in the tests).
 nwb_venv=/opt/mousepose/venv
-if ! "$nwb_venv/bin/python3" -c 'import pynwb, ndx_pose, nwbinspector, zmq, pylsl' >/dev/null 2>&1; then
+if ! "$nwb_venv/bin/python3" -c 'import pynwb, ndx_pose, nwbinspector, zmq, pylsl, tables, sleap_io' >/dev/null 2>&1; then
   if [[ $(id -u) -ne 0 ]]; then
     echo "setup: the Python environment $nwb_venv (pynwb, ndx-pose) is missing and making it needs root" >&2
     exit 1

@@ -613,6 +613,8 @@ const EXTERNAL: &[(&str, &[&str])] = &[
     ("png", ALL),
     ("image", ALL),
     ("crc32fast", ALL),
+    // Label files kept as HDF5: their reader.
+    ("hdf5_metno", &["io::paw_labels"]),
     // The models' content hashes that outputs record.
     ("sha2", &["runtime::models"]),
     ("roxmltree", ALL),

@@ -178,7 +178,7 @@ fn paws_learnt_from_labelled_real_frames_are_found_on_frames_held_out() {
         .arg(&labels)
         .args([
             "--paws",
-            "paw1LH_bot=left_hind_paw,paw2LF_bot=left_fore_paw,paw3RF_bot=right_fore_paw,paw4RH_bot=right_hind_paw",
+            MIRROR_MOUSE_PAWS,
             "--label-px-per-mm",
             "3.5",
             "--folds",
@@ -209,6 +209,81 @@ fn paws_learnt_from_labelled_real_frames_are_found_on_frames_held_out() {
     for s in found["px_per_mm"].as_array().unwrap() {
         let s = s.as_f64().unwrap();
         assert!((3.0..4.1).contains(&s), "scale found {s} px/mm, true 3.5");
+    }
+}
+
+/// The mirror-mouse labels' mapping from its body parts to our paws.
+const MIRROR_MOUSE_PAWS: &str =
+    "paw1LH_bot=left_hind_paw,paw2LF_bot=left_fore_paw,paw3RF_bot=right_fore_paw,paw4RH_bot=right_hind_paw";
+
+/// The same labels in DeepLabCut's `.h5` and SLEAP's `.slp` (on the image files, with the
+/// frames kept in the file, and on a video), each written by its own tool's library
+/// (`scripts/label-formats`), are read as the CSV is: the bundled cascade finds the same paws
+/// in them, told the scale and not.
+#[test]
+fn labels_in_deeplabcuts_h5_and_sleaps_slp_are_read_as_the_csv_is() {
+    let Some(csv) = real_file("mirror-mouse/CollectedData.csv") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let made = Command::new(python())
+        .arg(repo_root().join("scripts/label-formats"))
+        .arg(&csv)
+        .arg(tmp.path())
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let judge = |labels: &Path| -> serde_json::Value {
+        let out = mousepose()
+            .args(["eval", "paws", "--model"])
+            .arg(repo_root().join("fixtures/models/paws.xml"))
+            .arg("--labels")
+            .arg(labels)
+            .args(["--paws", MIRROR_MOUSE_PAWS, "--label-px-per-mm", "3.5", "--json"])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{labels:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let want = judge(&csv);
+    assert_eq!(want["told_scale"]["paws"], 180);
+    for name in ["CollectedData.h5", "labels.slp", "labels.pkg.slp", "labels-video.slp"] {
+        let got = judge(&tmp.path().join(name));
+        for key in ["bottom_view", "told_scale", "found_scale"] {
+            assert_eq!(got[key], want[key], "{name}: {key}");
+        }
+    }
+}
+
+/// An HDF5 file that holds no labels (MoSeq's results) is refused in one sentence naming it.
+#[test]
+fn an_hdf5_file_without_labels_is_refused_naming_it() {
+    let Some(results) = moseq_results() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    for (name, says) in [
+        ("results.h5", "no table written by pandas"),
+        ("results.slp", "not a SLEAP labels file"),
+    ] {
+        let file = tmp.path().join(name);
+        std::fs::copy(&results, &file).unwrap();
+        let out = mousepose()
+            .args(["eval", "paws", "--model"])
+            .arg(repo_root().join("fixtures/models/paws.xml"))
+            .arg("--labels")
+            .arg(&file)
+            .args(["--label-px-per-mm", "3.5"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains(name) && err.contains(says), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
     }
 }
 

@@ -1,5 +1,6 @@
 //! Writing videos through the `ffmpeg` command line: raw frames are piped into a child
 //! process, which encodes them into a file (FFV1 for lossless exports, H.264 for viewing).
+//! Reading chosen frames of a video the same way ([`decode_frames`]).
 //!
 //! Frames go in as raw video at a constant rate, or, for a video whose frames keep their own
 //! times ([`EncoderSpec::timed`]), each in a minimal Matroska stream (uncompressed RGB blocks
@@ -28,6 +29,12 @@ pub enum VideoError {
         program: PathBuf,
         path: PathBuf,
         stderr: String,
+    },
+    #[error("{program:?} could not decode the frames wanted of {path:?}: {why}")]
+    Decode {
+        program: PathBuf,
+        path: PathBuf,
+        why: String,
     },
     #[error("frame of {got} bytes, the video's frames are {expected} bytes")]
     FrameSize { got: usize, expected: usize },
@@ -230,6 +237,72 @@ mod mkv {
         out.extend_from_slice(&block_head);
         out
     }
+}
+
+/// Decodes the frames `frames` (counted from 0, ascending, each once) of the video at `path`,
+/// each as a PNG picture, in one run of ffmpeg.
+///
+/// # Errors
+/// [`VideoError::Spawn`] when ffmpeg cannot be run; [`VideoError::Decode`] when it fails or
+/// gives fewer frames (a video shorter than the frames wanted).
+pub fn decode_frames(program: &Path, path: &Path, frames: &[u64]) -> Result<Vec<Vec<u8>>, VideoError> {
+    let Some(last) = frames.last() else {
+        return Ok(Vec::new());
+    };
+    let select: Vec<String> = frames.iter().map(|f| format!("eq(n\\,{f})")).collect();
+    let output = Command::new(program)
+        .args(["-nostdin", "-v", "error", "-i"])
+        .arg(path)
+        .args(["-map", "0:v:0", "-vf"])
+        .arg(format!("select={}", select.join("+")))
+        .args(["-fps_mode", "passthrough", "-f", "image2pipe", "-c:v", "png", "-"])
+        .stdin(Stdio::null())
+        .output()
+        .map_err(|source| VideoError::Spawn {
+            program: program.to_owned(),
+            source,
+        })?;
+    let pictures = split_pngs(&output.stdout);
+    if !output.status.success() || pictures.len() != frames.len() {
+        return Err(VideoError::Decode {
+            program: program.to_owned(),
+            path: path.to_owned(),
+            why: format!(
+                "{} of {} frames decoded, the last wanted frame {last}: {}",
+                pictures.len(),
+                frames.len(),
+                tail(&String::from_utf8_lossy(&output.stderr))
+            ),
+        });
+    }
+    Ok(pictures.into_iter().map(<[u8]>::to_vec).collect())
+}
+
+/// Splits PNG files written end to end, each at its end (its `IEND` chunk); a last file cut
+/// short is left out.
+fn split_pngs(mut bytes: &[u8]) -> Vec<&[u8]> {
+    const SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
+    let mut out = Vec::new();
+    while bytes.starts_with(&SIGNATURE) {
+        let mut at = SIGNATURE.len();
+        loop {
+            // A chunk: its data's length, its type, the data, a checksum.
+            let Some(head) = bytes.get(at..at + 8) else {
+                return out;
+            };
+            let length = u32::from_be_bytes([head[0], head[1], head[2], head[3]]) as usize;
+            at = at.saturating_add(12).saturating_add(length);
+            if at > bytes.len() {
+                return out;
+            }
+            if &head[4..8] == b"IEND" {
+                break;
+            }
+        }
+        out.push(&bytes[..at]);
+        bytes = &bytes[at..];
+    }
+    out
 }
 
 /// The last part of ffmpeg's error output, on one line.
@@ -435,5 +508,32 @@ impl Drop for Encoder {
             }
             let _ = std::fs::remove_file(&self.partial);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn png(value: u8) -> Vec<u8> {
+        let mut out = Vec::new();
+        let mut encoder = png::Encoder::new(&mut out, 2, 1);
+        encoder.set_color(png::ColorType::Grayscale);
+        encoder
+            .write_header()
+            .unwrap()
+            .write_image_data(&[value, value])
+            .unwrap();
+        out
+    }
+
+    #[test]
+    fn pngs_end_to_end_are_split_each_whole_and_a_cut_one_left_out() {
+        let (a, b) = (png(7), png(200));
+        let mut stream = [a.clone(), b.clone()].concat();
+        assert_eq!(split_pngs(&stream), [a.as_slice(), b.as_slice()]);
+        stream.extend_from_slice(&a[..a.len() - 3]);
+        assert_eq!(split_pngs(&stream).len(), 2);
+        assert!(split_pngs(b"not a picture").is_empty());
     }
 }

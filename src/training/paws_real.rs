@@ -15,7 +15,7 @@
 use super::paws_data::{CutParams, Cutter, PawDataError, PawWindow};
 use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
 use crate::core::skeleton::Joint;
-use crate::io::paw_labels::{LabelTable, LabelledImage, PawMap, lower_view_top, read_dlc_csv};
+use crate::io::paw_labels::{FrameSource, LabelTable, LabelledImage, PawMap, lower_view_top, read_labels};
 use crate::vision::paws::grey::{GreyImage, Greyer};
 use crate::vision::paws::train::{Background, TrainingSet};
 use crate::vision::paws::{CANONICAL_PX_PER_MM, PawDetection, PawDetector};
@@ -54,25 +54,12 @@ impl RealViews {
     /// One sentence naming the file and what is wrong: a label file or mapping refused, a
     /// frame missing or unreadable, frames of different sizes, a bottom view below the frames.
     pub fn open(file: &Path, map: Option<&str>, px_per_mm: f64, view_top: Option<u32>) -> Result<Self, PawDataError> {
-        let labels = read_dlc_csv(file)?;
+        let labels = read_labels(file)?;
         let paws = match map {
             Some(text) => PawMap::parse(text, &labels.parts)?,
             None => PawMap::guess(&labels.parts)?,
         };
-        let mut frames = Vec::with_capacity(labels.images.len());
-        for image in &labels.images {
-            let path = image_path(file, &image.image).ok_or_else(|| PawDataError::Image {
-                path: image.image.clone(),
-                why: format!("it is neither beside {file:?} nor under any folder above it"),
-            })?;
-            let luma = image::open(&path)
-                .map_err(|e| PawDataError::Image {
-                    path: path.clone(),
-                    why: e.to_string(),
-                })?
-                .to_luma8();
-            frames.push(luma);
-        }
+        let frames = read_frames(file, &labels)?;
         if let Some(first) = frames.first()
             && let Some((k, other)) = frames
                 .iter()
@@ -254,18 +241,71 @@ impl RealViews {
     }
 }
 
-/// Where a label file's image path is: DeepLabCut writes it from the project's folder
+/// Where a path a label file gives is: DeepLabCut writes it from the project's folder
 /// (`labeled-data/VIDEO/img001.png`, the file itself in `labeled-data/VIDEO/`), other tools
-/// from the file's own folder; the first folder, from the file's up, that holds it.
+/// from the file's own folder; the first folder, from the file's up, that holds it. A path
+/// from another machine (absolute, and not here) is looked for by its name the same way.
 fn image_path(file: &Path, image: &Path) -> Option<PathBuf> {
     if image.is_absolute() {
-        return image.is_file().then(|| image.to_owned());
+        if image.is_file() {
+            return Some(image.to_owned());
+        }
+        return image_path(file, Path::new(image.file_name()?));
     }
     let dir = file.parent().unwrap_or(Path::new("."));
     dir.ancestors()
         .map(|d| if d.as_os_str().is_empty() { Path::new(".") } else { d })
         .map(|d| d.join(image))
         .find(|p| p.is_file())
+}
+
+/// Every labelled frame of `labels` (read from `file`), grey: image files found by
+/// [`image_path`], pictures kept in the label file decoded, frames of video files decoded by
+/// ffmpeg (one run per video).
+fn read_frames(file: &Path, labels: &LabelTable) -> Result<Vec<image::GrayImage>, PawDataError> {
+    let missing = |path: &Path| PawDataError::Image {
+        path: path.to_owned(),
+        why: format!("it is neither beside {file:?} nor under any folder above it"),
+    };
+    // Each video's frames, decoded at once.
+    let mut videos: BTreeMap<PathBuf, Vec<u64>> = BTreeMap::new();
+    for image in &labels.images {
+        if let FrameSource::Video { path, frame } = &image.source {
+            videos.entry(path.clone()).or_default().push(*frame);
+        }
+    }
+    let mut decoded: BTreeMap<(PathBuf, u64), Vec<u8>> = BTreeMap::new();
+    for (video, mut wanted) in videos {
+        let found = image_path(file, &video).ok_or_else(|| missing(&video))?;
+        wanted.sort_unstable();
+        wanted.dedup();
+        let pictures =
+            crate::io::video::decode_frames(Path::new("ffmpeg"), &found, &wanted).map_err(|e| PawDataError::Image {
+                path: found.clone(),
+                why: e.to_string(),
+            })?;
+        decoded.extend(wanted.into_iter().map(|f| (video.clone(), f)).zip(pictures));
+    }
+    let mut frames = Vec::with_capacity(labels.images.len());
+    for image in &labels.images {
+        let unreadable = |path: &Path, e: image::ImageError| PawDataError::Image {
+            path: path.to_owned(),
+            why: e.to_string(),
+        };
+        let picture = match &image.source {
+            FrameSource::File(name) => {
+                let path = image_path(file, name).ok_or_else(|| missing(name))?;
+                image::open(&path).map_err(|e| unreadable(&path, e))?
+            }
+            FrameSource::Embedded(bytes) => image::load_from_memory(bytes).map_err(|e| unreadable(&image.image, e))?,
+            FrameSource::Video { path, frame } => {
+                let bytes = &decoded[&(path.clone(), *frame)];
+                image::load_from_memory(bytes).map_err(|e| unreadable(&image.image, e))?
+            }
+        };
+        frames.push(picture.to_luma8());
+    }
+    Ok(frames)
 }
 
 /// Where the bottom view begins in frames that may stack two views (a side view above a

@@ -1,23 +1,40 @@
 //! Paw labels as labs already keep them: DeepLabCut's `CollectedData_*.csv` (its header rows
 //! `scorer`, optionally `individuals`, `bodyparts` and `coords`, then one row per labelled
 //! image: the image's path in one to three index columns, then x and y of every body part,
-//! empty where it is not visible), and the mapping from a lab's body-part names to our four
-//! paws.
+//! empty where it is not visible) and the same table in its `.h5` ([`hdf5`]), SLEAP's `.slp`
+//! ([`hdf5`]), and the mapping from a lab's body-part names to our four paws.
 //!
-//! A file that is wrong is refused in one sentence naming the file, the line and what is
-//! wrong. Frames that hold two views stacked (a side view above a bottom view through a
+//! A file that is wrong is refused in one sentence naming the file, the line, row or frame,
+//! and what is wrong. Frames that hold two views stacked (a side view above a bottom view through a
 //! mirror) give the row where the bottom view begins ([`lower_view_top`]).
+
+mod hdf5;
+
+pub use hdf5::{read_dlc_h5, read_slp};
 
 use crate::core::skeleton::Joint;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-/// One labelled image: its path as the file gives it (relative to the project the file
-/// belongs to) and the points labelled in it, by body-part name (pixels).
+/// One labelled image: its name (the path the file gives, relative to the project the file
+/// belongs to, or a video's path and the frame), where its pixels are, and the points
+/// labelled in it, by body-part name (pixels).
 #[derive(Clone, Debug, PartialEq)]
 pub struct LabelledImage {
     pub image: PathBuf,
+    pub source: FrameSource,
     pub points: BTreeMap<String, (f64, f64)>,
+}
+
+/// Where a labelled image's pixels are.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FrameSource {
+    /// An image file, its path as the label file gives it.
+    File(PathBuf),
+    /// An encoded picture (PNG, JPEG) kept in the label file itself (SLEAP's `.pkg.slp`).
+    Embedded(Vec<u8>),
+    /// A frame of a video file (counted from 0), as SLEAP labels videos.
+    Video { path: PathBuf, frame: u64 },
 }
 
 /// A label file read: its body parts (in the file's order) and its images.
@@ -32,12 +49,29 @@ pub struct LabelTable {
 /// Why a label file or a mapping is refused.
 #[derive(Debug, thiserror::Error)]
 pub enum LabelError {
-    #[error("cannot read the label file {path:?}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    #[error("cannot read the label file {path:?}: {error}")]
+    Io { path: PathBuf, error: std::io::Error },
     #[error("label file {path:?}, line {line}: {what}")]
     Malformed { path: PathBuf, line: usize, what: String },
+    /// A file of tables (HDF5): `place` names the row, frame or table.
+    #[error("label file {path:?}, {place}: {what}")]
+    Table { path: PathBuf, place: String, what: String },
     #[error("paw mapping: {0}")]
     Mapping(String),
+}
+
+/// Reads a label file by its kind: SLEAP's `.slp` ([`read_slp`]), DeepLabCut's `.h5`
+/// ([`read_dlc_h5`]), else DeepLabCut's CSV ([`read_dlc_csv`]).
+///
+/// # Errors
+/// As the reader of its kind.
+pub fn read_labels(path: &Path) -> Result<LabelTable, LabelError> {
+    let extension = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    match extension.as_deref() {
+        Some("slp") => read_slp(path),
+        Some("h5" | "hdf5") => read_dlc_h5(path),
+        _ => read_dlc_csv(path),
+    }
 }
 
 /// Reads a DeepLabCut `CollectedData_*.csv`.
@@ -58,7 +92,7 @@ pub fn read_dlc_csv(path: &Path) -> Result<LabelTable, LabelError> {
         .from_path(path)
         .map_err(|e| LabelError::Io {
             path: path.to_owned(),
-            source: std::io::Error::other(e.to_string()),
+            error: std::io::Error::other(e.to_string()),
         })?;
     let mut rows = Vec::new();
     for (k, record) in reader.records().enumerate() {
@@ -153,7 +187,11 @@ pub fn read_dlc_csv(path: &Path) -> Result<LabelTable, LabelError> {
                 _ => return Err(bad(line, format!("`{part}` has one coordinate without the other"))),
             }
         }
-        images.push(LabelledImage { image, points });
+        images.push(LabelledImage {
+            source: FrameSource::File(image.clone()),
+            image,
+            points,
+        });
     }
     if images.is_empty() {
         return Err(bad(rows.len(), "no labelled image after the header rows".into()));
