@@ -162,7 +162,14 @@ impl Smoother {
             .iter()
             .try_fold(Vector3::zeros(), |sum, p| p.map(|p| sum + p))
             .map(|sum| Point3::from(sum / SPINE.len() as f64));
-        let axis = orientation::heading(raw).map(|h| h.normalize());
+        // The body's axis from the snout when it is placed (the longer base wobbles less:
+        // chosen over the neck's on the first half of the real MoSeq session).
+        let tail_base = placed(Joint::TailBase).map(Point3::from);
+        let axis = match (placed(Joint::Snout).map(Point3::from), tail_base) {
+            (Some(snout), Some(tail_base)) => orientation::heading_between(&snout, &tail_base),
+            _ => orientation::heading(raw),
+        }
+        .map(|h| h.normalize());
         let (Some(centre), Some(axis), true) = (centre, axis, config.back_along_s > 0.0) else {
             self.spine = None;
             self.back_along_mm = None;
