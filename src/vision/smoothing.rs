@@ -7,6 +7,12 @@
 //! daemon's latency does not grow by a frame; the cost is a lag behind a moving joint of about
 //! `1 / (2 pi f)` seconds at the cut-off `f` its speed gives (see [`SmootherConfig::lag_s`]).
 //!
+//! `mid_back` is then placed along the body by the spine rather than by its own filter: the
+//! filtered centre of `neck`, `withers`, `mid_back` and `rump` plus `mid_back`'s place along
+//! the body from that centre averaged over seconds (see [`SmootherConfig::back_along_s`]). On
+//! a real mouse each spine joint's place along the back wanders slowly and independently of
+//! the others, which no filter of a few frames takes out but their centre averages away.
+//!
 //! The filter starts afresh on the first frame of a mouse, after a gap, for a joint that was
 //! not placed in the frame before or that jumped farther than a mouse moves in a frame, and for every joint when the heading turns more than 90
 //! degrees from the smoothed one between two frames (the tracker took the other end for the
