@@ -93,10 +93,11 @@ fn figures_with(results: &Path, options: &[&str], dir: &Path) -> (serde_json::Va
 /// Issue 41, item 2, on the recording as the Kinect gave it (no reading outside the arena).
 /// Goals met: found in every frame; body axis within 6 degrees of MoSeq's at the median, 20 at
 /// the 95th percentile; the head leading in 98 % of the frames where the mouse travels faster
-/// than 100 mm/s; the report's turning within 20 % of MoSeq's. Not met: the centre (the
-/// replay's `mid_back` against MoSeq's centroid) is 1.9 px off at the median and 4.1 at the
-/// 95th percentile against goals of 1.5 and 3: checked here only against falling back past
-/// 2.0 and 4.5 (see docs/FIGURES.md).
+/// than 100 mm/s; the report's turning within 20 % of MoSeq's. The centre (the replay's
+/// `mid_back` against MoSeq's centroid; issue 49, item 2) within 1.5 px at the median and 3 at
+/// the 95th percentile over all 900 frames (1.26 and 2.56 with `mid_back` placed by the spine;
+/// on frames 450-899, not looked at when its settings were chosen, 1.50 and 2.79: see
+/// docs/FIGURES.md).
 #[test]
 fn a_real_mouse_is_found_in_every_frame_along_moseqs_axis_and_its_head_leads_its_travel() {
     let Some(results) = moseq_results() else { return };
@@ -115,8 +116,8 @@ fn a_real_mouse_is_found_in_every_frame_along_moseqs_axis_and_its_head_leads_its
     assert_eq!(get("tails_frames"), get("found"), "{f}");
     let turned = get("report_turned_deg") / get("moseq_turned_deg");
     assert!((0.8..=1.2).contains(&turned), "turned {turned:.2}x MoSeq's: {f}");
-    assert!(get("centre_px_median") <= 2.0, "{f}");
-    assert!(get("centre_px_p95") <= 4.5, "{f}");
+    assert!(get("centre_px_median") <= 1.5, "{f}");
+    assert!(get("centre_px_p95") <= 3.0, "{f}");
     // Item 4: the round arena is zoned by its own outline, which is round (a square's corners
     // reach 1.41 times as far as its sides).
     let reach: Vec<f64> = report["arena"]["outline"]["reach_mm"]

@@ -7,6 +7,12 @@
 //! daemon's latency does not grow by a frame; the cost is a lag behind a moving joint of about
 //! `1 / (2 pi f)` seconds at the cut-off `f` its speed gives (see [`SmootherConfig::lag_s`]).
 //!
+//! `mid_back` is then placed along the body by the spine rather than by its own filter: the
+//! filtered centre of `neck`, `withers`, `mid_back` and `rump` plus `mid_back`'s place along
+//! the body from that centre averaged over seconds (see [`SmootherConfig::back_along_s`]). On
+//! a real mouse each spine joint's place along the back wanders slowly and independently of
+//! the others, which no filter of a few frames takes out but their centre averages away.
+//!
 //! The filter starts afresh on the first frame of a mouse, after a gap, for a joint that was
 //! not placed in the frame before or that jumped farther than a mouse moves in a frame, and for every joint when the heading turns more than 90
 //! degrees from the smoothed one between two frames (the tracker took the other end for the
@@ -34,6 +40,10 @@ pub struct SmootherConfig {
     /// moves so far in a frame (1,200 mm/s at 30 fps), so the estimate jumped (or the frames
     /// are not of one continuous scene).
     pub max_jump_mm: f64,
+    /// The time constant (s) over which `mid_back`'s place along the body, measured from the
+    /// centre of the spine's four joints (`neck`, `withers`, `mid_back`, `rump`), is averaged.
+    /// `0` leaves `mid_back` to its own filter like every other joint.
+    pub back_along_s: f64,
 }
 
 impl Default for SmootherConfig {
@@ -44,6 +54,7 @@ impl Default for SmootherConfig {
             derivative_cutoff_hz: 1.0,
             max_gap_s: 0.5,
             max_jump_mm: 40.0,
+            back_along_s: 10.0,
         }
     }
 }
@@ -78,6 +89,11 @@ struct OneEuro {
 pub struct Smoother {
     config: SmootherConfig,
     joints: [Option<OneEuro>; 12],
+    /// The centre of the spine's joints, filtered as a joint is.
+    spine: Option<OneEuro>,
+    /// `mid_back`'s place along the body from the spine's centre (mm, toward the head),
+    /// averaged over `back_along_s`.
+    back_along_mm: Option<f64>,
     last_ns: Option<u64>,
 }
 
@@ -86,6 +102,8 @@ impl Smoother {
         Self {
             config,
             joints: [None; 12],
+            spine: None,
+            back_along_mm: None,
             last_ns: None,
         }
     }
@@ -118,16 +136,78 @@ impl Smoother {
         };
         if dt_s.is_none() || turned {
             self.joints = [None; 12];
+            self.spine = None;
+            self.back_along_mm = None;
         }
         self.last_ns = Some(device_ns);
+        let raw = *joints;
         let config = self.config;
         for ((state, joint), which) in self.joints.iter_mut().zip(joints.iter_mut()).zip(Joint::MAIN_BODY) {
             *state = (which != Joint::TailTip)
                 .then(|| step(&config, *state, joint, dt_s))
                 .flatten();
         }
+        self.place_mid_back(&raw, joints, dt_s);
+    }
+
+    /// Moves the smoothed `mid_back` along the body to the spine's filtered centre plus its
+    /// averaged place from that centre, keeping its own place across the body and in height.
+    /// Each spine joint's place along the body wanders by a few millimetres, slowly (a filter
+    /// over a few frames does not take it out) and independently of the others (the middle of
+    /// the back has no feature along its length for the forest to place it by), so their
+    /// centre wanders less than any of them. Needs the four spine joints and the heading;
+    /// without them `mid_back` keeps its own filter's place and the averages start afresh.
+    fn place_mid_back(&mut self, raw: &BodyJoints, joints: &mut BodyJoints, dt_s: Option<f64>) {
+        let config = self.config;
+        let placed = |joint: Joint| {
+            let j = &raw[joint.index()];
+            (j.source != JointSource::Missing).then_some(j.position_mm.coords)
+        };
+        let centre = SPINE
+            .map(placed)
+            .iter()
+            .try_fold(Vector3::zeros(), |sum, p| p.map(|p| sum + p))
+            .map(|sum| Point3::from(sum / SPINE.len() as f64));
+        // The body's axis from the snout when it is placed (the longer base wobbles less:
+        // chosen over the neck's on the first half of the real MoSeq session).
+        let tail_base = placed(Joint::TailBase).map(Point3::from);
+        let axis = match (placed(Joint::Snout).map(Point3::from), tail_base) {
+            (Some(snout), Some(tail_base)) => orientation::heading_between(&snout, &tail_base),
+            _ => orientation::heading(raw),
+        }
+        .map(|h| h.normalize());
+        let (Some(centre), Some(axis), true) = (centre, axis, config.back_along_s > 0.0) else {
+            self.spine = None;
+            self.back_along_mm = None;
+            return;
+        };
+        let along_axis = Vector3::new(axis.x, axis.y, 0.0);
+        let offset = raw[Joint::MidBack.index()].position_mm - centre;
+        let along_now = offset.dot(&along_axis);
+        let mid_back = &mut joints[Joint::MidBack.index()];
+        // Starting afresh, the centre is taken where it puts `mid_back` at its own filter's
+        // place, so that `mid_back` does not jump when a spine joint comes back.
+        let filtered_centre = match (self.spine, self.joints[Joint::MidBack.index()]) {
+            (None, Some(own)) => OneEuro {
+                position_mm: own.position_mm - offset,
+                velocity_mm_s: own.velocity_mm_s,
+            },
+            (state, _) => filtered(&config, state, centre, dt_s),
+        };
+        let along = match (self.back_along_mm, dt_s) {
+            (Some(before), Some(dt)) if self.spine.is_some() => {
+                before + dt / (config.back_along_s + dt) * (along_now - before)
+            }
+            _ => along_now,
+        };
+        self.spine = Some(filtered_centre);
+        self.back_along_mm = Some(along);
+        mid_back.position_mm = filtered_centre.position_mm + (offset - along_now * along_axis) + along * along_axis;
     }
 }
+
+/// The spine's joints, whose centre places `mid_back` along the body.
+const SPINE: [Joint; 4] = [Joint::Neck, Joint::Withers, Joint::MidBack, Joint::Rump];
 
 /// One joint's step: its new state, with `joint` moved to its smoothed position.
 fn step(
@@ -139,24 +219,30 @@ fn step(
     if joint.source == JointSource::Missing {
         return None;
     }
-    let next = match (state, dt_s) {
-        (Some(s), Some(dt)) if (joint.position_mm - s.position_mm).norm() <= config.max_jump_mm => {
-            let raw_velocity = (joint.position_mm - s.position_mm) / dt;
+    let next = filtered(config, state, joint.position_mm, dt_s);
+    joint.position_mm = next.position_mm;
+    Some(next)
+}
+
+/// The One Euro filter's step from `state` to the new sample `position_mm`, `dt_s` after it
+/// (`None`: start afresh, as it also does after a jump farther than `max_jump_mm`).
+fn filtered(config: &SmootherConfig, state: Option<OneEuro>, position_mm: Point3<f64>, dt_s: Option<f64>) -> OneEuro {
+    match (state, dt_s) {
+        (Some(s), Some(dt)) if (position_mm - s.position_mm).norm() <= config.max_jump_mm => {
+            let raw_velocity = (position_mm - s.position_mm) / dt;
             let velocity_mm_s =
                 s.velocity_mm_s + alpha(config.derivative_cutoff_hz, dt) * (raw_velocity - s.velocity_mm_s);
             let a = alpha(config.cutoff_hz(velocity_mm_s.norm()), dt);
             OneEuro {
-                position_mm: s.position_mm + a * (joint.position_mm - s.position_mm),
+                position_mm: s.position_mm + a * (position_mm - s.position_mm),
                 velocity_mm_s,
             }
         }
         _ => OneEuro {
-            position_mm: joint.position_mm,
+            position_mm,
             velocity_mm_s: Vector3::zeros(),
         },
-    };
-    joint.position_mm = next.position_mm;
-    Some(next)
+    }
 }
 
 #[cfg(test)]
@@ -216,6 +302,28 @@ mod tests {
             lag_mm > 0.0 && lag_mm < 1.5 * expected_mm + 0.5,
             "lag {lag_mm} mm, expected {expected_mm} mm"
         );
+    }
+
+    #[test]
+    fn mid_back_wandering_alone_along_the_body_is_held_by_the_spine() {
+        let mut smoother = Smoother::new(SmootherConfig::default());
+        let (mut raw_sq, mut smooth_sq, mut across_sq) = (0.0, 0.0, 0.0);
+        for k in 0..600u64 {
+            // `mid_back` alone wanders 3 mm along the body with a period of a second, too
+            // slowly for a filter of a few frames; across the body it stands 1 mm aside.
+            let wander = 3.0 * (k as f64 * 2.0 * std::f64::consts::PI / 30.0).sin();
+            let mut joints = body(0.0);
+            joints[Joint::MidBack.index()].position_mm.x = wander;
+            joints[Joint::MidBack.index()].position_mm.y = 1.0;
+            smoother.smooth(k * FRAME_NS, &mut joints);
+            if k >= 300 {
+                raw_sq += wander * wander;
+                smooth_sq += x_of(&joints, Joint::MidBack).powi(2);
+                across_sq += (joints[Joint::MidBack.index()].position_mm.y - 1.0).powi(2);
+            }
+        }
+        assert!(smooth_sq < 0.1 * raw_sq, "smoothed {smooth_sq} against raw {raw_sq}");
+        assert!(across_sq < 1e-6 * raw_sq, "moved across the body: {across_sq}");
     }
 
     #[test]
