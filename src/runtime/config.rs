@@ -94,8 +94,8 @@ enum RawPartnerWait {
     Word(String),
 }
 
-/// The default of `[sync] partner_wait_ms` for a live rig: with the daemon's own p99 of about
-/// 10 ms from a depth frame's arrival to its pose published, 15 ms at every camera phase.
+/// The default of `[sync] partner_wait_ms` for a live rig: small beside the pipeline's own p99
+/// of 10-18 ms from a depth frame's arrival to its pose published, at every camera phase.
 pub const DEFAULT_PARTNER_WAIT_MS: f64 = 3.0;
 
 #[derive(Debug, Default, Deserialize)]

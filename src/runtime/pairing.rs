@@ -14,6 +14,12 @@
 //! difference between the two cameras' minimal latencies shifts every colour frame alike; the
 //! config's `color_latency_ns` corrects it when known.
 //!
+//! A depth frame goes out as soon as no colour frame still to come can be a nearer partner.
+//! Live, a partner wait ([`SyncConfig::partner_wait_ns`]) bounds that: at its end (told by
+//! [`Synchronizer::tick`], or at once when the next colour frame cannot arrive before it) the
+//! depth frame pairs with the nearest colour frame in within the tolerance, or goes out
+//! depth-only, and the decision is counted as unproven. Replay pairs exactly.
+//!
 //! Faults a rig meets: frames held up and delivered in a burst (a USB or network stall) are
 //! paired by the model but do not fit it (a frame 20 ms later than the model expects, and its
 //! block of the envelope, are left out; a Theil-Sen line shrugs off the rest), so they go out
