@@ -1067,6 +1067,14 @@ mod tests {
         (decided, sync.unproven())
     }
 
+    /// Whether each depth frame from `from` on went out on arrival with its colour frame.
+    fn each_on_arrival(decided: &[(Option<Option<u64>>, Option<Option<u64>>)], from: usize) -> bool {
+        decided[from..]
+            .iter()
+            .zip(from as u64..)
+            .all(|(d, k)| *d == (Some(Some(k)), None))
+    }
+
     #[test]
     fn a_depth_frame_waits_for_a_nearer_partner_no_longer_than_the_partner_wait() {
         // 16 ms: near the midpoint, the next colour frame (17 ms after) cannot be ruled out as
@@ -1086,23 +1094,11 @@ mod tests {
         // 9 ms: the nearest partner is known on arrival, as without a partner wait, once the
         // colour interval is (the first frame waits its wait).
         let (early, unproven) = decided_with_wait(9, 3, 20);
-        assert!(
-            early[1..]
-                .iter()
-                .enumerate()
-                .all(|(k, d)| *d == (Some(Some(k as u64 + 1)), None)),
-            "{early:?}"
-        );
+        assert!(each_on_arrival(&early, 1), "{early:?}");
         assert_eq!(unproven, (1, 0));
         // A wait of 0: never waits for a later colour frame.
         let (now, _) = decided_with_wait(16, 0, 20);
-        assert!(
-            now[1..]
-                .iter()
-                .enumerate()
-                .all(|(k, d)| *d == (Some(Some(k as u64 + 1)), None)),
-            "{now:?}"
-        );
+        assert!(each_on_arrival(&now, 1), "{now:?}");
     }
 
     #[test]
@@ -1111,14 +1107,7 @@ mod tests {
         // colour frame's earliest arrival, 15.7 ms after the depth frame's, is past the 3 ms
         // wait: the depth frame goes out on arrival, unproven, with the frame 16 ms before.
         let (mid, unproven) = decided_with_wait(16, 3, 150);
-        assert!(
-            mid[120..]
-                .iter()
-                .enumerate()
-                .all(|(k, d)| *d == (Some(Some(k as u64 + 120)), None)),
-            "{:?}",
-            &mid[120..]
-        );
+        assert!(each_on_arrival(&mid, 120), "{:?}", &mid[120..]);
         assert_eq!(unproven, (150, 0));
         // With a wait of 20 ms the next colour frame can arrive within it: it is waited for
         // (until the tick at the end of the wait here, the frame never delivered in time).
