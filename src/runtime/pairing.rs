@@ -1015,15 +1015,14 @@ mod tests {
         assert!(decided_on_arrival(20).iter().all(Option::is_none));
     }
 
+    /// A depth frame's partner (`Some(None)`: depth-only) if decided on arrival, and if not,
+    /// after a tick at the end of its wait.
+    type Decided = (Option<Option<u64>>, Option<Option<u64>>);
+
     /// As [`decided_on_arrival`], `frames` frames, with a partner wait of `wait_ms`: per depth
     /// frame, its partner if decided on arrival, and if not, after a tick at the end of its
     /// wait (`None`: still not decided); and the unproven decisions at the end.
-    #[allow(clippy::type_complexity)]
-    fn decided_with_wait(
-        lead_ms: u64,
-        wait_ms: u64,
-        frames: u64,
-    ) -> (Vec<(Option<Option<u64>>, Option<Option<u64>>)>, (u64, u64)) {
+    fn decided_with_wait(lead_ms: u64, wait_ms: u64, frames: u64) -> (Vec<Decided>, (u64, u64)) {
         let mut sync = Synchronizer::new(SyncConfig {
             partner_wait_ns: Some(wait_ms * 1_000_000),
             ..SyncConfig::default()
@@ -1068,7 +1067,7 @@ mod tests {
     }
 
     /// Whether each depth frame from `from` on went out on arrival with its colour frame.
-    fn each_on_arrival(decided: &[(Option<Option<u64>>, Option<Option<u64>>)], from: usize) -> bool {
+    fn each_on_arrival(decided: &[Decided], from: usize) -> bool {
         decided[from..]
             .iter()
             .zip(from as u64..)
