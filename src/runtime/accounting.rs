@@ -21,6 +21,11 @@ pub struct CameraCounters {
     pub paired: AtomicU64,
     /// Processed without a partner (depth-only pairs; colour frames no depth frame claimed).
     pub unpaired: AtomicU64,
+    /// Depth frames among `paired` and `unpaired` decided at the end of the partner wait
+    /// (`[sync] partner_wait_ms`) before their nearest partner was known: paired with the
+    /// nearest colour frame in, or depth-only while a partner could still have come.
+    pub paired_unproven: AtomicU64,
+    pub unpaired_unproven: AtomicU64,
     /// Delivered but not processed, by reason.
     pub dropped: Mutex<BTreeMap<String, u64>>,
     /// Written by the recorder.
@@ -81,6 +86,10 @@ pub struct CameraSummary {
     pub captured: u64,
     pub paired: u64,
     pub unpaired: u64,
+    /// Of `paired` and `unpaired` (depth frames): decided at the end of the partner wait, not
+    /// known to be with the nearest partner.
+    pub paired_unproven: u64,
+    pub unpaired_unproven: u64,
     pub dropped: BTreeMap<String, u64>,
     pub dropped_total: u64,
     pub lost_before_capture: BTreeMap<String, u64>,
@@ -109,6 +118,8 @@ impl CameraSummary {
             captured: c.captured.load(Ordering::Relaxed),
             paired: c.paired.load(Ordering::Relaxed),
             unpaired: c.unpaired.load(Ordering::Relaxed),
+            paired_unproven: c.paired_unproven.load(Ordering::Relaxed),
+            unpaired_unproven: c.unpaired_unproven.load(Ordering::Relaxed),
             dropped_total: dropped.values().sum(),
             dropped,
             lost_before_capture: read(&c.lost),

@@ -83,7 +83,20 @@ struct RawSync {
     tolerance_ms: Option<f64>,
     color_latency_ms: Option<f64>,
     max_wait_ms: Option<f64>,
+    partner_wait_ms: Option<RawPartnerWait>,
 }
+
+/// `[sync] partner_wait_ms`: milliseconds, or `"nearest"`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum RawPartnerWait {
+    Ms(f64),
+    Word(String),
+}
+
+/// The default of `[sync] partner_wait_ms` for a live rig: small beside the pipeline's own p99
+/// of 10-18 ms from a depth frame's arrival to its pose published, at every camera phase.
+pub const DEFAULT_PARTNER_WAIT_MS: f64 = 3.0;
 
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -347,11 +360,26 @@ impl Checker<'_> {
         }
         let r = raw.reconnect;
         let stall_ms = self.positive("reconnect.stall_ms", r.stall_ms.unwrap_or(2000.0), 600_000.0)?;
+        let partner_wait_ms = match raw.sync.partner_wait_ms {
+            None => Some(DEFAULT_PARTNER_WAIT_MS),
+            Some(RawPartnerWait::Word(w)) if w == "nearest" => None,
+            Some(RawPartnerWait::Ms(v)) if v.is_finite() && (0.0..=10_000.0).contains(&v) => Some(v),
+            Some(RawPartnerWait::Ms(v)) => {
+                return Err(self.bad("sync.partner_wait_ms", format!("must be from 0 to 10000 ms, not {v}")));
+            }
+            Some(RawPartnerWait::Word(w)) => {
+                return Err(self.bad(
+                    "sync.partner_wait_ms",
+                    format!("must be a number of ms or \"nearest\", not \"{w}\""),
+                ));
+            }
+        };
         let sync = crate::runtime::pairing::SyncConfig {
             tolerance_ns: tolerance.map(|t| (t * 1e6) as u64),
             color: color.is_some(),
             max_wait_ns: (ms("sync.max_wait_ms", raw.sync.max_wait_ms)?.unwrap_or(stall_ms) * 1e6) as u64,
             color_latency_ns: (latency * 1e6) as i64,
+            partner_wait_ns: partner_wait_ms.map(|ms| (ms * 1e6) as u64),
         };
         let p = raw.pipeline;
         let capture_edge = EdgeConfig {
@@ -751,6 +779,25 @@ mod tests {
         ] {
             let e = parse(&format!("{base}[stream]\n{stream}")).unwrap_err().to_string();
             assert!(e.contains(why) && !e.contains('\n'), "{stream}: {e}");
+        }
+    }
+
+    #[test]
+    fn the_partner_wait_is_bounded_by_default_and_nearest_on_request() {
+        let base = "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n";
+        let ms = |sync: &str| parse(&format!("{base}{sync}")).map(|c| c.sync.partner_wait_ns);
+        assert_eq!(ms("").unwrap(), Some((DEFAULT_PARTNER_WAIT_MS * 1e6) as u64));
+        assert_eq!(ms("[sync]\npartner_wait_ms = 0\n").unwrap(), Some(0));
+        assert_eq!(ms("[sync]\npartner_wait_ms = 7.5\n").unwrap(), Some(7_500_000));
+        assert_eq!(ms("[sync]\npartner_wait_ms = \"nearest\"\n").unwrap(), None);
+        for (bad, why) in [("-1", "from 0 to 10000"), ("\"soon\"", "\"nearest\"")] {
+            let e = ms(&format!("[sync]\npartner_wait_ms = {bad}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("sync.partner_wait_ms") && e.contains(why) && !e.contains('\n'),
+                "{e}"
+            );
         }
     }
 

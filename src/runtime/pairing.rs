@@ -14,6 +14,12 @@
 //! difference between the two cameras' minimal latencies shifts every colour frame alike; the
 //! config's `color_latency_ns` corrects it when known.
 //!
+//! A depth frame goes out as soon as no colour frame still to come can be a nearer partner.
+//! Live, a partner wait ([`SyncConfig::partner_wait_ns`]) bounds that: at its end (told by
+//! [`Synchronizer::tick`], or at once when the next colour frame cannot arrive before it) the
+//! depth frame pairs with the nearest colour frame in within the tolerance, or goes out
+//! depth-only, and the decision is counted as unproven. Replay pairs exactly.
+//!
 //! Faults a rig meets: frames held up and delivered in a burst (a USB or network stall) are
 //! paired by the model but do not fit it (a frame 20 ms later than the model expects, and its
 //! block of the envelope, are left out; a Theil-Sen line shrugs off the rest), so they go out
@@ -43,6 +49,13 @@ pub struct SyncConfig {
     pub max_wait_ns: u64,
     /// The colour camera's minimal latency minus the depth camera's, when known (ns).
     pub color_latency_ns: i64,
+    /// How long (host time from its arrival) a depth frame waits for a colour frame still to
+    /// come that could be a nearer partner than those in; then it pairs with the nearest
+    /// colour frame in within the tolerance, or goes out depth-only. `None`: it waits until
+    /// the nearest partner is known (exact pairing, what replay does). A live pipeline decides
+    /// at the latest at the end of the wait only if something calls [`Synchronizer::tick`]
+    /// then ([`Synchronizer::due_ns`] says when); without ticks, at the next frame's arrival.
+    pub partner_wait_ns: Option<u64>,
 }
 
 impl Default for SyncConfig {
@@ -52,6 +65,7 @@ impl Default for SyncConfig {
             color: true,
             max_wait_ns: DEFAULT_MAX_WAIT_NS,
             color_latency_ns: 0,
+            partner_wait_ns: None,
         }
     }
 }
@@ -233,6 +247,12 @@ impl ClockModel {
         }
     }
 
+    /// Whether the line through the minima exists (two whole blocks in since the clock was
+    /// learnt last), so that the envelope is more than the lowest of the first frames.
+    pub fn fitted(&self) -> bool {
+        self.line.is_some()
+    }
+
     /// The device clock's rate relative to the host's, in ppm (positive: the device runs
     /// slow), once the line exists.
     pub fn drift_ppm(&self) -> Option<f64> {
@@ -283,6 +303,12 @@ pub struct Synchronizer {
     /// partner was given up, and in all runs.
     given_up_run: u64,
     given_up: u64,
+    /// The newest host time known: the latest arrival pushed or tick.
+    now_ns: u64,
+    /// Depth frames decided at the end of [`SyncConfig::partner_wait_ns`] before their
+    /// nearest partner was known: paired with the nearest colour frame in, or depth-only.
+    unproven_paired: u64,
+    unproven_unpaired: u64,
 }
 
 impl Synchronizer {
@@ -306,7 +332,30 @@ impl Synchronizer {
             last_color_arrival: None,
             given_up_run: 0,
             given_up: 0,
+            now_ns: 0,
+            unproven_paired: 0,
+            unproven_unpaired: 0,
         }
+    }
+
+    /// Depth frames decided at the end of the partner wait before their nearest partner was
+    /// known, over the whole run: (paired with the nearest colour frame in, depth-only).
+    pub fn unproven(&self) -> (u64, u64) {
+        (self.unproven_paired, self.unproven_unpaired)
+    }
+
+    /// When (host clock, ns) the oldest pending depth frame's partner wait ends, if there is
+    /// a partner wait and a depth frame waiting: [`Synchronizer::tick`] then decides it.
+    pub fn due_ns(&self) -> Option<u64> {
+        let wait = self.config.partner_wait_ns?;
+        self.depth.front().map(|d| d.stamp.host_ns.saturating_add(wait))
+    }
+
+    /// Tells the time (host clock, ns) without a frame: depth frames whose partner wait ended
+    /// are decided into `out`.
+    pub fn tick(&mut self, now_ns: u64, out: &mut Vec<SyncOutput>) {
+        self.now_ns = self.now_ns.max(now_ns);
+        self.decide(out, false);
     }
 
     /// Depth frames that went out without waiting longer for a colour partner (the colour
@@ -360,6 +409,7 @@ impl Synchronizer {
             self.depth_interval_ns = Some(self.depth_interval_ns.map_or(dt, |i| i.min(dt)));
         }
         self.last_depth = Some(stamp);
+        self.now_ns = self.now_ns.max(stamp.host_ns);
         self.first_depth_arrival.get_or_insert(stamp.host_ns);
         self.newest_depth_arrival = self.newest_depth_arrival.max(stamp.host_ns);
         self.depth_clock.observe(stamp);
@@ -384,6 +434,7 @@ impl Synchronizer {
             self.color_interval_ns = crate::core::median(&mut v).map(|m| m as u64);
         }
         self.last_color = Some(stamp);
+        self.now_ns = self.now_ns.max(stamp.host_ns);
         self.last_color_arrival = Some(self.last_color_arrival.map_or(stamp.host_ns, |t| t.max(stamp.host_ns)));
         self.color_clock.observe(stamp);
         let t = self.color_time(stamp);
@@ -471,14 +522,18 @@ impl Synchronizer {
             // about a colour frame interval after the newest, cannot be nearer than the newest
             // nor within the tolerance: waiting for it cost up to a whole interval.
             let decided = end || !self.config.color || self.nearest_color_in(td, tol);
+            // Or its partner wait is over, or no colour frame can arrive before it is: the
+            // nearest colour frame in is taken without knowing that it is the nearest.
+            let unproven = !decided && self.partner_wait_over(d.stamp.host_ns);
             // Waiting given up: the frame waited the longest wait, or the colour camera has
             // been silent that long.
             let given_up = !decided
+                && !unproven
                 && (self
                     .newest_depth
                     .is_some_and(|n| n - td > self.config.max_wait_ns as i64)
                     || self.color_silent());
-            if !decided && !given_up {
+            if !decided && !unproven && !given_up {
                 break;
             }
             let Some(d) = self.depth.pop_front() else {
@@ -513,6 +568,13 @@ impl Synchronizer {
                 }
                 None => (None, 0),
             };
+            if unproven {
+                if color.is_some() {
+                    self.unproven_paired += 1;
+                } else {
+                    self.unproven_unpaired += 1;
+                }
+            }
             if given_up && color.is_none() {
                 self.given_up_run += 1;
                 self.given_up += 1;
@@ -565,6 +627,28 @@ impl Synchronizer {
         };
         let next = newest + (interval as f64 * NEXT_COLOR_SHARE) as i64;
         next - td >= td - newest || next - td > tol
+    }
+
+    /// Whether a depth frame that arrived at `arrival_ns` (host clock) waited its partner wait,
+    /// or the next colour frame cannot arrive before the wait is over: it arrives no earlier
+    /// than the colour clock's lower envelope says, [`NEXT_COLOR_SHARE`] of the usual colour
+    /// interval after the newest (once the envelope is a fitted line: the lowest of a camera's
+    /// first frames may be well above it). Never without a partner wait.
+    fn partner_wait_over(&self, arrival_ns: u64) -> bool {
+        let Some(wait) = self.config.partner_wait_ns else {
+            return false;
+        };
+        let end = arrival_ns.saturating_add(wait);
+        if self.now_ns >= end {
+            return true;
+        }
+        let (Some(newest), Some(interval), true) =
+            (self.newest_color, self.color_interval_ns, self.color_clock.fitted())
+        else {
+            return false;
+        };
+        let next_arrival = newest + self.config.color_latency_ns + (interval as f64 * NEXT_COLOR_SHARE) as i64;
+        next_arrival > end as i64
     }
 
     /// Frames waiting for a decision (depth, colour).
@@ -929,6 +1013,105 @@ mod tests {
         );
         // 20 ms: the next colour frame, 13 ms after, is nearer: it is waited for.
         assert!(decided_on_arrival(20).iter().all(Option::is_none));
+    }
+
+    /// A depth frame's partner (`Some(None)`: depth-only) if decided on arrival, and if not,
+    /// after a tick at the end of its wait.
+    type Decided = (Option<Option<u64>>, Option<Option<u64>>);
+
+    /// As [`decided_on_arrival`], `frames` frames, with a partner wait of `wait_ms`: per depth
+    /// frame, its partner if decided on arrival, and if not, after a tick at the end of its
+    /// wait (`None`: still not decided); and the unproven decisions at the end.
+    fn decided_with_wait(lead_ms: u64, wait_ms: u64, frames: u64) -> (Vec<Decided>, (u64, u64)) {
+        let mut sync = Synchronizer::new(SyncConfig {
+            partner_wait_ns: Some(wait_ms * 1_000_000),
+            ..SyncConfig::default()
+        });
+        let ms = 1_000_000;
+        let partner = |out: &[SyncOutput], k: u64| {
+            out.iter().find_map(|o| match o {
+                SyncOutput::Pair(p) if p.depth.stamp.seq == k => Some(p.color.as_ref().map(|c| c.stamp.seq)),
+                _ => None,
+            })
+        };
+        let decided = (0..frames)
+            .map(|k| {
+                let t = 1_000 * ms + k * 33 * ms;
+                let mut out = Vec::new();
+                let c = Stamp {
+                    seq: k,
+                    device_ns: t - lead_ms * ms,
+                    host_ns: t - lead_ms * ms + 2 * ms,
+                };
+                sync.push_color(color(c), &mut out);
+                let arrival = t + 2 * ms;
+                let d = Stamp {
+                    seq: k,
+                    device_ns: t,
+                    host_ns: arrival,
+                };
+                sync.push_depth(depth(d), &mut out);
+                let on_arrival = partner(&out, k);
+                if on_arrival.is_some() {
+                    return (on_arrival, None);
+                }
+                assert_eq!(sync.due_ns(), Some(arrival + wait_ms * ms));
+                // Just before the end of the wait nothing is decided; at its end it is.
+                sync.tick(arrival + wait_ms * ms - 1, &mut out);
+                assert!(partner(&out, k).is_none());
+                sync.tick(arrival + wait_ms * ms, &mut out);
+                (None, partner(&out, k))
+            })
+            .collect();
+        (decided, sync.unproven())
+    }
+
+    /// Whether each depth frame from `from` on went out on arrival with its colour frame.
+    fn each_on_arrival(decided: &[Decided], from: usize) -> bool {
+        decided[from..]
+            .iter()
+            .zip(from as u64..)
+            .all(|(d, k)| *d == (Some(Some(k)), None))
+    }
+
+    #[test]
+    fn a_depth_frame_waits_for_a_nearer_partner_no_longer_than_the_partner_wait() {
+        // 16 ms: near the midpoint, the next colour frame (17 ms after) cannot be ruled out as
+        // nearer; waited for without a partner wait, here each depth frame goes out at the end
+        // of the wait with the colour frame 16 ms before it, counted as unproven.
+        let (mid, unproven) = decided_with_wait(16, 3, 20);
+        assert!(
+            mid.iter().enumerate().all(|(k, d)| *d == (None, Some(Some(k as u64)))),
+            "{mid:?}"
+        );
+        assert_eq!(unproven, (20, 0));
+        // 20 ms: the frame before is out of the tolerance and the next one still to come:
+        // depth-only at the end of the wait, counted.
+        let (late, unproven) = decided_with_wait(20, 3, 20);
+        assert!(late.iter().all(|d| *d == (None, Some(None))), "{late:?}");
+        assert_eq!(unproven, (0, 20));
+        // 9 ms: the nearest partner is known on arrival, as without a partner wait, once the
+        // colour interval is (the first frame waits its wait).
+        let (early, unproven) = decided_with_wait(9, 3, 20);
+        assert!(each_on_arrival(&early, 1), "{early:?}");
+        assert_eq!(unproven, (1, 0));
+        // A wait of 0: never waits for a later colour frame.
+        let (now, _) = decided_with_wait(16, 0, 20);
+        assert!(each_on_arrival(&now, 1), "{now:?}");
+    }
+
+    #[test]
+    fn a_depth_frame_goes_out_at_once_when_no_colour_frame_can_arrive_within_the_wait() {
+        // Once the colour camera's clock is learnt (a line over two whole seconds), the next
+        // colour frame's earliest arrival, 15.7 ms after the depth frame's, is past the 3 ms
+        // wait: the depth frame goes out on arrival, unproven, with the frame 16 ms before.
+        let (mid, unproven) = decided_with_wait(16, 3, 150);
+        assert!(each_on_arrival(&mid, 120), "{:?}", &mid[120..]);
+        assert_eq!(unproven, (150, 0));
+        // With a wait of 20 ms the next colour frame can arrive within it: it is waited for
+        // (until the tick at the end of the wait here, the frame never delivered in time).
+        let (long, _) = decided_with_wait(16, 20, 150);
+        assert!(long[120..].iter().all(|d| d.0.is_none()), "{:?}", &long[120..]);
     }
 
     #[test]
@@ -1371,6 +1554,76 @@ mod tests {
             prop_assert_eq!(t.depth_seen, d.len());
             prop_assert_eq!(t.color_seen + t.rejected_color, c.len());
             prop_assert!(t.rejected_color < RESET_AFTER as usize);
+        }
+    }
+
+    /// Pushes both streams into a synchroniser in the order their frames reach the host, with a
+    /// timer that ticks at every end of a partner wait before the next arrival, then flushes:
+    /// each output with the host time it was decided at (`u64::MAX`: at the flush), and the
+    /// unproven decisions.
+    fn run_timed(config: SyncConfig, d: &[(f64, Stamp)], c: &[(f64, Stamp)]) -> (Vec<(u64, SyncOutput)>, (u64, u64)) {
+        let mut sync = Synchronizer::new(config);
+        let mut arrivals: Vec<(u64, bool, Stamp)> = d
+            .iter()
+            .map(|x| (x.1.host_ns, true, x.1))
+            .chain(c.iter().map(|x| (x.1.host_ns, false, x.1)))
+            .collect();
+        arrivals.sort_by_key(|a| (a.0, !a.1));
+        let (mut timed, mut out) = (Vec::new(), Vec::new());
+        for (t, is_depth, s) in arrivals {
+            while let Some(due) = sync.due_ns().filter(|&due| due <= t) {
+                sync.tick(due, &mut out);
+                if out.is_empty() {
+                    break;
+                }
+                timed.extend(out.drain(..).map(|o| (due, o)));
+            }
+            if is_depth {
+                sync.push_depth(depth(s), &mut out);
+            } else {
+                sync.push_color(color(s), &mut out);
+            }
+            timed.extend(out.drain(..).map(|o| (t, o)));
+        }
+        sync.flush(&mut out);
+        timed.extend(out.drain(..).map(|o| (u64::MAX, o)));
+        (timed, sync.unproven())
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        /// Under the fault mix with a partner wait: every frame is accounted for once, every
+        /// depth frame is decided by the end of its wait (or at the end of the input), and
+        /// every pair made is with the true nearest colour frame of those that reached the host
+        /// by the end of the wait, within half an interval.
+        #[test]
+        fn with_a_partner_wait_each_pair_is_the_nearest_arrived_within_the_wait(case in fault_mix(), wait_ms in 0u64..12) {
+            let (d, c) = case.streams();
+            let wait = wait_ms * 1_000_000;
+            let config = SyncConfig { partner_wait_ns: Some(wait), ..SyncConfig::default() };
+            let (timed, (unproven_paired, unproven_unpaired)) = run_timed(config, &d, &c);
+            let (times, out): (Vec<u64>, Vec<SyncOutput>) = timed.into_iter().unzip();
+            let t = Tally::of(&out, &d, &c);
+            prop_assert_eq!(t.rejected_depth, 0);
+            prop_assert_eq!(t.depth_seen, d.len());
+            prop_assert_eq!(t.color_seen + t.rejected_color, c.len());
+            prop_assert!(unproven_paired + unproven_unpaired <= d.len() as u64);
+            let mut wrong = Vec::new();
+            for (at, o) in times.iter().zip(&out) {
+                let SyncOutput::Pair(p) = o else { continue };
+                let end = p.depth.stamp.host_ns + wait;
+                prop_assert!(*at <= end || *at == u64::MAX, "depth frame {} decided {} ns after its wait", p.depth.stamp.seq, at - end);
+                let Some(f) = &p.color else { continue };
+                let time = d.iter().find(|x| x.1.seq == p.depth.stamp.seq).map(|x| x.0);
+                let arrived: Vec<(f64, Stamp)> = c.iter().filter(|x| x.1.host_ns <= end).copied().collect();
+                let want = time.and_then(|time| true_partner(&arrived, time, PERIOD_S));
+                let truth = c.iter().find(|x| x.1.seq == f.stamp.seq && x.1.device_ns == f.stamp.device_ns);
+                if truth.is_none() || truth.map(|x| x.1.seq) != want {
+                    wrong.push((p.depth.stamp.seq, f.stamp.seq));
+                }
+            }
+            prop_assert!(wrong.is_empty(), "{} pairs not with the nearest arrived (depth, colour): {:?}", wrong.len(), &wrong[..wrong.len().min(10)]);
         }
     }
 

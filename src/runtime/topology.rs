@@ -231,6 +231,13 @@ impl Topology<'_> {
         let end_to_end = Arc::new(Histogram::default());
         let branches = (processing.is_some(), recorder.is_some());
         let (tee, mut edge_stats, frames, recorded) = Tee::declare(edges.capture, branches);
+        // The partner wait is told the time by the host clock: live cameras only, so that a
+        // replay (on its own clock) pairs with the nearest and is the same every time.
+        let live = matches!(sources, Sources::Cameras { .. });
+        let sync = SyncConfig {
+            partner_wait_ns: sync.partner_wait_ns.filter(|_| live),
+            ..sync
+        };
         let (capture, color, epochs) = sources.declare(sync.color)?;
         for thread in capture {
             thread.spawn(&mut runner, &tee, &acct).map_err(threads)?;

@@ -156,6 +156,18 @@ impl Families<'_> {
             &per_camera(&|c| c.unpaired),
         )?;
         self.counter(
+            "mousepose_frames_paired_unproven",
+            "Depth frames paired at the end of the partner wait ([sync] partner_wait_ms) with the nearest colour frame in, a nearer one still possible (of frames_paired).",
+            None,
+            &per_camera(&|c| c.paired_unproven),
+        )?;
+        self.counter(
+            "mousepose_frames_unpaired_unproven",
+            "Depth frames sent depth-only at the end of the partner wait, a partner still possible (of frames_unpaired).",
+            None,
+            &per_camera(&|c| c.unpaired_unproven),
+        )?;
+        self.counter(
             "mousepose_frames_dropped",
             "Frames delivered but not processed, by reason.",
             None,

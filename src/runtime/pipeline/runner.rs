@@ -10,7 +10,8 @@
 use super::edge::{EdgeSender, Sent};
 use super::metrics::{Histogram, LatencySummary};
 use super::stage::{FlatMap, Map, Sink, StageError, Tracked};
-use crossbeam_channel::Receiver;
+use crate::runtime::capture::clock::monotonic_ns;
+use crossbeam_channel::{Receiver, RecvTimeoutError};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -189,7 +190,8 @@ impl Runner {
     }
 
     /// Starts a [`FlatMap`] on one thread named after it, reading `input` and sending what it
-    /// emits to `output`, numbered from 0 and marked as entering the pipeline there. Its work
+    /// emits to `output`, numbered from 0 and marked as entering the pipeline there; when no
+    /// input comes by the time it asks for ([`FlatMap::due_ns`]), its `tick` is called. Its work
     /// is not a stage's in the reports: the synchroniser's shows in the frames' accounting
     /// (paired, unpaired, rejected).
     ///
@@ -213,7 +215,27 @@ impl Runner {
                 }
                 true
             };
-            for item in input.iter() {
+            loop {
+                let item = match stage.due_ns() {
+                    None => match input.recv() {
+                        Ok(item) => item,
+                        Err(_) => break,
+                    },
+                    Some(due) => {
+                        let wait = due.saturating_sub(monotonic_ns());
+                        match input.recv_timeout(std::time::Duration::from_nanos(wait)) {
+                            Ok(item) => item,
+                            Err(RecvTimeoutError::Timeout) => {
+                                stage.tick(monotonic_ns(), &mut out)?;
+                                if !send(&mut out) {
+                                    return Ok(());
+                                }
+                                continue;
+                            }
+                            Err(RecvTimeoutError::Disconnected) => break,
+                        }
+                    }
+                };
                 stage.process(item, &mut out)?;
                 if !send(&mut out) {
                     // Downstream stopped (it failed and says so): stop quietly.

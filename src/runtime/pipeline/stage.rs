@@ -47,6 +47,19 @@ pub trait FlatMap: Send + 'static {
         let _ = out;
         Ok(())
     }
+    /// When (host clock, `CLOCK_MONOTONIC` ns) the step wants [`FlatMap::tick`] called if no
+    /// input came before; `None`: only on input.
+    fn due_ns(&self) -> Option<u64> {
+        None
+    }
+    /// Pushes the outputs that the time `now_ns` (host clock) completes, without input.
+    ///
+    /// # Errors
+    /// A failure that must stop the run.
+    fn tick(&mut self, now_ns: u64, out: &mut Vec<Self::Out>) -> Result<(), StageError> {
+        let _ = (now_ns, out);
+        Ok(())
+    }
 }
 
 /// The end of the pipeline: writes what reaches it.

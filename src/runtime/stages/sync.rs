@@ -22,6 +22,8 @@ pub struct SyncStage {
     epochs: Epochs,
     seen_epochs: [u64; 2],
     outputs: Vec<SyncOutput>,
+    /// The synchroniser's unproven decisions already counted (paired, depth-only).
+    unproven: (u64, u64),
 }
 
 impl SyncStage {
@@ -32,12 +34,21 @@ impl SyncStage {
             epochs,
             seen_epochs: [0; 2],
             outputs: Vec::new(),
+            unproven: (0, 0),
         }
     }
 
     /// Counts the synchroniser's outputs and passes the pairs on.
     fn emit(&mut self, out: &mut Vec<FramePair>) {
         let acct = &self.acct;
+        let (paired, alone) = self.sync.unproven();
+        acct.depth
+            .paired_unproven
+            .fetch_add(paired - self.unproven.0, Ordering::Relaxed);
+        acct.depth
+            .unpaired_unproven
+            .fetch_add(alone - self.unproven.1, Ordering::Relaxed);
+        self.unproven = (paired, alone);
         for o in self.outputs.drain(..) {
             match o {
                 SyncOutput::Pair(pair) => {
@@ -90,6 +101,16 @@ impl FlatMap for SyncStage {
 
     fn finish(&mut self, out: &mut Vec<FramePair>) -> Result<(), StageError> {
         self.sync.flush(&mut self.outputs);
+        self.emit(out);
+        Ok(())
+    }
+
+    fn due_ns(&self) -> Option<u64> {
+        self.sync.due_ns()
+    }
+
+    fn tick(&mut self, now_ns: u64, out: &mut Vec<FramePair>) -> Result<(), StageError> {
+        self.sync.tick(now_ns, &mut self.outputs);
         self.emit(out);
         Ok(())
     }
