@@ -94,9 +94,10 @@ enum RawPartnerWait {
     Word(String),
 }
 
-/// The default of `[sync] partner_wait_ms` for a live rig: small beside the pipeline's own p99
-/// of 10-18 ms from a depth frame's arrival to its pose published, at every camera phase.
-pub const DEFAULT_PARTNER_WAIT_MS: f64 = 3.0;
+/// The `[sync] partner_wait_ms` a closed-loop rig sets (not the default, which waits for the
+/// nearest partner: poses keep their paws at every camera phase): small beside the pipeline's
+/// own p99 of 10-18 ms from a depth frame's arrival to its pose published.
+pub const CLOSED_LOOP_PARTNER_WAIT_MS: f64 = 3.0;
 
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -361,7 +362,7 @@ impl Checker<'_> {
         let r = raw.reconnect;
         let stall_ms = self.positive("reconnect.stall_ms", r.stall_ms.unwrap_or(2000.0), 600_000.0)?;
         let partner_wait_ms = match raw.sync.partner_wait_ms {
-            None => Some(DEFAULT_PARTNER_WAIT_MS),
+            None => None,
             Some(RawPartnerWait::Word(w)) if w == "nearest" => None,
             Some(RawPartnerWait::Ms(v)) if v.is_finite() && (0.0..=10_000.0).contains(&v) => Some(v),
             Some(RawPartnerWait::Ms(v)) => {
@@ -783,10 +784,12 @@ mod tests {
     }
 
     #[test]
-    fn the_partner_wait_is_bounded_by_default_and_nearest_on_request() {
+    fn the_partner_wait_is_the_nearest_by_default_and_bounded_on_request() {
         let base = "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n";
         let ms = |sync: &str| parse(&format!("{base}{sync}")).map(|c| c.sync.partner_wait_ns);
-        assert_eq!(ms("").unwrap(), Some((DEFAULT_PARTNER_WAIT_MS * 1e6) as u64));
+        assert_eq!(ms("").unwrap(), None);
+        let closed_loop = format!("[sync]\npartner_wait_ms = {CLOSED_LOOP_PARTNER_WAIT_MS}\n");
+        assert_eq!(ms(&closed_loop).unwrap(), Some(3_000_000));
         assert_eq!(ms("[sync]\npartner_wait_ms = 0\n").unwrap(), Some(0));
         assert_eq!(ms("[sync]\npartner_wait_ms = 7.5\n").unwrap(), Some(7_500_000));
         assert_eq!(ms("[sync]\npartner_wait_ms = \"nearest\"\n").unwrap(), None);
