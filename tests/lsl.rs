@@ -43,14 +43,18 @@ fn documented_reader() -> String {
     text[start..end].to_owned()
 }
 
-/// Resolves `mousepose-test`, writes its type, source id, channel labels and every sample
-/// (stamp first, NaN as null) as JSON, until no sample came for 5 s.
+/// Resolves `mousepose-test`, connects (then says so in a file: the documented reader starts
+/// only after it, so that the outlet, which sends from its first reader on, sends this one
+/// every sample), writes its type, source id, channel labels and every sample (stamp first,
+/// NaN as null) as JSON, until no sample came for 5 s.
 const RECEIVER: &str = r#"
 import json, math, sys, pylsl
 found = pylsl.resolve_byprop("name", "mousepose-test", timeout=30)
 if not found:
     sys.exit("no stream called mousepose-test")
 inlet = pylsl.StreamInlet(found[0])
+inlet.open_stream(timeout=10)
+open(sys.argv[2], "w").close()
 info = inlet.info(timeout=10)
 labels, ch = [], info.desc().child("channels").first_child()
 while not ch.empty():
@@ -101,11 +105,15 @@ fn issue46_pylsl_reads_a_replays_poses_from_the_lsl_outlet_as_poses_csv_has_them
     let script = r#"
 set -e
 ip link set lo up
-"$PY" receiver.py received.json 2>receiver.err &
+"$PY" receiver.py received.json connected 2>receiver.err &
 receiver=$!
+"$BIN" replay session --out out --realtime --lsl mousepose-test --json --models "$MODELS" >summary.json 2>replay.err &
+replay=$!
+tries=0
+until [ -e connected ] || [ $tries -ge 600 ]; do sleep 0.05; tries=$((tries + 1)); done
 "$PY" reader.py >reader.txt 2>reader.err &
 reader=$!
-"$BIN" replay session --out out --realtime --lsl mousepose-test --json --models "$MODELS" >summary.json 2>replay.err
+wait $replay
 wait $receiver
 kill $reader
 "#;

@@ -585,4 +585,21 @@ mod tests {
         let scores: Vec<f32> = found.iter().map(|d| d.score).collect();
         assert_eq!(scores, vec![5.2, 3.1, 1.2]);
     }
+
+    /// The grouping is the cascade's own from 2 px/mm up and in proportion below, never below
+    /// 1 unless the cascade's own is 0.
+    #[test]
+    fn a_coarser_view_is_grouped_in_proportion() {
+        let mut detector = PawDetector::load(Path::new("fixtures/models/paws.xml")).unwrap();
+        detector.set_min_neighbors(7);
+        let at: Vec<usize> = [3.5, 2.0, 1.0, 0.5, 0.1]
+            .iter()
+            .map(|&s| detector.min_neighbors_at(s))
+            .collect();
+        assert_eq!(at, [7, 7, 4, 2, 1]);
+        detector.set_min_neighbors(1);
+        assert_eq!(detector.min_neighbors_at(0.5), 1);
+        detector.set_min_neighbors(0);
+        assert_eq!(detector.min_neighbors_at(3.5), 0);
+    }
 }
