@@ -972,29 +972,10 @@ mod tests {
     /// and in first: for each depth frame, the colour frames out of the synchroniser when it
     /// arrives (`None`: not decided yet).
     fn decided_on_arrival(lead_ms: u64) -> Vec<Option<Option<u64>>> {
-        let mut sync = Synchronizer::new(SyncConfig::default());
-        let ms = 1_000_000;
-        (0..20u64)
-            .map(|k| {
-                let t = 1_000 * ms + k * 33 * ms;
-                let mut out = Vec::new();
-                let c = Stamp {
-                    seq: k,
-                    device_ns: t - lead_ms * ms,
-                    host_ns: t - lead_ms * ms + 2 * ms,
-                };
-                sync.push_color(color(c), &mut out);
-                let d = Stamp {
-                    seq: k,
-                    device_ns: t,
-                    host_ns: t + 2 * ms,
-                };
-                sync.push_depth(depth(d), &mut out);
-                out.iter().find_map(|o| match o {
-                    SyncOutput::Pair(p) if p.depth.stamp.seq == k => Some(p.color.as_ref().map(|c| c.stamp.seq)),
-                    _ => None,
-                })
-            })
+        decided_with_wait(lead_ms, None, 20)
+            .0
+            .into_iter()
+            .map(|(d, _)| d)
             .collect()
     }
 
@@ -1019,12 +1000,13 @@ mod tests {
     /// after a tick at the end of its wait.
     type Decided = (Option<Option<u64>>, Option<Option<u64>>);
 
-    /// As [`decided_on_arrival`], `frames` frames, with a partner wait of `wait_ms`: per depth
-    /// frame, its partner if decided on arrival, and if not, after a tick at the end of its
-    /// wait (`None`: still not decided); and the unproven decisions at the end.
-    fn decided_with_wait(lead_ms: u64, wait_ms: u64, frames: u64) -> (Vec<Decided>, (u64, u64)) {
+    /// As [`decided_on_arrival`], `frames` frames, with a partner wait of `wait_ms` (`None`:
+    /// the nearest): per depth frame, its partner if decided on arrival, and if not, after a
+    /// tick at the end of its wait (`None`: still not decided); and the unproven decisions at
+    /// the end.
+    fn decided_with_wait(lead_ms: u64, wait_ms: Option<u64>, frames: u64) -> (Vec<Decided>, (u64, u64)) {
         let mut sync = Synchronizer::new(SyncConfig {
-            partner_wait_ns: Some(wait_ms * 1_000_000),
+            partner_wait_ns: wait_ms.map(|w| w * 1_000_000),
             ..SyncConfig::default()
         });
         let ms = 1_000_000;
@@ -1052,9 +1034,9 @@ mod tests {
                 };
                 sync.push_depth(depth(d), &mut out);
                 let on_arrival = partner(&out, k);
-                if on_arrival.is_some() {
+                let Some(wait_ms) = wait_ms.filter(|_| on_arrival.is_none()) else {
                     return (on_arrival, None);
-                }
+                };
                 assert_eq!(sync.due_ns(), Some(arrival + wait_ms * ms));
                 // Just before the end of the wait nothing is decided; at its end it is.
                 sync.tick(arrival + wait_ms * ms - 1, &mut out);
@@ -1079,7 +1061,7 @@ mod tests {
         // 16 ms: near the midpoint, the next colour frame (17 ms after) cannot be ruled out as
         // nearer; waited for without a partner wait, here each depth frame goes out at the end
         // of the wait with the colour frame 16 ms before it, counted as unproven.
-        let (mid, unproven) = decided_with_wait(16, 3, 20);
+        let (mid, unproven) = decided_with_wait(16, Some(3), 20);
         assert!(
             mid.iter().enumerate().all(|(k, d)| *d == (None, Some(Some(k as u64)))),
             "{mid:?}"
@@ -1087,16 +1069,16 @@ mod tests {
         assert_eq!(unproven, (20, 0));
         // 20 ms: the frame before is out of the tolerance and the next one still to come:
         // depth-only at the end of the wait, counted.
-        let (late, unproven) = decided_with_wait(20, 3, 20);
+        let (late, unproven) = decided_with_wait(20, Some(3), 20);
         assert!(late.iter().all(|d| *d == (None, Some(None))), "{late:?}");
         assert_eq!(unproven, (0, 20));
         // 9 ms: the nearest partner is known on arrival, as without a partner wait, once the
         // colour interval is (the first frame waits its wait).
-        let (early, unproven) = decided_with_wait(9, 3, 20);
+        let (early, unproven) = decided_with_wait(9, Some(3), 20);
         assert!(each_on_arrival(&early, 1), "{early:?}");
         assert_eq!(unproven, (1, 0));
         // A wait of 0: never waits for a later colour frame.
-        let (now, _) = decided_with_wait(16, 0, 20);
+        let (now, _) = decided_with_wait(16, Some(0), 20);
         assert!(each_on_arrival(&now, 1), "{now:?}");
     }
 
@@ -1105,12 +1087,12 @@ mod tests {
         // Once the colour camera's clock is learnt (a line over two whole seconds), the next
         // colour frame's earliest arrival, 15.7 ms after the depth frame's, is past the 3 ms
         // wait: the depth frame goes out on arrival, unproven, with the frame 16 ms before.
-        let (mid, unproven) = decided_with_wait(16, 3, 150);
+        let (mid, unproven) = decided_with_wait(16, Some(3), 150);
         assert!(each_on_arrival(&mid, 120), "{:?}", &mid[120..]);
         assert_eq!(unproven, (150, 0));
         // With a wait of 20 ms the next colour frame can arrive within it: it is waited for
         // (until the tick at the end of the wait here, the frame never delivered in time).
-        let (long, _) = decided_with_wait(16, 20, 150);
+        let (long, _) = decided_with_wait(16, Some(20), 150);
         assert!(long[120..].iter().all(|d| d.0.is_none()), "{:?}", &long[120..]);
     }
 
