@@ -750,14 +750,21 @@ mod tests {
         run_on(&mut Synchronizer::new(config), d, c)
     }
 
-    /// Pushes both streams into `sync` in the order their frames reach the host, then flushes.
-    fn run_on(sync: &mut Synchronizer, d: &[(f64, Stamp)], c: &[(f64, Stamp)]) -> Vec<SyncOutput> {
+    /// Both streams' frames in the order they reach the host (depth first at equal times):
+    /// (host time, depth?, stamp).
+    fn arrivals(d: &[(f64, Stamp)], c: &[(f64, Stamp)]) -> Vec<(u64, bool, Stamp)> {
         let mut arrivals: Vec<(u64, bool, Stamp)> = d
             .iter()
             .map(|x| (x.1.host_ns, true, x.1))
             .chain(c.iter().map(|x| (x.1.host_ns, false, x.1)))
             .collect();
         arrivals.sort_by_key(|a| (a.0, !a.1));
+        arrivals
+    }
+
+    /// Pushes both streams into `sync` in the order their frames reach the host, then flushes.
+    fn run_on(sync: &mut Synchronizer, d: &[(f64, Stamp)], c: &[(f64, Stamp)]) -> Vec<SyncOutput> {
+        let arrivals = arrivals(d, c);
         let mut out = Vec::new();
         for (_, is_depth, s) in arrivals {
             if is_depth {
@@ -1545,12 +1552,7 @@ mod tests {
     /// unproven decisions.
     fn run_timed(config: SyncConfig, d: &[(f64, Stamp)], c: &[(f64, Stamp)]) -> (Vec<(u64, SyncOutput)>, (u64, u64)) {
         let mut sync = Synchronizer::new(config);
-        let mut arrivals: Vec<(u64, bool, Stamp)> = d
-            .iter()
-            .map(|x| (x.1.host_ns, true, x.1))
-            .chain(c.iter().map(|x| (x.1.host_ns, false, x.1)))
-            .collect();
-        arrivals.sort_by_key(|a| (a.0, !a.1));
+        let arrivals = arrivals(d, c);
         let (mut timed, mut out) = (Vec::new(), Vec::new());
         for (t, is_depth, s) in arrivals {
             while let Some(due) = sync.due_ns().filter(|&due| due <= t) {

@@ -286,12 +286,12 @@ fn read_frames(file: &Path, labels: &LabelTable) -> Result<Vec<image::GrayImage>
             })?;
         decoded.extend(wanted.into_iter().map(|f| (video.clone(), f)).zip(pictures));
     }
+    let unreadable = |path: &Path, e: image::ImageError| PawDataError::Image {
+        path: path.to_owned(),
+        why: e.to_string(),
+    };
     let mut frames = Vec::with_capacity(labels.images.len());
     for image in &labels.images {
-        let unreadable = |path: &Path, e: image::ImageError| PawDataError::Image {
-            path: path.to_owned(),
-            why: e.to_string(),
-        };
         let picture = match &image.source {
             FrameSource::File(name) => {
                 let path = image_path(file, name).ok_or_else(|| missing(name))?;

@@ -96,9 +96,9 @@ fn string_attr(location: &h5::Location, name: &str, longest: usize) -> Option<St
 pub fn read_dlc_h5(path: &Path) -> Result<LabelTable, LabelError> {
     let file = opened(path)?;
     let groups = file.groups().map_err(|e| wrong(path, "its top level", e.to_string()))?;
-    let frame = groups
+    let (frame, pandas_type) = groups
         .iter()
-        .find(|g| string_attr(g, "pandas_type", 64).is_some())
+        .find_map(|g| string_attr(g, "pandas_type", 64).map(|t| (g, t)))
         .ok_or_else(|| {
             wrong(
                 path,
@@ -107,28 +107,26 @@ pub fn read_dlc_h5(path: &Path) -> Result<LabelTable, LabelError> {
             )
         })?;
     let key = frame.name().trim_start_matches('/').to_owned();
-    match string_attr(frame, "pandas_type", 64).as_deref() {
-        Some("frame") => {}
-        Some("frame_table") => {
+    match pandas_type.as_str() {
+        "frame" => {}
+        "frame_table" => {
             return Err(wrong(
                 path,
                 format!("table `{key}`"),
                 "it is in pandas' `table` format; save it in the fixed format DeepLabCut writes (`to_hdf(..., format=\"fixed\")`) or as CSV",
             ));
         }
-        Some(other) => {
+        other => {
             return Err(wrong(
                 path,
                 format!("table `{key}`"),
                 format!("pandas wrote a `{other}`, not a DataFrame"),
             ));
         }
-        None => unreachable!("the group was found by its `pandas_type`"),
     }
     let table = |what: &str| format!("table `{key}/{what}`");
     let columns = index(path, frame, &key, "axis0")?;
-    let level = |name: &str| columns.iter().position(|(n, _)| n == name);
-    let (Some(bodyparts), Some(_)) = (level("bodyparts"), level("coords")) else {
+    let Some(column_names) = part_and_coordinate(&columns) else {
         return Err(wrong(
             path,
             table("axis0"),
@@ -142,9 +140,10 @@ pub fn read_dlc_h5(path: &Path) -> Result<LabelTable, LabelError> {
             ),
         ));
     };
-    let individuals = level("individuals");
-    let scorer = level("scorer")
-        .and_then(|l| columns[l].1.first().cloned())
+    let scorer = columns
+        .iter()
+        .find(|(n, _)| n == "scorer")
+        .and_then(|(_, v)| v.first().cloned())
         .unwrap_or_default();
     let rows = index(path, frame, &key, "axis1")?;
     let n_rows = rows.first().map_or(0, |(_, v)| v.len());
@@ -156,16 +155,8 @@ pub fn read_dlc_h5(path: &Path) -> Result<LabelTable, LabelError> {
                 .collect()
         })
         .collect();
-    // (individual, body part, coordinate) of each column, then where its values are.
-    let name = |cols: &[(String, Vec<String>)], c: usize, l: usize| cols[l].1[c].clone();
-    let part_of = |cols: &[(String, Vec<String>)], c: usize| match individuals {
-        Some(i) if !name(cols, c, i).is_empty() => format!("{}/{}", name(cols, c, i), name(cols, c, bodyparts)),
-        _ => name(cols, c, bodyparts),
-    };
-    let n_columns = columns[0].1.len();
     let mut parts: Vec<String> = Vec::new();
-    for c in 0..n_columns {
-        let part = part_of(&columns, c);
+    for (part, _) in column_names {
         if !parts.contains(&part) {
             parts.push(part);
         }
@@ -207,21 +198,14 @@ pub fn read_dlc_h5(path: &Path) -> Result<LabelTable, LabelError> {
                 ));
             }
         };
-        let item_level = |name: &str| items.iter().position(|(n, _)| n == name);
-        let (Some(item_parts), Some(item_coords)) = (item_level("bodyparts"), item_level("coords")) else {
+        let Some(item_names) = part_and_coordinate(&items) else {
             return Err(wrong(
                 path,
                 place,
                 "its columns are not named by body part and coordinate",
             ));
         };
-        for i in 0..n_items {
-            let part = match (individuals, item_level("individuals")) {
-                (Some(_), Some(l)) if !items[l].1[i].is_empty() => {
-                    format!("{}/{}", items[l].1[i], items[item_parts].1[i])
-                }
-                _ => items[item_parts].1[i].clone(),
-            };
+        for (i, name) in item_names.into_iter().enumerate() {
             let column = (0..n_rows)
                 .map(|r| {
                     if transposed {
@@ -231,7 +215,7 @@ pub fn read_dlc_h5(path: &Path) -> Result<LabelTable, LabelError> {
                     }
                 })
                 .collect();
-            values.insert((part, items[item_coords].1[i].clone()), column);
+            values.insert(name, column);
         }
     }
     let mut labelled = Vec::with_capacity(n_rows);
@@ -273,6 +257,29 @@ pub fn read_dlc_h5(path: &Path) -> Result<LabelTable, LabelError> {
         parts,
         images: labelled,
     })
+}
+
+/// The (body part, coordinate) of each column of a DeepLabCut column index: its levels
+/// `bodyparts` and `coords`, the part named `individual/part` where an `individuals` level
+/// names one. `None` without those levels.
+fn part_and_coordinate(index: &[(String, Vec<String>)]) -> Option<Vec<(String, String)>> {
+    let level = |name: &str| index.iter().find(|(n, _)| n == name).map(|(_, v)| v);
+    let (parts, coords) = (level("bodyparts")?, level("coords")?);
+    let individuals = level("individuals");
+    Some(
+        parts
+            .iter()
+            .zip(coords)
+            .enumerate()
+            .map(|(c, (part, coord))| {
+                let part = match individuals.map(|i| &i[c]) {
+                    Some(individual) if !individual.is_empty() => format!("{individual}/{part}"),
+                    _ => part.clone(),
+                };
+                (part, coord.clone())
+            })
+            .collect(),
+    )
 }
 
 /// A pandas index kept in the fixed format: its levels, each with its name and the value of
