@@ -137,6 +137,12 @@ fn settings_are_applied_or_refused_with_the_camera_range() {
     let end = start + xml[start..].find("</EnumEntry>").unwrap() + "</EnumEntry>".len();
     let dir = tempfile::tempdir().unwrap();
     let genicam = dir.path().join("no-rgb8.xml");
+    let xml = format!("{}{}", &xml[..start], &xml[end..]);
+    // ... and without a software trigger.
+    let start = xml
+        .find("<EnumEntry Name=\"Software\"")
+        .expect("the fake camera offers a software trigger");
+    let end = start + xml[start..].find("</EnumEntry>").unwrap() + "</EnumEntry>".len();
     std::fs::write(&genicam, format!("{}{}", &xml[..start], &xml[end..])).unwrap();
     let fake = start_fake(&FakeCameraConfig {
         serial: "MP-COLOR-2".into(),
@@ -193,6 +199,15 @@ fn settings_are_applied_or_refused_with_the_camera_range() {
         ..config(None)
     });
     assert!(message.contains("Line7") && message.contains("Line0"), "{message}");
+
+    let message = refusal(AravisConfig {
+        trigger: Trigger::Depth,
+        ..config(None)
+    });
+    assert!(
+        message.contains("trigger \"depth\"") && message.contains("software trigger") && message.contains("[Line0]"),
+        "{message}"
+    );
 
     let message = refusal(AravisConfig {
         fps: Some(1e6),
@@ -342,4 +357,90 @@ fn a_missing_camera_is_a_clear_error_not_a_hang() {
     assert!(message.contains("not an IPv4 address"), "{message}");
     let message = nothing_named.unwrap_err().to_string();
     assert!(message.contains("neither an address nor a serial"), "{message}");
+}
+
+/// Issue 46: a colour camera triggered in step with the depth camera (`trigger = "depth"`)
+/// makes one frame per depth frame, delivered just before it, however its own frame rate is
+/// set; without depth frames it is triggered at its own rate.
+#[test]
+fn issue46_a_camera_triggered_by_the_depth_beat_delivers_each_frame_just_before_the_depth_frame() {
+    use mousepose::runtime::capture::beat::DepthBeat;
+    use std::sync::Arc;
+    let _port = take_port();
+    let fake = start_fake(&FakeCameraConfig {
+        serial: "MP-COLOR-STEP".into(),
+        trigger_frequency: Some(2_000.0),
+        ..FakeCameraConfig::default()
+    });
+    let mut source = AravisColor::open(&AravisConfig {
+        trigger: Trigger::Depth,
+        fps: Some(10.0),
+        ..config(Some((0, 0, 64, 48)))
+    })
+    .unwrap();
+    let beat = Arc::new(DepthBeat::default());
+    source.in_step_with(&beat);
+    let clock = Clock::Monotonic;
+    source.start(&clock).unwrap();
+
+    // Without depth frames: its own 10 frames/s.
+    let own = read_frames(&mut source, 100, Duration::from_millis(1_000));
+    assert!(
+        (6..=14).contains(&own.len()),
+        "{} frames in 1 s at its own 10 fps",
+        own.len()
+    );
+
+    // A depth camera at 25 frames/s, its frames arriving on a thread of their own.
+    let period_ns = 40_000_000;
+    let beats = {
+        let beat = Arc::clone(&beat);
+        std::thread::Builder::new()
+            .name("depth-beat".into())
+            .spawn(move || {
+                let start = Clock::Monotonic.now_ns();
+                let mut arrivals = Vec::new();
+                for k in 0..50u64 {
+                    let due = start + k * period_ns;
+                    let now = Clock::Monotonic.now_ns();
+                    std::thread::sleep(Duration::from_nanos(due.saturating_sub(now)));
+                    let arrived = Clock::Monotonic.now_ns();
+                    beat.beat(arrived);
+                    arrivals.push(arrived);
+                }
+                arrivals
+            })
+            .unwrap()
+    };
+    let frames = read_frames(&mut source, 1_000, Duration::from_millis(2_100));
+    let arrivals = beats.join().unwrap();
+    source.stop().unwrap();
+    assert_eq!(source.losses(), vec![], "no trigger refused");
+    // After the first few depth frames (the period is learnt), each colour frame is delivered
+    // within a few ms before a depth frame.
+    let settled: Vec<i64> = frames
+        .iter()
+        .filter(|f| f.stamp.host_ns > arrivals[5] && f.stamp.host_ns < arrivals[49] + period_ns / 2)
+        .map(|f| {
+            let host = f.stamp.host_ns as i64;
+            arrivals
+                .iter()
+                .map(|&a| host - a as i64)
+                .min_by_key(|d| d.abs())
+                .unwrap()
+        })
+        .collect();
+    let mut sorted = settled.clone();
+    sorted.sort_unstable();
+    assert!(
+        (34..=46).contains(&settled.len()),
+        "{} colour frames for 44 depth frames: {settled:?}",
+        settled.len()
+    );
+    let median = sorted[sorted.len() / 2];
+    assert!(
+        (-10_000_000..=1_000_000).contains(&median),
+        "colour frames at {median} ns from their depth frames at the median: {settled:?}"
+    );
+    drop(fake);
 }

@@ -160,6 +160,10 @@ pub struct FakeCameraConfig {
     pub genicam_file: Option<std::path::PathBuf>,
     /// The share of GVSP packets (0 to 1) the camera drops instead of sending.
     pub lost_packet_ratio: f64,
+    /// How often, per second, the camera looks for a software trigger when it is in trigger
+    /// mode: a triggered frame is sent at the next such instant. `None`: Aravis's own rate
+    /// (25 Hz, far coarser than a real camera's response to a trigger).
+    pub trigger_frequency: Option<f64>,
 }
 
 impl Default for FakeCameraConfig {
@@ -168,6 +172,7 @@ impl Default for FakeCameraConfig {
             serial: "GV01".into(),
             genicam_file: None,
             lost_packet_ratio: 0.0,
+            trigger_frequency: None,
         }
     }
 }
@@ -232,6 +237,9 @@ impl FakeCamera {
         }
         camera.set_gvsp_lost_ratio(config.lost_packet_ratio.clamp(0.0, 1.0));
         let model = camera.fake_camera().ok_or(FakeCameraError::NoModel)?;
+        if let Some(hz) = config.trigger_frequency.filter(|hz| hz.is_finite() && *hz > 0.0) {
+            model.set_trigger_frequency(hz);
+        }
         let model_ptr: *mut aravis_sys::ArvFakeCamera = model.to_glib_none().0;
         let state = Box::into_raw(Box::new(FillState {
             model: model_ptr,

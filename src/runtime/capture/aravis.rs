@@ -16,6 +16,7 @@
 //! timeout, wrong size) are counted by reason in [`FrameSource::losses`] and never returned.
 
 use super::backend::{self, Backend, BackendDevices, CameraConfig, ColorBackend, TableError};
+use super::beat::DepthBeat;
 use super::{CaptureError, Clock, DeviceInfo, FrameSource};
 use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
 use crate::io::session::codec::FrameFormat;
@@ -26,7 +27,7 @@ use aravis_ext::aravis::{BufferStatus, Camera, Stream};
 use aravis_ext::{Interface, use_only_interfaces};
 use std::net::Ipv4Addr;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 const BACKEND: &str = "aravis";
@@ -39,6 +40,11 @@ pub enum Trigger {
     FreeRun,
     /// Each frame starts on a rising edge of this input line (`Line0`, `Line1`, ...).
     Line(String),
+    /// Each frame starts on a software trigger sent so that the frame is delivered just before
+    /// the depth camera's next frame (`trigger = "depth"`, [`super::beat`]). Before the first
+    /// depth frames, and while the depth camera is away, the camera is triggered at its `fps`
+    /// (30 frames/s when not set), so that it is never taken for away itself.
+    Depth,
 }
 
 /// Which camera to open and how to set it up. Plain data: [`AravisColor::open`] does the I/O.
@@ -89,6 +95,11 @@ pub struct AravisColor {
     frame_ids: FrameIdExtender,
     losses: Vec<(&'static str, u64)>,
     connected: Arc<AtomicBool>,
+    /// For a camera triggered in step with the depth camera: the depth camera's arrivals, the
+    /// rate to trigger at without them (ns between frames), and the triggering thread once
+    /// started.
+    in_step: Option<(Arc<DepthBeat>, u64)>,
+    pacer: Option<Pacer>,
 }
 
 impl std::fmt::Debug for AravisColor {
@@ -265,7 +276,30 @@ impl AravisColor {
             frame_ids: FrameIdExtender::default(),
             losses: Vec::new(),
             connected: Arc::new(AtomicBool::new(true)),
+            in_step: (config.trigger == Trigger::Depth).then(|| {
+                let fps = config.fps.unwrap_or(DEFAULT_STEP_FPS);
+                (Arc::new(DepthBeat::default()), (1e9 / fps).round() as u64)
+            }),
+            pacer: None,
         })
+    }
+
+    /// Keeps a camera triggered in step with the depth camera (`trigger = "depth"`) in step
+    /// with `beat`'s arrivals; any other camera is left as it is. Call before `start`.
+    pub fn in_step_with(&mut self, beat: &Arc<DepthBeat>) {
+        if let Some((own, _)) = &mut self.in_step {
+            *own = Arc::clone(beat);
+        }
+    }
+
+    /// Stops the triggering thread, if there is one.
+    fn stop_pacer(&mut self) {
+        if let Some(pacer) = self.pacer.take() {
+            let failed = pacer.stop();
+            if failed > 0 {
+                self.losses.push(("trigger_failed", failed));
+            }
+        }
     }
 
     fn count_loss(&mut self, reason: &'static str) {
@@ -348,7 +382,6 @@ fn apply_settings(camera: &Camera, id: &str, config: &AravisConfig) -> Result<Pi
     if let Err(error) = camera.set_acquisition_mode(aravis::AcquisitionMode::Continuous) {
         tracing::debug!(message = "AcquisitionMode not set.", camera = %id, %error);
     }
-    apply_trigger(camera, id, &config.trigger)?;
     apply_pixel_format(camera, id, config.pixel_format)?;
     if let Some(region) = config.region {
         apply_region(camera, id, region)?;
@@ -362,6 +395,8 @@ fn apply_settings(camera: &Camera, id: &str, config: &AravisConfig) -> Result<Pi
     if let Some(fps) = config.fps {
         apply_frame_rate(camera, id, fps)?;
     }
+    // Last: Aravis switches the trigger off when it sets the frame rate.
+    apply_trigger(camera, id, &config.trigger)?;
     Ok(config.pixel_format)
 }
 
@@ -388,8 +423,159 @@ fn apply_trigger(camera: &Camera, id: &str, trigger: &Trigger) -> Result<(), Cap
                 .set_trigger(line)
                 .map_err(driver(id, format!("setting trigger source {line}")))?;
         }
+        Trigger::Depth => {
+            let sources = camera.dup_available_trigger_sources().unwrap_or_default();
+            if !sources.iter().any(|s| s.as_str() == SOFTWARE) {
+                let offered: Vec<&str> = sources.iter().map(|s| s.as_str()).collect();
+                return Err(refused(
+                    id,
+                    "trigger \"depth\"",
+                    format!(
+                        "it needs the camera's software trigger, and its trigger sources are [{}]",
+                        offered.join(", ")
+                    ),
+                ));
+            }
+            camera
+                .set_trigger(SOFTWARE)
+                .map_err(driver(id, "setting trigger source Software"))?;
+        }
     }
     Ok(())
+}
+
+/// GenICam's name for the trigger a host sends (`TriggerSoftware`).
+const SOFTWARE: &str = "Software";
+
+/// The frame rate a camera triggered in step with the depth camera keeps without depth frames,
+/// when its table sets none.
+const DEFAULT_STEP_FPS: f64 = 30.0;
+
+/// How long before the depth frame's expected arrival a triggered frame should be delivered:
+/// room for the depth camera's own jitter.
+const STEP_MARGIN_NS: u64 = 1_000_000;
+
+/// After this many periods without a depth frame the depth camera is taken for away, and the
+/// colour camera is triggered at its own rate.
+const STEP_SILENT_PERIODS: u64 = 4;
+
+/// The thread that triggers a camera in step with the depth camera: for each depth frame due,
+/// one trigger, sent the camera's trigger-to-delivery time (followed as frames come: exposure,
+/// read-out, transfer, the host's scheduling) plus [`STEP_MARGIN_NS`] before it.
+struct Pacer {
+    stop: Arc<AtomicBool>,
+    shared: Arc<PaceShared>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+/// What the triggering thread and the capture thread share.
+#[derive(Debug, Default)]
+struct PaceShared {
+    /// Host time the last trigger was sent, ns (0: none yet).
+    fired_ns: AtomicU64,
+    /// The camera's trigger-to-delivery time, ns, as followed.
+    delay_ns: AtomicU64,
+    /// Triggers the camera refused (each a frame not made).
+    failed: AtomicU64,
+}
+
+impl Pacer {
+    fn start(camera: Camera, beat: Arc<DepthBeat>, own_period_ns: u64, clock: Clock, id: &str) -> Self {
+        let stop = Arc::new(AtomicBool::new(false));
+        let shared = Arc::new(PaceShared {
+            delay_ns: AtomicU64::new(STEP_MARGIN_NS),
+            ..PaceShared::default()
+        });
+        let (thread_stop, thread_shared, id) = (Arc::clone(&stop), Arc::clone(&shared), id.to_owned());
+        let thread = std::thread::Builder::new()
+            .name("color-trigger".into())
+            .spawn(move || pace(&camera, &beat, own_period_ns, &clock, &thread_shared, &thread_stop, &id))
+            .map_err(|error| tracing::error!(message = "The colour trigger thread did not start.", %error))
+            .ok();
+        Self { stop, shared, thread }
+    }
+
+    /// Notes a frame delivered at `now_ns`: the time since the last trigger is the camera's
+    /// trigger-to-delivery time (when under 100 ms).
+    fn delivered(&self, now_ns: u64) {
+        let fired = self.shared.fired_ns.load(Ordering::Acquire);
+        let delay = now_ns.saturating_sub(fired);
+        if fired == 0 || delay > 100_000_000 {
+            return;
+        }
+        // Up at once, down slowly: the trigger leads by about the longest recent delay, so that
+        // frames come before their depth frames however the delay varies.
+        let old = self.shared.delay_ns.load(Ordering::Acquire);
+        let followed = if delay > old { delay } else { old - (old - delay) / 16 };
+        self.shared.delay_ns.store(followed, Ordering::Release);
+    }
+
+    fn failed(&self) -> u64 {
+        self.shared.failed.load(Ordering::Acquire)
+    }
+
+    /// Stops the thread; returns the triggers that failed.
+    fn stop(mut self) -> u64 {
+        self.stop.store(true, Ordering::Release);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+        self.failed()
+    }
+}
+
+/// The triggering loop of [`Pacer`].
+fn pace(
+    camera: &Camera,
+    beat: &DepthBeat,
+    own_period_ns: u64,
+    clock: &Clock,
+    shared: &PaceShared,
+    stop: &AtomicBool,
+    id: &str,
+) {
+    let (mut served, mut last_fire) = (0u64, 0u64);
+    while !stop.load(Ordering::Acquire) {
+        let now = clock.now_ns();
+        let period = beat.period_ns().unwrap_or(own_period_ns);
+        let lead = (shared.delay_ns.load(Ordering::Acquire) + STEP_MARGIN_NS).min(period / 2);
+        let fire_at = match beat.next_after(now + lead, STEP_SILENT_PERIODS) {
+            Some(mut due) => {
+                // One trigger per depth frame: never the one served already.
+                while due < served + period / 2 {
+                    due += period;
+                }
+                served = due;
+                due - lead
+            }
+            None => {
+                served = 0;
+                (last_fire + own_period_ns).max(now)
+            }
+        };
+        // Slept in slices, so that a stop is seen within 50 ms.
+        loop {
+            let left = fire_at.saturating_sub(clock.now_ns());
+            if left == 0 || stop.load(Ordering::Acquire) {
+                break;
+            }
+            std::thread::sleep(Duration::from_nanos(left.min(50_000_000)));
+        }
+        if stop.load(Ordering::Acquire) {
+            break;
+        }
+        last_fire = fire_at;
+        shared.fired_ns.store(clock.now_ns(), Ordering::Release);
+        if let Err(error) = camera.software_trigger() {
+            if shared.failed.fetch_add(1, Ordering::AcqRel) == 0 {
+                tracing::warn!(
+                    message = "Colour camera trigger refused (logged once, counted in losses as trigger_failed).",
+                    camera = %id,
+                    %error,
+                );
+            }
+        }
+    }
 }
 
 /// The pixel format, by the first of its GenICam names the camera offers, checked once set.
@@ -576,6 +762,15 @@ impl FrameSource for AravisColor {
         camera
             .start_acquisition()
             .map_err(driver(&id, "starting acquisition"))?;
+        if let Some((beat, own_period_ns)) = &self.in_step {
+            self.pacer = Some(Pacer::start(
+                camera.clone(),
+                Arc::clone(beat),
+                *own_period_ns,
+                clock.clone(),
+                &id,
+            ));
+        }
         self.stream = Some(stream);
         self.losses.clear();
         self.frame_ids = FrameIdExtender::default();
@@ -614,6 +809,9 @@ impl FrameSource for AravisColor {
                 }
             };
             stream.push_buffer(buffer);
+            if let Some(pacer) = &self.pacer {
+                pacer.delivered(self.clock.now_ns());
+            }
             match frame {
                 Ok(frame) => return Ok(Some(frame)),
                 Err(reason) => self.count_loss(reason),
@@ -625,10 +823,15 @@ impl FrameSource for AravisColor {
     }
 
     fn losses(&self) -> Vec<(&'static str, u64)> {
-        self.losses.clone()
+        let mut losses = self.losses.clone();
+        if let Some(failed) = self.pacer.as_ref().map(Pacer::failed).filter(|&n| n > 0) {
+            losses.push(("trigger_failed", failed));
+        }
+        losses
     }
 
     fn stop(&mut self) -> Result<(), CaptureError> {
+        self.stop_pacer();
         let result = match &self.camera {
             Some(camera) if self.stream.is_some() => camera
                 .stop_acquisition()
@@ -645,6 +848,7 @@ impl FrameSource for AravisColor {
 
 impl Drop for AravisColor {
     fn drop(&mut self) {
+        self.stop_pacer();
         let (Some(camera), Some(_)) = (&self.camera, &self.stream) else {
             return;
         };
@@ -868,10 +1072,12 @@ fn check_region([x, y, w, h]: [u32; 4]) -> Result<(), TableError> {
     Ok(())
 }
 
-/// `free_run`, or `line:<LINE>` with a GenICam line name.
+/// `free_run`, `depth`, or `line:<LINE>` with a GenICam line name.
 fn parse_trigger(text: &str) -> Result<Trigger, TableError> {
-    if text == "free_run" {
-        return Ok(Trigger::FreeRun);
+    match text {
+        "free_run" => return Ok(Trigger::FreeRun),
+        "depth" => return Ok(Trigger::Depth),
+        _ => {}
     }
     match text.strip_prefix("line:") {
         Some(line)
@@ -884,7 +1090,7 @@ fn parse_trigger(text: &str) -> Result<Trigger, TableError> {
         _ => Err(TableError::new(
             "trigger",
             format!(
-                "must be \"free_run\" or \"line:<LINE>\" with a GenICam line name of letters, digits and _ (e.g. \"line:Line1\"), not {text:?}"
+                "must be \"free_run\", \"depth\" or \"line:<LINE>\" with a GenICam line name of letters, digits and _ (e.g. \"line:Line1\"), not {text:?}"
             ),
         )),
     }
@@ -899,6 +1105,12 @@ impl CameraConfig for AravisConfig {
 
     fn open(&self) -> Result<Box<dyn FrameSource<Frame = ColorFrame>>, CaptureError> {
         Ok(Box::new(AravisColor::open(self)?))
+    }
+
+    fn open_in_step(&self, beat: &Arc<DepthBeat>) -> Result<Box<dyn FrameSource<Frame = ColorFrame>>, CaptureError> {
+        let mut camera = AravisColor::open(self)?;
+        camera.in_step_with(beat);
+        Ok(Box::new(camera))
     }
 
     fn frame_size(&self) -> Option<(u32, u32)> {
@@ -942,6 +1154,11 @@ mod tests {
             (c.gain_db, c.trigger, c.buffers),
             (Some(12.0), Trigger::Line("Line1".into()), 16)
         );
+        let table: toml::Table = toml::from_str("address = \"127.0.0.1\"\ntrigger = \"depth\"\n").unwrap();
+        assert_eq!(check_table(table).unwrap().trigger, Trigger::Depth);
+        let table: toml::Table = toml::from_str("address = \"127.0.0.1\"\ntrigger = \"depths\"\n").unwrap();
+        let error = check_table(table).unwrap_err().reason;
+        assert!(error.contains("\"depth\"") && error.contains("\"depths\""), "{error}");
         assert_eq!(c.pixel_format, PixelFormat::BayerRg8);
     }
 

@@ -8,6 +8,7 @@
 
 use crate::core::frame::{ColorFrame, DepthFrame};
 use crate::core::geometry::Rig;
+use crate::runtime::capture::beat::DepthBeat;
 use crate::runtime::capture::{CaptureError, DeviceInfo, FrameSource};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -26,6 +27,17 @@ pub trait CameraConfig: fmt::Debug + Send + Sync {
     /// # Errors
     /// The camera cannot be found, opened or configured.
     fn open(&self) -> Result<Box<dyn FrameSource<Frame = Self::Frame>>, CaptureError>;
+
+    /// The camera's source as [`CameraConfig::open`] gives it, told when the depth camera's
+    /// frames arrive: a colour camera its table triggers in step with the depth camera keeps
+    /// `beat` (`[color] trigger = "depth"`); every other camera ignores it.
+    ///
+    /// # Errors
+    /// As [`CameraConfig::open`].
+    fn open_in_step(&self, beat: &Arc<DepthBeat>) -> Result<Box<dyn FrameSource<Frame = Self::Frame>>, CaptureError> {
+        let _ = beat;
+        self.open()
+    }
 
     /// The size of its frames when the configuration fixes it, known before the camera opens
     /// (a calibration is checked against it).

@@ -11,6 +11,7 @@
 
 pub mod aravis;
 pub mod backend;
+pub mod beat;
 pub mod clock;
 pub mod openni;
 pub mod rig;

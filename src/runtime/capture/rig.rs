@@ -5,6 +5,7 @@
 use crate::core::frame::{ColorFrame, DepthFrame};
 use crate::io::session::{CameraMeta, CameraRole};
 use crate::runtime::capture::backend::{ColorCamera, DepthCamera};
+use crate::runtime::capture::beat::{Beating, DepthBeat};
 use crate::runtime::capture::supervise::{Epochs, Reconnect, SharedHealth, StallWatch, Supervised};
 use crate::runtime::capture::{CaptureError, Clock, FrameSource};
 use std::sync::Arc;
@@ -14,7 +15,8 @@ pub type DepthSource = Box<dyn FrameSource<Frame = DepthFrame>>;
 /// A colour camera of any backend.
 pub type ColorSource = Box<dyn FrameSource<Frame = ColorFrame>>;
 
-/// The rig's cameras, each supervised; they start on their capture threads.
+/// The rig's cameras, each supervised; they start on their capture threads. The depth camera's
+/// arrivals are told to the colour camera (a camera triggered in step with them uses them).
 #[derive(Debug)]
 pub struct RigCameras {
     pub depth: Supervised<DepthSource>,
@@ -31,19 +33,24 @@ impl RigCameras {
     /// The cameras `depth` and `color` configure, none opened yet: each opens when started,
     /// and again after each failure, as `policy` says.
     pub fn supervised(depth: &DepthCamera, color: Option<&ColorCamera>, policy: Reconnect) -> Self {
+        Self::in_step(depth, color, policy, &Arc::new(DepthBeat::default()))
+    }
+
+    /// As [`RigCameras::supervised`], the depth camera's arrivals told to `beat`.
+    fn in_step(depth: &DepthCamera, color: Option<&ColorCamera>, policy: Reconnect, beat: &Arc<DepthBeat>) -> Self {
         let epochs = Epochs::default();
-        let depth = Arc::clone(depth);
+        let (depth, depth_beat) = (Arc::clone(depth), Arc::clone(beat));
         let depth = Supervised::new(
             CameraRole::Depth,
-            Box::new(move || depth.open()),
+            Box::new(move || depth.open().map(|source| beating(source, &depth_beat))),
             policy,
             Arc::clone(&epochs[0]),
         );
         let color = color.map(|color| {
-            let color = Arc::clone(color);
+            let (color, beat) = (Arc::clone(color), Arc::clone(beat));
             Supervised::new(
                 CameraRole::Color,
-                Box::new(move || color.open()),
+                Box::new(move || color.open_in_step(&beat)),
                 policy,
                 Arc::clone(&epochs[1]),
             )
@@ -64,19 +71,23 @@ impl RigCameras {
         clock: &Clock,
     ) -> Result<(Self, Vec<CameraMeta>), CameraFailure> {
         let failed = |role| move |e| (role, e);
-        let mut first_depth = depth.open().map_err(failed(CameraRole::Depth))?;
-        let first_color = color.map(|c| c.open()).transpose().map_err(failed(CameraRole::Color))?;
+        let beat = Arc::new(DepthBeat::default());
+        let mut first_depth = beating(depth.open().map_err(failed(CameraRole::Depth))?, &beat);
+        let first_color = color
+            .map(|c| c.open_in_step(&beat))
+            .transpose()
+            .map_err(failed(CameraRole::Color))?;
         first_depth.start(clock).map_err(failed(CameraRole::Depth))?;
         let mut metas = vec![first_depth.meta()];
         metas.extend(first_color.as_ref().map(FrameSource::meta));
-        let mut cameras = Self::supervised(depth, None, policy);
+        let mut cameras = Self::in_step(depth, None, policy, &beat);
         cameras.depth = cameras.depth.opened(first_depth, clock);
         cameras.color = first_color.zip(color).map(|(first, color)| {
             // The first opening is the camera opened above; later ones open it again.
             let (mut first, color) = (Some(first), Arc::clone(color));
             Supervised::new(
                 CameraRole::Color,
-                Box::new(move || first.take().map_or_else(|| color.open(), Ok)),
+                Box::new(move || first.take().map_or_else(|| color.open_in_step(&beat), Ok)),
                 policy,
                 Arc::clone(&cameras.epochs[1]),
             )
@@ -110,4 +121,9 @@ impl RigCameras {
         healths.extend(self.color.as_ref().map(|c| ("color", c.health())));
         healths
     }
+}
+
+/// A depth source that tells `beat` when its frames arrive.
+fn beating(source: DepthSource, beat: &Arc<DepthBeat>) -> DepthSource {
+    Box::new(Beating::new(source, Arc::clone(beat)))
 }
