@@ -1089,3 +1089,40 @@ fn issue37_a_chunk_begun_on_a_full_disk_gets_its_camera_events() {
     assert!(kinds.iter().any(|k| k == "camera_opened"), "{kinds:?}");
     assert!(kinds.iter().any(|k| k == "recording_resumed"), "{kinds:?}");
 }
+
+/// Issue 46: a colour camera triggered in step with the depth camera (`trigger = "depth"`)
+/// makes a frame for each depth frame, whatever its own frame rate (here 5 frames/s against
+/// the depth camera's 30), and each depth frame gets a colour partner.
+#[test]
+fn issue46_a_colour_camera_triggered_by_the_depth_camera_gives_every_depth_frame_a_partner() {
+    let _port = take_port();
+    let tmp = tempfile::tempdir().unwrap();
+    let rig = rig_with(tmp.path(), &session_depth(), true, "");
+    let text = std::fs::read_to_string(&rig).unwrap();
+    std::fs::write(
+        &rig,
+        text.replace("fps = 30\nbuffers = 8\n", "fps = 5\nbuffers = 8\ntrigger = \"depth\"\n"),
+    )
+    .unwrap();
+    let camera = crate::capture_aravis::start_fake(&aravis_ext::FakeCameraConfig {
+        serial: "MP-STEP".into(),
+        trigger_frequency: Some(2_000.0),
+        ..aravis_ext::FakeCameraConfig::default()
+    });
+    let daemon = daemon(&rig, None);
+    std::thread::sleep(Duration::from_secs(8));
+    let (status, out, err) = terminate(daemon, Duration::from_secs(30));
+    drop(camera);
+    assert!(status.success(), "{status}: {err}");
+    let report = report(&out);
+    let count = |camera: &str, what: &str| report["cameras"][camera][what].as_u64().unwrap_or(0);
+    let depth = count("depth", "captured");
+    assert!(depth > 100, "{report:#}");
+    // At its own 5 frames/s the colour camera would give a sixth of this.
+    assert!(count("color", "captured") * 10 >= depth * 8, "{report:#}");
+    assert!(count("depth", "paired") * 10 >= depth * 8, "{report:#}");
+    assert!(
+        !report["cameras"]["color"].to_string().contains("trigger_failed"),
+        "{report:#}"
+    );
+}
