@@ -54,7 +54,8 @@ pub struct PawReport {
     pub mean_centre_error_px: f64,
     /// The colour camera's binning the views were seen at (1: the full sensor).
     pub color_binning: u32,
-    /// Detector settings used for the figures above.
+    /// Detector settings used for the figures above: the grouping at the views' scale (less
+    /// than the cascade's own for binned views, [`PawDetector::min_neighbors_at`]), the scales.
     pub min_neighbors: usize,
     pub scales: Vec<f64>,
     /// Precision and recall as the minimum score varies (grouping with `minNeighbors = 0`).
@@ -225,7 +226,7 @@ pub fn evaluate(detector: &PawDetector, dir: &Path, binning: u32) -> Result<PawR
         f1,
         mean_centre_error_px: if tp > 0 { err / tp as f64 } else { 0.0 },
         color_binning: binning,
-        min_neighbors: detector.min_neighbors(),
+        min_neighbors: detector.min_neighbors_at(DATASET_PX_PER_MM / f64::from(binning)),
         scales: detector.scales().to_vec(),
         curve,
     })
