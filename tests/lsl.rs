@@ -8,20 +8,19 @@
 //! with a sentence saying why.
 
 use crate::util::repo_root;
+use mousepose::engine::project_python;
 use mousepose::synth::session::{SessionSpec, write_session};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
-
-/// The project's Python (`scripts/setup.sh` gives it pylsl).
-fn python() -> PathBuf {
-    mousepose::engine::project_python()
-}
 
 /// Why the test cannot run here, if it cannot.
 fn cannot_run() -> Option<String> {
-    let pylsl = Command::new(python()).args(["-c", "import pylsl"]).output();
+    let pylsl = Command::new(project_python()).args(["-c", "import pylsl"]).output();
     if !pylsl.is_ok_and(|o| o.status.success()) {
-        return Some(format!("{} has no pylsl (run scripts/setup.sh)", python().display()));
+        return Some(format!(
+            "{} has no pylsl (run scripts/setup.sh)",
+            project_python().display()
+        ));
     }
     let netns = Command::new("unshare").args(["-n", "true"]).output();
     if !netns.is_ok_and(|o| o.status.success()) {
@@ -121,7 +120,7 @@ kill $reader
         .args(["-n", "sh", "-c", script])
         .current_dir(dir)
         .env("LSLAPICFG", &config)
-        .env("PY", python())
+        .env("PY", project_python())
         .env("BIN", env!("CARGO_BIN_EXE_mousepose"))
         .env("MODELS", repo_root().join("fixtures/models"))
         .status()

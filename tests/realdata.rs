@@ -11,6 +11,7 @@
 #![allow(clippy::unwrap_used)] // test code
 
 use crate::util::{mousepose, replay_options, repo_root};
+use mousepose::engine::project_python;
 use mousepose::engine::replay::replay;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -34,16 +35,9 @@ fn moseq_results() -> Option<PathBuf> {
     real_file("moseq2-viz/results_00.h5")
 }
 
-/// The Python with numpy and h5py: the one `export nwb` uses, which `scripts/setup.sh` makes.
-fn python() -> PathBuf {
-    std::env::var_os("MOUSEPOSE_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(mousepose::engine::export::nwb::DEFAULT_PYTHON))
-}
-
 /// Runs `scripts/real-moseq-session` with `args`; its stdout.
 fn script(args: &[&std::ffi::OsStr]) -> String {
-    let out = Command::new(python())
+    let out = Command::new(project_python())
         .arg(repo_root().join("scripts/real-moseq-session"))
         .args(args)
         .output()
@@ -227,7 +221,7 @@ fn labels_in_deeplabcuts_h5_and_sleaps_slp_are_read_as_the_csv_is() {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
-    let made = Command::new(python())
+    let made = Command::new(project_python())
         .arg(repo_root().join("scripts/label-formats"))
         .arg(&csv)
         .arg(tmp.path())

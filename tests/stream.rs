@@ -4,9 +4,10 @@
 
 use crate::run::{daemon, rig_full, session_depth, terminate};
 use crate::util::{mousepose, repo_root};
+use mousepose::engine::project_python;
 use mousepose::runtime::stream::{Endpoint, Publisher, StreamConfig, Subscriber, Topic};
 use std::io::BufRead as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -72,13 +73,6 @@ fn documented_subscriber() -> String {
     text[start..end].to_owned()
 }
 
-/// The Python of `export nwb`, which `scripts/setup.sh` gives pyzmq.
-fn python() -> PathBuf {
-    std::env::var_os("MOUSEPOSE_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(mousepose::engine::export::nwb::DEFAULT_PYTHON))
-}
-
 /// A daemon on the fixture session with its stream on a socket file of `dir`.
 fn streaming_daemon(dir: &Path) -> (crate::capture_aravis::ChildGuard, String) {
     let endpoint = format!("ipc://{}", dir.join("stream.sock").display());
@@ -95,7 +89,7 @@ fn issue46_the_documented_python_subscriber_and_listen_read_a_running_daemon() {
     let script = documented_subscriber().replace("tcp://127.0.0.1:8471", &endpoint);
     assert!(script.contains(&endpoint), "{script}");
     let mut child = crate::capture_aravis::ChildGuard(
-        Command::new(python())
+        Command::new(project_python())
             .args(["-c", &script])
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
