@@ -162,7 +162,9 @@ mod moseq {
     fn check_range(source: &MoseqDepth) {
         for range in [1..FRAMES, 2..3, 0..FRAMES, 3..3] {
             let mut read = Vec::new();
-            source.for_each_in(range.clone(), |f| read.push(f)).unwrap();
+            source
+                .for_each_in(range.clone(), |f| read.push(f))
+                .expect("reads the range");
             let seqs: Vec<u64> = read.iter().map(|f| f.stamp.seq).collect();
             assert_eq!(seqs, range.clone().map(|k| k as u64).collect::<Vec<_>>());
             for f in &read {
