@@ -732,9 +732,9 @@ fn judge_recording(
         return Err(Failure::from(anyhow::Error::new(e)));
     }
     let mut figures = judged.iter().map(|f| unlabelled(f));
-    let mut dirs = runs_made.into_iter().map(Some);
+    let mut dirs = runs_made.into_iter();
     let (bundled_figures, bundled_run) = if bundled.is_some() {
-        (figures.next(), dirs.next().flatten())
+        (figures.next(), dirs.next())
     } else {
         (None, None)
     };
@@ -744,7 +744,7 @@ fn judge_recording(
         bundled: bundled_figures,
         adapted: figures.next().unwrap_or_default(),
         bundled_run,
-        adapted_run: dirs.next().flatten().unwrap_or_default(),
+        adapted_run: dirs.next().unwrap_or_default(),
     })
 }
 
