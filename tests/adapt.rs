@@ -9,9 +9,15 @@ use std::path::Path;
 
 /// A synthetic MoSeq recording of `frames` frames into `dir`, of a mouse of the given build.
 fn recording(dir: &Path, frames: u32, scale: f64, girth: f64) {
+    recording_as(dir, frames, scale, girth, &[]);
+}
+
+/// [`recording`] with more arguments of `synth moseq`.
+fn recording_as(dir: &Path, frames: u32, scale: f64, girth: f64, more: &[&str]) {
     let out = mousepose()
         .args(["synth", "moseq", "--frames", &frames.to_string(), "--seed", "5"])
         .args(["--scale", &scale.to_string(), "--girth", &girth.to_string()])
+        .args(more)
         .arg("--out")
         .arg(dir)
         .output()
@@ -36,6 +42,19 @@ fn adapt(args: &[&std::ffi::OsStr]) -> (bool, String, String) {
     )
 }
 
+/// `adapt` of `rec` into `models`, judged on frames 30..; what it printed (`adapt.json`).
+fn adapt_judging_from_30(rec: &Path, models: &Path) -> serde_json::Value {
+    let (ok, stdout, stderr) = adapt(&[
+        rec.as_os_str(),
+        "--out".as_ref(),
+        models.as_os_str(),
+        "--judge-frames".as_ref(),
+        "30:".as_ref(),
+    ]);
+    assert!(ok, "{stderr}");
+    serde_json::from_str(stdout.trim()).unwrap()
+}
+
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
 }
@@ -45,15 +64,7 @@ fn adapt_measures_a_larger_rendered_mouse_and_writes_models_that_the_replays_nam
     let tmp = tempfile::tempdir().unwrap();
     let (rec, models) = (tmp.path().join("rec"), tmp.path().join("models"));
     recording(&rec, 90, 1.2, 1.15);
-    let (ok, stdout, stderr) = adapt(&[
-        rec.as_os_str(),
-        "--out".as_ref(),
-        models.as_os_str(),
-        "--judge-frames".as_ref(),
-        "30:".as_ref(),
-    ]);
-    assert!(ok, "{stderr}");
-    let s: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let s = adapt_judging_from_30(&rec, &models);
     let f = |v: &serde_json::Value| v.as_f64().unwrap_or_else(|| panic!("{v} in {s}"));
     // The build is fitted so that the rendered mouse measures as the recording's: its size
     // and girth are the recording's mouse's (within 5 %).
@@ -94,6 +105,26 @@ fn adapt_measures_a_larger_rendered_mouse_and_writes_models_that_the_replays_nam
     assert_eq!(adapted["models"]["files"]["body.forest"]["bytes"], bytes);
     assert_eq!(hash(&adapted).len(), 64);
     assert_ne!(hash(&adapted), hash(&bundled));
+}
+
+/// The same recording as `depth.avi` (`synth moseq --video`) adapts and judges exactly as
+/// its `depth.dat`: the judged frames (from frame 30: one ffmpeg seeking there) are the same.
+#[test]
+fn a_depth_avi_adapts_and_judges_as_its_depth_dat() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut figures = Vec::new();
+    for (name, more) in [("dat", &[][..]), ("avi", &["--video"][..])] {
+        let rec = tmp.path().join(name);
+        recording_as(&rec, 60, 1.0, 1.0, more);
+        let file = if more.is_empty() { "depth.dat" } else { "depth.avi" };
+        assert!(rec.join(file).is_file(), "{name}");
+        let models = tmp.path().join(format!("models-{name}"));
+        let s = adapt_judging_from_30(&rec, &models);
+        let judged = &s["judged"][0];
+        assert!(judged["adapted"]["frames"].as_u64().unwrap() >= 25, "{judged}");
+        figures.push((s["build"].clone(), judged["bundled"].clone(), judged["adapted"].clone()));
+    }
+    assert_eq!(figures[0], figures[1]);
 }
 
 #[test]

@@ -107,6 +107,7 @@ mod moseq {
         assert_eq!(source.frame_at(2).unwrap().data, frames()[2]);
         assert!(source.frame_at(FRAMES).is_err());
         assert_eq!(source.duplicate_timestamps(), 0);
+        check_range(&source);
     }
 
     #[test]
@@ -153,6 +154,29 @@ mod moseq {
             assert_eq!(frame.stamp.seq, k as u64);
         }
         assert!(source.frame_at(FRAMES).is_err());
+        check_range(&source);
+    }
+
+    /// A range read on from its first frame (a `depth.avi` by one ffmpeg seeking there) gives
+    /// exactly those frames; a range past the end is refused.
+    fn check_range(source: &MoseqDepth) {
+        for range in [1..FRAMES, 2..3, 0..FRAMES, 3..3] {
+            let mut read = Vec::new();
+            source
+                .for_each_in(range.clone(), |f| read.push(f))
+                .expect("reads the range");
+            let seqs: Vec<u64> = read.iter().map(|f| f.stamp.seq).collect();
+            assert_eq!(seqs, range.clone().map(|k| k as u64).collect::<Vec<_>>());
+            for f in &read {
+                assert_eq!(
+                    f.data,
+                    frames()[f.stamp.seq as usize],
+                    "frame {} of {range:?}",
+                    f.stamp.seq
+                );
+            }
+        }
+        assert!(source.for_each_in(1..FRAMES + 1, |_| {}).is_err());
     }
 
     #[test]

@@ -96,6 +96,10 @@ pub struct MoseqArgs {
     /// Depth camera noise model: none, structured-light or tof.
     #[arg(long = "noise-model", value_name = "MODEL", default_value = "tof")]
     noise_model: NoiseModel,
+    /// Write the frames as depth.avi (lossless 16-bit FFV1, as MoSeq compresses a recording;
+    /// about a fifth of depth.dat's size) instead of depth.dat.
+    #[arg(long)]
+    video: bool,
     /// Replace the output directory if it is not empty.
     #[arg(long)]
     force: bool,
@@ -265,6 +269,7 @@ fn synth_moseq(args: &MoseqArgs) -> Outcome {
             height: args.back_height,
             tail_shown: 1.0,
         }),
+        video: args.video,
     };
     engine::synth_moseq(
         &MoseqOptions {

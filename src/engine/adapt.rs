@@ -30,7 +30,7 @@ use crate::io::output::Staging;
 use crate::runtime::models::{BODY_MODEL, ORIENTATION_MODEL, PAWS_MODEL, default_models_dir};
 use crate::runtime::pose_record::{PoseRecord, PoseStatus};
 use crate::runtime::recording::Recording;
-use crate::runtime::sink::poses::{POSES_FILE, read_poses};
+use crate::runtime::sink::poses::{POSES_FILE, PosesRows};
 use crate::synth::Build;
 use crate::synth::dataset::{DatasetSpec, render_sample, write_dataset};
 use crate::synth::mouse::pose_library;
@@ -43,7 +43,6 @@ use anyhow::Context as _;
 use nalgebra::{Point2, Point3, Vector2, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
-use std::collections::HashMap;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
@@ -676,7 +675,7 @@ fn judge_recording(
         .unwrap_or_else(|| "recording".to_owned());
     let runs = models.join("judge").join(name);
     let bundled = default_models_dir().ok();
-    let mut tables: Vec<(Option<PathBuf>, HashMap<u64, PoseRecord>)> = Vec::new();
+    let mut runs_made: Vec<PathBuf> = Vec::new();
     for (label, dir) in [("bundled", bundled.clone()), ("adapted", Some(models.to_path_buf()))] {
         let Some(dir) = dir else { continue };
         let out = runs.join(label);
@@ -691,31 +690,51 @@ fn judge_recording(
         )
         .map_err(|e| Failure::classed(e.is_usage(), e))?;
         progress.finish();
-        let rows = read_poses(&out.join(POSES_FILE)).map_err(|e| Failure::from(anyhow::Error::new(e)))?;
-        tables.push((Some(out), rows.into_iter().map(|r| (r.depth.seq, r)).collect()));
+        runs_made.push(out);
     }
     let scene = scene_of(&replay_options(path, options, PathBuf::new(), None), &recording)
         .map_err(|e| Failure::classed(e.is_usage(), e))?;
     let (rig, mut segmenter) = (scene.rig, scene.segmenter);
-    let indices: Vec<usize> = range.clone().collect();
-    let mut judged: Vec<Vec<JudgedFrame>> = vec![Vec::new(); tables.len()];
-    progress.start("judging", indices.len() as u64);
-    for_frames(&recording, &indices, |frame| {
-        progress.advance(1);
-        let Ok(Some(mouse)) = segmenter.segment(frame) else {
-            return;
-        };
-        for ((_, table), out) in tables.iter().zip(judged.iter_mut()) {
-            if let Some(j) = table.get(&frame.stamp.seq).and_then(|r| judged_frame(r, &mouse, &rig)) {
-                out.push(j);
+    // Each run's rows read beside the frames, both in the recording's order: neither the
+    // frames nor the runs' poses are ever all in memory, however long the recording.
+    let mut rows = runs_made
+        .iter()
+        .map(|run| PosesRows::open(&run.join(POSES_FILE)).map(Iterator::peekable))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| Failure::from(anyhow::Error::new(e)))?;
+    let mut judged: Vec<Vec<JudgedFrame>> = vec![Vec::new(); rows.len()];
+    let mut unreadable = None;
+    progress.start("judging", range.len() as u64);
+    recording
+        .for_each_depth_frame(range.clone(), |frame| {
+            progress.advance(1);
+            let seq = frame.stamp.seq;
+            let mouse = segmenter.segment(&frame).ok().flatten();
+            for (run, out) in rows.iter_mut().zip(judged.iter_mut()) {
+                // The run's rows before this frame (frames outside those judged, or not paired).
+                while run.next_if(|r| r.as_ref().is_ok_and(|r| r.depth.seq < seq)).is_some() {}
+                let row = match run.next_if(|r| r.as_ref().map_or(true, |r| r.depth.seq == seq)) {
+                    Some(Ok(row)) => row,
+                    Some(Err(e)) => {
+                        unreadable.get_or_insert(e);
+                        continue;
+                    }
+                    None => continue,
+                };
+                if let Some(j) = mouse.as_ref().and_then(|m| judged_frame(&row, m, &rig)) {
+                    out.push(j);
+                }
             }
-        }
-    })?;
+        })
+        .with_context(|| format!("reading frames of {:?}", recording.dir()))?;
     progress.finish();
+    if let Some(e) = unreadable {
+        return Err(Failure::from(anyhow::Error::new(e)));
+    }
     let mut figures = judged.iter().map(|f| unlabelled(f));
-    let mut dirs = tables.into_iter().map(|(d, _)| d);
+    let mut dirs = runs_made.into_iter();
     let (bundled_figures, bundled_run) = if bundled.is_some() {
-        (figures.next(), dirs.next().flatten())
+        (figures.next(), dirs.next())
     } else {
         (None, None)
     };
@@ -725,7 +744,7 @@ fn judge_recording(
         bundled: bundled_figures,
         adapted: figures.next().unwrap_or_default(),
         bundled_run,
-        adapted_run: dirs.next().flatten().unwrap_or_default(),
+        adapted_run: dirs.next().unwrap_or_default(),
     })
 }
 

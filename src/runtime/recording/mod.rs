@@ -280,6 +280,29 @@ impl Recording {
         }
     }
 
+    /// The depth frames at positions `range`, in order, each handed to `each` as it is read
+    /// (a MoSeq `depth.avi` by one ffmpeg from the first; never all of them in memory); a
+    /// session's frames that do not decode are left out.
+    ///
+    /// # Errors
+    /// The MoSeq recording cannot be read.
+    pub fn for_each_depth_frame(
+        &self,
+        range: std::ops::Range<usize>,
+        mut each: impl FnMut(DepthFrame),
+    ) -> Result<(), RecordingError> {
+        match self {
+            Recording::Session(r) => {
+                range.filter_map(|k| r.depth_frame(k).ok()).for_each(each);
+                Ok(())
+            }
+            Recording::Moseq { config: c, .. } => {
+                let source = Self::moseq(c)?;
+                source.for_each_in(range, &mut each).map_err(RecordingError::Moseq)
+            }
+        }
+    }
+
     /// The colour frame with sequence number `seq` (sessions only).
     pub fn color_frame(&self, seq: u64) -> Option<ColorFrame> {
         match self {

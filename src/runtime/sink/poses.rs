@@ -440,43 +440,85 @@ pub enum PosesReadError {
 /// # Errors
 /// The file cannot be read, its header is not this version's, or a row does not parse.
 pub fn read_poses(path: &Path) -> Result<Vec<PoseRecord>, PosesReadError> {
-    let bytes = std::fs::read(path).map_err(|source| PosesReadError::Io {
-        path: path.to_owned(),
-        source,
-    })?;
-    let mut reader = csv::ReaderBuilder::new()
-        .has_headers(false)
-        .flexible(true)
-        .from_reader(bytes.as_slice());
-    let mut records = reader.records();
-    let header = records.next().and_then(Result::ok);
-    let is = |orientation: bool| {
-        header
-            .as_ref()
-            .is_some_and(|h| h.iter().eq(columns(orientation).iter()))
-    };
-    let orientation = if is(true) {
-        true
-    } else if is(false) {
-        false
-    } else {
-        return Err(PosesReadError::Header { path: path.to_owned() });
-    };
-    records
-        .map(|record| {
-            let line = |e: &csv::Error| e.position().map_or(0, csv::Position::line);
-            let record = record.map_err(|e| PosesReadError::Row {
-                path: path.to_owned(),
-                line: line(&e) as usize,
-                what: e.to_string(),
-            })?;
-            parse_row(&record, orientation).map_err(|what| PosesReadError::Row {
-                path: path.to_owned(),
-                line: record.position().map_or(0, csv::Position::line) as usize,
-                what,
-            })
+    PosesRows::open(path)?.collect()
+}
+
+/// The rows of a `poses.csv` read one at a time, as [`read_poses`] reads them all (a long
+/// run's file is never held in memory).
+pub struct PosesRows {
+    records: csv::StringRecordsIntoIter<std::io::BufReader<File>>,
+    orientation: bool,
+    path: std::path::PathBuf,
+}
+
+impl PosesRows {
+    /// Opens `path` and reads its header.
+    ///
+    /// # Errors
+    /// The file cannot be read, or its header is not this version's.
+    pub fn open(path: &Path) -> Result<Self, PosesReadError> {
+        let file = File::open(path).map_err(|source| PosesReadError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let mut records = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .from_reader(std::io::BufReader::new(file))
+            .into_records();
+        let header = records.next().and_then(Result::ok);
+        let is = |orientation: bool| {
+            header
+                .as_ref()
+                .is_some_and(|h| h.iter().eq(columns(orientation).iter()))
+        };
+        let orientation = if is(true) {
+            true
+        } else if is(false) {
+            false
+        } else {
+            return Err(PosesReadError::Header { path: path.to_owned() });
+        };
+        Ok(Self {
+            records,
+            orientation,
+            path: path.to_owned(),
         })
-        .collect()
+    }
+}
+
+impl std::fmt::Debug for PosesRows {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PosesRows")
+            .field("path", &self.path)
+            .field("orientation", &self.orientation)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Iterator for PosesRows {
+    type Item = Result<PoseRecord, PosesReadError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let record = self.records.next()?;
+        let path = &self.path;
+        let line = |e: &csv::Error| e.position().map_or(0, csv::Position::line);
+        Some(
+            record
+                .map_err(|e| PosesReadError::Row {
+                    path: path.clone(),
+                    line: line(&e) as usize,
+                    what: e.to_string(),
+                })
+                .and_then(|record| {
+                    parse_row(&record, self.orientation).map_err(|what| PosesReadError::Row {
+                        path: path.clone(),
+                        line: record.position().map_or(0, csv::Position::line) as usize,
+                        what,
+                    })
+                }),
+        )
+    }
 }
 
 /// One row of `poses.csv`; `orientation`: whether the file has the orientation column.

@@ -51,6 +51,7 @@ use crate::io::session::meta::{BackendName, CameraMeta, CameraRole};
 use crate::runtime::capture::{CaptureError, Clock, FrameSource};
 use std::fs::File;
 use std::io;
+use std::ops::Range;
 use std::path::PathBuf;
 use std::sync::mpsc;
 use std::time::Duration;
@@ -348,15 +349,74 @@ impl MoseqDepth {
         let samples = self.frame_samples();
         let data = match self.kind {
             MoseqKind::Raw => read_raw_frame(&self.depth_path, samples, index as u64),
-            MoseqKind::Video => {
-                let fps = self.video_rate.unwrap_or(if self.fps > 0.0 { self.fps } else { 30.0 });
-                // At the frame's own time: ffmpeg seeking an AVI half a frame early or late
-                // can give the frame before or after.
-                read_video_frame(&self.config.ffmpeg, &self.depth_path, samples, index as f64 / fps)
-            }
+            MoseqKind::Video => read_video_frame(
+                &self.config.ffmpeg,
+                &self.depth_path,
+                samples,
+                self.video_seconds(index),
+            ),
         }
         .map_err(|e| self.error(e))?;
         Ok(self.frame(index, data))
+    }
+
+    /// The time `depth.avi` is seeked to for frame `index`: the frame's own time by the
+    /// video's rate (ffmpeg seeking an AVI half a frame early or late can give the frame
+    /// before or after).
+    fn video_seconds(&self, index: usize) -> f64 {
+        let fps = self.video_rate.unwrap_or(if self.fps > 0.0 { self.fps } else { 30.0 });
+        index as f64 / fps
+    }
+
+    /// Frames `range` in order, each handed to `each` as it is read, one at a time:
+    /// `depth.dat` read on from the first, `depth.avi` decoded by a single ffmpeg from the
+    /// first (a long range costs one seek, not one a frame, and never all its frames in memory).
+    ///
+    /// # Errors
+    /// A range past the end, or the file cannot be read there.
+    pub fn for_each_in(&self, range: Range<usize>, mut each: impl FnMut(DepthFrame)) -> Result<(), CaptureError> {
+        if range.end > self.timestamps.len() {
+            return Err(self.error(self.count_mismatch(range.end as u64)));
+        }
+        if range.is_empty() {
+            return Ok(());
+        }
+        let samples = self.frame_samples();
+        match self.kind {
+            MoseqKind::Raw => {
+                use std::io::{Seek, SeekFrom};
+                let io_error = |source| {
+                    self.error(MoseqError::Io {
+                        path: self.depth_path.clone(),
+                        source,
+                    })
+                };
+                let mut file = File::open(&self.depth_path).map_err(io_error)?;
+                file.seek(SeekFrom::Start(range.start as u64 * samples as u64 * 2))
+                    .map_err(io_error)?;
+                for index in range {
+                    match read_samples(&mut file, samples) {
+                        Ok((data, n)) if n == samples * 2 => each(self.frame(index, data)),
+                        Ok(_) => return Err(self.error(self.count_mismatch(index as u64))),
+                        Err(e) => return Err(io_error(e)),
+                    }
+                }
+            }
+            MoseqKind::Video => {
+                let decoder = self.spawn_decoder(range.start).map_err(|e| self.error(e))?;
+                let Some(frames) = decoder.frames.as_ref() else {
+                    return Err(self.error(self.count_mismatch(range.start as u64)));
+                };
+                for index in range {
+                    match frames.recv() {
+                        Ok(Ok(data)) => each(self.frame(index, data)),
+                        Ok(Err(e)) => return Err(self.error(e)),
+                        Err(_) => return Err(self.error(self.count_mismatch(index as u64))),
+                    }
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Frame `index` with its stamp from the time file, holding `data`.
@@ -394,7 +454,7 @@ impl MoseqDepth {
         if !one_pass {
             return indices.iter().map(|&i| self.frame_at(i)).collect();
         }
-        let decoder = self.spawn_decoder().map_err(|e| self.error(e))?;
+        let decoder = self.spawn_decoder(0).map_err(|e| self.error(e))?;
         let Some(frames) = decoder.frames.as_ref() else {
             return Err(self.error(self.count_mismatch(0)));
         };
@@ -485,7 +545,7 @@ impl FrameSource for MoseqDepth {
                     source,
                 })
             })?,
-            MoseqKind::Video => Reader::Video(self.spawn_decoder().map_err(|e| self.error(e))?),
+            MoseqKind::Video => Reader::Video(self.spawn_decoder(0).map_err(|e| self.error(e))?),
         };
         self.reader = Some(reader);
         Ok(())

@@ -192,9 +192,16 @@ pub(super) struct VideoDecoder {
 }
 
 impl MoseqDepth {
-    pub(super) fn spawn_decoder(&self) -> Result<VideoDecoder, MoseqError> {
-        let mut child = Command::new(&self.config.ffmpeg)
-            .args(["-nostdin", "-v", "error", "-i"])
+    /// An ffmpeg decoding `depth.avi` from frame `from` on (seeking to its time, as
+    /// [`MoseqDepth::frame_at`] does) to its end.
+    pub(super) fn spawn_decoder(&self, from: usize) -> Result<VideoDecoder, MoseqError> {
+        let mut command = Command::new(&self.config.ffmpeg);
+        command.args(["-nostdin", "-v", "error"]);
+        if from > 0 {
+            command.args(["-ss", &format!("{:.6}", self.video_seconds(from))]);
+        }
+        let mut child = command
+            .arg("-i")
             .arg(&self.depth_path)
             .args(["-map", "0:v:0", "-f", "rawvideo", "-pix_fmt", "gray16le", "-"])
             .stdin(Stdio::null())
