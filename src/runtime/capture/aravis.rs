@@ -460,13 +460,19 @@ const STEP_MARGIN_NS: u64 = 1_000_000;
 const STEP_SILENT_PERIODS: u64 = 4;
 
 /// The thread that triggers a camera in step with the depth camera: for each depth frame due,
-/// one trigger, sent the camera's trigger-to-delivery time (followed as frames come: exposure,
-/// read-out, transfer, the host's scheduling) plus [`STEP_MARGIN_NS`] before it.
+/// one trigger, sent the camera's trigger-to-delivery time (exposure, read-out, transfer, the
+/// host's scheduling: [`STEP_DELAYS`]) plus [`STEP_MARGIN_NS`] before it.
 struct Pacer {
     stop: Arc<AtomicBool>,
     shared: Arc<PaceShared>,
     thread: Option<std::thread::JoinHandle<()>>,
+    /// The last trigger-to-delivery times, ns (at most [`STEP_DELAYS`]).
+    delays: std::collections::VecDeque<u64>,
 }
+
+/// Trigger-to-delivery times the lead is taken from: the 9th longest of the last 31 (their
+/// 75th percentile), so that one late delivery (the host busy) does not move it.
+const STEP_DELAYS: usize = 31;
 
 /// What the triggering thread and the capture thread share.
 #[derive(Debug, Default)]
@@ -492,22 +498,30 @@ impl Pacer {
             .spawn(move || pace(&camera, &beat, own_period_ns, &clock, &thread_shared, &thread_stop, &id))
             .map_err(|error| tracing::error!(message = "The colour trigger thread did not start.", %error))
             .ok();
-        Self { stop, shared, thread }
+        Self {
+            stop,
+            shared,
+            thread,
+            delays: std::collections::VecDeque::with_capacity(STEP_DELAYS),
+        }
     }
 
     /// Notes a frame delivered at `now_ns`: the time since the last trigger is the camera's
     /// trigger-to-delivery time (when under 100 ms).
-    fn delivered(&self, now_ns: u64) {
+    fn delivered(&mut self, now_ns: u64) {
         let fired = self.shared.fired_ns.load(Ordering::Acquire);
         let delay = now_ns.saturating_sub(fired);
         if fired == 0 || delay > 100_000_000 {
             return;
         }
-        // Up at once, down slowly: the trigger leads by about the longest recent delay, so that
-        // frames come before their depth frames however the delay varies.
-        let old = self.shared.delay_ns.load(Ordering::Acquire);
-        let followed = if delay > old { delay } else { old - (old - delay) / 16 };
-        self.shared.delay_ns.store(followed, Ordering::Release);
+        if self.delays.len() == STEP_DELAYS {
+            self.delays.pop_front();
+        }
+        self.delays.push_back(delay);
+        let mut sorted: Vec<u64> = self.delays.iter().copied().collect();
+        sorted.sort_unstable();
+        let at = (sorted.len() * 3 / 4).min(sorted.len() - 1);
+        self.shared.delay_ns.store(sorted[at], Ordering::Release);
     }
 
     fn failed(&self) -> u64 {
@@ -809,8 +823,9 @@ impl FrameSource for AravisColor {
                 }
             };
             stream.push_buffer(buffer);
-            if let Some(pacer) = &self.pacer {
-                pacer.delivered(self.clock.now_ns());
+            let now_ns = self.clock.now_ns();
+            if let Some(pacer) = &mut self.pacer {
+                pacer.delivered(now_ns);
             }
             match frame {
                 Ok(frame) => return Ok(Some(frame)),
