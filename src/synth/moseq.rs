@@ -114,8 +114,8 @@ pub fn moseq_camera(spec: &MoseqSpec) -> Result<Camera, SynthMoseqError> {
 const STREAM_DEPTH: u64 = 12;
 
 /// Writes the recording into `dir` (which must exist), calling `progress` with the frames done
-/// out of the total. Frames are rendered in parallel, a chunk at a time, and written as they
-/// come: the recording is never held in memory.
+/// out of the total. Frames are posed and rendered a chunk at a time (rendered in parallel)
+/// and written as they come: neither the recording nor its mice are ever held in memory.
 ///
 /// # Errors
 /// A frame size not in the camera table, or a file that cannot be written.
@@ -128,25 +128,28 @@ pub fn write_moseq(dir: &Path, spec: &MoseqSpec, mut progress: impl FnMut(u64, u
     let background = Cage::new(&camera).depth(Region::full(&camera.intrinsics));
     let (mut animator, carriage) = session_mouse(spec.seed, Mice::Standard, spec.build);
     let period = 1.0 / spec.fps;
-    let mut mice = Vec::with_capacity(spec.frames as usize);
-    for k in 0..spec.frames {
-        if k > 0 {
-            animator.advance(period);
-        }
-        let (mut params, placement) = animator.state();
-        carriage.apply(&mut params);
-        let mut mouse = pose_mouse(&params, &placement);
-        fit_in_cage(&mut mouse, 3.0);
-        mice.push(mouse);
-    }
     let mut depth = DepthWriter::create(dir, spec)?;
-    const CHUNK: usize = 32;
-    for (c, chunk) in mice.chunks(CHUNK).enumerate() {
-        let frames: Vec<Vec<u16>> = chunk
+    // Posed a chunk at a time (in order: the animation is sequential), then rendered in parallel.
+    const CHUNK: u64 = 32;
+    let mut mice = Vec::with_capacity(CHUNK as usize);
+    let mut done = 0u64;
+    while done < spec.frames {
+        mice.clear();
+        for k in done..(done + CHUNK).min(spec.frames) {
+            if k > 0 {
+                animator.advance(period);
+            }
+            let (mut params, placement) = animator.state();
+            carriage.apply(&mut params);
+            let mut mouse = pose_mouse(&params, &placement);
+            fit_in_cage(&mut mouse, 3.0);
+            mice.push(mouse);
+        }
+        let frames: Vec<Vec<u16>> = mice
             .par_iter()
             .enumerate()
             .map(|(i, m)| {
-                let mut rng = item_rng(spec.seed, STREAM_DEPTH, (c * CHUNK + i) as u64);
+                let mut rng = item_rng(spec.seed, STREAM_DEPTH, done + i as u64);
                 render_top_frame(&camera, &background, &skin(m), &spec.noise, &mut rng)
             })
             .collect();
@@ -154,7 +157,8 @@ pub fn write_moseq(dir: &Path, spec: &MoseqSpec, mut progress: impl FnMut(u64, u
             let bytes: Vec<u8> = f.iter().flat_map(|v| v.to_le_bytes()).collect();
             depth.write(&bytes)?;
         }
-        progress(((c + 1) * CHUNK).min(mice.len()) as u64, spec.frames);
+        done += mice.len() as u64;
+        progress(done, spec.frames);
     }
     depth.finish()?;
     // MoSeq's timestamps: device milliseconds, one frame a line.
