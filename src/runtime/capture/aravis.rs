@@ -518,10 +518,14 @@ impl Pacer {
             self.delays.pop_front();
         }
         self.delays.push_back(delay);
-        let mut sorted: Vec<u64> = self.delays.iter().copied().collect();
-        sorted.sort_unstable();
+        let mut sorted = [0u64; STEP_DELAYS];
+        let sorted = &mut sorted[..self.delays.len()];
+        for (slot, &delay) in sorted.iter_mut().zip(&self.delays) {
+            *slot = delay;
+        }
         let at = (sorted.len() * 3 / 4).min(sorted.len() - 1);
-        self.shared.delay_ns.store(sorted[at], Ordering::Release);
+        let (_, &mut lead, _) = sorted.select_nth_unstable(at);
+        self.shared.delay_ns.store(lead, Ordering::Release);
     }
 
     fn failed(&self) -> u64 {
@@ -823,9 +827,8 @@ impl FrameSource for AravisColor {
                 }
             };
             stream.push_buffer(buffer);
-            let now_ns = self.clock.now_ns();
             if let Some(pacer) = &mut self.pacer {
-                pacer.delivered(now_ns);
+                pacer.delivered(self.clock.now_ns());
             }
             match frame {
                 Ok(frame) => return Ok(Some(frame)),

@@ -402,18 +402,26 @@ impl MoseqDepth {
                     }
                 }
             }
-            MoseqKind::Video => {
-                let decoder = self.spawn_decoder(range.start).map_err(|e| self.error(e))?;
-                let Some(frames) = decoder.frames.as_ref() else {
-                    return Err(self.error(self.count_mismatch(range.start as u64)));
-                };
-                for index in range {
-                    match frames.recv() {
-                        Ok(Ok(data)) => each(self.frame(index, data)),
-                        Ok(Err(e)) => return Err(self.error(e)),
-                        Err(_) => return Err(self.error(self.count_mismatch(index as u64))),
-                    }
-                }
+            MoseqKind::Video => self.decode_video(range, |index, data| each(self.frame(index, data)))?,
+        }
+        Ok(())
+    }
+
+    /// Decodes `depth.avi`'s frames `range` by one ffmpeg seeking to the first, handing each
+    /// frame's index and samples to `each` as it comes.
+    ///
+    /// # Errors
+    /// The decoder fails or ends before the range does.
+    fn decode_video(&self, range: Range<usize>, mut each: impl FnMut(usize, Vec<u16>)) -> Result<(), CaptureError> {
+        let decoder = self.spawn_decoder(range.start).map_err(|e| self.error(e))?;
+        let Some(frames) = decoder.frames.as_ref() else {
+            return Err(self.error(self.count_mismatch(range.start as u64)));
+        };
+        for index in range {
+            match frames.recv() {
+                Ok(Ok(data)) => each(index, data),
+                Ok(Err(e)) => return Err(self.error(e)),
+                Err(_) => return Err(self.error(self.count_mismatch(index as u64))),
             }
         }
         Ok(())
@@ -454,23 +462,13 @@ impl MoseqDepth {
         if !one_pass {
             return indices.iter().map(|&i| self.frame_at(i)).collect();
         }
-        let decoder = self.spawn_decoder(0).map_err(|e| self.error(e))?;
-        let Some(frames) = decoder.frames.as_ref() else {
-            return Err(self.error(self.count_mismatch(0)));
-        };
         let mut out = Vec::with_capacity(indices.len());
         let mut wanted = indices.iter().peekable();
-        for index in 0..=last {
-            let data = match frames.recv() {
-                Ok(Ok(data)) => data,
-                Ok(Err(e)) => return Err(self.error(e)),
-                Err(_) => return Err(self.error(self.count_mismatch(index as u64))),
-            };
-            if wanted.next_if_eq(&&index).is_none() {
-                continue;
+        self.decode_video(0..last + 1, |index, data| {
+            if wanted.next_if_eq(&&index).is_some() {
+                out.push(self.frame(index, data));
             }
-            out.push(self.frame(index, data));
-        }
+        })?;
         Ok(out)
     }
 
