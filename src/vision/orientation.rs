@@ -65,7 +65,7 @@ pub struct Headings {
     /// Tail base to neck of the forest's own estimate (world x, y), when it has both.
     pub forest_heading: Option<Vector2<f64>>,
     /// The body's surface points (world frame, mm; the tail found as one left
-    /// out), where the smoothing finds the body's middle across its axis.
+    /// out), where the smoothing finds the ridge of the back across the body.
     pub body: Vec<Point3<f64>>,
 }
 

@@ -12,6 +12,10 @@
 //! the body from that centre averaged over seconds (see [`SmootherConfig::back_along_s`]). On
 //! a real mouse each spine joint's place along the back wanders slowly and independently of
 //! the others, which no filter of a few frames takes out but their centre averages away.
+//! Across the body, each frame's `mid_back` is first moved to the ridge of the back through
+//! it, seen in the frame's own surface points (see [`ridge_across`]), and then filtered: the
+//! forest places it sideways with a wobble of its own, while the spine runs along the top of
+//! the back. The raw joints the frame placed are kept by the caller.
 //!
 //! The filter starts afresh on the first frame of a mouse, after a gap, for a joint that was
 //! not placed in the frame before or that jumped farther than a mouse moves in a frame, and for every joint when the heading turns more than 90
@@ -425,6 +429,55 @@ mod tests {
         }
         assert!(smooth_sq < 0.1 * raw_sq, "smoothed {smooth_sq} against raw {raw_sq}");
         assert!(across_sq < 1e-6 * raw_sq, "moved across the body: {across_sq}");
+    }
+
+    /// A back along x seen from above: a rounded ridge 12 mm to either side of y = 0, 30 mm
+    /// high at its middle; beside it toward +y more of its flank in view, low and densely
+    /// seen (as a camera off to that side sees it); and, across a gap, the other side of a
+    /// curl at y = 30-43.5 mm, higher still.
+    fn back_surface() -> Vec<Point3<f64>> {
+        let mut points = Vec::new();
+        for i in -40..=40 {
+            let x = f64::from(i) * 1.5;
+            for j in -8..=8 {
+                let y = f64::from(j) * 1.5;
+                points.push(Point3::new(x, y, 30.0 * (1.0 - (y / 14.0).powi(2)).sqrt()));
+            }
+            for j in 0..20 {
+                points.push(Point3::new(x, 12.5 + f64::from(j) * 0.3, 8.0));
+            }
+            for j in 0..10 {
+                points.push(Point3::new(x, 30.0 + f64::from(j) * 1.5, 35.0));
+            }
+        }
+        points
+    }
+
+    #[test]
+    fn mid_back_wobbling_sideways_is_held_on_the_ridge_of_the_back() {
+        let surface = back_surface();
+        for (body_seen, held) in [(&surface[..], true), (&[][..], false)] {
+            let mut smoother = Smoother::new(SmootherConfig::default());
+            let mut worst_mm: f64 = 0.0;
+            for k in 0..120u64 {
+                // 3 mm to either side, once a second: slowly enough for the filter to follow.
+                let wobble = 3.0 * (k as f64 * 2.0 * std::f64::consts::PI / 30.0).sin();
+                let mut joints = body(0.0);
+                joints[Joint::MidBack.index()].position_mm.y = wobble;
+                smoother.smooth(k * FRAME_NS, &mut joints, body_seen);
+                if k >= 30 {
+                    worst_mm = worst_mm.max(joints[Joint::MidBack.index()].position_mm.y.abs());
+                }
+            }
+            if held {
+                assert!(worst_mm < 1e-6, "{worst_mm} mm off the ridge");
+            } else {
+                assert!(
+                    worst_mm > 1.5,
+                    "without the body's surface the filter alone: {worst_mm} mm"
+                );
+            }
+        }
     }
 
     #[test]
