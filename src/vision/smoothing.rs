@@ -139,7 +139,7 @@ impl Smoother {
     /// `mid_back` is first moved across the body to the ridge of the back there (see
     /// [`ridge_across`]); empty, it stays where the frame placed it.
     pub fn smooth(&mut self, device_ns: u64, joints: &mut BodyJoints, body: &[Point3<f64>]) {
-        self.to_ridge(joints, body);
+        self.move_to_ridge(joints, body);
         let dt_s = self
             .last_ns
             .map(|last| device_ns.saturating_sub(last) as f64 * 1e-9)
@@ -172,7 +172,7 @@ impl Smoother {
     }
 
     /// Moves `mid_back` across the body's axis to the middle of the back's ridge there.
-    fn to_ridge(&mut self, joints: &mut BodyJoints, body: &[Point3<f64>]) {
+    fn move_to_ridge(&mut self, joints: &mut BodyJoints, body: &[Point3<f64>]) {
         if self.config.across_slab_mm <= 0.0 {
             return;
         }
