@@ -89,9 +89,9 @@ fn figures_with(results: &Path, options: &[&str], dir: &Path) -> (serde_json::Va
 /// the 95th percentile; the head leading in 98 % of the frames where the mouse travels faster
 /// than 100 mm/s; the report's turning within 20 % of MoSeq's. The centre (the replay's
 /// `mid_back` against MoSeq's centroid; issue 49, item 2) within 1.5 px at the median and 3 at
-/// the 95th percentile over all 900 frames (1.26 and 2.56 with `mid_back` placed by the spine;
-/// on frames 450-899, not looked at when its settings were chosen, 1.50 and 2.79: see
-/// docs/FIGURES.md).
+/// the 95th percentile over all 900 frames (1.15 and 2.64 with `mid_back` placed along the body
+/// by the spine and across it on the ridge of the back; on frames 450-899, not looked at when
+/// its settings were chosen, 1.04 and 2.31: see docs/FIGURES.md).
 #[test]
 fn a_real_mouse_is_found_in_every_frame_along_moseqs_axis_and_its_head_leads_its_travel() {
     let Some(results) = moseq_results() else { return };

@@ -64,6 +64,9 @@ pub struct Headings {
     pub joints: [BodyJoints; 2],
     /// Tail base to neck of the forest's own estimate (world x, y), when it has both.
     pub forest_heading: Option<Vector2<f64>>,
+    /// The body's surface points (world frame, mm; the tail found as one left
+    /// out), where the smoothing finds the ridge of the back across the body.
+    pub body: Vec<Point3<f64>>,
 }
 
 /// How much each cue counts (in units of log-odds) and what a flip costs.
@@ -348,6 +351,7 @@ mod tests {
             tail: 0.0,
             joints: [[JointEstimate::default(); Joint::MAIN_BODY.len()]; 2],
             forest_heading: None,
+            body: Vec::new(),
         }
     }
 

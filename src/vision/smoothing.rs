@@ -12,13 +12,17 @@
 //! the body from that centre averaged over seconds (see [`SmootherConfig::back_along_s`]). On
 //! a real mouse each spine joint's place along the back wanders slowly and independently of
 //! the others, which no filter of a few frames takes out but their centre averages away.
+//! Across the body, each frame's `mid_back` is first moved to the ridge of the back through
+//! it, seen in the frame's own surface points (see [`ridge_across`]), and then filtered: the
+//! forest places it sideways with a wobble of its own, while the spine runs along the top of
+//! the back. The raw joints the frame placed are kept by the caller.
 //!
 //! The filter starts afresh on the first frame of a mouse, after a gap, for a joint that was
 //! not placed in the frame before or that jumped farther than a mouse moves in a frame, and for every joint when the heading turns more than 90
 //! degrees from the smoothed one between two frames (the tracker took the other end for the
 //! head: the joints swap ends, which no smoothing should blur).
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Point2, Point3, Vector2, Vector3};
 
 use crate::core::pose::{JointEstimate, JointSource};
 use crate::core::skeleton::Joint;
@@ -44,6 +48,13 @@ pub struct SmootherConfig {
     /// centre of the spine's four joints (`neck`, `withers`, `mid_back`, `rump`), is averaged.
     /// `0` leaves `mid_back` to its own filter like every other joint.
     pub back_along_s: f64,
+    /// Half the thickness (mm) of the slab across the body, through `mid_back`, in which its
+    /// place across the body is taken from the body's surface (see [`ridge_across`]). `0`
+    /// leaves it where the frame placed it.
+    pub across_slab_mm: f64,
+    /// The surface points of that slab at least this share of its highest point's height
+    /// above the floor make the back's ridge, whose middle `mid_back` is moved to.
+    pub ridge_height_share: f64,
 }
 
 impl Default for SmootherConfig {
@@ -55,6 +66,8 @@ impl Default for SmootherConfig {
             max_gap_s: 0.5,
             max_jump_mm: 40.0,
             back_along_s: 10.0,
+            across_slab_mm: 2.0,
+            ridge_height_share: 0.8,
         }
     }
 }
@@ -95,6 +108,8 @@ pub struct Smoother {
     /// averaged over `back_along_s`.
     back_along_mm: Option<f64>,
     last_ns: Option<u64>,
+    /// Scratch for [`ridge_across`]: the slab's points, across the axis and in height (mm).
+    slab: Vec<(f64, f64)>,
 }
 
 impl Smoother {
@@ -105,6 +120,7 @@ impl Smoother {
             spine: None,
             back_along_mm: None,
             last_ns: None,
+            slab: Vec::new(),
         }
     }
 
@@ -118,7 +134,12 @@ impl Smoother {
     /// which the tail search places where it sees the tail end, and which whips faster than
     /// the filter follows (on renders 141 mm/s at the median against 15-26 mm/s for the
     /// body's joints).
-    pub fn smooth(&mut self, device_ns: u64, joints: &mut BodyJoints) {
+    ///
+    /// `body` is the mouse's surface in the frame (world points, mm; its tail left out):
+    /// `mid_back` is first moved across the body to the ridge of the back there (see
+    /// [`ridge_across`]); empty, it stays where the frame placed it.
+    pub fn smooth(&mut self, device_ns: u64, joints: &mut BodyJoints, body: &[Point3<f64>]) {
+        self.move_to_ridge(joints, body);
         let dt_s = self
             .last_ns
             .map(|last| device_ns.saturating_sub(last) as f64 * 1e-9)
@@ -150,6 +171,23 @@ impl Smoother {
         self.place_mid_back(&raw, joints, dt_s);
     }
 
+    /// Moves `mid_back` across the body's axis to the middle of the back's ridge there.
+    fn move_to_ridge(&mut self, joints: &mut BodyJoints, body: &[Point3<f64>]) {
+        if self.config.across_slab_mm <= 0.0 {
+            return;
+        }
+        let Some(axis) = body_axis(joints).map(|a| a.normalize()) else {
+            return;
+        };
+        let mid_back = &mut joints[Joint::MidBack.index()];
+        if mid_back.source == JointSource::Missing {
+            return;
+        }
+        if let Some(shift) = ridge_across(&self.config, &mid_back.position_mm, &axis, body, &mut self.slab) {
+            mid_back.position_mm += shift;
+        }
+    }
+
     /// Moves the smoothed `mid_back` along the body to the spine's filtered centre plus its
     /// averaged place from that centre, keeping its own place across the body and in height.
     /// Each spine joint's place along the body wanders by a few millimetres, slowly (a filter
@@ -168,14 +206,7 @@ impl Smoother {
             .iter()
             .try_fold(Vector3::zeros(), |sum, p| p.map(|p| sum + p))
             .map(|sum| Point3::from(sum / SPINE.len() as f64));
-        // The body's axis from the snout when it is placed (the longer base wobbles less:
-        // chosen over the neck's on the first half of the real MoSeq session).
-        let tail_base = placed(Joint::TailBase).map(Point3::from);
-        let axis = match (placed(Joint::Snout).map(Point3::from), tail_base) {
-            (Some(snout), Some(tail_base)) => orientation::heading_between(&snout, &tail_base),
-            _ => orientation::heading(raw),
-        }
-        .map(|h| h.normalize());
+        let axis = body_axis(raw).map(|h| h.normalize());
         let (Some(centre), Some(axis), true) = (centre, axis, config.back_along_s > 0.0) else {
             self.spine = None;
             self.back_along_mm = None;
@@ -202,12 +233,86 @@ impl Smoother {
         };
         self.spine = Some(filtered_centre);
         self.back_along_mm = Some(along);
-        mid_back.position_mm = filtered_centre.position_mm + (offset - along_now * along_axis) + along * along_axis;
+        // Along the body from the spine; across it and in height its own filter's place.
+        let own = mid_back.position_mm;
+        mid_back.position_mm =
+            own + (filtered_centre.position_mm + along * along_axis - own).dot(&along_axis) * along_axis;
     }
 }
 
 /// The spine's joints, whose centre places `mid_back` along the body.
 const SPINE: [Joint; 4] = [Joint::Neck, Joint::Withers, Joint::MidBack, Joint::Rump];
+
+/// The body's axis seen from above (world x, y; toward the head, not of unit length): from
+/// the tail base to the snout when both are placed (the longer base wobbles less than the
+/// neck's: chosen on the first half of the real MoSeq session), else to the neck.
+fn body_axis(joints: &BodyJoints) -> Option<Vector2<f64>> {
+    let placed = |joint: Joint| {
+        let j = &joints[joint.index()];
+        (j.source != JointSource::Missing).then_some(j.position_mm)
+    };
+    match (placed(Joint::Snout), placed(Joint::TailBase)) {
+        (Some(snout), Some(tail_base)) => orientation::heading_between(&snout, &tail_base),
+        _ => orientation::heading(joints),
+    }
+}
+
+/// Fewer of the body's points than this in the slab say nothing of its cross-section.
+const MIN_SLAB_POINTS: usize = 3;
+
+/// A gap across the body wider than this (mm, about three depth pixels at a mouse) between
+/// the slab's points parts two pieces of body: on a curled mouse the slab may cross the other
+/// side of the curl too.
+const SLAB_GAP_MM: f64 = 6.0;
+
+/// The shift across `axis` (world x, y, unit length) that puts `at` on the middle of the
+/// back's ridge: of the `body` points within `config.across_slab_mm` of `at` along the axis,
+/// the piece across the axis that holds `at` (or the nearest piece), and of it the points at
+/// least `config.ridge_height_share` of its highest point's height above the floor; their
+/// mean place across the axis. The top of the back, not the whole cross-section: a camera
+/// off to one side sees more of the mouse's flank facing it, which would pull the middle of
+/// all the points seen toward it, while the ridge is seen from either side. `slab` is
+/// scratch space.
+fn ridge_across(
+    config: &SmootherConfig,
+    at: &Point3<f64>,
+    axis: &Vector2<f64>,
+    body: &[Point3<f64>],
+    slab: &mut Vec<(f64, f64)>,
+) -> Option<Vector3<f64>> {
+    let normal = Vector2::new(-axis.y, axis.x);
+    let at = Point2::new(at.x, at.y);
+    slab.clear();
+    slab.extend(body.iter().filter_map(|p| {
+        let d = Point2::new(p.x, p.y) - at;
+        (d.dot(axis).abs() <= config.across_slab_mm).then(|| (d.dot(&normal), p.z))
+    }));
+    if slab.len() < MIN_SLAB_POINTS {
+        return None;
+    }
+    slab.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    // The piece nearest `at` (0 across): its distance from it, first and last index.
+    let mut nearest: Option<(f64, usize, usize)> = None;
+    let mut start = 0;
+    for k in 1..=slab.len() {
+        if k < slab.len() && slab[k].0 - slab[k - 1].0 <= SLAB_GAP_MM {
+            continue;
+        }
+        let distance = slab[start].0.max(0.0) + (-slab[k - 1].0).max(0.0);
+        if nearest.is_none_or(|(d, _, _)| distance < d) {
+            nearest = Some((distance, start, k - 1));
+        }
+        start = k;
+    }
+    let (_, first, last) = nearest?;
+    let piece = &slab[first..=last];
+    let top = piece.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+    let (sum, count) = piece
+        .iter()
+        .filter(|p| p.1 >= config.ridge_height_share * top)
+        .fold((0.0, 0usize), |(sum, count), p| (sum + p.0, count + 1));
+    (count > 0).then(|| Vector3::new(normal.x, normal.y, 0.0) * (sum / count as f64))
+}
 
 /// One joint's step: its new state, with `joint` moved to its smoothed position.
 fn step(
@@ -275,7 +380,7 @@ mod tests {
             // Jitter of +-2 mm, alternating with a period that is not a multiple of two frames.
             let noise = 2.0 * ((k as f64) * 2.3).sin();
             let mut joints = body(noise);
-            smoother.smooth(k * FRAME_NS, &mut joints);
+            smoother.smooth(k * FRAME_NS, &mut joints, &[]);
             if k >= 30 {
                 raw_sq += noise * noise;
                 smooth_sq += x_of(&joints, Joint::MidBack).powi(2);
@@ -293,7 +398,7 @@ mod tests {
         for k in 0..60u64 {
             let x = speed_mm_s * k as f64 * FRAME_NS as f64 * 1e-9;
             let mut joints = body(x);
-            smoother.smooth(k * FRAME_NS, &mut joints);
+            smoother.smooth(k * FRAME_NS, &mut joints, &[]);
             lag_mm = x - x_of(&joints, Joint::MidBack);
         }
         let expected_mm = speed_mm_s * config.lag_s(speed_mm_s);
@@ -315,7 +420,7 @@ mod tests {
             let mut joints = body(0.0);
             joints[Joint::MidBack.index()].position_mm.x = wander;
             joints[Joint::MidBack.index()].position_mm.y = 1.0;
-            smoother.smooth(k * FRAME_NS, &mut joints);
+            smoother.smooth(k * FRAME_NS, &mut joints, &[]);
             if k >= 300 {
                 raw_sq += wander * wander;
                 smooth_sq += x_of(&joints, Joint::MidBack).powi(2);
@@ -326,11 +431,60 @@ mod tests {
         assert!(across_sq < 1e-6 * raw_sq, "moved across the body: {across_sq}");
     }
 
+    /// A back along x seen from above: a rounded ridge 12 mm to either side of y = 0, 30 mm
+    /// high at its middle; beside it toward +y more of its flank in view, low and densely
+    /// seen (as a camera off to that side sees it); and, across a gap, the other side of a
+    /// curl at y = 30-43.5 mm, higher still.
+    fn back_surface() -> Vec<Point3<f64>> {
+        let mut points = Vec::new();
+        for i in -40..=40 {
+            let x = f64::from(i) * 1.5;
+            for j in -8..=8 {
+                let y = f64::from(j) * 1.5;
+                points.push(Point3::new(x, y, 30.0 * (1.0 - (y / 14.0).powi(2)).sqrt()));
+            }
+            for j in 0..20 {
+                points.push(Point3::new(x, 12.5 + f64::from(j) * 0.3, 8.0));
+            }
+            for j in 0..10 {
+                points.push(Point3::new(x, 30.0 + f64::from(j) * 1.5, 35.0));
+            }
+        }
+        points
+    }
+
+    #[test]
+    fn mid_back_wobbling_sideways_is_held_on_the_ridge_of_the_back() {
+        let surface = back_surface();
+        for (body_seen, held) in [(&surface[..], true), (&[][..], false)] {
+            let mut smoother = Smoother::new(SmootherConfig::default());
+            let mut worst_mm: f64 = 0.0;
+            for k in 0..120u64 {
+                // 3 mm to either side, once a second: slowly enough for the filter to follow.
+                let wobble = 3.0 * (k as f64 * 2.0 * std::f64::consts::PI / 30.0).sin();
+                let mut joints = body(0.0);
+                joints[Joint::MidBack.index()].position_mm.y = wobble;
+                smoother.smooth(k * FRAME_NS, &mut joints, body_seen);
+                if k >= 30 {
+                    worst_mm = worst_mm.max(joints[Joint::MidBack.index()].position_mm.y.abs());
+                }
+            }
+            if held {
+                assert!(worst_mm < 1e-6, "{worst_mm} mm off the ridge");
+            } else {
+                assert!(
+                    worst_mm > 1.5,
+                    "without the body's surface the filter alone: {worst_mm} mm"
+                );
+            }
+        }
+    }
+
     #[test]
     fn a_swap_of_ends_a_gap_and_a_missing_joint_start_afresh() {
         let mut smoother = Smoother::new(SmootherConfig::default());
         for k in 0..10u64 {
-            smoother.smooth(k * FRAME_NS, &mut body(0.0));
+            smoother.smooth(k * FRAME_NS, &mut body(0.0), &[]);
         }
         // The tracker takes the other end for the head: the joints are taken as they are.
         let mut swapped: BodyJoints = body(0.0);
@@ -338,19 +492,19 @@ mod tests {
             j.position_mm.x = -j.position_mm.x;
         }
         let expected = swapped;
-        smoother.smooth(10 * FRAME_NS, &mut swapped);
+        smoother.smooth(10 * FRAME_NS, &mut swapped, &[]);
         assert_eq!(swapped, expected);
         // A second later, the mouse has moved 50 mm: taken as it is.
         let mut later = body(50.0);
-        smoother.smooth(40 * FRAME_NS, &mut later);
+        smoother.smooth(40 * FRAME_NS, &mut later, &[]);
         assert_eq!(later, body(50.0));
         // The rump missing for one frame is taken as it is when it returns; the tail tip is
         // never smoothed.
         let mut rump_gone = body(50.0);
         rump_gone[Joint::Rump.index()].source = JointSource::Missing;
-        smoother.smooth(41 * FRAME_NS, &mut rump_gone);
+        smoother.smooth(41 * FRAME_NS, &mut rump_gone, &[]);
         let mut back = body(52.0);
-        smoother.smooth(42 * FRAME_NS, &mut back);
+        smoother.smooth(42 * FRAME_NS, &mut back, &[]);
         for joint in [Joint::Rump, Joint::TailTip] {
             assert_eq!(back[joint.index()], body(52.0)[joint.index()], "{joint:?}");
         }

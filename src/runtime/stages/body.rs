@@ -62,13 +62,9 @@ impl BodyStage {
         }
     }
 
-    /// The body-shape model's log-odds that the head lies toward `axis` (world x, y), from
-    /// every mouse pixel of `image` not on its tail, in the world frame; 0 without a model or
-    /// features.
-    fn shape(&mut self, image: &DepthImage, axis: &Vector2<f64>) -> f64 {
-        let Some(model) = &self.orientation else {
-            return 0.0;
-        };
+    /// Puts every mouse pixel of `image` that reads and is not on its tail into `self.points`,
+    /// in the world frame.
+    fn body_points(&mut self, image: &DepthImage) {
         let r = image.region;
         let (intrinsics, world) = (&self.camera.intrinsics, &self.camera.world_from_camera);
         let tail = &self.tail;
@@ -85,6 +81,15 @@ impl BodyStage {
                     world * intrinsics.unproject(&pixel, f64::from(d))
                 }),
         );
+    }
+
+    /// The body-shape model's log-odds that the head lies toward `axis` (world x, y), from
+    /// the body's points (`self.points`, see [`Self::body_points`]); 0 without a model or
+    /// features.
+    fn shape(&self, axis: &Vector2<f64>) -> f64 {
+        let Some(model) = &self.orientation else {
+            return 0.0;
+        };
         // The model's axis and the forest's may differ a little: its evidence counts as much
         // as they agree.
         aligned(&self.points).map_or(0.0, |a| model.log_odds(&a.features) * a.axis.dot(axis))
@@ -153,6 +158,7 @@ impl BodyStage {
             tail: 0.0,
             joints: oriented.ahead.each_ref().map(to_world),
             forest_heading: orientation::heading(&to_world(&oriented.raw)),
+            body: Vec::new(),
         }
     }
 }
@@ -203,7 +209,9 @@ impl Map for BodyStage {
                     self.estimator
                         .estimate_oriented(&image, &self.pixels, &self.camera.intrinsics, &up, &self.tail);
                 let mut headings = self.headings(&oriented);
-                headings.shape = self.shape(&image, &headings.axis);
+                self.body_points(&image);
+                headings.shape = self.shape(&headings.axis);
+                headings.body.extend_from_slice(&self.points);
                 if let Some((tail, mm_per_px)) = &tail {
                     headings.tail = self.tail_evidence(&image, tail, *mm_per_px, &headings);
                 }

@@ -48,7 +48,8 @@ impl Map for FuseStage {
             let decision = self.tracker.update(record.depth.device_ns, &headings);
             let raw = headings.joints[decision.chosen];
             let mut smoothed: BodyJoints = raw;
-            self.smoother.smooth(record.depth.device_ns, &mut smoothed);
+            self.smoother
+                .smooth(record.depth.device_ns, &mut smoothed, &headings.body);
             for (joint, estimate) in Joint::MAIN_BODY.iter().zip(smoothed) {
                 *record.pose.joint_mut(*joint) = estimate;
             }
