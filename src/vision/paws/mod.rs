@@ -17,11 +17,14 @@ pub mod footprint;
 pub mod grey;
 pub mod haar;
 pub mod integral;
+pub mod model;
+pub mod net;
 pub mod train;
 pub mod xml;
 
 pub use cascade::Cascade;
 pub use detect::PawDetector;
+pub use model::PawModel;
 pub use footprint::{FOOTPRINT_MARGIN_MM, footprint};
 
 use serde::{Deserialize, Serialize};
