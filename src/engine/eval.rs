@@ -231,8 +231,7 @@ fn eval_parts(
 /// `mousepose eval paws`.
 fn eval_paws(options: &EvalOptions) -> Result<EvalSummary> {
     use crate::training::paws_eval as eval;
-    use crate::vision::paws::PawDetector;
-    let detector = PawDetector::load(&options.model)?;
+    let detector = crate::vision::paws::PawModel::load(&options.model)?;
     let report = eval::evaluate(&detector, &options.data, options.color_binning)
         .with_context(|| format!("evaluating on test dataset {:?}", options.data))?;
     if let Some(dir) = &options.report {
@@ -453,13 +452,14 @@ pub fn eval_real_paws(
                 );
                 let mut detector = if let Some(params) = &options.net {
                     let net = crate::engine::train::fit_paw_net(&views, &learnt, params, progress)?;
-                    PawModel::Net(crate::vision::paws::net::NetDetector::new(net)?)
+                    PawModel::Net(Box::new(crate::vision::paws::net::NetDetector::new(net)?))
                 } else {
-                    let set = crate::engine::train::paw_material(renders.as_ref(), Some((&views, &learnt)), options.seed)?;
+                    let set =
+                        crate::engine::train::paw_material(renders.as_ref(), Some((&views, &learnt)), options.seed)?;
                     let trained = crate::engine::train::fit_paw_cascade(&set, options.stages, options.seed, progress)?;
                     let mut cascade = trained.cascade;
                     cascade.min_neighbors = options.min_neighbors;
-                    PawModel::Cascade(PawDetector::from_cascade(cascade))
+                    PawModel::Cascade(Box::new(PawDetector::from_cascade(cascade)))
                 };
                 let (told, frames) = judge(&mut detector, &views, &judged, Scale::Told);
                 figures.told_scale.merge(&told);

@@ -471,7 +471,9 @@ fn train_paw_net(
     progress: &dyn Progress,
 ) -> Result<TrainSummary, Failure> {
     let Some(labels) = &options.labels else {
-        return Err(Failure::usage(anyhow::anyhow!("train paws --net learns from labelled real frames: give --labels FILE")));
+        return Err(Failure::usage(anyhow::anyhow!(
+            "train paws --net learns from labelled real frames: give --labels FILE"
+        )));
     };
     if options.data.is_some() {
         return Err(Failure::usage(anyhow::anyhow!(

@@ -140,7 +140,11 @@ fn batch(views: &[NetView], n: usize, rng: &mut impl Rng) -> candle_core::Result
                 let (u, w) = from_crop(i, j);
                 let (x, y) = (ox + u as i64, oy + w as i64);
                 let inside = x >= 0 && y >= 0 && (x as usize) < v.width && (y as usize) < v.height;
-                let value = if inside { v.pixels[y as usize * v.width + x as usize] } else { 0.0 };
+                let value = if inside {
+                    v.pixels[y as usize * v.width + x as usize]
+                } else {
+                    0.0
+                };
                 crop[j * CROP_PX + i] = value * gain + offset + rng.gen_range(-0.1f32..0.1);
             }
         }

@@ -260,7 +260,7 @@ pub const DEFAULT_SCALES: [f64; 3] = [0.8, 1.0, 1.25];
 
 /// Drops each detection whose centre lies in the box of a surer one: one paw found twice by
 /// groups the grouping kept apart (a paw's toes and its heel). Surest first.
-fn suppress_repeats(found: &mut Vec<PawDetection>) {
+pub(super) fn suppress_repeats(found: &mut Vec<PawDetection>) {
     found.sort_by(|a, b| b.score.total_cmp(&a.score));
     let mut kept = 0;
     for i in 0..found.len() {

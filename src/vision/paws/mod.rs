@@ -24,8 +24,8 @@ pub mod xml;
 
 pub use cascade::Cascade;
 pub use detect::PawDetector;
-pub use model::PawModel;
 pub use footprint::{FOOTPRINT_MARGIN_MM, footprint};
+pub use model::PawModel;
 
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;

@@ -11,8 +11,9 @@ use std::path::Path;
 /// A paw model ready to run. Cheap to clone: one per worker thread.
 #[derive(Clone, Debug)]
 pub enum PawModel {
-    Cascade(PawDetector),
-    Net(NetDetector),
+    // Both boxed: each detector holds its buffers inline, hundreds of bytes.
+    Cascade(Box<PawDetector>),
+    Net(Box<NetDetector>),
 }
 
 impl PawModel {
@@ -22,9 +23,26 @@ impl PawModel {
     /// As [`PawDetector::load`] and [`PawNet::load`].
     pub fn load(path: &Path) -> Result<Self, PawError> {
         if path.extension().is_some_and(|e| e == "safetensors") {
-            Ok(Self::Net(NetDetector::new(PawNet::load(path)?)?))
+            Ok(Self::Net(Box::new(NetDetector::new(PawNet::load(path)?)?)))
         } else {
-            Ok(Self::Cascade(PawDetector::load(path)?))
+            Ok(Self::Cascade(Box::new(PawDetector::load(path)?)))
+        }
+    }
+
+    /// The same model keeping every candidate it finds, for a score curve: a cascade grouping
+    /// no raw windows, a network reporting peaks of any probability from 0.05.
+    pub fn permissive(&self) -> Self {
+        match self {
+            Self::Cascade(d) => {
+                let mut d = d.clone();
+                d.set_min_neighbors(0);
+                Self::Cascade(d)
+            }
+            Self::Net(d) => {
+                let mut d = d.clone();
+                d.set_threshold(0.05);
+                Self::Net(d)
+            }
         }
     }
 
@@ -38,7 +56,13 @@ impl PawModel {
 
     /// Detects paws in `frame` within `roi`, the glass seen at `px_per_mm`: clears `out` and
     /// pushes the paws found, surest first ([`PawDetector::detect`], [`NetDetector::detect`]).
-    pub fn detect(&mut self, frame: &ColorFrame, roi: (u32, u32, u32, u32), px_per_mm: f64, out: &mut Vec<PawDetection>) {
+    pub fn detect(
+        &mut self,
+        frame: &ColorFrame,
+        roi: (u32, u32, u32, u32),
+        px_per_mm: f64,
+        out: &mut Vec<PawDetection>,
+    ) {
         match self {
             Self::Cascade(d) => d.detect(frame, roi, px_per_mm, out),
             Self::Net(d) => d.detect(frame, roi, px_per_mm, out),

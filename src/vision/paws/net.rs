@@ -5,12 +5,14 @@
 //! The network: a 3x3 convolution at the input's resolution, a 2x2 max-pool, four 3x3
 //! convolutions (the last two dilated 2 and 4, so that a cell sees 17 mm of the glass around
 //! it: a paw and the toes, heel and floor beside it), each followed by a ReLU, and a 1x1
-//! convolution to one logit per cell. It is trained through `candle` on the CPU; the weights
+//! convolution to one logit per cell. A peak whose centre lies in the box of a surer one is
+//! the same paw (its toes and its heel), dropped as the cascade drops a paw found twice. It is trained through `candle` on the CPU; the weights
 //! are a `safetensors` file ([`PawNet::load`]) that `mousepose train paws --net` writes. At run
 //! time the same layers run as plain loops over rows ([`Layers`]): `candle`'s general
 //! convolution (unfolding each layer's input into a matrix first) took several times as long
 //! on these few channels, and a test holds the two to the same heatmap.
 
+use super::detect::suppress_repeats;
 use super::grey::{GreyImage, Greyer};
 use super::{PawDetection, PawError, WINDOW_PX};
 use crate::core::frame::ColorFrame;
@@ -24,9 +26,6 @@ pub const NET_PX_PER_MM: f64 = 2.0;
 
 /// Input pixels per heatmap cell along each axis.
 pub const NET_STRIDE: usize = 2;
-
-/// Paws closer than this (mm) are one paw: the weaker peak is dropped.
-pub const PEAK_SEPARATION_MM: f64 = 3.0;
 
 /// The version of the weights file's layout, kept in its `meta` tensor.
 const FORMAT_VERSION: f32 = 1.0;
@@ -193,7 +192,8 @@ impl Layer {
             dst.fill(self.bias[o]);
             for i in 0..self.inputs {
                 let src = &input[i * plane..(i + 1) * plane];
-                let taps = &self.weights[(o * self.inputs + i) * self.kernel * self.kernel..][..self.kernel * self.kernel];
+                let taps =
+                    &self.weights[(o * self.inputs + i) * self.kernel * self.kernel..][..self.kernel * self.kernel];
                 for (t, &k) in taps.iter().enumerate() {
                     let dy = (t / self.kernel) as isize * self.dilation as isize - reach;
                     let dx = (t % self.kernel) as isize * self.dilation as isize - reach;
@@ -236,7 +236,12 @@ pub struct Layers {
 
 impl Layers {
     fn of(net: &PawNet) -> candle_core::Result<Self> {
-        let layers = net.convs.iter().chain([&net.head]).map(Layer::of).collect::<candle_core::Result<_>>()?;
+        let layers = net
+            .convs
+            .iter()
+            .chain([&net.head])
+            .map(Layer::of)
+            .collect::<candle_core::Result<_>>()?;
         Ok(Self {
             layers,
             a: Vec::new(),
@@ -285,14 +290,14 @@ pub fn standardise(grey: &GreyImage, out: &mut Vec<f32>) {
 }
 
 /// The peaks of a heatmap of `width` cells a row: `(cell x, cell y, probability)`, the
-/// centre refined to the probability-weighted mean of the 3x3 cells around the peak, surest
-/// first, peaks within `separation` cells of a surer one dropped.
-pub fn peaks(heat: &[f32], width: usize, threshold: f32, separation: f64) -> Vec<(f64, f64, f32)> {
+/// centre refined to the probability-weighted mean of the 3x3 cells around the peak.
+pub fn peaks(heat: &[f32], width: usize, threshold: f32, out: &mut Vec<(f64, f64, f32)>) {
     let height = heat.len() / width.max(1);
     let at = |x: i64, y: i64| -> Option<f32> {
-        (x >= 0 && y >= 0 && (x as usize) < width && (y as usize) < height).then(|| heat[y as usize * width + x as usize])
+        (x >= 0 && y >= 0 && (x as usize) < width && (y as usize) < height)
+            .then(|| heat[y as usize * width + x as usize])
     };
-    let mut found = Vec::new();
+    out.clear();
     for y in 0..height as i64 {
         for x in 0..width as i64 {
             let p = heat[y as usize * width + x as usize];
@@ -313,18 +318,10 @@ pub fn peaks(heat: &[f32], width: usize, threshold: f32, separation: f64) -> Vec
                 }
             }
             if top {
-                found.push((sx / sw, sy / sw, p));
+                out.push((sx / sw, sy / sw, p));
             }
         }
     }
-    found.sort_by(|a, b| b.2.total_cmp(&a.2));
-    let mut kept: Vec<(f64, f64, f32)> = Vec::with_capacity(found.len());
-    for f in found {
-        if kept.iter().all(|k| (k.0 - f.0).hypot(k.1 - f.1) > separation) {
-            kept.push(f);
-        }
-    }
-    kept
 }
 
 /// Finds paws with a [`PawNet`]. Cheap to clone: one per worker thread.
@@ -336,6 +333,7 @@ pub struct NetDetector {
     grey: GreyImage,
     input: Vec<f32>,
     heat: Vec<f32>,
+    peaks: Vec<(f64, f64, f32)>,
 }
 
 impl NetDetector {
@@ -352,12 +350,8 @@ impl NetDetector {
             grey: GreyImage::default(),
             input: Vec::new(),
             heat: Vec::new(),
+            peaks: Vec::new(),
         })
-    }
-
-    /// A copy of its run-time layers (for timing them alone).
-    pub fn layers_for_bench(&self) -> Layers {
-        self.layers.clone()
     }
 
     /// The network it runs.
@@ -365,10 +359,21 @@ impl NetDetector {
         &self.net
     }
 
+    /// Reports peaks of this probability and more instead of the network's own threshold.
+    pub fn set_threshold(&mut self, threshold: f32) {
+        self.net.threshold = threshold;
+    }
+
     /// Detects paws in `frame` within `roi`, the glass seen at `px_per_mm`: clears `out`, then
     /// pushes a box of the cascade's window (12 mm) around each paw, `score` the heatmap's
-    /// probability, surest first.
-    pub fn detect(&mut self, frame: &ColorFrame, roi: (u32, u32, u32, u32), px_per_mm: f64, out: &mut Vec<PawDetection>) {
+    /// probability, surest first, a peak in a surer one's box dropped.
+    pub fn detect(
+        &mut self,
+        frame: &ColorFrame,
+        roi: (u32, u32, u32, u32),
+        px_per_mm: f64,
+        out: &mut Vec<PawDetection>,
+    ) {
         out.clear();
         let Some(place) = self
             .greyer
@@ -383,9 +388,9 @@ impl NetDetector {
         standardise(&self.grey, &mut self.input);
         self.layers.heatmap(&self.input, w, h, &mut self.heat);
         let cells = w / NET_STRIDE;
-        let separation = PEAK_SEPARATION_MM * NET_PX_PER_MM / NET_STRIDE as f64;
+        peaks(&self.heat, cells, self.net.threshold, &mut self.peaks);
         let half = f64::from(WINDOW_PX) / 2.0 * place.frame_px_per_px * NET_PX_PER_MM;
-        for (cx, cy, p) in peaks(&self.heat, cells, self.net.threshold, separation) {
+        for &(cx, cy, p) in &self.peaks {
             // A cell covers input pixels [2c, 2c + 2): its centre is at 2c + 1.
             let (x, y) = place.to_frame(cx * NET_STRIDE as f64 + 1.0, cy * NET_STRIDE as f64 + 1.0);
             out.push(PawDetection {
@@ -396,6 +401,7 @@ impl NetDetector {
                 score: p,
             });
         }
+        suppress_repeats(out);
     }
 }
 
@@ -404,7 +410,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn peaks_are_local_maxima_refined_and_kept_apart() {
+    fn peaks_are_local_maxima_refined_to_their_neighbours() {
         let w = 8;
         let mut heat = vec![0.0f32; w * 6];
         heat[2 * w + 2] = 0.9;
@@ -412,12 +418,14 @@ mod tests {
         heat[2 * w + 4] = 0.1;
         heat[4 * w + 6] = 0.6;
         heat[4 * w + 7] = 0.3; // no peak: a neighbour is surer
-        let found = peaks(&heat, w, 0.5, 1.5);
+        let mut found = Vec::new();
+        peaks(&heat, w, 0.5, &mut found);
         assert_eq!(found.len(), 2, "{found:?}");
-        assert!((found[0].0 - 2.5).abs() < 0.06 && (found[0].1 - 2.0).abs() < 1e-9, "{found:?}");
+        assert!(
+            (found[0].0 - 2.5).abs() < 0.06 && (found[0].1 - 2.0).abs() < 1e-9,
+            "{found:?}"
+        );
         assert!(found[1].0 > 6.0 && found[1].0 < 6.5, "{found:?}");
-        // Within the separation of a surer peak: dropped.
-        assert_eq!(peaks(&heat, w, 0.5, 5.0).len(), 1);
     }
 
     #[test]
@@ -450,7 +458,11 @@ mod tests {
             let mut heat = Vec::new();
             layers.heatmap(&x.flatten_all().unwrap().to_vec1().unwrap(), w, h, &mut heat);
             assert_eq!(heat.len(), reference.len());
-            let worst = heat.iter().zip(&reference).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+            let worst = heat
+                .iter()
+                .zip(&reference)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f32::max);
             assert!(worst < 1e-5, "{worst}");
         }
         std::fs::write(&path, b"not a network").unwrap();
