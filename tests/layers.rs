@@ -618,6 +618,9 @@ const EXTERNAL: &[(&str, &[&str])] = &[
     // The models' content hashes that outputs record.
     ("sha2", &["runtime::models"]),
     ("roxmltree", ALL),
+    // The paw network: its module, and its training.
+    ("candle_core", &["vision::paws", "training::paws_net"]),
+    ("candle_nn", &["vision::paws", "training::paws_net"]),
     ("safe_arch", ALL),
     ("wide", ALL),
 ];

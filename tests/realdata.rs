@@ -207,6 +207,66 @@ fn paws_learnt_from_labelled_real_frames_are_found_on_frames_held_out() {
     }
 }
 
+/// The paw network learns from the labelled real frames (`train paws --net`, a short
+/// training: its cross-validated figures, 3,000 iterations, are in FIGURES.md), is written as
+/// `safetensors`, and is read and run by `eval paws --labels --model`: judged here on the
+/// frames it learnt from, so this checks the plumbing, not the figure. A file not named
+/// `.safetensors` is refused before any training.
+#[test]
+fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
+    let Some(labels) = real_file("mirror-mouse/CollectedData.csv") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let train = |out: &std::path::Path| {
+        mousepose()
+            .args(["train", "paws", "--labels"])
+            .arg(&labels)
+            .args(["--paws", MIRROR_MOUSE_PAWS, "--label-px-per-mm", "3.5", "--net"])
+            .args(["--net-iterations", "400", "--json", "--out"])
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    let wrong = tmp.path().join("paws.xml");
+    let out = train(&wrong);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("safetensors") && !wrong.exists(), "{err}");
+    let net = tmp.path().join("paws.safetensors");
+    let out = train(&net);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let trained: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        (trained["network"].as_bool(), trained["frames"].as_u64()),
+        (Some(true), Some(45))
+    );
+    let out = mousepose()
+        .args(["eval", "paws", "--labels"])
+        .arg(&labels)
+        .args([
+            "--paws",
+            MIRROR_MOUSE_PAWS,
+            "--label-px-per-mm",
+            "3.5",
+            "--json",
+            "--model",
+        ])
+        .arg(&net)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let f: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(f["detector"], "network");
+    let told = &f["told_scale"];
+    let (recall, precision) = (told["recall"].as_f64().unwrap(), told["precision"].as_f64().unwrap());
+    eprintln!("learnt frames, told the scale: recall {recall}, precision {precision}");
+    assert!(
+        recall >= 0.6 && precision >= 0.3,
+        "recall {recall}, precision {precision}"
+    );
+}
+
 /// The mirror-mouse labels' mapping from its body parts to our paws.
 const MIRROR_MOUSE_PAWS: &str =
     "paw1LH_bot=left_hind_paw,paw2LF_bot=left_fore_paw,paw3RF_bot=right_fore_paw,paw4RH_bot=right_hind_paw";

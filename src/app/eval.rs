@@ -35,6 +35,12 @@ pub struct EvalArgs {
     /// With `--folds`: the training's seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// With `--folds`: train the small convolutional paw network on each fold instead of a
+    /// cascade.
+    #[arg(long, requires = "folds")]
+    pub net: bool,
+    #[command(flatten)]
+    pub net_settings: crate::app::parse::NetArgs,
     /// With `--labels`: group with this `minNeighbors` instead of the cascade's own (or the
     /// detector's default, 1); the score curve shows every choice.
     #[arg(long, value_name = "N", requires = "labels", value_parser = clap::value_parser!(u32).range(0..=50))]
@@ -71,6 +77,7 @@ pub fn command(args: &EvalArgs) -> crate::app::Outcome {
                 seed: args.seed,
                 min_neighbors: args.min_neighbors,
                 scale_range: crate::vision::paws::detect::FIND_SCALE_RANGE,
+                net: args.net.then(|| args.net_settings.params(args.seed)),
                 report: args.report.clone(),
             },
             &crate::app::progress::Bars::default(),

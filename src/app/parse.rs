@@ -125,3 +125,30 @@ impl LabelArgs {
         }))
     }
 }
+
+/// How the paw network is trained (`--net`).
+#[derive(clap::Args, Clone, Debug)]
+pub struct NetArgs {
+    /// With `--net`: training iterations, each a batch of 16 crops of the labelled views.
+    #[arg(long, value_name = "N", default_value_t = crate::training::paws_net::NetParams::default().iterations)]
+    pub net_iterations: usize,
+    /// With `--net`: channels of the network's inner layers.
+    #[arg(long, value_name = "C", default_value_t = 12, value_parser = clap::value_parser!(u16).range(2..=128))]
+    pub net_width: u16,
+    /// With `--net`: the heatmap's probability a paw needs to be reported.
+    #[arg(long, value_name = "P", default_value_t = crate::training::paws_net::NetParams::default().threshold)]
+    pub net_threshold: f32,
+}
+
+impl NetArgs {
+    /// The training's settings, drawn from `seed`.
+    pub fn params(&self, seed: u64) -> crate::training::paws_net::NetParams {
+        crate::training::paws_net::NetParams {
+            iterations: self.net_iterations,
+            width: usize::from(self.net_width),
+            threshold: self.net_threshold,
+            seed,
+            ..crate::training::paws_net::NetParams::default()
+        }
+    }
+}

@@ -72,8 +72,9 @@ pub fn summary_text(summary: &ReplaySummary, out: &Path) -> String {
     if summary.paw_model.is_none() && summary.cameras.contains_key("color") {
         let _ = writeln!(
             text,
-            "no paw cascade ({}) among the models: paws and limbs are in their default configuration",
-            crate::runtime::models::PAWS_MODEL
+            "no paw model ({} or {}) among the models: paws and limbs are in their default configuration",
+            crate::runtime::models::PAWS_MODEL,
+            crate::runtime::models::PAWS_NET_MODEL
         );
     }
     if let Some(mean) = summary.mean_error_mm {

@@ -91,6 +91,12 @@ pub struct TrainArgs {
     /// `eval paws --labels --folds`' curve. The detector's default (1) when not given.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=50))]
     pub min_neighbors: Option<u32>,
+    /// Paws: train the small convolutional paw network instead of the cascade, from the
+    /// labelled real frames (`--labels`) alone; `--out` then ends in `.safetensors`.
+    #[arg(long, requires = "labels")]
+    pub net: bool,
+    #[command(flatten)]
+    pub net_settings: parse::NetArgs,
     /// Replace the model file if it exists.
     #[arg(long)]
     pub force: bool,
@@ -125,6 +131,7 @@ pub fn command(args: &TrainArgs) -> Outcome {
         seed: args.seed,
         stages: args.stages,
         min_neighbors: args.min_neighbors,
+        net: args.net.then(|| args.net_settings.params(args.seed)),
         force: args.force,
     };
     let summary = crate::engine::train::train(&options, &Bars::default())?;
@@ -163,6 +170,21 @@ pub fn command(args: &TrainArgs) -> Outcome {
             "weak": weak,
             "features": features,
             "hard_negative_windows": hard_negative_windows,
+            "training_seconds": training_seconds,
+        }),
+        TrainSummary::PawNet {
+            out,
+            frames,
+            iterations,
+            width,
+            training_seconds,
+        } => serde_json::json!({
+            "out": out,
+            "kind": "paws",
+            "network": true,
+            "frames": frames,
+            "iterations": iterations,
+            "width": width,
             "training_seconds": training_seconds,
         }),
         TrainSummary::Orientation {

@@ -27,7 +27,7 @@ use crate::engine::replay::{ReplayOptions, replay_with, scene_of};
 use crate::engine::train::{ModelTarget, TrainOptions, TrainSummary, train};
 use crate::engine::{Exists, Failure, Interrupt, output_failure};
 use crate::io::output::Staging;
-use crate::runtime::models::{BODY_MODEL, ORIENTATION_MODEL, PAWS_MODEL, default_models_dir};
+use crate::runtime::models::{BODY_MODEL, ORIENTATION_MODEL, default_models_dir, paws_file};
 use crate::runtime::pose_record::{PoseRecord, PoseStatus};
 use crate::runtime::recording::Recording;
 use crate::runtime::sink::poses::{POSES_FILE, PosesRows};
@@ -574,6 +574,7 @@ fn train_models(
         seed: options.seed,
         stages: 20,
         min_neighbors: None,
+        net: None,
         force: true,
     };
     let (body_trees, body_nodes, body_seconds) = match train(&train_options(ModelTarget::Body, BODY_MODEL), progress)? {
@@ -597,12 +598,11 @@ fn train_models(
         };
     progress.finish();
     std::fs::remove_dir_all(&data).with_context(|| format!("removing {data:?}"))?;
-    let paws = default_models_dir()
-        .ok()
-        .map(|d| d.join(PAWS_MODEL))
-        .filter(|p| p.is_file());
-    if let Some(p) = &paws {
-        std::fs::copy(p, dir.join(PAWS_MODEL)).with_context(|| format!("copying {p:?}"))?;
+    let paws = default_models_dir().ok().and_then(|d| paws_file(&d));
+    if let Some(p) = &paws
+        && let Some(name) = p.file_name()
+    {
+        std::fs::copy(p, dir.join(name)).with_context(|| format!("copying {p:?}"))?;
     }
     Ok(Trained {
         images: options.images,

@@ -72,7 +72,8 @@ pub struct PawBench {
     pub roi_px: [u32; 4],
     /// The glass's scale in that frame.
     pub px_per_mm: f64,
-    /// `PawDetector::detect` on the region (grey conversion, every scale, grouping), ms.
+    /// `PawModel::detect` on the region (a cascade: grey conversion, every scale, grouping;
+    /// a network: grey conversion, the network, the heatmap's peaks), ms.
     pub detect_ms_per_frame: f64,
     pub detections: usize,
 }
@@ -220,10 +221,10 @@ fn bench_training(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick:
     })
 }
 
-/// Where the bundled paw cascade is looked for: the checkout's fixtures.
+/// Where the bundled paw model is looked for: the checkout's fixtures
+/// ([`crate::runtime::models::paws_file`]).
 pub fn bundled_paw_model() -> Option<std::path::PathBuf> {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/models/paws.xml");
-    path.exists().then_some(path)
+    crate::runtime::models::paws_file(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/models"))
 }
 
 /// Times the paw detector on a full-size synthetic BayerRG8 bottom frame, within the mouse's
@@ -231,10 +232,10 @@ pub fn bundled_paw_model() -> Option<std::path::PathBuf> {
 fn bench_paws(rig: &Rig, iterations: u32) -> Option<PawBench> {
     use crate::core::frame::{ColorFrame, PixelFormat};
     use crate::synth::views::render_bottom_frame;
-    use crate::vision::paws::PawDetector;
+    use crate::vision::paws::PawModel;
     use nalgebra::Point3;
     let path = bundled_paw_model()?;
-    let mut detector = match PawDetector::load(&path) {
+    let mut detector = match PawModel::load(&path) {
         Ok(d) => d,
         Err(e) => {
             tracing::warn!(error = %e, "cannot measure the paw detector");

@@ -6,8 +6,8 @@ use crate::core::frame::{ColorFrame, PixelFormat, Stamp};
 use crate::core::image::RgbImage;
 use crate::engine::{Failure, output_failure};
 use crate::io::output::Staging;
-use crate::runtime::models::{PAWS_MODEL, default_models_dir};
-use crate::vision::paws::{PawDetection, PawDetector};
+use crate::runtime::models::{PAWS_MODEL, default_models_dir, paws_file};
+use crate::vision::paws::{PawDetection, PawModel};
 use anyhow::Context as _;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -37,8 +37,8 @@ pub enum ScaleSource {
     Told(f64),
     /// A rig calibration's colour camera (from `calibrate extrinsics`).
     Calibration(PathBuf),
-    /// Found by the cascade over all the images together, between these px/mm
-    /// ([`PawDetector::find_scale`]): the images are taken to come from one camera.
+    /// Found by the paw model over all the images together, between these px/mm
+    /// ([`PawModel::find_scale`]): the images are taken to come from one camera.
     Find { lowest: f64, highest: f64 },
 }
 
@@ -104,11 +104,14 @@ fn picture(frame: &ColorFrame, paws: &[PawDetection]) -> RgbImage {
 pub fn paws(options: &DetectPawsOptions) -> Result<Detections, Failure> {
     let model = match &options.model {
         Some(path) => path.clone(),
-        None => default_models_dir().map_err(Failure::usage)?.join(PAWS_MODEL),
+        None => {
+            let dir = default_models_dir().map_err(Failure::usage)?;
+            paws_file(&dir).unwrap_or_else(|| dir.join(PAWS_MODEL))
+        }
     };
-    let mut detector = PawDetector::load(&model)
+    let mut detector = PawModel::load(&model)
         .map_err(Failure::usage)
-        .map_err(|f| f.context(format!("loading the paw cascade {model:?}")))?;
+        .map_err(|f| f.context(format!("loading the paw model {model:?}")))?;
     let frames = options
         .images
         .iter()
@@ -133,7 +136,7 @@ pub fn paws(options: &DetectPawsOptions) -> Result<Detections, Failure> {
                 frames.iter().map(|f| (f, (0, 0, f.width, f.height))).collect();
             let found = detector.find_scale(&whole, lowest, highest).ok_or_else(|| {
                 Failure::usage(anyhow::anyhow!(
-                    "the cascade finds no paw in these images at any scale from {lowest} to {highest} px/mm: say the scale with --px-per-mm"
+                    "the paw model finds no paw in these images at any scale from {lowest} to {highest} px/mm: say the scale with --px-per-mm"
                 ))
             })?;
             tracing::info!(

@@ -231,8 +231,7 @@ fn eval_parts(
 /// `mousepose eval paws`.
 fn eval_paws(options: &EvalOptions) -> Result<EvalSummary> {
     use crate::training::paws_eval as eval;
-    use crate::vision::paws::PawDetector;
-    let detector = PawDetector::load(&options.model)?;
+    let detector = crate::vision::paws::PawModel::load(&options.model)?;
     let report = eval::evaluate(&detector, &options.data, options.color_binning)
         .with_context(|| format!("evaluating on test dataset {:?}", options.data))?;
     if let Some(dir) = &options.report {
@@ -344,6 +343,8 @@ pub struct RealPawsOptions {
     pub min_neighbors: Option<u32>,
     /// Where the detector looks for the scale it is not told (px/mm).
     pub scale_range: (f64, f64),
+    /// With `folds`: train the paw network with these settings instead of a cascade.
+    pub net: Option<training::paws_net::NetParams>,
     /// Write `summary.json` and each frame with its paws found, missed and false drawn here.
     pub report: Option<PathBuf>,
 }
@@ -362,7 +363,9 @@ pub struct RealPawsFigures {
     pub told_scale: training::paws_real::RealPawReport,
     pub found_scale: training::paws_real::RealPawReport,
     pub training_seconds: f64,
-    /// The grouping the figures were judged with (`minNeighbors`).
+    /// What kind of model was judged: `cascade` or `network`.
+    pub detector: &'static str,
+    /// The grouping the figures were judged with (`minNeighbors`; a cascade's).
     pub min_neighbors: usize,
     /// Per frame (told the scale): its image, paws found and missed, false detections.
     pub per_frame: Vec<RealPawsFrame>,
@@ -388,7 +391,7 @@ pub fn eval_real_paws(
     progress: &dyn crate::engine::progress::Progress,
 ) -> Result<RealPawsFigures, Failure> {
     use crate::training::paws_real::{RealPawReport, Scale, fold_frames, judge};
-    use crate::vision::paws::PawDetector;
+    use crate::vision::paws::{PawDetector, PawModel};
     let views = options.labels.open()?;
     let n = views.frames.len();
     let found = Scale::Found {
@@ -404,6 +407,7 @@ pub fn eval_real_paws(
         told_scale: RealPawReport::default(),
         found_scale: RealPawReport::default(),
         training_seconds: 0.0,
+        detector: if options.net.is_some() { "network" } else { "cascade" },
         min_neighbors: options
             .min_neighbors
             .map_or(crate::vision::paws::detect::DEFAULT_MIN_NEIGHBORS, |n| n as usize),
@@ -412,13 +416,16 @@ pub fn eval_real_paws(
     let mut outcomes = Vec::new();
     match (&options.model, options.folds) {
         (Some(model), None) => {
-            let mut detector = PawDetector::load(model)
+            let mut detector = PawModel::load(model)
                 .map_err(Failure::usage)
-                .map_err(|f| f.context(format!("loading the paw cascade {model:?}")))?;
-            if let Some(n) = options.min_neighbors {
-                detector.set_min_neighbors(n as usize);
+                .map_err(|f| f.context(format!("loading the paw model {model:?}")))?;
+            if let PawModel::Cascade(cascade) = &mut detector {
+                if let Some(n) = options.min_neighbors {
+                    cascade.set_min_neighbors(n as usize);
+                }
+                figures.min_neighbors = cascade.min_neighbors();
             }
-            figures.min_neighbors = detector.min_neighbors();
+            figures.detector = detector.kind();
             let all: Vec<usize> = (0..n).collect();
             let (told, frames) = judge(&mut detector, &views, &all, Scale::Told);
             figures.told_scale = told;
@@ -437,17 +444,23 @@ pub fn eval_real_paws(
             for fold in 0..folds as usize {
                 let judged = fold_frames(n, folds as usize, fold);
                 let learnt: Vec<usize> = (0..n).filter(|k| !judged.contains(k)).collect();
-                let set = crate::engine::train::paw_material(renders.as_ref(), Some((&views, &learnt)), options.seed)?;
                 tracing::info!(
-                    message = "Training a fold's cascade.",
+                    message = "Training a fold's paw model.",
                     fold = fold + 1,
                     folds,
                     judged = judged.len()
                 );
-                let trained = crate::engine::train::fit_paw_cascade(&set, options.stages, options.seed, progress)?;
-                let mut cascade = trained.cascade;
-                cascade.min_neighbors = options.min_neighbors;
-                let mut detector = PawDetector::from_cascade(cascade);
+                let mut detector = if let Some(params) = &options.net {
+                    let net = crate::engine::train::fit_paw_net(&views, &learnt, params, progress)?;
+                    PawModel::Net(Box::new(crate::vision::paws::net::NetDetector::new(net)?))
+                } else {
+                    let set =
+                        crate::engine::train::paw_material(renders.as_ref(), Some((&views, &learnt)), options.seed)?;
+                    let trained = crate::engine::train::fit_paw_cascade(&set, options.stages, options.seed, progress)?;
+                    let mut cascade = trained.cascade;
+                    cascade.min_neighbors = options.min_neighbors;
+                    PawModel::Cascade(Box::new(PawDetector::from_cascade(cascade)))
+                };
                 let (told, frames) = judge(&mut detector, &views, &judged, Scale::Told);
                 figures.told_scale.merge(&told);
                 figures

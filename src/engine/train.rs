@@ -58,6 +58,8 @@ pub struct TrainOptions {
     pub stages: u32,
     /// Paws: the grouping kept in the cascade's file ([`crate::vision::paws::Cascade::min_neighbors`]).
     pub min_neighbors: Option<u32>,
+    /// Paws: train the network with these settings instead of the cascade.
+    pub net: Option<training::paws_net::NetParams>,
     /// Replace the model file if it exists.
     pub force: bool,
 }
@@ -114,6 +116,15 @@ pub enum TrainSummary {
         weak: usize,
         features: usize,
         hard_negative_windows: usize,
+        training_seconds: f64,
+    },
+    /// The paw network.
+    PawNet {
+        out: PathBuf,
+        /// Labelled frames it learnt from.
+        frames: usize,
+        iterations: usize,
+        width: usize,
         training_seconds: f64,
     },
     /// The orientation model.
@@ -376,9 +387,36 @@ pub fn fit_paw_cascade(
     Ok(trained)
 }
 
+/// Trains the paw network on the labelled frames `which` of `views`, its iterations counted on
+/// `progress` with the loss's running mean.
+///
+/// # Errors
+/// The frames hold no labelled paw, or the training's arithmetic fails.
+pub fn fit_paw_net(
+    views: &RealViews,
+    which: &[usize],
+    params: &training::paws_net::NetParams,
+    progress: &dyn Progress,
+) -> Result<crate::vision::paws::net::PawNet> {
+    let material = training::paws_net::real_views(views, which);
+    progress.start("iterations", params.iterations as u64);
+    let net = training::paws_net::train(&material, params, &mut |done, loss| {
+        progress.advance(1);
+        if done % 50 == 0 {
+            progress.label(&format!("loss {loss:.3}"));
+        }
+    })
+    .context("training the paw network")?;
+    progress.finish();
+    Ok(net)
+}
+
 /// `mousepose train paws`.
 fn train_paws(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSummary, Failure> {
     use crate::vision::paws::xml;
+    if let Some(params) = &options.net {
+        return train_paw_net(options, params, progress);
+    }
     let real = options.labels.as_ref().map(LabelOptions::open).transpose()?;
     if options.data.is_none() && real.is_none() {
         return Err(Failure::usage(anyhow::anyhow!(
@@ -422,6 +460,52 @@ fn train_paws(options: &TrainOptions, progress: &dyn Progress) -> Result<TrainSu
         weak,
         features: trained.cascade.features.len(),
         hard_negative_windows: set.hard_count(),
+        training_seconds,
+    })
+}
+
+/// `mousepose train paws --net`: the network from every labelled frame.
+fn train_paw_net(
+    options: &TrainOptions,
+    params: &training::paws_net::NetParams,
+    progress: &dyn Progress,
+) -> Result<TrainSummary, Failure> {
+    let Some(labels) = &options.labels else {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "train paws --net learns from labelled real frames: give --labels FILE"
+        )));
+    };
+    if options.data.is_some() {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "train paws --net learns from labelled real frames only: --data (rendered views) is for the cascade"
+        )));
+    }
+    if options.out.extension().is_none_or(|e| e != "safetensors") {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "train paws --net writes a safetensors file: name --out FILE.safetensors, not {:?}",
+            options.out
+        )));
+    }
+    let views = labels.open()?;
+    let all: Vec<usize> = (0..views.frames.len()).collect();
+    let started = std::time::Instant::now();
+    let net = fit_paw_net(&views, &all, params, progress)?;
+    if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
+    }
+    net.save(&options.out)?;
+    let training_seconds = started.elapsed().as_secs_f64();
+    tracing::info!(
+        message = "Paw network written.",
+        path = %options.out.display(),
+        frames = all.len(),
+        seconds = format!("{training_seconds:.0}"),
+    );
+    Ok(TrainSummary::PawNet {
+        out: options.out.clone(),
+        frames: all.len(),
+        iterations: params.iterations,
+        width: params.width,
         training_seconds,
     })
 }

@@ -3,7 +3,7 @@
 
 use crate::vision::forest::infer::{BodyEstimator, VoteSettings};
 use crate::vision::forest::model::ModelError;
-use crate::vision::paws::{PawDetector, PawError};
+use crate::vision::paws::{PawError, PawModel};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -12,6 +12,19 @@ use std::path::{Path, PathBuf};
 pub const BODY_MODEL: &str = "body.forest";
 /// The paw cascade's file name in a models directory.
 pub const PAWS_MODEL: &str = "paws.xml";
+
+/// The paw network's file in a models directory (`mousepose train paws --net`); run instead
+/// of the cascade when a directory holds both.
+pub const PAWS_NET_MODEL: &str = "paws.safetensors";
+
+/// The paw model of a models directory: its network when it has one, else its cascade;
+/// `None` when it has neither.
+pub fn paws_file(dir: &Path) -> Option<PathBuf> {
+    [PAWS_NET_MODEL, PAWS_MODEL]
+        .iter()
+        .map(|name| dir.join(name))
+        .find(|p| p.is_file())
+}
 /// The orientation model's file name in a models directory.
 pub const ORIENTATION_MODEL: &str = crate::vision::body_shape::MODEL_FILE;
 
@@ -68,9 +81,9 @@ pub fn default_models_dir() -> Result<PathBuf, ModelsError> {
 pub struct Models {
     pub dir: PathBuf,
     pub body: BodyEstimator,
-    /// `None` when the directory has no paw cascade, so that older model directories still
+    /// `None` when the directory has no paw model, so that older model directories still
     /// work (the limbs then take their default configuration).
-    pub paws: Option<PawDetector>,
+    pub paws: Option<PawModel>,
     /// `None` when the directory has no orientation model (older model directories): head
     /// and tail are then told apart by the forest's votes and the motion alone.
     pub orientation: Option<crate::vision::body_shape::ShapeModel>,
@@ -113,9 +126,9 @@ impl Models {
         self.orientation.is_some().then(|| self.dir.join(ORIENTATION_MODEL))
     }
 
-    /// The paw cascade's file, when there is one.
+    /// The paw model's file, when there is one.
     pub fn paws_path(&self) -> Option<PathBuf> {
-        self.paws.is_some().then(|| self.dir.join(PAWS_MODEL))
+        self.paws.as_ref().and(paws_file(&self.dir))
     }
 
     /// Which models these are, for the outputs they make: the directory, whether it is the
@@ -198,16 +211,16 @@ pub fn load_body(models: &Path) -> Result<BodyEstimator, ModelsError> {
     BodyEstimator::load(&path, VoteSettings::default()).map_err(|source| ModelsError::Body { path, source })
 }
 
-/// Loads the paw cascade of a models directory; `None` when the directory has none.
+/// Loads the paw model of a models directory ([`paws_file`]); `None` when the directory has
+/// none.
 ///
 /// # Errors
-/// The file is there but is not a cascade we can run.
-pub fn load_paws(models: &Path) -> Result<Option<PawDetector>, ModelsError> {
-    let path = models.join(PAWS_MODEL);
-    if !path.exists() {
+/// The file is there but is not a paw model we can run.
+pub fn load_paws(models: &Path) -> Result<Option<PawModel>, ModelsError> {
+    let Some(path) = paws_file(models) else {
         return Ok(None);
-    }
-    PawDetector::load(&path).map(Some).map_err(ModelsError::Paws)
+    };
+    PawModel::load(&path).map(Some).map_err(ModelsError::Paws)
 }
 
 /// Loads the orientation model of a models directory; `None` when the directory has none.

@@ -7,6 +7,7 @@
 pub mod orientation;
 pub mod paws_data;
 pub mod paws_eval;
+pub mod paws_net;
 pub mod paws_real;
 
 use crate::core::geometry::Rig;

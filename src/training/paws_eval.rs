@@ -19,7 +19,7 @@
 use super::paws_data::{DATASET_PX_PER_MM, PawDataError, bottom_frame, hard_places};
 use crate::synth::dataset::Dataset;
 use crate::synth::views::Mark;
-use crate::vision::paws::{PawDetection, PawDetector};
+use crate::vision::paws::{PawDetection, PawModel};
 use serde::Serialize;
 use std::path::Path;
 
@@ -54,9 +54,11 @@ pub struct PawReport {
     pub mean_centre_error_px: f64,
     /// The colour camera's binning the views were seen at (1: the full sensor).
     pub color_binning: u32,
-    /// Detector settings used for the figures above: the grouping at the views' scale (less
-    /// than the cascade's own for binned views, [`PawDetector::min_neighbors_at`]), the scales.
-    pub min_neighbors: usize,
+    /// A cascade's settings used for the figures above: the grouping at the views' scale (less
+    /// than the cascade's own for binned views,
+    /// [`crate::vision::paws::PawDetector::min_neighbors_at`]), the scales; `None` and none
+    /// for a network.
+    pub min_neighbors: Option<usize>,
     pub scales: Vec<f64>,
     /// Precision and recall as the minimum score varies (grouping with `minNeighbors = 0`).
     pub curve: Vec<CurvePoint>,
@@ -152,13 +154,12 @@ fn ratio(a: usize, b: usize) -> f64 {
 ///
 /// # Errors
 /// When the dataset cannot be read or has no visible paw on the glass.
-pub fn evaluate(detector: &PawDetector, dir: &Path, binning: u32) -> Result<PawReport, PawDataError> {
+pub fn evaluate(detector: &PawModel, dir: &Path, binning: u32) -> Result<PawReport, PawDataError> {
     let binning = binning.max(1);
     let ds = Dataset::open(dir)?;
     let rig = ds.meta.rig.unwrap_or_else(crate::core::geometry::Rig::default_rig);
     let mut headline = detector.clone();
-    let mut all = detector.clone();
-    all.set_min_neighbors(0);
+    let mut all = detector.permissive();
     let mut dets = Vec::new();
     let mut outcomes = Vec::new();
     let mut curve_outcomes = Vec::new();
@@ -226,8 +227,14 @@ pub fn evaluate(detector: &PawDetector, dir: &Path, binning: u32) -> Result<PawR
         f1,
         mean_centre_error_px: if tp > 0 { err / tp as f64 } else { 0.0 },
         color_binning: binning,
-        min_neighbors: detector.min_neighbors_at(DATASET_PX_PER_MM / f64::from(binning)),
-        scales: detector.scales().to_vec(),
+        min_neighbors: match detector {
+            PawModel::Cascade(c) => Some(c.min_neighbors_at(DATASET_PX_PER_MM / f64::from(binning))),
+            PawModel::Net(_) => None,
+        },
+        scales: match detector {
+            PawModel::Cascade(c) => c.scales().to_vec(),
+            PawModel::Net(_) => Vec::new(),
+        },
         curve,
     })
 }

@@ -18,7 +18,7 @@ use crate::core::skeleton::Joint;
 use crate::io::paw_labels::{FrameSource, LabelTable, LabelledImage, PawMap, lower_view_top, read_labels};
 use crate::vision::paws::grey::{GreyImage, Greyer};
 use crate::vision::paws::train::{Background, TrainingSet};
-use crate::vision::paws::{CANONICAL_PX_PER_MM, PawDetection, PawDetector};
+use crate::vision::paws::{CANONICAL_PX_PER_MM, PawDetection, PawModel};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -497,13 +497,21 @@ impl RealPawReport {
         for t in self.per_paw.values_mut() {
             t.recall = ratio(t.found, t.labelled);
         }
-        let top = self.scored.iter().map(|(s, _)| s.floor() as u32).max().unwrap_or(0);
-        self.curve = (1..=top)
+        // A cascade's scores count windows (whole numbers from 1); a network's are
+        // probabilities, its curve in tenths.
+        let top = self.scored.iter().map(|(s, _)| *s).fold(0.0f32, f32::max);
+        let mins: Vec<f32> = if top > 1.0 {
+            (1..=top.floor() as u32).map(|m| m as f32).collect()
+        } else {
+            (1..10).map(|m| m as f32 / 10.0).collect()
+        };
+        self.curve = mins
+            .into_iter()
             .map(|min| {
-                let kept = self.scored.iter().filter(|(s, _)| *s >= min as f32);
+                let kept = self.scored.iter().filter(|(s, _)| *s >= min);
                 let (all, found) = kept.fold((0, 0), |(a, f), (_, t)| (a + 1, f + usize::from(*t)));
                 super::paws_eval::CurvePoint {
-                    min_score: f64::from(min),
+                    min_score: (f64::from(min) * 10.0).round() / 10.0,
                     precision: ratio(found, all),
                     recall: ratio(found, self.paws),
                 }
@@ -516,7 +524,7 @@ impl RealPawReport {
 /// labels ([module rules](self)). At [`Scale::Found`] one scale is found for all of `which`
 /// together, as for the frames of one rig.
 pub fn judge(
-    detector: &mut PawDetector,
+    detector: &mut PawModel,
     views: &RealViews,
     which: &[usize],
     scale: Scale,

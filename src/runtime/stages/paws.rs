@@ -1,18 +1,18 @@
-//! The paw stage: the paw cascade on the bottom colour frame, only around where the mouse
+//! The paw stage: the paw model on the bottom colour frame, only around where the mouse
 //! stands (its body joints' footprint on the glass, projected into the bottom camera).
 
 use super::Posed;
 use crate::core::geometry::Camera;
 use crate::runtime::pipeline::{Map, StageError};
 use crate::runtime::pose_record::PoseStatus;
-use crate::vision::paws::{FOOTPRINT_MARGIN_MM, PawDetector, footprint};
+use crate::vision::paws::{FOOTPRINT_MARGIN_MM, PawModel, footprint};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// Runs a [`PawDetector`] on each colour frame that comes with a mouse.
+/// Runs a [`PawModel`] on each colour frame that comes with a mouse.
 #[derive(Debug, Clone)]
 pub struct PawStage {
-    detector: Option<PawDetector>,
+    detector: Option<PawModel>,
     color: Camera,
     /// Whether the colour frames' size was found not to match: said once, by whichever of
     /// the stage's workers (its clones) finds it first.
@@ -22,7 +22,7 @@ pub struct PawStage {
 impl PawStage {
     /// A stage for the bottom camera `color`; without a detector it finds no paws (the
     /// fusion then puts every limb in its default configuration).
-    pub fn new(detector: Option<PawDetector>, color: Camera) -> Self {
+    pub fn new(detector: Option<PawModel>, color: Camera) -> Self {
         Self {
             detector,
             color,
@@ -85,7 +85,7 @@ mod tests {
     fn a_wrong_colour_size_is_said_once_whatever_the_number_of_workers() {
         let rig = Rig::default_rig();
         let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/models/paws.xml");
-        let stage = PawStage::new(Some(PawDetector::load(&models).unwrap()), rig.color);
+        let stage = PawStage::new(Some(PawModel::load(&models).unwrap()), rig.color);
         let mut workers = vec![stage.clone(), stage];
         let said = warnings(|| {
             for w in &mut workers {

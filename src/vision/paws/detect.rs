@@ -260,7 +260,7 @@ pub const DEFAULT_SCALES: [f64; 3] = [0.8, 1.0, 1.25];
 
 /// Drops each detection whose centre lies in the box of a surer one: one paw found twice by
 /// groups the grouping kept apart (a paw's toes and its heel). Surest first.
-fn suppress_repeats(found: &mut Vec<PawDetection>) {
+pub(super) fn suppress_repeats(found: &mut Vec<PawDetection>) {
     found.sort_by(|a, b| b.score.total_cmp(&a.score));
     let mut kept = 0;
     for i in 0..found.len() {
@@ -291,6 +291,39 @@ pub const SCALE_STEPS_PER_OCTAVE: u32 = 8;
 pub struct FoundScale {
     pub px_per_mm: f64,
     pub evidence: f64,
+}
+
+/// [`PawDetector::find_scale`] with any detector: `detect` finds paws in a frame's region at
+/// a scale. The scale whose detections are surest, their four best scores in each frame (a
+/// mouse has four paws) summed over the frames; candidates [`SCALE_STEPS_PER_OCTAVE`] to an
+/// octave apart from `lowest` to `highest`. `None` when the range is empty or nothing is
+/// detected at any scale.
+pub fn find_scale_with(
+    frames: &[FrameRegion<'_>],
+    lowest: f64,
+    highest: f64,
+    mut detect: impl FnMut(&ColorFrame, (u32, u32, u32, u32), f64, &mut Vec<PawDetection>),
+) -> Option<FoundScale> {
+    if !(lowest > 0.0 && highest >= lowest && highest.is_finite()) {
+        return None;
+    }
+    let step = 2f64.powf(1.0 / f64::from(SCALE_STEPS_PER_OCTAVE));
+    let mut best: Option<FoundScale> = None;
+    let mut found = Vec::new();
+    let mut px_per_mm = lowest;
+    while px_per_mm <= highest * 1.000_001 {
+        let mut evidence = 0.0;
+        for &(frame, roi) in frames {
+            detect(frame, roi, px_per_mm, &mut found);
+            found.sort_by(|a, b| b.score.total_cmp(&a.score));
+            evidence += found.iter().take(4).map(|d| f64::from(d.score)).sum::<f64>();
+        }
+        if evidence > 0.0 && best.is_none_or(|b| evidence > b.evidence) {
+            best = Some(FoundScale { px_per_mm, evidence });
+        }
+        px_per_mm *= step;
+    }
+    best
 }
 
 /// The view's scale (px/mm on the glass) from which a cascade's grouping holds as chosen
@@ -426,26 +459,10 @@ impl PawDetector {
     /// Candidates are [`SCALE_STEPS_PER_OCTAVE`] to an octave apart.
     /// `None` when the range is empty or nothing is detected at any scale.
     pub fn find_scale(&mut self, frames: &[FrameRegion<'_>], lowest: f64, highest: f64) -> Option<FoundScale> {
-        if !(lowest > 0.0 && highest >= lowest && highest.is_finite()) {
-            return None;
-        }
-        let step = 2f64.powf(1.0 / f64::from(SCALE_STEPS_PER_OCTAVE));
-        let mut best: Option<FoundScale> = None;
-        let mut found = Vec::new();
-        let mut px_per_mm = lowest;
-        while px_per_mm <= highest * 1.000_001 {
-            let mut evidence = 0.0;
-            for &(frame, roi) in frames {
-                self.detect_grouped(frame, roi, px_per_mm, self.min_neighbors, &mut found);
-                found.sort_by(|a, b| b.score.total_cmp(&a.score));
-                evidence += found.iter().take(4).map(|d| f64::from(d.score)).sum::<f64>();
-            }
-            if evidence > 0.0 && best.is_none_or(|b| evidence > b.evidence) {
-                best = Some(FoundScale { px_per_mm, evidence });
-            }
-            px_per_mm *= step;
-        }
-        best
+        let min = self.min_neighbors;
+        find_scale_with(frames, lowest, highest, |frame, roi, px_per_mm, out| {
+            self.detect_grouped(frame, roi, px_per_mm, min, out);
+        })
     }
 
     /// Scans one image (`scaled` or `canonical`) and appends its accepted windows to `raw`.

@@ -17,12 +17,15 @@ pub mod footprint;
 pub mod grey;
 pub mod haar;
 pub mod integral;
+pub mod model;
+pub mod net;
 pub mod train;
 pub mod xml;
 
 pub use cascade::Cascade;
 pub use detect::PawDetector;
 pub use footprint::{FOOTPRINT_MARGIN_MM, footprint};
+pub use model::PawModel;
 
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;

@@ -1,0 +1,225 @@
+//! Training the paw network ([`crate::vision::paws::net`]) on labelled real bottom views.
+//!
+//! Each labelled frame's bottom view is taken in grey at the network's scale and at four other
+//! sizes (x0.8 to x1.25: a view told or found a little off its true scale still finds its
+//! paws), standardised as the detector does. Training draws crops of [`CROP_PX`] pixels, half
+//! of them near a labelled paw and half anywhere, each turned or mirrored (one of the eight
+//! ways), its contrast and brightness varied and noise added. The target of each heatmap cell
+//! is a Gaussian of its distance from the nearest paw (sigma [`TARGET_SIGMA_MM`]); the loss is
+//! CenterNet's penalty-reduced focal loss (Zhou, Wang and Krahenbuhl 2019), which weighs the few
+//! cells on a paw against the many beside and between them. AdamW with a cosine-decayed
+//! learning rate.
+
+use crate::training::paws_real::RealViews;
+use crate::vision::paws::PawError;
+use crate::vision::paws::grey::{GreyImage, Greyer};
+use crate::vision::paws::net::{NET_PX_PER_MM, NET_STRIDE, PawNet, standardise};
+use candle_core::{DType, Device, Tensor};
+use candle_nn::{Optimizer, VarBuilder, VarMap};
+use rand::{Rng, SeedableRng};
+
+/// The side of a training crop (pixels at [`NET_PX_PER_MM`]).
+pub const CROP_PX: usize = 48;
+
+/// The spread of a paw's target about its centre (mm).
+pub const TARGET_SIGMA_MM: f64 = 1.2;
+
+/// The sizes each view is also learnt at, relative to its true scale.
+const SIZES: [f64; 5] = [0.8, 0.9, 1.0, 1.12, 1.25];
+
+/// Cells whose target is at least this are a paw's own (the focal loss's positives).
+const POSITIVE_TARGET: f32 = 0.8;
+
+/// How the network is trained.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NetParams {
+    pub iterations: usize,
+    pub batch: usize,
+    /// Channels of the inner layers.
+    pub width: usize,
+    pub learning_rate: f64,
+    /// Heatmap probability a paw needs to be reported.
+    pub threshold: f32,
+    pub seed: u64,
+}
+
+impl Default for NetParams {
+    fn default() -> Self {
+        Self {
+            iterations: 2000,
+            batch: 16,
+            width: 12,
+            learning_rate: 2e-3,
+            threshold: 0.4,
+            seed: 1,
+        }
+    }
+}
+
+/// One bottom view at one size, standardised, with its paws (pixels of the view).
+#[derive(Clone, Debug)]
+pub struct NetView {
+    pub pixels: Vec<f32>,
+    pub width: usize,
+    pub height: usize,
+    pub paws: Vec<(f64, f64)>,
+}
+
+/// The bottom views of the labelled frames `which`, each at every size of training.
+pub fn real_views(views: &RealViews, which: &[usize]) -> Vec<NetView> {
+    let mut greyer = Greyer::default();
+    let mut grey = GreyImage::default();
+    let mut out = Vec::new();
+    for &k in which.iter().filter(|&&k| k < views.frames.len()) {
+        for size in SIZES {
+            let Some(place) = greyer.convert(
+                &views.frames[k],
+                views.roi(k),
+                views.px_per_mm / size,
+                NET_PX_PER_MM,
+                &mut grey,
+            ) else {
+                continue;
+            };
+            let mut pixels = Vec::new();
+            standardise(&grey, &mut pixels);
+            let paws = views
+                .paws_in(k)
+                .iter()
+                .map(|&(_, x, y)| {
+                    (
+                        (x - place.x0) / place.frame_px_per_px,
+                        (y - place.y0) / place.frame_px_per_px,
+                    )
+                })
+                .collect();
+            out.push(NetView {
+                pixels,
+                width: grey.width,
+                height: grey.height,
+                paws,
+            });
+        }
+    }
+    out
+}
+
+/// A batch of crops and their targets.
+fn batch(views: &[NetView], n: usize, rng: &mut impl Rng) -> candle_core::Result<(Tensor, Tensor)> {
+    let cells = CROP_PX / NET_STRIDE;
+    let mut xs = vec![0f32; n * CROP_PX * CROP_PX];
+    let mut ts = vec![0f32; n * cells * cells];
+    let sigma_px = TARGET_SIGMA_MM * NET_PX_PER_MM;
+    for b in 0..n {
+        let v = &views[rng.gen_range(0..views.len())];
+        let (cx, cy) = if !v.paws.is_empty() && rng.gen_bool(0.5) {
+            let p = v.paws[rng.gen_range(0..v.paws.len())];
+            let reach = CROP_PX as f64 * 0.4;
+            (p.0 + rng.gen_range(-reach..reach), p.1 + rng.gen_range(-reach..reach))
+        } else {
+            (rng.gen_range(0.0..v.width as f64), rng.gen_range(0.0..v.height as f64))
+        };
+        let (ox, oy) = (
+            (cx - CROP_PX as f64 / 2.0).round() as i64,
+            (cy - CROP_PX as f64 / 2.0).round() as i64,
+        );
+        let (flip_x, flip_y, transpose) = (rng.gen_bool(0.5), rng.gen_bool(0.5), rng.gen_bool(0.5));
+        // The view's pixel offset from the crop's corner of crop pixel (i, j).
+        let from_crop = |i: usize, j: usize| {
+            let (u, w) = if transpose { (j, i) } else { (i, j) };
+            (
+                if flip_x { CROP_PX - 1 - u } else { u },
+                if flip_y { CROP_PX - 1 - w } else { w },
+            )
+        };
+        let gain = rng.gen_range(0.75f32..1.33);
+        let offset = rng.gen_range(-0.3f32..0.3);
+        let crop = &mut xs[b * CROP_PX * CROP_PX..(b + 1) * CROP_PX * CROP_PX];
+        for j in 0..CROP_PX {
+            for i in 0..CROP_PX {
+                let (u, w) = from_crop(i, j);
+                let (x, y) = (ox + u as i64, oy + w as i64);
+                let inside = x >= 0 && y >= 0 && (x as usize) < v.width && (y as usize) < v.height;
+                let value = if inside {
+                    v.pixels[y as usize * v.width + x as usize]
+                } else {
+                    0.0
+                };
+                crop[j * CROP_PX + i] = value * gain + offset + rng.gen_range(-0.1f32..0.1);
+            }
+        }
+        for j in 0..cells {
+            for i in 0..cells {
+                // The cell's centre: between its first and last pixel, in the view.
+                let (u0, w0) = from_crop(NET_STRIDE * i, NET_STRIDE * j);
+                let (u1, w1) = from_crop(NET_STRIDE * i + NET_STRIDE - 1, NET_STRIDE * j + NET_STRIDE - 1);
+                let x = ox as f64 + (u0 + u1) as f64 / 2.0 + 0.5;
+                let y = oy as f64 + (w0 + w1) as f64 / 2.0 + 0.5;
+                let d2 = v
+                    .paws
+                    .iter()
+                    .map(|p| (x - p.0).powi(2) + (y - p.1).powi(2))
+                    .fold(f64::INFINITY, f64::min);
+                ts[b * cells * cells + j * cells + i] = (-d2 / (2.0 * sigma_px * sigma_px)).exp() as f32;
+            }
+        }
+    }
+    Ok((
+        Tensor::from_vec(xs, (n, 1, CROP_PX, CROP_PX), &Device::Cpu)?,
+        Tensor::from_vec(ts, (n, 1, cells, cells), &Device::Cpu)?,
+    ))
+}
+
+/// `log(1 + e^x)`, without overflow.
+fn softplus(x: &Tensor) -> candle_core::Result<Tensor> {
+    x.relu()? + (x.abs()?.neg()?.exp()? + 1.0)?.log()?
+}
+
+/// The penalty-reduced focal loss of `logits` against the Gaussian `targets`, per positive.
+fn focal_loss(logits: &Tensor, targets: &Tensor) -> candle_core::Result<Tensor> {
+    let p = candle_nn::ops::sigmoid(logits)?;
+    let positive = targets.ge(POSITIVE_TARGET)?.to_dtype(DType::F32)?;
+    let negative = (positive.neg()? + 1.0)?;
+    // -log p = softplus(-x); -log(1 - p) = softplus(x).
+    let on_paws = ((&positive * (p.neg()? + 1.0)?.sqr()?)? * softplus(&logits.neg()?)?)?;
+    let beside = (((negative * (targets.neg()? + 1.0)?.powf(4.0)?)? * p.sqr()?)? * softplus(logits)?)?;
+    let count = f64::from(positive.sum_all()?.to_scalar::<f32>()?.max(1.0));
+    (on_paws.sum_all()? + beside.sum_all()?)? / count
+}
+
+/// Trains a network on `views`; `progress` is told each iteration done and the loss's
+/// running mean.
+///
+/// # Errors
+/// No view holds a paw, or the training's arithmetic fails.
+pub fn train(views: &[NetView], params: &NetParams, progress: &mut dyn FnMut(usize, f64)) -> Result<PawNet, PawError> {
+    if views.iter().all(|v| v.paws.is_empty()) {
+        return Err(PawError::Training {
+            reason: "no labelled paw to learn from".into(),
+        });
+    }
+    let failed = |e: candle_core::Error| PawError::Training { reason: e.to_string() };
+    let vars = VarMap::new();
+    let vb = VarBuilder::from_varmap(&vars, DType::F32, &Device::Cpu);
+    let net = PawNet::new(&vb, params.width, params.threshold).map_err(failed)?;
+    let adam = candle_nn::ParamsAdamW {
+        lr: params.learning_rate,
+        weight_decay: 1e-4,
+        ..candle_nn::ParamsAdamW::default()
+    };
+    let mut optimiser = candle_nn::AdamW::new(vars.all_vars(), adam).map_err(failed)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(params.seed);
+    let mut mean = None;
+    for it in 0..params.iterations {
+        let done = it as f64 / params.iterations as f64;
+        optimiser.set_learning_rate(params.learning_rate * 0.5 * (1.0 + (std::f64::consts::PI * done).cos()));
+        let (x, t) = batch(views, params.batch, &mut rng).map_err(failed)?;
+        let loss = focal_loss(&net.forward(&x).map_err(failed)?, &t).map_err(failed)?;
+        optimiser.backward_step(&loss).map_err(failed)?;
+        let l = f64::from(loss.to_scalar::<f32>().map_err(failed)?);
+        let m = mean.map_or(l, |m: f64| 0.98 * m + 0.02 * l);
+        mean = Some(m);
+        progress(it + 1, m);
+    }
+    Ok(net)
+}
