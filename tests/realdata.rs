@@ -218,7 +218,7 @@ fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
-    let train = |out: &std::path::Path| {
+    let train = |out: &Path| {
         mousepose()
             .args(["train", "paws", "--labels"])
             .arg(&labels)

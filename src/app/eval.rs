@@ -159,16 +159,19 @@ fn parts_text(report: &training::PartsReport) -> String {
 fn real_paws_text(f: &RealPawsFigures) -> String {
     let mut t = String::new();
     let how = if f.folds > 0 {
-        format!("cross-validated over {} folds of frames", f.folds)
+        format!("{}s cross-validated over {} folds of frames", f.detector, f.folds)
     } else {
         format!(
-            "the cascade {:?}",
+            "the {} {:?}",
+            f.detector,
             f.model.as_deref().unwrap_or(std::path::Path::new("?"))
         )
     };
     let _ = writeln!(t, "{how}, on {:?}", f.label_file);
     let _ = writeln!(t, "bottom view: {}", f.bottom_view);
-    let _ = writeln!(t, "grouping: minNeighbors {}", f.min_neighbors);
+    if f.detector == "cascade" {
+        let _ = writeln!(t, "grouping: minNeighbors {}", f.min_neighbors);
+    }
     let _ = writeln!(t, "{:<22} {:>12} {:>12}", "", "scale told", "scale found");
     let (a, b) = (&f.told_scale, &f.found_scale);
     let _ = writeln!(t, "{:<22} {:>12} {:>12}", "frames", a.frames, b.frames);

@@ -365,7 +365,8 @@ pub struct RealPawsFigures {
     pub training_seconds: f64,
     /// What kind of model was judged: `cascade` or `network`.
     pub detector: &'static str,
-    /// The grouping the figures were judged with (`minNeighbors`; a cascade's).
+    /// The grouping a cascade's figures were judged with (`minNeighbors`; not used by a
+    /// network).
     pub min_neighbors: usize,
     /// Per frame (told the scale): its image, paws found and missed, false detections.
     pub per_frame: Vec<RealPawsFrame>,

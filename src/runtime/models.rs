@@ -25,6 +25,7 @@ pub fn paws_file(dir: &Path) -> Option<PathBuf> {
         .map(|name| dir.join(name))
         .find(|p| p.is_file())
 }
+
 /// The orientation model's file name in a models directory.
 pub const ORIENTATION_MODEL: &str = crate::vision::body_shape::MODEL_FILE;
 
