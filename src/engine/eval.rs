@@ -453,7 +453,7 @@ pub fn eval_real_paws(
                 );
                 let mut detector = if let Some(params) = &options.net {
                     let net = crate::engine::train::fit_paw_net(&views, &learnt, params, progress)?;
-                    PawModel::Net(Box::new(crate::vision::paws::net::NetDetector::new(net)?))
+                    PawModel::Net(Box::new(crate::vision::paws::net::NetDetector::new(&net)?))
                 } else {
                     let set =
                         crate::engine::train::paw_material(renders.as_ref(), Some((&views, &learnt)), options.seed)?;

@@ -211,7 +211,9 @@ impl Map for BodyStage {
                 let mut headings = self.headings(&oriented);
                 self.body_points(&image);
                 headings.shape = self.shape(&headings.axis);
-                headings.body.extend_from_slice(&self.points);
+                // The points go with the frame; the next frame's start at their size.
+                let next = Vec::with_capacity(self.points.len());
+                headings.body = std::mem::replace(&mut self.points, next);
                 if let Some((tail, mm_per_px)) = &tail {
                     headings.tail = self.tail_evidence(&image, tail, *mm_per_px, &headings);
                 }

@@ -23,7 +23,7 @@ impl PawModel {
     /// As [`PawDetector::load`] and [`PawNet::load`].
     pub fn load(path: &Path) -> Result<Self, PawError> {
         if path.extension().is_some_and(|e| e == "safetensors") {
-            Ok(Self::Net(Box::new(NetDetector::new(PawNet::load(path)?)?)))
+            Ok(Self::Net(Box::new(NetDetector::new(&PawNet::load(path)?)?)))
         } else {
             Ok(Self::Cascade(Box::new(PawDetector::load(path)?)))
         }

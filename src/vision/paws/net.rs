@@ -27,6 +27,9 @@ pub const NET_PX_PER_MM: f64 = 2.0;
 /// Input pixels per heatmap cell along each axis.
 pub const NET_STRIDE: usize = 2;
 
+/// The layers' names in the weights file, input first.
+const LAYER_NAMES: [&str; 6] = ["c1", "c2", "c3", "c4", "c5", "head"];
+
 /// The version of the weights file's layout, kept in its `meta` tensor.
 const FORMAT_VERSION: f32 = 1.0;
 
@@ -58,11 +61,11 @@ impl PawNet {
     pub fn new(vb: &VarBuilder<'_>, width: usize, threshold: f32) -> candle_core::Result<Self> {
         let half = (width / 2).max(1);
         let convs = vec![
-            conv2d(1, half, 3, config(1), vb.pp("c1"))?,
-            conv2d(half, width, 3, config(1), vb.pp("c2"))?,
-            conv2d(width, width, 3, config(1), vb.pp("c3"))?,
-            conv2d(width, width, 3, config(2), vb.pp("c4"))?,
-            conv2d(width, width, 3, config(4), vb.pp("c5"))?,
+            conv2d(1, half, 3, config(1), vb.pp(LAYER_NAMES[0]))?,
+            conv2d(half, width, 3, config(1), vb.pp(LAYER_NAMES[1]))?,
+            conv2d(width, width, 3, config(1), vb.pp(LAYER_NAMES[2]))?,
+            conv2d(width, width, 3, config(2), vb.pp(LAYER_NAMES[3]))?,
+            conv2d(width, width, 3, config(4), vb.pp(LAYER_NAMES[4]))?,
         ];
         let head = conv2d(
             width,
@@ -72,7 +75,7 @@ impl PawNet {
                 padding: 0,
                 ..Conv2dConfig::default()
             },
-            vb.pp("head"),
+            vb.pp(LAYER_NAMES[5]),
         )?;
         Ok(Self {
             convs,
@@ -133,8 +136,7 @@ impl PawNet {
     /// The file cannot be written.
     pub fn save(&self, path: &Path) -> Result<(), PawError> {
         let mut tensors: HashMap<String, Tensor> = HashMap::new();
-        let names = ["c1", "c2", "c3", "c4", "c5", "head"];
-        for (name, conv) in names.iter().zip(self.convs.iter().chain([&self.head])) {
+        for (name, conv) in LAYER_NAMES.iter().zip(self.convs.iter().chain([&self.head])) {
             tensors.insert(format!("{name}.weight"), conv.weight().clone());
             if let Some(b) = conv.bias() {
                 tensors.insert(format!("{name}.bias"), b.clone());
@@ -327,8 +329,9 @@ pub fn peaks(heat: &[f32], width: usize, threshold: f32, out: &mut Vec<(f64, f64
 /// Finds paws with a [`PawNet`]. Cheap to clone: one per worker thread.
 #[derive(Clone, Debug)]
 pub struct NetDetector {
-    net: PawNet,
     layers: Layers,
+    /// Heatmap probability a paw needs to be reported.
+    threshold: f32,
     greyer: Greyer,
     grey: GreyImage,
     input: Vec<f32>,
@@ -341,10 +344,10 @@ impl NetDetector {
     ///
     /// # Errors
     /// The network's weights cannot be read out (they are not `f32`).
-    pub fn new(net: PawNet) -> Result<Self, PawError> {
-        let layers = Layers::of(&net).map_err(|e| PawError::Training { reason: e.to_string() })?;
+    pub fn new(net: &PawNet) -> Result<Self, PawError> {
+        let layers = Layers::of(net).map_err(|e| PawError::Training { reason: e.to_string() })?;
         Ok(Self {
-            net,
+            threshold: net.threshold,
             layers,
             greyer: Greyer::default(),
             grey: GreyImage::default(),
@@ -354,14 +357,9 @@ impl NetDetector {
         })
     }
 
-    /// The network it runs.
-    pub fn net(&self) -> &PawNet {
-        &self.net
-    }
-
     /// Reports peaks of this probability and more instead of the network's own threshold.
     pub fn set_threshold(&mut self, threshold: f32) {
-        self.net.threshold = threshold;
+        self.threshold = threshold;
     }
 
     /// Detects paws in `frame` within `roi`, the glass seen at `px_per_mm`: clears `out`, then
@@ -388,7 +386,7 @@ impl NetDetector {
         standardise(&self.grey, &mut self.input);
         self.layers.heatmap(&self.input, w, h, &mut self.heat);
         let cells = w / NET_STRIDE;
-        peaks(&self.heat, cells, self.net.threshold, &mut self.peaks);
+        peaks(&self.heat, cells, self.threshold, &mut self.peaks);
         let half = f64::from(WINDOW_PX) / 2.0 * place.frame_px_per_px * NET_PX_PER_MM;
         for &(cx, cy, p) in &self.peaks {
             // A cell covers input pixels [2c, 2c + 2): its centre is at 2c + 1.
