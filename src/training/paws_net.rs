@@ -170,6 +170,39 @@ fn batch(views: &[NetView], n: usize, rng: &mut impl Rng) -> candle_core::Result
     ))
 }
 
+/// Draws the new network's weights from `rng`, as `candle_nn::conv2d` draws them (Kaiming's
+/// normal for the weights, uniform within one over the root of the inputs for the biases),
+/// layer by layer in the order of their names: `candle`'s own draws come from an unseeded
+/// generator, so two trainings of one seed would start, and end, apart.
+fn seed_weights(vars: &VarMap, rng: &mut impl Rng) -> candle_core::Result<()> {
+    let vars = vars
+        .data()
+        .lock()
+        .map_err(|_| candle_core::Error::Msg("the weights' lock was poisoned".into()))?;
+    let mut names: Vec<&String> = vars.keys().collect();
+    names.sort();
+    for name in names {
+        let var = &vars[name];
+        let layer = name.rsplit_once('.').map_or(name.as_str(), |(layer, _)| layer);
+        let weight = vars
+            .get(&format!("{layer}.weight"))
+            .ok_or_else(|| candle_core::Error::Msg(format!("no weight for {name}")))?;
+        let (_, inputs, kh, kw) = weight.dims4()?;
+        let values: Vec<f32> = if var.rank() == 4 {
+            let normal = rand_distr::Normal::new(0.0, (2.0 / (inputs * kh * kw) as f64).sqrt())
+                .map_err(|e| candle_core::Error::Msg(e.to_string()))?;
+            (0..var.elem_count()).map(|_| rng.sample(normal) as f32).collect()
+        } else {
+            let bound = 1.0 / (inputs as f64).sqrt();
+            (0..var.elem_count())
+                .map(|_| rng.gen_range(-bound..bound) as f32)
+                .collect()
+        };
+        var.set(&Tensor::from_vec(values, var.shape(), &Device::Cpu)?)?;
+    }
+    Ok(())
+}
+
 /// `log(1 + e^x)`, without overflow.
 fn softplus(x: &Tensor) -> candle_core::Result<Tensor> {
     x.relu()? + (x.abs()?.neg()?.exp()? + 1.0)?.log()?
@@ -202,13 +235,14 @@ pub fn train(views: &[NetView], params: &NetParams, progress: &mut dyn FnMut(usi
     let vars = VarMap::new();
     let vb = VarBuilder::from_varmap(&vars, DType::F32, &Device::Cpu);
     let net = PawNet::new(&vb, params.width, params.threshold).map_err(failed)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(params.seed);
+    seed_weights(&vars, &mut rng).map_err(failed)?;
     let adam = candle_nn::ParamsAdamW {
         lr: params.learning_rate,
         weight_decay: 1e-4,
         ..candle_nn::ParamsAdamW::default()
     };
     let mut optimiser = candle_nn::AdamW::new(vars.all_vars(), adam).map_err(failed)?;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(params.seed);
     let mut mean = None;
     for it in 0..params.iterations {
         let done = it as f64 / params.iterations as f64;
@@ -222,4 +256,45 @@ pub fn train(views: &[NetView], params: &NetParams, progress: &mut dyn FnMut(usi
         progress(it + 1, m);
     }
     Ok(net)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The heatmap of one network on one fixed image.
+    fn output(net: &PawNet) -> Vec<f32> {
+        let x: Vec<f32> = (0..32 * 32).map(|i| ((i * 37 % 101) as f32 / 50.0) - 1.0).collect();
+        let x = Tensor::from_vec(x, (1, 1, 32, 32), &Device::Cpu).unwrap();
+        net.forward(&x).unwrap().flatten_all().unwrap().to_vec1().unwrap()
+    }
+
+    #[test]
+    fn one_seed_trains_one_network_and_another_seed_another() {
+        let view = NetView {
+            pixels: (0..64 * 64).map(|i| ((i * 13 % 29) as f32 / 14.0) - 1.0).collect(),
+            width: 64,
+            height: 64,
+            paws: vec![(20.0, 20.0), (40.0, 44.0)],
+        };
+        let params = NetParams {
+            iterations: 4,
+            batch: 2,
+            width: 4,
+            ..NetParams::default()
+        };
+        let run = |seed| {
+            output(
+                &train(
+                    std::slice::from_ref(&view),
+                    &NetParams { seed, ..params },
+                    &mut |_, _| {},
+                )
+                .unwrap(),
+            )
+        };
+        let first = run(3);
+        assert_eq!(first, run(3));
+        assert_ne!(first, run(4));
+    }
 }
