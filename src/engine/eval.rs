@@ -436,11 +436,15 @@ pub fn eval_real_paws(
         (None, Some(folds)) => {
             let folds = folds.clamp(2, n.max(2) as u32);
             figures.folds = folds;
-            let renders = options
-                .renders
-                .as_deref()
-                .map(|dir| crate::engine::train::render_material(dir, options.seed))
-                .transpose()?;
+            // The renders as the kind of model trained learns them.
+            let (renders, render_views) = match (&options.renders, &options.net) {
+                (Some(dir), Some(_)) => (None, crate::engine::train::render_views(dir)?),
+                (Some(dir), None) => (
+                    Some(crate::engine::train::render_material(dir, options.seed)?),
+                    Vec::new(),
+                ),
+                (None, _) => (None, Vec::new()),
+            };
             let started = std::time::Instant::now();
             for fold in 0..folds as usize {
                 let judged = fold_frames(n, folds as usize, fold);
@@ -452,7 +456,7 @@ pub fn eval_real_paws(
                     judged = judged.len()
                 );
                 let mut detector = if let Some(params) = &options.net {
-                    let net = crate::engine::train::fit_paw_net(&views, &learnt, params, progress)?;
+                    let net = crate::engine::train::fit_paw_net(&views, &learnt, &render_views, params, progress)?;
                     PawModel::Net(Box::new(crate::vision::paws::net::NetDetector::new(&net)?))
                 } else {
                     let set =

@@ -310,6 +310,14 @@ pub fn render_material(dir: &std::path::Path, seed: u64) -> Result<crate::vision
         .with_context(|| format!("reading training dataset {dir:?}"))
 }
 
+/// The rendered views of the dataset `dir` as the paw network learns them.
+///
+/// # Errors
+/// The dataset cannot be read, or holds no visible paw on the glass.
+pub fn render_views(dir: &std::path::Path) -> Result<Vec<training::paws_net::NetView>> {
+    training::paws_net::render_views(dir).with_context(|| format!("reading training dataset {dir:?}"))
+}
+
 /// The paw cascade's training material: `renders` ([`render_material`]) and the labelled real
 /// frames `which` of `real`, together. Mixed, each real paw is copied (turned, resized,
 /// shifted) until the real paws give about as many positives as the renders: a lab's few
@@ -387,20 +395,22 @@ pub fn fit_paw_cascade(
     Ok(trained)
 }
 
-/// Trains the paw network on the labelled frames `which` of `views`, its iterations counted on
-/// `progress` with the loss's running mean.
+/// Trains the paw network on the labelled frames `which` of `views` and the rendered views
+/// `renders` ([`training::paws_net::render_views`]; none, real frames only), its iterations
+/// counted on `progress` with the loss's running mean.
 ///
 /// # Errors
 /// The frames hold no labelled paw, or the training's arithmetic fails.
 pub fn fit_paw_net(
     views: &RealViews,
     which: &[usize],
+    renders: &[training::paws_net::NetView],
     params: &training::paws_net::NetParams,
     progress: &dyn Progress,
 ) -> Result<crate::vision::paws::net::PawNet> {
     let material = training::paws_net::real_views(views, which);
     progress.start("iterations", params.iterations as u64);
-    let net = training::paws_net::train(&material, params, &mut |done, loss| {
+    let net = training::paws_net::train(&material, renders, params, &mut |done, loss| {
         progress.advance(1);
         if done % 50 == 0 {
             progress.label(&format!("loss {loss:.3}"));
@@ -475,11 +485,6 @@ fn train_paw_net(
             "train paws --net learns from labelled real frames: give --labels FILE"
         )));
     };
-    if options.data.is_some() {
-        return Err(Failure::usage(anyhow::anyhow!(
-            "train paws --net learns from labelled real frames only: --data (rendered views) is for the cascade"
-        )));
-    }
     if options.out.extension().is_none_or(|e| e != "safetensors") {
         return Err(Failure::usage(anyhow::anyhow!(
             "train paws --net writes a safetensors file: name --out FILE.safetensors, not {:?}",
@@ -487,9 +492,15 @@ fn train_paw_net(
         )));
     }
     let views = labels.open()?;
+    let renders = options
+        .data
+        .as_deref()
+        .map(render_views)
+        .transpose()?
+        .unwrap_or_default();
     let all: Vec<usize> = (0..views.frames.len()).collect();
     let started = std::time::Instant::now();
-    let net = fit_paw_net(&views, &all, params, progress)?;
+    let net = fit_paw_net(&views, &all, &renders, params, progress)?;
     if let Some(parent) = options.out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).with_context(|| format!("creating {parent:?}"))?;
     }

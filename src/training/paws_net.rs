@@ -1,8 +1,10 @@
-//! Training the paw network ([`crate::vision::paws::net`]) on labelled real bottom views.
+//! Training the paw network ([`crate::vision::paws::net`]) on labelled real bottom views, and
+//! rendered ones beside them when given.
 //!
 //! Each labelled frame's bottom view is taken in grey at the network's scale and at four other
 //! sizes (x0.8 to x1.25: a view told or found a little off its true scale still finds its
-//! paws), standardised as the detector does. Training draws crops of [`CROP_PX`] pixels, half
+//! paws), standardised as the detector does; rendered views at their own scale. Half of each
+//! batch comes from the renders when there are any. Training draws crops of [`CROP_PX`] pixels, half
 //! of them near a labelled paw and half anywhere, each turned or mirrored (one of the eight
 //! ways), its contrast and brightness varied and noise added. The target of each heatmap cell
 //! is a Gaussian of its distance from the nearest paw (sigma [`TARGET_SIGMA_MM`]); the loss is
@@ -10,6 +12,9 @@
 //! cells on a paw against the many beside and between them. AdamW with a cosine-decayed
 //! learning rate.
 
+use crate::core::frame::ColorFrame;
+use crate::synth::dataset::Dataset;
+use crate::training::paws_data::{DATASET_PX_PER_MM, PawDataError, bottom_frame};
 use crate::training::paws_real::RealViews;
 use crate::vision::paws::PawError;
 use crate::vision::paws::grey::{GreyImage, Greyer};
@@ -17,6 +22,7 @@ use crate::vision::paws::net::{NET_PX_PER_MM, NET_STRIDE, PawNet, standardise};
 use candle_core::{DType, Device, Tensor};
 use candle_nn::{Optimizer, VarBuilder, VarMap};
 use rand::{Rng, SeedableRng};
+use std::path::Path;
 
 /// The side of a training crop (pixels at [`NET_PX_PER_MM`]).
 pub const CROP_PX: usize = 48;
@@ -65,52 +71,106 @@ pub struct NetView {
     pub paws: Vec<(f64, f64)>,
 }
 
+/// `frame`'s region `roi`, seen at `px_per_mm`, in grey at the network's scale and
+/// standardised, with `paws` (pixels of the frame) moved into it.
+fn net_view(
+    greyer: &mut Greyer,
+    grey: &mut GreyImage,
+    frame: &ColorFrame,
+    roi: (u32, u32, u32, u32),
+    px_per_mm: f64,
+    paws: impl Iterator<Item = (f64, f64)>,
+) -> Option<NetView> {
+    let place = greyer.convert(frame, roi, px_per_mm, NET_PX_PER_MM, grey)?;
+    let mut pixels = Vec::new();
+    standardise(grey, &mut pixels);
+    Some(NetView {
+        pixels,
+        width: grey.width,
+        height: grey.height,
+        paws: paws
+            .map(|(x, y)| {
+                (
+                    (x - place.x0) / place.frame_px_per_px,
+                    (y - place.y0) / place.frame_px_per_px,
+                )
+            })
+            .collect(),
+    })
+}
+
 /// The bottom views of the labelled frames `which`, each at every size of training.
 pub fn real_views(views: &RealViews, which: &[usize]) -> Vec<NetView> {
     let mut greyer = Greyer::default();
     let mut grey = GreyImage::default();
     let mut out = Vec::new();
     for &k in which.iter().filter(|&&k| k < views.frames.len()) {
+        let paws = views.paws_in(k);
         for size in SIZES {
-            let Some(place) = greyer.convert(
+            out.extend(net_view(
+                &mut greyer,
+                &mut grey,
                 &views.frames[k],
                 views.roi(k),
                 views.px_per_mm / size,
-                NET_PX_PER_MM,
-                &mut grey,
-            ) else {
-                continue;
-            };
-            let mut pixels = Vec::new();
-            standardise(&grey, &mut pixels);
-            let paws = views
-                .paws_in(k)
-                .iter()
-                .map(|&(_, x, y)| {
-                    (
-                        (x - place.x0) / place.frame_px_per_px,
-                        (y - place.y0) / place.frame_px_per_px,
-                    )
-                })
-                .collect();
-            out.push(NetView {
-                pixels,
-                width: grey.width,
-                height: grey.height,
-                paws,
-            });
+                paws.iter().map(|&(_, x, y)| (x, y)),
+            ));
         }
     }
     out
 }
 
-/// A batch of crops and their targets.
-fn batch(views: &[NetView], n: usize, rng: &mut impl Rng) -> candle_core::Result<(Tensor, Tensor)> {
+/// The bottom views of a rendered dataset (at its own scale, the full sensor's), their paws
+/// those on the glass and visible, as the cascade learns them ([`super::paws_data`]); a
+/// lifted paw is neither a paw nor a place to stay away from.
+///
+/// # Errors
+/// The dataset cannot be read, or holds no visible paw on the glass.
+pub fn render_views(dir: &Path) -> Result<Vec<NetView>, PawDataError> {
+    let ds = Dataset::open(dir)?;
+    let mut greyer = Greyer::default();
+    let mut grey = GreyImage::default();
+    let mut out = Vec::new();
+    ds.for_each(|sample| {
+        let Some(view) = &sample.bottom else {
+            return Ok(());
+        };
+        let frame = bottom_frame(view);
+        let (rx, ry) = (f64::from(view.region.x0), f64::from(view.region.y0));
+        let paws = view
+            .paws
+            .iter()
+            .filter(|p| p.x1 > p.x0 && p.contact && p.visible)
+            .map(|p| (f64::from(p.x0 + p.x1) / 2.0 - rx, f64::from(p.y0 + p.y1) / 2.0 - ry));
+        out.extend(net_view(
+            &mut greyer,
+            &mut grey,
+            &frame,
+            (0, 0, frame.width, frame.height),
+            DATASET_PX_PER_MM,
+            paws,
+        ));
+        Ok(())
+    })?;
+    if out.iter().all(|v| v.paws.is_empty()) {
+        return Err(PawDataError::NoPaws { path: dir.to_owned() });
+    }
+    Ok(out)
+}
+
+/// A batch of crops and their targets, each from `real` or (half of them, when there are
+/// any) from `renders`.
+fn batch(real: &[NetView], renders: &[NetView], n: usize, rng: &mut impl Rng) -> candle_core::Result<(Tensor, Tensor)> {
     let cells = CROP_PX / NET_STRIDE;
     let mut xs = vec![0f32; n * CROP_PX * CROP_PX];
     let mut ts = vec![0f32; n * cells * cells];
     let sigma_px = TARGET_SIGMA_MM * NET_PX_PER_MM;
     for b in 0..n {
+        let views = if !renders.is_empty() && rng.gen_bool(0.5) {
+            renders
+        } else {
+            real
+        };
         let v = &views[rng.gen_range(0..views.len())];
         let (cx, cy) = if !v.paws.is_empty() && rng.gen_bool(0.5) {
             let p = v.paws[rng.gen_range(0..v.paws.len())];
@@ -220,13 +280,19 @@ fn focal_loss(logits: &Tensor, targets: &Tensor) -> candle_core::Result<Tensor> 
     (on_paws.sum_all()? + beside.sum_all()?)? / count
 }
 
-/// Trains a network on `views`; `progress` is told each iteration done and the loss's
+/// Trains a network on the labelled real views `real` and, half of each batch when there are
+/// any, the rendered views `renders`; `progress` is told each iteration done and the loss's
 /// running mean.
 ///
 /// # Errors
-/// No view holds a paw, or the training's arithmetic fails.
-pub fn train(views: &[NetView], params: &NetParams, progress: &mut dyn FnMut(usize, f64)) -> Result<PawNet, PawError> {
-    if views.iter().all(|v| v.paws.is_empty()) {
+/// No real view holds a paw, or the training's arithmetic fails.
+pub fn train(
+    real: &[NetView],
+    renders: &[NetView],
+    params: &NetParams,
+    progress: &mut dyn FnMut(usize, f64),
+) -> Result<PawNet, PawError> {
+    if real.iter().all(|v| v.paws.is_empty()) {
         return Err(PawError::Training {
             reason: "no labelled paw to learn from".into(),
         });
@@ -247,7 +313,7 @@ pub fn train(views: &[NetView], params: &NetParams, progress: &mut dyn FnMut(usi
     for it in 0..params.iterations {
         let done = it as f64 / params.iterations as f64;
         optimiser.set_learning_rate(params.learning_rate * 0.5 * (1.0 + (std::f64::consts::PI * done).cos()));
-        let (x, t) = batch(views, params.batch, &mut rng).map_err(failed)?;
+        let (x, t) = batch(real, renders, params.batch, &mut rng).map_err(failed)?;
         let loss = focal_loss(&net.forward(&x).map_err(failed)?, &t).map_err(failed)?;
         optimiser.backward_step(&loss).map_err(failed)?;
         let l = f64::from(loss.to_scalar::<f32>().map_err(failed)?);
@@ -287,6 +353,7 @@ mod tests {
             output(
                 &train(
                     std::slice::from_ref(&view),
+                    &[],
                     &NetParams { seed, ..params },
                     &mut |_, _| {},
                 )

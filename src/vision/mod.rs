@@ -13,5 +13,6 @@ pub mod movement;
 pub mod orientation;
 pub mod paws;
 pub mod segment;
+pub mod simd;
 pub mod smoothing;
 pub mod tail;

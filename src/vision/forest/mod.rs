@@ -13,8 +13,7 @@ pub mod discriminative;
 pub mod infer;
 pub mod leaf;
 pub mod model;
-mod packed;
-pub mod simd;
+pub(crate) mod packed;
 pub mod train;
 
 pub use packed::{PackedNode, PackedTree, Traversal};

@@ -8,14 +8,16 @@
 //! convolution to one logit per cell. A peak whose centre lies in the box of a surer one is
 //! the same paw (its toes and its heel), dropped as the cascade drops a paw found twice. It is trained through `candle` on the CPU; the weights
 //! are a `safetensors` file ([`PawNet::load`]) that `mousepose train paws --net` writes. At run
-//! time the same layers run as plain loops over rows ([`Layers`]): `candle`'s general
-//! convolution (unfolding each layer's input into a matrix first) took several times as long
-//! on these few channels, and a test holds the two to the same heatmap.
+//! time the same layers run as plain loops ([`Layers`], [`crate::vision::simd::conv`]: twelve
+//! output channels by eight columns held in registers, in AVX2 where the processor has it):
+//! `candle`'s general convolution (unfolding each layer's input into a matrix first) took
+//! several times as long on these few channels, and a test holds the two to the same heatmap.
 
 use super::detect::suppress_repeats;
 use super::grey::{GreyImage, Greyer};
 use super::{PawDetection, PawError, WINDOW_PX};
 use crate::core::frame::ColorFrame;
+use crate::vision::simd::{self, CONV_BLOCK, Kernel};
 use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::{Conv2d, Conv2dConfig, VarBuilder, conv2d};
 use std::collections::HashMap;
@@ -153,7 +155,7 @@ impl PawNet {
     }
 }
 
-/// One 3x3 convolution's weights, as the run-time loops read them.
+/// One convolution's weights, as the run-time loops read them ([`simd::ConvLayer`]).
 #[derive(Clone, Debug)]
 struct Layer {
     inputs: usize,
@@ -161,104 +163,109 @@ struct Layer {
     /// 1 or 3.
     kernel: usize,
     dilation: usize,
-    /// `[output][input][ky][kx]`.
+    /// `[block of outputs][input][ky][kx][output in the block]` ([`simd::ConvLayer::weights`]).
     weights: Vec<f32>,
     bias: Vec<f32>,
+    /// Followed by a ReLU (every layer but the head).
+    relu: bool,
 }
 
 impl Layer {
-    fn of(conv: &Conv2d) -> candle_core::Result<Self> {
+    fn of(conv: &Conv2d, relu: bool) -> candle_core::Result<Self> {
         let (outputs, inputs, kernel, _) = conv.weight().dims4()?;
         let bias = match conv.bias() {
             Some(b) => b.to_vec1()?,
             None => vec![0.0; outputs],
         };
+        // candle's `[output][input][ky][kx]`, regrouped.
+        let flat: Vec<f32> = conv.weight().flatten_all()?.to_vec1()?;
+        let taps = kernel * kernel;
+        let mut weights = vec![0.0; outputs.div_ceil(CONV_BLOCK) * inputs * taps * CONV_BLOCK];
+        for (n, &v) in flat.iter().enumerate() {
+            let (o, i, t) = (n / (inputs * taps), n / taps % inputs, n % taps);
+            weights[((o / CONV_BLOCK * inputs + i) * taps + t) * CONV_BLOCK + o % CONV_BLOCK] = v;
+        }
         Ok(Self {
             inputs,
             outputs,
             kernel,
             dilation: conv.config().dilation,
-            weights: conv.weight().flatten_all()?.to_vec1()?,
+            weights,
             bias,
+            relu,
         })
     }
 
     /// `out` = this layer on `input` (`inputs` planes of `w` x `h`, zero beyond the edges),
-    /// ReLU'd when `relu`.
-    fn run(&self, input: &[f32], w: usize, h: usize, relu: bool, out: &mut Vec<f32>) {
-        let plane = w * h;
-        out.clear();
-        out.resize(self.outputs * plane, 0.0);
-        let reach = (self.kernel / 2) as isize * self.dilation as isize;
-        for (o, dst) in out.chunks_exact_mut(plane).enumerate() {
-            dst.fill(self.bias[o]);
-            for i in 0..self.inputs {
-                let src = &input[i * plane..(i + 1) * plane];
-                let taps =
-                    &self.weights[(o * self.inputs + i) * self.kernel * self.kernel..][..self.kernel * self.kernel];
-                for (t, &k) in taps.iter().enumerate() {
-                    let dy = (t / self.kernel) as isize * self.dilation as isize - reach;
-                    let dx = (t % self.kernel) as isize * self.dilation as isize - reach;
-                    // Output columns whose source column `x + dx` is inside the image.
-                    let x0 = (-dx).max(0) as usize;
-                    let x1 = (w as isize - dx.max(0)).max(0) as usize;
-                    if x0 >= x1 {
-                        continue;
-                    }
-                    for y in 0..h {
-                        let sy = y as isize + dy;
-                        if sy < 0 || sy >= h as isize {
-                            continue;
-                        }
-                        let s = &src[sy as usize * w..][..w];
-                        let d = &mut dst[y * w..][..w];
-                        let s = &s[(x0 as isize + dx) as usize..(x1 as isize + dx) as usize];
-                        for (a, &b) in d[x0..x1].iter_mut().zip(s) {
-                            *a += k * b;
-                        }
-                    }
-                }
-            }
-            if relu {
-                for v in dst.iter_mut() {
-                    *v = v.max(0.0);
-                }
+    /// by `kernel`; `padded` is scratch for the input's copy with a
+    /// border of zeros.
+    fn run(&self, kernel: Kernel, input: &[f32], w: usize, h: usize, padded: &mut Vec<f32>, out: &mut Vec<f32>) {
+        let layer = simd::ConvLayer {
+            inputs: self.inputs,
+            outputs: self.outputs,
+            kernel: self.kernel,
+            dilation: self.dilation,
+            weights: &self.weights,
+            bias: &self.bias,
+            relu: self.relu,
+        };
+        let (reach, pw) = (layer.reach(), layer.padded_width(w));
+        let pplane = pw * (h + 2 * reach);
+        padded.clear();
+        padded.resize(self.inputs * pplane, 0.0);
+        for (dst, src) in padded.chunks_exact_mut(pplane).zip(input.chunks_exact(w * h)) {
+            for (y, row) in src.chunks_exact(w).enumerate() {
+                dst[(y + reach) * pw + reach..][..w].copy_from_slice(row);
             }
         }
+        out.clear();
+        out.resize(self.outputs * w * h, 0.0);
+        simd::conv(kernel, &layer, padded, w, h, out);
     }
 }
 
 /// The network's layers as the run-time loops read them, with their scratch planes.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct Layers {
     layers: Vec<Layer>,
+    kernel: Kernel,
     a: Vec<f32>,
     b: Vec<f32>,
+    padded: Vec<f32>,
 }
 
 impl Layers {
     fn of(net: &PawNet) -> candle_core::Result<Self> {
+        // Every layer but the head is followed by a ReLU.
         let layers = net
             .convs
             .iter()
-            .chain([&net.head])
-            .map(Layer::of)
+            .map(|conv| Layer::of(conv, true))
+            .chain([Layer::of(&net.head, false)])
             .collect::<candle_core::Result<_>>()?;
         Ok(Self {
             layers,
+            kernel: Kernel::detect(),
             a: Vec::new(),
             b: Vec::new(),
+            padded: Vec::new(),
         })
     }
 
     /// The heatmap's probabilities of a standardised grey image of `w` x `h` pixels, row by
     /// row, `w / 2` cells a row: [`PawNet::forward`]'s result, through the sigmoid.
     pub fn heatmap(&mut self, input: &[f32], w: usize, h: usize, out: &mut Vec<f32>) {
-        let Self { layers, a, b } = self;
+        let Self {
+            layers,
+            kernel,
+            a,
+            b,
+            padded,
+        } = self;
         let Some((first, rest)) = layers.split_first() else {
             return;
         };
-        first.run(input, w, h, true, a);
+        first.run(*kernel, input, w, h, padded, a);
         // 2x2 max-pool: odd last rows and columns dropped, as candle does.
         let (cw, ch) = (w / NET_STRIDE, h / NET_STRIDE);
         b.clear();
@@ -270,9 +277,8 @@ impl Layers {
                 }
             }
         }
-        let last = rest.len().saturating_sub(1);
-        for (k, layer) in rest.iter().enumerate() {
-            layer.run(b, cw, ch, k < last, a);
+        for layer in rest {
+            layer.run(*kernel, b, cw, ch, padded, a);
             std::mem::swap(a, b);
         }
         out.clear();

@@ -1,7 +1,9 @@
 //! The body forest's traversal in AVX2: eight pixels go down a tree together, their nodes and
-//! probed depths fetched with gather instructions; and mean-shift's kernel sums over its votes
-//! eight at a time in 256-bit registers ([`kernel_lanes`]). The one module of mousepose
-//! outside the camera crates with `unsafe`, for the intrinsics.
+//! probed depths fetched with gather instructions; mean-shift's kernel sums over its votes
+//! eight at a time in 256-bit registers ([`kernel_lanes`]); and the paw network's
+//! convolutions ([`conv`]), the same loops compiled for AVX2, eight columns a register. The
+//! one module of mousepose outside the camera crates with `unsafe`, for the intrinsics and
+//! the calls into code compiled for AVX2.
 //!
 //! [`Kernel::detect`] picks AVX2 at run time when the processor has it; every other processor
 //! takes the portable path ([`PackedTree::leaf_indices`]). Both give the same leaf for every
@@ -12,13 +14,13 @@
 //! The AVX2 code reads nodes, pixels and depths without bounds checks, so what it reads is
 //! vouched for by types rather than by callers, and [`leaf_indices`] is sound whatever it is
 //! given: a [`Kernel::Avx2`] exists only where [`Kernel::detect`] found AVX2, a [`PackedTree`]
-//! only once its child indices were checked ([`super::Tree::check`]), [`PixelLanes`] keep their
+//! only once its child indices were checked ([`crate::vision::forest::Tree::check`]), [`PixelLanes`] keep their
 //! arrays one length, and an image whose depth array does not cover its region takes the
 //! portable path.
 #![allow(unsafe_code)]
 
-use super::PackedTree;
-use super::depth::{DepthFeature, DepthImage};
+use crate::vision::forest::PackedTree;
+use crate::vision::forest::depth::{DepthFeature, DepthImage};
 
 /// Which traversal code runs. Only [`Kernel::detect`] makes [`Kernel::Avx2`] (its
 /// [`Avx2Detected`] cannot be built anywhere else), so holding one means the processor was
@@ -110,7 +112,7 @@ pub fn leaf_indices(
     tree: &PackedTree<DepthFeature>,
     image: &DepthImage,
     lanes: &PixelLanes,
-    scratch: &mut super::Traversal,
+    scratch: &mut crate::vision::forest::Traversal,
     leaves: &mut Vec<u32>,
 ) {
     let n = lanes.len();
@@ -180,6 +182,111 @@ pub fn kernel_lanes(kernel: Kernel, [x, y, z, w]: [&[f32]; 4], at: [f32; 3], sca
     }
 }
 
+/// Output channels [`conv`] computes together, their sums held in registers.
+pub const CONV_BLOCK: usize = 12;
+
+/// Columns the widest path of [`conv`] computes together: each padded input row holds whole
+/// groups of them ([`ConvLayer::padded_width`]).
+pub const CONV_LANES: usize = 8;
+
+/// One layer of a small convolutional network, as [`conv`] reads it.
+#[derive(Clone, Copy, Debug)]
+pub struct ConvLayer<'a> {
+    pub inputs: usize,
+    pub outputs: usize,
+    /// The kernel's side (1 or 3) and the spacing of its taps.
+    pub kernel: usize,
+    pub dilation: usize,
+    /// `[block of outputs][input][ky][kx][output in the block]`, each block [`CONV_BLOCK`]
+    /// outputs wide (the last one filled out with zeros).
+    pub weights: &'a [f32],
+    /// One per output.
+    pub bias: &'a [f32],
+    /// Zero what is below zero.
+    pub relu: bool,
+}
+
+impl ConvLayer<'_> {
+    /// How far the kernel reaches from its centre (pixels).
+    pub fn reach(&self) -> usize {
+        self.kernel / 2 * self.dilation
+    }
+
+    /// The row length of the input's padded copy for an output `w` columns wide: the border
+    /// of zeros on both sides and whole groups of [`CONV_LANES`] columns.
+    pub fn padded_width(&self, w: usize) -> usize {
+        w.div_ceil(CONV_LANES) * CONV_LANES + 2 * self.reach()
+    }
+}
+
+/// `out` (`outputs` planes of `w` x `h`) = `layer` on `padded`, its `inputs` planes of `w` x
+/// `h` copied with a border of [`ConvLayer::reach`] zeros at the top and left and rows
+/// [`ConvLayer::padded_width`] long. Each output is its bias plus its weighted inputs added
+/// input by input, tap by tap, never fused: AVX2 and the portable path give the same
+/// planes, bit for bit (eight columns at a time, or four).
+///
+/// # Panics
+/// `padded` or `out` is shorter than that, or `weights` or `bias` short of `layer`'s sizes.
+pub fn conv(kernel: Kernel, layer: &ConvLayer<'_>, padded: &[f32], w: usize, h: usize, out: &mut [f32]) {
+    match kernel {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `Kernel::Avx2` holds an `Avx2Detected`, which only `Kernel::detect` makes
+        // after finding AVX2 on this processor; the loops index their slices checked.
+        Kernel::Avx2(_) => unsafe { avx2::conv(layer, padded, w, h, out) },
+        _ => conv_columns::<4>(layer, padded, w, h, out),
+    }
+}
+
+/// [`conv`], `LANES` columns at a time: inlined into each path so that each is compiled for
+/// its own instructions.
+#[inline(always)]
+fn conv_columns<const LANES: usize>(layer: &ConvLayer<'_>, padded: &[f32], w: usize, h: usize, out: &mut [f32]) {
+    let (k, d) = (layer.kernel, layer.dilation);
+    let pw = layer.padded_width(w);
+    let pplane = pw * (h + 2 * layer.reach());
+    let plane = w * h;
+    let block_weights = layer.inputs * k * k * CONV_BLOCK;
+    for (b, weights) in layer.weights.chunks_exact(block_weights).enumerate() {
+        let first = b * CONV_BLOCK;
+        let count = layer.outputs.saturating_sub(first).min(CONV_BLOCK);
+        for y in 0..h {
+            for x in (0..w).step_by(LANES) {
+                let mut sums = [[0.0f32; LANES]; CONV_BLOCK];
+                for (s, &bias) in sums.iter_mut().zip(&layer.bias[first..first + count]) {
+                    *s = [bias; LANES];
+                }
+                for (source, weights) in padded
+                    .chunks_exact(pplane)
+                    .take(layer.inputs)
+                    .zip(weights.chunks_exact(k * k * CONV_BLOCK))
+                {
+                    for ky in 0..k {
+                        let row = &source[(y + ky * d) * pw + x..];
+                        for kx in 0..k {
+                            let v: [f32; LANES] = row[kx * d..][..LANES].try_into().unwrap_or([0.0; LANES]);
+                            let tap: [f32; CONV_BLOCK] = weights[(ky * k + kx) * CONV_BLOCK..][..CONV_BLOCK]
+                                .try_into()
+                                .unwrap_or([0.0; CONV_BLOCK]);
+                            for (s, weight) in sums.iter_mut().zip(tap) {
+                                for (s, v) in s.iter_mut().zip(v) {
+                                    *s += weight * v;
+                                }
+                            }
+                        }
+                    }
+                }
+                let columns = (w - x).min(LANES);
+                for (j, s) in sums[..count].iter().enumerate() {
+                    let dst = &mut out[(first + j) * plane + y * w + x..][..columns];
+                    for (o, &v) in dst.iter_mut().zip(s) {
+                        *o = if layer.relu { v.max(0.0) } else { v };
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// Whether the AVX2 gathers can read `image`: the region's pixel count fits in an `i32` (the
 /// gathers' indices) and `image.depth` holds them all.
 #[cfg(target_arch = "x86_64")]
@@ -190,9 +297,9 @@ fn gatherable(image: &DepthImage) -> bool {
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::super::depth::{BACKGROUND_MM, DepthFeature, DepthImage};
-    use super::super::packed::{PACKED_LEAF, PackedNode, PackedTree};
     use super::PixelLanes;
+    use crate::vision::forest::depth::{BACKGROUND_MM, DepthFeature, DepthImage};
+    use crate::vision::forest::packed::{PACKED_LEAF, PackedNode, PackedTree};
     use std::arch::x86_64::*;
 
     // A node is four 32-bit words: the feature's two offsets, the threshold, then the child
@@ -223,6 +330,15 @@ mod avx2 {
         inverse: __m256,
         at: __m256i,
         result: __m256i,
+    }
+
+    /// [`super::conv`] eight columns at a time, compiled for AVX2.
+    ///
+    /// # Safety
+    /// The processor must have AVX2.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn conv(layer: &super::ConvLayer<'_>, padded: &[f32], w: usize, h: usize, out: &mut [f32]) {
+        super::conv_columns::<{ super::CONV_LANES }>(layer, padded, w, h, out);
     }
 
     /// [`super::kernel_lanes`] over `groups` of eight votes each (x, y, z, weight), in AVX:
@@ -396,10 +512,10 @@ mod avx2 {
 
 #[cfg(test)]
 mod tests {
-    use super::super::depth::{BACKGROUND_MM, DepthImage};
-    use super::super::{BadTree, NOT_LEAF, Node, Traversal, Tree};
     use super::*;
     use crate::core::image::Region;
+    use crate::vision::forest::depth::{BACKGROUND_MM, DepthImage};
+    use crate::vision::forest::{BadTree, NOT_LEAF, Node, Traversal, Tree};
     use rand::{Rng, SeedableRng};
 
     /// A random tree of up to `depth` levels with probe offsets up to ±40,000 px·mm (about ±70 px at 570 mm) and thresholds
@@ -614,5 +730,58 @@ mod tests {
         }
         let (mut scratch, mut leaves) = (Traversal::default(), Vec::new());
         leaf_indices(Kernel::detect(), &tree, &image, &lanes, &mut scratch, &mut leaves);
+    }
+
+    #[test]
+    fn a_convolution_gives_the_same_planes_bit_for_bit_in_avx2_and_portably() {
+        let Some(avx2) = avx2_or_skip() else { return };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(45);
+        // Blocks of outputs whole and part-filled, odd sizes, dilated taps, 1x1 heads.
+        for (inputs, outputs, kernel, dilation, w, h) in [
+            (1usize, 6usize, 3usize, 1usize, 37usize, 21usize),
+            (6, 12, 3, 1, 19, 11),
+            (12, 12, 3, 4, 23, 17),
+            (5, 13, 3, 2, 8, 9),
+            (12, 1, 1, 1, 31, 7),
+            (3, 25, 3, 1, 1, 1),
+        ] {
+            let weights: Vec<f32> = (0..outputs.div_ceil(CONV_BLOCK) * inputs * kernel * kernel * CONV_BLOCK)
+                .map(|_| rng.gen_range(-1.0..1.0))
+                .collect();
+            let bias: Vec<f32> = (0..outputs).map(|_| rng.gen_range(-1.0..1.0)).collect();
+            for relu in [false, true] {
+                let layer = ConvLayer {
+                    inputs,
+                    outputs,
+                    kernel,
+                    dilation,
+                    weights: &weights,
+                    bias: &bias,
+                    relu,
+                };
+                let (pw, reach) = (layer.padded_width(w), layer.reach());
+                let pplane = pw * (h + 2 * reach);
+                let mut padded = vec![0.0f32; inputs * pplane];
+                for (i, plane) in padded.chunks_exact_mut(pplane).enumerate() {
+                    for y in 0..h {
+                        for x in 0..w {
+                            // Values of very different sizes, so that a change of order shows.
+                            plane[(y + reach) * pw + reach + x] =
+                                rng.gen_range(-1.0f32..1.0) * 10f32.powi((i + x) as i32 % 7 - 3);
+                        }
+                    }
+                }
+                let mut portable = vec![0.0; outputs * w * h];
+                let mut fast = vec![1.0; outputs * w * h];
+                conv(Kernel::Portable, &layer, &padded, w, h, &mut portable);
+                conv(avx2, &layer, &padded, w, h, &mut fast);
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(
+                    bits(&portable),
+                    bits(&fast),
+                    "{inputs} -> {outputs}, {kernel}x{kernel} / {dilation}, {w}x{h}"
+                );
+            }
+        }
     }
 }
