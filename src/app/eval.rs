@@ -169,8 +169,8 @@ fn real_paws_text(f: &RealPawsFigures) -> String {
     };
     let _ = writeln!(t, "{how}, on {:?}", f.label_file);
     let _ = writeln!(t, "bottom view: {}", f.bottom_view);
-    if f.detector == "cascade" {
-        let _ = writeln!(t, "grouping: minNeighbors {}", f.min_neighbors);
+    if let Some(n) = f.min_neighbors {
+        let _ = writeln!(t, "grouping: minNeighbors {n}");
     }
     let _ = writeln!(t, "{:<22} {:>12} {:>12}", "", "scale told", "scale found");
     let (a, b) = (&f.told_scale, &f.found_scale);

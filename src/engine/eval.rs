@@ -365,9 +365,9 @@ pub struct RealPawsFigures {
     pub training_seconds: f64,
     /// What kind of model was judged: `cascade` or `network`.
     pub detector: &'static str,
-    /// The grouping a cascade's figures were judged with (`minNeighbors`; not used by a
-    /// network).
-    pub min_neighbors: usize,
+    /// The grouping a cascade's figures were judged with (`minNeighbors`); `None` for a
+    /// network.
+    pub min_neighbors: Option<usize>,
     /// Per frame (told the scale): its image, paws found and missed, false detections.
     pub per_frame: Vec<RealPawsFrame>,
 }
@@ -409,9 +409,11 @@ pub fn eval_real_paws(
         found_scale: RealPawReport::default(),
         training_seconds: 0.0,
         detector: if options.net.is_some() { "network" } else { "cascade" },
-        min_neighbors: options
-            .min_neighbors
-            .map_or(crate::vision::paws::detect::DEFAULT_MIN_NEIGHBORS, |n| n as usize),
+        min_neighbors: options.net.is_none().then(|| {
+            options
+                .min_neighbors
+                .map_or(crate::vision::paws::detect::DEFAULT_MIN_NEIGHBORS, |n| n as usize)
+        }),
         per_frame: Vec::new(),
     };
     let mut outcomes = Vec::new();
@@ -424,8 +426,11 @@ pub fn eval_real_paws(
                 if let Some(n) = options.min_neighbors {
                     cascade.set_min_neighbors(n as usize);
                 }
-                figures.min_neighbors = cascade.min_neighbors();
             }
+            figures.min_neighbors = match &detector {
+                PawModel::Cascade(cascade) => Some(cascade.min_neighbors()),
+                PawModel::Net(_) => None,
+            };
             figures.detector = detector.kind();
             let all: Vec<usize> = (0..n).collect();
             let (told, frames) = judge(&mut detector, &views, &all, Scale::Told);
