@@ -258,6 +258,11 @@ fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let f: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(f["detector"], "network");
+    assert!(
+        f["min_neighbors"].is_null(),
+        "a network has no grouping: {}",
+        f["min_neighbors"]
+    );
     let told = &f["told_scale"];
     let (recall, precision) = (told["recall"].as_f64().unwrap(), told["precision"].as_f64().unwrap());
     eprintln!("learnt frames, told the scale: recall {recall}, precision {precision}");
@@ -265,6 +270,48 @@ fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
         recall >= 0.6 && precision >= 0.3,
         "recall {recall}, precision {precision}"
     );
+
+    // With rendered views in half of each batch; one seed, one network, byte for byte.
+    let data = tmp.path().join("renders");
+    let out = mousepose()
+        .args([
+            "synth",
+            "dataset",
+            "--images",
+            "8",
+            "--seed",
+            "77",
+            "--bottom-clutter",
+            "--out",
+        ])
+        .arg(&data)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mixed = |name: &str, seed: &str| {
+        let path = tmp.path().join(name);
+        let out = mousepose()
+            .args(["train", "paws", "--labels"])
+            .arg(&labels)
+            .args([
+                "--paws",
+                MIRROR_MOUSE_PAWS,
+                "--label-px-per-mm",
+                "3.5",
+                "--net",
+                "--data",
+            ])
+            .arg(&data)
+            .args(["--net-iterations", "30", "--seed", seed, "--out"])
+            .arg(&path)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        std::fs::read(path).unwrap()
+    };
+    let first = mixed("a.safetensors", "3");
+    assert!(first == mixed("b.safetensors", "3"), "one seed trained two networks");
+    assert!(first != mixed("c.safetensors", "4"), "two seeds trained one network");
 }
 
 /// The mirror-mouse labels' mapping from its body parts to our paws.
