@@ -3,11 +3,11 @@
 //!
 //! Each labelled frame's bottom view is taken in grey at the network's scale and at four other
 //! sizes (x0.8 to x1.25: a view told or found a little off its true scale still finds its
-//! paws), standardised as the detector does; rendered views at their own scale. Half of each
-//! batch comes from the renders when there are any. Training draws crops of [`CROP_PX`] pixels, half
-//! of them near a labelled paw and half anywhere, each turned or mirrored (one of the eight
-//! ways), its contrast and brightness varied and noise added. The target of each heatmap cell
-//! is a Gaussian of its distance from the nearest paw (sigma [`TARGET_SIGMA_MM`]); the loss is
+//! paws), standardised as the detector does; rendered views at their own scale, half of each
+//! batch when there are any. Training draws crops of [`CROP_PX`] pixels, half of them near a
+//! labelled paw and half anywhere, each turned or mirrored (one of the eight ways), its
+//! contrast and brightness varied and noise added. The target of each heatmap cell is a
+//! Gaussian of its distance from the nearest paw (sigma [`TARGET_SIGMA_MM`]); the loss is
 //! CenterNet's penalty-reduced focal loss (Zhou, Wang and Krahenbuhl 2019), which weighs the few
 //! cells on a paw against the many beside and between them. AdamW with a cosine-decayed
 //! learning rate.
@@ -121,8 +121,8 @@ pub fn real_views(views: &RealViews, which: &[usize]) -> Vec<NetView> {
 }
 
 /// The bottom views of a rendered dataset (at its own scale, the full sensor's), their paws
-/// those on the glass and visible, as the cascade learns them ([`super::paws_data`]); a
-/// lifted paw is neither a paw nor a place to stay away from.
+/// those on the glass and visible, the cascade's positives ([`super::paws_data`]): a lifted
+/// paw is learnt as no paw.
 ///
 /// # Errors
 /// The dataset cannot be read, or holds no visible paw on the glass.

@@ -14,15 +14,15 @@
 //! The AVX2 code reads nodes, pixels and depths without bounds checks, so what it reads is
 //! vouched for by types rather than by callers, and [`leaf_indices`] is sound whatever it is
 //! given: a [`Kernel::Avx2`] exists only where [`Kernel::detect`] found AVX2, a [`PackedTree`]
-//! only once its child indices were checked ([`crate::vision::forest::Tree::check`]), [`PixelLanes`] keep their
-//! arrays one length, and an image whose depth array does not cover its region takes the
-//! portable path.
+//! only once its child indices were checked ([`crate::vision::forest::Tree::check`]),
+//! [`PixelLanes`] keep their arrays one length, and an image whose depth array does not cover
+//! its region takes the portable path. The convolutions index their slices checked.
 #![allow(unsafe_code)]
 
 use crate::vision::forest::PackedTree;
 use crate::vision::forest::depth::{DepthFeature, DepthImage};
 
-/// Which traversal code runs. Only [`Kernel::detect`] makes [`Kernel::Avx2`] (its
+/// Which code runs (the traversal, the kernel sums, the convolutions). Only [`Kernel::detect`] makes [`Kernel::Avx2`] (its
 /// [`Avx2Detected`] cannot be built anywhere else), so holding one means the processor was
 /// found to have AVX2.
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -220,8 +220,8 @@ impl ConvLayer<'_> {
 }
 
 /// `out` (`outputs` planes of `w` x `h`) = `layer` on `padded`, its `inputs` planes of `w` x
-/// `h` copied with a border of [`ConvLayer::reach`] zeros at the top and left and rows
-/// [`ConvLayer::padded_width`] long. Each output is its bias plus its weighted inputs added
+/// `h` each copied into a plane of `h + 2 reach` rows [`ConvLayer::padded_width`] long, from
+/// row and column [`ConvLayer::reach`] on, zeros all round. Each output is its bias plus its weighted inputs added
 /// input by input, tap by tap, never fused: AVX2 and the portable path give the same
 /// planes, bit for bit (eight columns at a time, or four).
 ///
