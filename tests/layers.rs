@@ -543,7 +543,7 @@ fn unsafe_code_in_src_is_only_the_simd_kernel_module() {
         })
         .map(|f| f.strip_prefix(&src).expect("under src/").display().to_string())
         .collect();
-    assert_eq!(with_unsafe, ["vision/simd.rs"]);
+    assert_eq!(with_unsafe, ["vision/forest/simd.rs"]);
 }
 
 /// Every layer.

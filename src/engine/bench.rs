@@ -312,7 +312,7 @@ pub fn bundled_body_model() -> Option<std::path::PathBuf> {
 fn bench_forest(rig: &Rig, library: &[crate::synth::mouse::PoseParams], quick: bool) -> Option<ForestBench> {
     use crate::vision::forest::infer::{BodyEstimator, Pixel, VoteSettings, sample_pixels};
     use crate::vision::forest::model::{Model, ModelKind, load};
-    use crate::vision::simd::Kernel;
+    use crate::vision::forest::simd::Kernel;
     let path = bundled_body_model()?;
     let Ok(Model::Body(_, forest)) = load(&path, Some(ModelKind::Body)) else {
         return None;

@@ -13,6 +13,5 @@ pub mod movement;
 pub mod orientation;
 pub mod paws;
 pub mod segment;
-pub mod simd;
 pub mod smoothing;
 pub mod tail;

@@ -19,11 +19,11 @@
 
 use super::depth::{BODY_JOINTS, DepthFeature, DepthImage, JointLeaf};
 use super::leaf::{Located, SparseLeaves};
+use super::simd::{self, Kernel, PixelLanes};
 use super::{BadTree, Forest, PackedTree, Traversal, Tree, model};
 use crate::core::geometry::Intrinsics;
 use crate::core::skeleton::Joint;
 use crate::vision::orientation;
-use crate::vision::simd::{self, Kernel, PixelLanes};
 use nalgebra::{Point2, Point3, Vector3};
 use std::collections::VecDeque;
 use std::sync::Arc;

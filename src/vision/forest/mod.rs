@@ -13,7 +13,8 @@ pub mod discriminative;
 pub mod infer;
 pub mod leaf;
 pub mod model;
-pub(crate) mod packed;
+mod packed;
+pub mod simd;
 pub mod train;
 
 pub use packed::{PackedNode, PackedTree, Traversal};

@@ -1,7 +1,7 @@
 //! The form of a tree that run-time traversal reads: split nodes and leaf indices in one flat
 //! array of [`PackedNode`]s. Only [`PackedTree::new`] builds one, from a [`Tree`] it has
 //! checked ([`Tree::check`]), so every packed tree can be walked: each split node's children
-//! lie after it and inside the array. The AVX2 traversal ([`crate::vision::simd`]) reads nodes without
+//! lie after it and inside the array. The AVX2 traversal ([`super::simd`]) reads nodes without
 //! bounds checks and relies on that.
 
 use super::{BadTree, Tree};
@@ -33,11 +33,11 @@ fn prefetch<T>(x: &T) {
 }
 
 /// Marks a [`PackedNode`] that is a leaf; the other bits are its leaf index.
-pub(crate) const PACKED_LEAF: u32 = 1 << 31;
+pub(super) const PACKED_LEAF: u32 = 1 << 31;
 
 /// A node as traversal reads it: the child index and the leaf index share one word, so a
 /// node with a two-float feature fills 16 bytes and four share a cache line. `repr(C)`: the
-/// AVX2 traversal ([`crate::vision::simd`]) gathers the fields by their offsets.
+/// AVX2 traversal ([`super::simd`]) gathers the fields by their offsets.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C)]
 pub struct PackedNode<F> {
@@ -80,7 +80,7 @@ impl<F: Copy> PackedTree<F> {
 
 impl<F> PackedTree<F> {
     /// The nodes, root first (for the AVX2 traversal, which reads them by address).
-    pub(crate) fn nodes(&self) -> &[PackedNode<F>] {
+    pub(super) fn nodes(&self) -> &[PackedNode<F>] {
         &self.nodes
     }
 

@@ -8,7 +8,7 @@
 //! convolution to one logit per cell. A peak whose centre lies in the box of a surer one is
 //! the same paw (its toes and its heel), dropped as the cascade drops a paw found twice. It is trained through `candle` on the CPU; the weights
 //! are a `safetensors` file ([`PawNet::load`]) that `mousepose train paws --net` writes. At run
-//! time the same layers run as plain loops ([`Layers`], [`crate::vision::simd::conv`]: twelve
+//! time the same layers run as plain loops ([`Layers`], [`crate::vision::forest::simd::conv`]: twelve
 //! output channels by eight columns held in registers, in AVX2 where the processor has it):
 //! `candle`'s general convolution (unfolding each layer's input into a matrix first) took
 //! several times as long on these few channels, and a test holds the two to the same heatmap.
@@ -17,7 +17,7 @@ use super::detect::suppress_repeats;
 use super::grey::{GreyImage, Greyer};
 use super::{PawDetection, PawError, WINDOW_PX};
 use crate::core::frame::ColorFrame;
-use crate::vision::simd::{self, CONV_BLOCK, Kernel};
+use crate::vision::forest::simd::{self, CONV_BLOCK, Kernel};
 use candle_core::{DType, Device, Module, Tensor};
 use candle_nn::{Conv2d, Conv2dConfig, VarBuilder, conv2d};
 use std::collections::HashMap;

@@ -14,13 +14,13 @@
 //! The AVX2 code reads nodes, pixels and depths without bounds checks, so what it reads is
 //! vouched for by types rather than by callers, and [`leaf_indices`] is sound whatever it is
 //! given: a [`Kernel::Avx2`] exists only where [`Kernel::detect`] found AVX2, a [`PackedTree`]
-//! only once its child indices were checked ([`crate::vision::forest::Tree::check`]),
+//! only once its child indices were checked ([`super::Tree::check`]),
 //! [`PixelLanes`] keep their arrays one length, and an image whose depth array does not cover
 //! its region takes the portable path. The convolutions index their slices checked.
 #![allow(unsafe_code)]
 
-use crate::vision::forest::PackedTree;
-use crate::vision::forest::depth::{DepthFeature, DepthImage};
+use super::PackedTree;
+use super::depth::{DepthFeature, DepthImage};
 
 /// Which code runs (the traversal, the kernel sums, the convolutions). Only [`Kernel::detect`] makes [`Kernel::Avx2`] (its
 /// [`Avx2Detected`] cannot be built anywhere else), so holding one means the processor was
@@ -112,7 +112,7 @@ pub fn leaf_indices(
     tree: &PackedTree<DepthFeature>,
     image: &DepthImage,
     lanes: &PixelLanes,
-    scratch: &mut crate::vision::forest::Traversal,
+    scratch: &mut super::Traversal,
     leaves: &mut Vec<u32>,
 ) {
     let n = lanes.len();
@@ -297,9 +297,9 @@ fn gatherable(image: &DepthImage) -> bool {
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
+    use super::super::depth::{BACKGROUND_MM, DepthFeature, DepthImage};
+    use super::super::packed::{PACKED_LEAF, PackedNode, PackedTree};
     use super::PixelLanes;
-    use crate::vision::forest::depth::{BACKGROUND_MM, DepthFeature, DepthImage};
-    use crate::vision::forest::packed::{PACKED_LEAF, PackedNode, PackedTree};
     use std::arch::x86_64::*;
 
     // A node is four 32-bit words: the feature's two offsets, the threshold, then the child
@@ -512,10 +512,10 @@ mod avx2 {
 
 #[cfg(test)]
 mod tests {
+    use super::super::depth::{BACKGROUND_MM, DepthImage};
+    use super::super::{BadTree, NOT_LEAF, Node, Traversal, Tree};
     use super::*;
     use crate::core::image::Region;
-    use crate::vision::forest::depth::{BACKGROUND_MM, DepthImage};
-    use crate::vision::forest::{BadTree, NOT_LEAF, Node, Traversal, Tree};
     use rand::{Rng, SeedableRng};
 
     /// A random tree of up to `depth` levels with probe offsets up to ±40,000 px·mm (about ±70 px at 570 mm) and thresholds
