@@ -13,6 +13,7 @@
 use crate::util::{mousepose, replay_options, repo_root};
 use mousepose::engine::project_python;
 use mousepose::engine::replay::replay;
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -36,7 +37,7 @@ fn moseq_results() -> Option<PathBuf> {
 }
 
 /// Runs `scripts/real-moseq-session` with `args`; its stdout.
-fn script(args: &[&std::ffi::OsStr]) -> String {
+fn script(args: &[&OsStr]) -> String {
     let out = Command::new(project_python())
         .arg(repo_root().join("scripts/real-moseq-session"))
         .args(args)
@@ -61,8 +62,8 @@ fn figures(results: &Path, no_reading: &str, dir: &Path) -> (serde_json::Value, 
 /// The figures of the real session rebuilt with the `build` options `options`, as [`figures`].
 fn figures_with(results: &Path, options: &[&str], dir: &Path) -> (serde_json::Value, serde_json::Value) {
     let (recording, run, report) = (dir.join("rec"), dir.join("run"), dir.join("report"));
-    let mut args: Vec<&std::ffi::OsStr> = vec!["build".as_ref(), results.as_os_str(), recording.as_os_str()];
-    args.extend(options.iter().map(std::ffi::OsStr::new));
+    let mut args: Vec<&OsStr> = vec!["build".as_ref(), results.as_os_str(), recording.as_os_str()];
+    args.extend(options.iter().map(OsStr::new));
     script(&args);
     replay(&replay_options(&recording, &run, 2)).unwrap();
     let status = mousepose()
@@ -218,16 +219,25 @@ fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
-    let train = |out: &Path| {
+    // `train paws --net` on the labels, with `more` arguments.
+    let train_with = |out: &Path, more: &[&OsStr]| {
         mousepose()
             .args(["train", "paws", "--labels"])
             .arg(&labels)
-            .args(["--paws", MIRROR_MOUSE_PAWS, "--label-px-per-mm", "3.5", "--net"])
-            .args(["--net-iterations", "400", "--json", "--out"])
+            .args([
+                "--paws",
+                MIRROR_MOUSE_PAWS,
+                "--label-px-per-mm",
+                "3.5",
+                "--net",
+                "--out",
+            ])
             .arg(out)
+            .args(more)
             .output()
             .unwrap()
     };
+    let train = |out: &Path| train_with(out, &["--net-iterations".as_ref(), "400".as_ref(), "--json".as_ref()]);
     let wrong = tmp.path().join("paws.xml");
     let out = train(&wrong);
     let err = String::from_utf8_lossy(&out.stderr);
@@ -290,22 +300,18 @@ fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let mixed = |name: &str, seed: &str| {
         let path = tmp.path().join(name);
-        let out = mousepose()
-            .args(["train", "paws", "--labels"])
-            .arg(&labels)
-            .args([
-                "--paws",
-                MIRROR_MOUSE_PAWS,
-                "--label-px-per-mm",
-                "3.5",
-                "--net",
-                "--data",
-            ])
-            .arg(&data)
-            .args(["--net-iterations", "30", "--seed", seed, "--out"])
-            .arg(&path)
-            .output()
-            .unwrap();
+        let seed: &OsStr = seed.as_ref();
+        let out = train_with(
+            &path,
+            &[
+                "--data".as_ref(),
+                data.as_os_str(),
+                "--net-iterations".as_ref(),
+                "30".as_ref(),
+                "--seed".as_ref(),
+                seed,
+            ],
+        );
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
         std::fs::read(path).unwrap()
     };
