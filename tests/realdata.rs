@@ -367,6 +367,63 @@ fn labels_in_deeplabcuts_h5_and_sleaps_slp_are_read_as_the_csv_is() {
     }
 }
 
+/// A view of one mouse keeps its four surest detections (`--max-paws`, 4 by default): the
+/// bundled cascade grouping no windows finds more than four things in some mirror-mouse
+/// views, and keeping the surest four drops false ones.
+#[test]
+fn a_view_of_one_mouse_keeps_its_four_surest_detections() {
+    let Some(labels) = real_file("mirror-mouse/CollectedData.csv") else {
+        return;
+    };
+    let judge = |more: &[&str]| -> serde_json::Value {
+        let out = mousepose()
+            .args(["eval", "paws", "--model"])
+            .arg(repo_root().join("fixtures/models/paws.xml"))
+            .arg("--labels")
+            .arg(&labels)
+            .args([
+                "--paws",
+                MIRROR_MOUSE_PAWS,
+                "--label-px-per-mm",
+                "3.5",
+                "--min-neighbors",
+                "0",
+                "--json",
+            ])
+            .args(more)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let most = |f: &serde_json::Value| {
+        f["per_frame"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v["found"].as_u64().unwrap() + v["false_detections"].as_u64().unwrap())
+            .max()
+            .unwrap()
+    };
+    let (kept, all) = (judge(&[]), judge(&["--max-paws", "0"]));
+    assert_eq!(
+        (kept["max_paws"].as_u64(), all["max_paws"].as_u64()),
+        (Some(4), Some(0))
+    );
+    assert!(most(&kept) <= 4 && most(&all) > 4, "{} and {}", most(&kept), most(&all));
+    let (k, a) = (&kept["told_scale"], &all["told_scale"]);
+    let f = |r: &serde_json::Value, key: &str| r[key].as_f64().unwrap();
+    assert!(f(k, "false_detections") < f(a, "false_detections"), "{k} against {a}");
+    assert!(f(k, "precision") > f(a, "precision"), "{k} against {a}");
+    eprintln!(
+        "four kept: recall {} precision {}; all: recall {} precision {}",
+        f(k, "recall"),
+        f(k, "precision"),
+        f(a, "recall"),
+        f(a, "precision")
+    );
+}
+
 /// An HDF5 file that holds no labels (MoSeq's results) is refused in one sentence naming it.
 #[test]
 fn an_hdf5_file_without_labels_is_refused_naming_it() {

@@ -33,6 +33,8 @@ pub struct DetectPawsArgs {
     /// Take the scale from a rig calibration's colour camera (`calibrate extrinsics`).
     #[arg(long, value_name = "FILE", conflicts_with = "px_per_mm")]
     pub calibration: Option<PathBuf>,
+    #[command(flatten)]
+    pub max_paws: crate::app::parse::MaxPawsArg,
     /// Print the detections as one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -69,6 +71,7 @@ fn paws(args: &DetectPawsArgs) -> crate::app::Outcome {
                 highest: FIND_SCALE_RANGE.1,
             },
         },
+        max_paws: args.max_paws.max_paws,
         force: args.force,
     })?;
     if args.json {

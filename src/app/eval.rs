@@ -45,6 +45,9 @@ pub struct EvalArgs {
     /// detector's default, 1); the score curve shows every choice.
     #[arg(long, value_name = "N", requires = "labels", value_parser = clap::value_parser!(u32).range(0..=50))]
     pub min_neighbors: Option<u32>,
+    /// Paws.
+    #[command(flatten)]
+    pub max_paws: crate::app::parse::MaxPawsArg,
     /// Write tables and PNG charts into this directory.
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
@@ -77,6 +80,7 @@ pub fn command(args: &EvalArgs) -> crate::app::Outcome {
                 seed: args.seed,
                 min_neighbors: args.min_neighbors,
                 scale_range: crate::vision::paws::detect::FIND_SCALE_RANGE,
+                max_paws: args.max_paws.max_paws,
                 net: args.net.then(|| args.net_settings.params(args.seed)),
                 report: args.report.clone(),
             },
@@ -99,6 +103,7 @@ pub fn command(args: &EvalArgs) -> crate::app::Outcome {
         report: args.report.clone(),
         baseline: args.baseline.clone(),
         color_binning: args.color_binning,
+        max_paws: args.max_paws.max_paws,
     })?;
     if args.json {
         return Ok(print_json(&summary)?);
@@ -171,6 +176,9 @@ fn real_paws_text(f: &RealPawsFigures) -> String {
     let _ = writeln!(t, "bottom view: {}", f.bottom_view);
     if let Some(n) = f.min_neighbors {
         let _ = writeln!(t, "grouping: minNeighbors {n}");
+    }
+    if f.max_paws > 0 {
+        let _ = writeln!(t, "kept: the {} surest detections of a view", f.max_paws);
     }
     let _ = writeln!(t, "{:<22} {:>12} {:>12}", "", "scale told", "scale found");
     let (a, b) = (&f.told_scale, &f.found_scale);

@@ -82,6 +82,15 @@ pub fn endpoint(s: &str) -> Result<crate::runtime::stream::Endpoint, String> {
         .map_err(|e: crate::runtime::stream::EndpointError| e.to_string())
 }
 
+/// How many paws a bottom view keeps, as `detect paws` and `eval paws --labels` take it.
+#[derive(Clone, Copy, Debug, Args)]
+pub struct MaxPawsArg {
+    /// Keep at most this many detections a view, the surest: a view of one mouse shows four
+    /// paws. 0 keeps every detection (a view of several mice).
+    #[arg(long, value_name = "N", default_value_t = crate::vision::paws::PAWS_PER_VIEW)]
+    pub max_paws: usize,
+}
+
 /// Real frames a lab labelled (paws), as `train paws` and `eval paws` take them.
 #[derive(Debug, Args)]
 pub struct LabelArgs {

@@ -26,6 +26,8 @@ pub struct DetectPawsOptions {
     pub model: Option<PathBuf>,
     /// How many image pixels a millimetre on the glass spans, or where to learn it.
     pub scale: ScaleSource,
+    /// Detections an image keeps at most, the surest (0: all).
+    pub max_paws: usize,
     /// Replace the output directory if it is not empty.
     pub force: bool,
 }
@@ -152,6 +154,7 @@ pub fn paws(options: &DetectPawsOptions) -> Result<Detections, Failure> {
     let mut images = Vec::new();
     for (k, (path, frame)) in options.images.iter().zip(&frames).enumerate() {
         detector.detect(frame, (0, 0, frame.width, frame.height), px_per_mm, &mut found);
+        crate::vision::paws::keep_surest(&mut found, options.max_paws);
         let stem = path.file_stem().map_or_else(|| "image".into(), |s| s.to_string_lossy());
         let name = format!("{k:03}-{stem}.png");
         let out = staging.path().join(&name);

@@ -26,6 +26,8 @@ pub struct EvalOptions {
     pub baseline: Option<PathBuf>,
     /// The colour camera's binning the bottom views are seen at (paws; 1 is the full sensor).
     pub color_binning: u32,
+    /// Detections a bottom view keeps at most, the surest (paws; 0: all).
+    pub max_paws: usize,
 }
 
 /// A model's figures: what `eval --json` prints (the command line prints them as a table
@@ -232,7 +234,7 @@ fn eval_parts(
 fn eval_paws(options: &EvalOptions) -> Result<EvalSummary> {
     use crate::training::paws_eval as eval;
     let detector = crate::vision::paws::PawModel::load(&options.model)?;
-    let report = eval::evaluate(&detector, &options.data, options.color_binning)
+    let report = eval::evaluate(&detector, &options.data, options.color_binning, options.max_paws)
         .with_context(|| format!("evaluating on test dataset {:?}", options.data))?;
     if let Some(dir) = &options.report {
         report_dir(dir)?;
@@ -343,6 +345,8 @@ pub struct RealPawsOptions {
     pub min_neighbors: Option<u32>,
     /// Where the detector looks for the scale it is not told (px/mm).
     pub scale_range: (f64, f64),
+    /// Detections a view keeps at most, the surest (0: all).
+    pub max_paws: usize,
     /// With `folds`: train the paw network with these settings instead of a cascade.
     pub net: Option<training::paws_net::NetParams>,
     /// Write `summary.json` and each frame with its paws found, missed and false drawn here.
@@ -368,6 +372,8 @@ pub struct RealPawsFigures {
     /// The grouping a cascade's figures were judged with (`minNeighbors`); `None` for a
     /// network.
     pub min_neighbors: Option<usize>,
+    /// Detections a view kept at most, the surest (0: all).
+    pub max_paws: usize,
     /// Per frame (told the scale): its image, paws found and missed, false detections.
     pub per_frame: Vec<RealPawsFrame>,
 }
@@ -414,6 +420,7 @@ pub fn eval_real_paws(
                 .min_neighbors
                 .map_or(crate::vision::paws::detect::DEFAULT_MIN_NEIGHBORS, |n| n as usize)
         }),
+        max_paws: options.max_paws,
         per_frame: Vec::new(),
     };
     let mut outcomes = Vec::new();
@@ -433,9 +440,9 @@ pub fn eval_real_paws(
             };
             figures.detector = detector.kind();
             let all: Vec<usize> = (0..n).collect();
-            let (told, frames) = judge(&mut detector, &views, &all, Scale::Told);
+            let (told, frames) = judge(&mut detector, &views, &all, Scale::Told, options.max_paws);
             figures.told_scale = told;
-            figures.found_scale = judge(&mut detector, &views, &all, found).0;
+            figures.found_scale = judge(&mut detector, &views, &all, found, options.max_paws).0;
             outcomes = frames;
         }
         (None, Some(folds)) => {
@@ -471,11 +478,11 @@ pub fn eval_real_paws(
                     cascade.min_neighbors = options.min_neighbors;
                     PawModel::Cascade(Box::new(PawDetector::from_cascade(cascade)))
                 };
-                let (told, frames) = judge(&mut detector, &views, &judged, Scale::Told);
+                let (told, frames) = judge(&mut detector, &views, &judged, Scale::Told, options.max_paws);
                 figures.told_scale.merge(&told);
                 figures
                     .found_scale
-                    .merge(&judge(&mut detector, &views, &judged, found).0);
+                    .merge(&judge(&mut detector, &views, &judged, found, options.max_paws).0);
                 outcomes.extend(frames);
             }
             figures.training_seconds = started.elapsed().as_secs_f64();

@@ -60,6 +60,8 @@ pub struct PawReport {
     /// for a network.
     pub min_neighbors: Option<usize>,
     pub scales: Vec<f64>,
+    /// Detections a view kept at most, the surest (0: all).
+    pub max_paws: usize,
     /// Precision and recall as the minimum score varies (grouping with `minNeighbors = 0`).
     pub curve: Vec<CurvePoint>,
 }
@@ -150,11 +152,12 @@ fn ratio(a: usize, b: usize) -> f64 {
 
 /// Runs `detector` (as configured) on every bottom view of the dataset at `dir`, each seen by
 /// a colour camera binned by `binning` ([`crate::synth::views::BottomView::binned`]; 1 is the
-/// full sensor). Boxes are matched in the full sensor's pixels.
+/// full sensor), keeping the `max_paws` surest detections of a view (all at 0;
+/// [`crate::vision::paws::keep_surest`]). Boxes are matched in the full sensor's pixels.
 ///
 /// # Errors
 /// When the dataset cannot be read or has no visible paw on the glass.
-pub fn evaluate(detector: &PawModel, dir: &Path, binning: u32) -> Result<PawReport, PawDataError> {
+pub fn evaluate(detector: &PawModel, dir: &Path, binning: u32, max_paws: usize) -> Result<PawReport, PawDataError> {
     let binning = binning.max(1);
     let ds = Dataset::open(dir)?;
     let rig = ds.meta.rig.unwrap_or_else(crate::core::geometry::Rig::default_rig);
@@ -192,9 +195,11 @@ pub fn evaluate(detector: &PawModel, dir: &Path, binning: u32) -> Result<PawRepo
         };
         let px_per_mm = DATASET_PX_PER_MM / f64::from(binning);
         headline.detect(&frame, roi, px_per_mm, &mut dets);
+        crate::vision::paws::keep_surest(&mut dets, max_paws);
         dets.iter_mut().for_each(shift);
         match_image(&mut dets, &view.paws, &look_alikes, &mut outcomes);
         all.detect(&frame, roi, px_per_mm, &mut dets);
+        crate::vision::paws::keep_surest(&mut dets, max_paws);
         dets.iter_mut().for_each(shift);
         match_image(&mut dets, &view.paws, &look_alikes, &mut curve_outcomes);
         Ok(())
@@ -235,6 +240,7 @@ pub fn evaluate(detector: &PawModel, dir: &Path, binning: u32) -> Result<PawRepo
             PawModel::Cascade(c) => c.scales().to_vec(),
             PawModel::Net(_) => Vec::new(),
         },
+        max_paws,
         curve,
     })
 }

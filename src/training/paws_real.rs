@@ -521,13 +521,15 @@ impl RealPawReport {
 }
 
 /// Runs `detector` on the bottom views of the frames `which` and matches its detections to the
-/// labels ([module rules](self)). At [`Scale::Found`] one scale is found for all of `which`
-/// together, as for the frames of one rig.
+/// labels ([module rules](self)), keeping the `max_paws` surest detections of a view (all at
+/// 0; [`crate::vision::paws::keep_surest`]). At [`Scale::Found`] one scale is found for all
+/// of `which` together, as for the frames of one rig.
 pub fn judge(
     detector: &mut PawModel,
     views: &RealViews,
     which: &[usize],
     scale: Scale,
+    max_paws: usize,
 ) -> (RealPawReport, Vec<FrameOutcome>) {
     let px_per_mm = match scale {
         Scale::Told => Some(views.px_per_mm),
@@ -551,7 +553,7 @@ pub fn judge(
         if let Some(s) = px_per_mm {
             detector.detect(&views.frames[k], views.roi(k), s, &mut dets);
         }
-        dets.sort_by(|a, b| b.score.total_cmp(&a.score));
+        crate::vision::paws::keep_surest(&mut dets, max_paws);
         let paws = views.paws_in(k);
         let mut taken = vec![false; paws.len()];
         let mut outcome = FrameOutcome {

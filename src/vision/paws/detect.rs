@@ -315,8 +315,8 @@ pub fn find_scale_with(
         let mut evidence = 0.0;
         for &(frame, roi) in frames {
             detect(frame, roi, px_per_mm, &mut found);
-            found.sort_by(|a, b| b.score.total_cmp(&a.score));
-            evidence += found.iter().take(4).map(|d| f64::from(d.score)).sum::<f64>();
+            super::keep_surest(&mut found, super::PAWS_PER_VIEW);
+            evidence += found.iter().map(|d| f64::from(d.score)).sum::<f64>();
         }
         if evidence > 0.0 && best.is_none_or(|b| evidence > b.evidence) {
             best = Some(FoundScale { px_per_mm, evidence });
@@ -590,6 +590,21 @@ mod tests {
     }
 
     /// A paw found twice (its toes and its heel) is kept once, the surer; paws apart stay.
+    #[test]
+    fn a_view_keeps_its_surest_detections() {
+        let mut found = vec![
+            det(0.0, 0.0, 12.0, 1.5),
+            det(20.0, 0.0, 12.0, 3.5),
+            det(40.0, 0.0, 12.0, 2.5),
+        ];
+        crate::vision::paws::keep_surest(&mut found, 2);
+        let scores: Vec<f32> = found.iter().map(|d| d.score).collect();
+        assert_eq!(scores, vec![3.5, 2.5]);
+        let mut all = vec![det(0.0, 0.0, 12.0, 1.5), det(20.0, 0.0, 12.0, 3.5)];
+        crate::vision::paws::keep_surest(&mut all, 0);
+        assert_eq!(all.len(), 2, "0 keeps every detection");
+    }
+
     #[test]
     fn one_paw_found_twice_is_kept_once() {
         let mut found = vec![

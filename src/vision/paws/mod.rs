@@ -36,6 +36,18 @@ pub const CANONICAL_PX_PER_MM: f64 = 1.0;
 /// The detection window's side, pixels at the canonical scale (millimetres on the glass).
 pub const WINDOW_PX: u32 = 12;
 
+/// A mouse's paws: how many detections a view of one mouse keeps by default, the surest
+/// ([`keep_surest`]).
+pub const PAWS_PER_VIEW: usize = 4;
+
+/// Keeps the `n` surest of `found` (all when `n` is 0), surest first.
+pub fn keep_surest(found: &mut Vec<PawDetection>, n: usize) {
+    found.sort_by(|a, b| b.score.total_cmp(&a.score));
+    if n > 0 {
+        found.truncate(n);
+    }
+}
+
 /// One paw found in a bottom colour frame.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PawDetection {
