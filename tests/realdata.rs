@@ -104,6 +104,10 @@ fn a_real_mouse_is_found_in_every_frame_along_moseqs_axis_and_its_head_leads_its
     assert!(get("axis_deg_p95") <= 20.0, "{f}");
     assert!(get("moving_frames") >= 100.0, "{f}");
     assert!(get("head_leading") >= 0.98 * get("moving_frames"), "{f}");
+    // The same by our own centre's travel over 9 frames (over 5, 5 frames of about 180 move
+    // backward, the body shortening from the front and the mouse sliding out of view).
+    assert!(get("moving_frames_own") >= 100.0, "{f}");
+    assert!(get("head_leading_own") >= 0.98 * get("moving_frames_own"), "{f}");
     // Issue 49, item 1: no heading turned 180 degrees and back within one or two frames.
     assert_eq!(get("brief_reversals"), 0.0, "{f}");
     // Issue 49, item 5: MoSeq's tail filter removed this mouse's tail: no tail is seen.
