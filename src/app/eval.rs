@@ -45,7 +45,6 @@ pub struct EvalArgs {
     /// detector's default, 1); the score curve shows every choice.
     #[arg(long, value_name = "N", requires = "labels", value_parser = clap::value_parser!(u32).range(0..=50))]
     pub min_neighbors: Option<u32>,
-    /// Paws.
     #[command(flatten)]
     pub max_paws: crate::app::parse::MaxPawsArg,
     /// Write tables and PNG charts into this directory.

@@ -82,7 +82,7 @@ pub fn endpoint(s: &str) -> Result<crate::runtime::stream::Endpoint, String> {
         .map_err(|e: crate::runtime::stream::EndpointError| e.to_string())
 }
 
-/// How many paws a bottom view keeps, as `detect paws` and `eval paws --labels` take it.
+/// How many paws a bottom view keeps, as `detect paws` and `eval paws` take it.
 #[derive(Clone, Copy, Debug, Args)]
 pub struct MaxPawsArg {
     /// Keep at most this many detections a view, the surest: a view of one mouse shows four

@@ -589,7 +589,7 @@ mod tests {
         }
     }
 
-    /// A paw found twice (its toes and its heel) is kept once, the surer; paws apart stay.
+    /// A view keeps its surest detections, surest first; 0 keeps every one.
     #[test]
     fn a_view_keeps_its_surest_detections() {
         let mut found = vec![
@@ -605,6 +605,7 @@ mod tests {
         assert_eq!(all.len(), 2, "0 keeps every detection");
     }
 
+    /// A paw found twice (its toes and its heel) is kept once, the surer; paws apart stay.
     #[test]
     fn one_paw_found_twice_is_kept_once() {
         let mut found = vec![
