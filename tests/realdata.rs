@@ -173,24 +173,7 @@ fn paws_learnt_from_labelled_real_frames_are_found_on_frames_held_out() {
     let Some(labels) = real_file("mirror-mouse/CollectedData.csv") else {
         return;
     };
-    let out = mousepose()
-        .args(["eval", "paws", "--labels"])
-        .arg(&labels)
-        .args([
-            "--paws",
-            MIRROR_MOUSE_PAWS,
-            "--label-px-per-mm",
-            "3.5",
-            "--folds",
-            "2",
-            "--stages",
-            "12",
-            "--json",
-        ])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let f: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let f = eval_mirror_mouse(&labels, &["--folds", "2", "--stages", "12"]);
     eprintln!("{f:#}");
     assert!(
         f["bottom_view"].as_str().unwrap().starts_with("row 16"),
@@ -255,22 +238,7 @@ fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
         (trained["network"].as_bool(), trained["frames"].as_u64()),
         (Some(true), Some(45))
     );
-    let out = mousepose()
-        .args(["eval", "paws", "--labels"])
-        .arg(&labels)
-        .args([
-            "--paws",
-            MIRROR_MOUSE_PAWS,
-            "--label-px-per-mm",
-            "3.5",
-            "--json",
-            "--model",
-        ])
-        .arg(&net)
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let f: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let f = eval_mirror_mouse(&labels, &["--model".as_ref(), net.as_os_str()]);
     assert_eq!(f["detector"], "network");
     assert!(
         f["min_neighbors"].is_null(),
@@ -324,6 +292,24 @@ fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
     assert!(first != mixed("c.safetensors", "4"), "two seeds trained one network");
 }
 
+/// `eval paws --labels LABELS` with the mirror-mouse labels' paws at 3.5 px/mm and `more`
+/// arguments; what it printed.
+fn eval_mirror_mouse<S: AsRef<OsStr>>(labels: &Path, more: &[S]) -> serde_json::Value {
+    let out = mousepose()
+        .args(["eval", "paws", "--labels"])
+        .arg(labels)
+        .args(["--paws", MIRROR_MOUSE_PAWS, "--label-px-per-mm", "3.5", "--json"])
+        .args(more)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{labels:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
 /// The mirror-mouse labels' mapping from its body parts to our paws.
 const MIRROR_MOUSE_PAWS: &str =
     "paw1LH_bot=left_hind_paw,paw2LF_bot=left_fore_paw,paw3RF_bot=right_fore_paw,paw4RH_bot=right_hind_paw";
@@ -345,22 +331,8 @@ fn labels_in_deeplabcuts_h5_and_sleaps_slp_are_read_as_the_csv_is() {
         .output()
         .unwrap();
     assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
-    let judge = |labels: &Path| -> serde_json::Value {
-        let out = mousepose()
-            .args(["eval", "paws", "--model"])
-            .arg(repo_root().join("fixtures/models/paws.xml"))
-            .arg("--labels")
-            .arg(labels)
-            .args(["--paws", MIRROR_MOUSE_PAWS, "--label-px-per-mm", "3.5", "--json"])
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{labels:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        serde_json::from_slice(&out.stdout).unwrap()
-    };
+    let bundled = repo_root().join("fixtures/models/paws.xml");
+    let judge = |labels: &Path| eval_mirror_mouse(labels, &["--model".as_ref(), bundled.as_os_str()]);
     let want = judge(&csv);
     assert_eq!(want["told_scale"]["paws"], 180);
     for name in ["CollectedData.h5", "labels.slp", "labels.pkg.slp", "labels-video.slp"] {
@@ -379,26 +351,16 @@ fn a_view_of_one_mouse_keeps_its_four_surest_detections() {
     let Some(labels) = real_file("mirror-mouse/CollectedData.csv") else {
         return;
     };
-    let judge = |more: &[&str]| -> serde_json::Value {
-        let out = mousepose()
-            .args(["eval", "paws", "--model"])
-            .arg(repo_root().join("fixtures/models/paws.xml"))
-            .arg("--labels")
-            .arg(&labels)
-            .args([
-                "--paws",
-                MIRROR_MOUSE_PAWS,
-                "--label-px-per-mm",
-                "3.5",
-                "--min-neighbors",
-                "0",
-                "--json",
-            ])
-            .args(more)
-            .output()
-            .unwrap();
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-        serde_json::from_slice(&out.stdout).unwrap()
+    let bundled = repo_root().join("fixtures/models/paws.xml");
+    let judge = |more: &[&str]| {
+        let mut args = vec![
+            "--model".as_ref(),
+            bundled.as_os_str(),
+            "--min-neighbors".as_ref(),
+            "0".as_ref(),
+        ];
+        args.extend(more.iter().map(OsStr::new));
+        eval_mirror_mouse(&labels, &args)
     };
     let most = |f: &serde_json::Value| {
         f["per_frame"]
