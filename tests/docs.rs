@@ -12,6 +12,12 @@ use std::path::Path;
 const README_MAX_LINES: usize = 300;
 /// A paragraph's most lines in the README and the docs pages written for reading through.
 const PARAGRAPH_MAX_LINES: usize = 12;
+/// A table cell's most words in the README and the docs pages: a cell holds one figure or a short
+/// phrase, read at a glance; its detail goes into prose or a list below the table.
+const CELL_MAX_WORDS: usize = 60;
+/// A line's most characters in the README and the docs pages, outside code blocks: prose is
+/// wrapped at about 100 characters, and a table row longer than this no longer reads as a row.
+const LINE_MAX_CHARS: usize = 400;
 /// The pages held to `PARAGRAPH_MAX_LINES` beside the README (FORMATS.md is a reference of
 /// fields, read a field at a time).
 const READ_THROUGH: [&str; 8] = [
@@ -110,6 +116,36 @@ fn longest_paragraph(text: &str) -> (usize, usize) {
         }
     }
     longest
+}
+
+/// The cells of a markdown table row (`| a | b |`), split on each `|` no backslash escapes; none
+/// for a line that is not a table row.
+fn table_cells(line: &str) -> Vec<String> {
+    let Some(row) = line.trim().strip_prefix('|') else {
+        return Vec::new();
+    };
+    let mut cells = Vec::new();
+    let mut cell = String::new();
+    let mut escaped = false;
+    for c in row.chars() {
+        if c == '|' && !escaped {
+            cells.push(std::mem::take(&mut cell));
+        } else {
+            cell.push(c);
+        }
+        escaped = c == '\\' && !escaped;
+    }
+    if !cell.trim().is_empty() {
+        cells.push(cell);
+    }
+    cells
+}
+
+/// The first words of `text`, to name in a failure what is too long.
+fn opening(text: &str) -> String {
+    let words: Vec<&str> = text.split_whitespace().collect();
+    let shown = words[..words.len().min(8)].join(" ");
+    if words.len() > 8 { format!("{shown} ...") } else { shown }
 }
 
 /// GitHub's anchor for a heading: lower case, spaces to hyphens, other punctuation dropped.
@@ -240,6 +276,39 @@ fn the_readme_is_short_and_keeps_the_test_and_install_commands() {
             "the README does not link {page}"
         );
     }
+}
+
+#[test]
+fn no_table_cell_or_line_of_a_document_is_too_long() {
+    let mut long = Vec::new();
+    for doc in documents() {
+        let text = read(&doc);
+        for (number, line) in prose(&text) {
+            let chars = line.chars().count();
+            if chars > LINE_MAX_CHARS {
+                long.push(format!(
+                    "{doc}:{number}: a line of {chars} characters (at most {LINE_MAX_CHARS}): {}",
+                    opening(line)
+                ));
+            }
+            for (column, cell) in table_cells(line).iter().enumerate() {
+                let words = cell.split_whitespace().count();
+                if words > CELL_MAX_WORDS {
+                    long.push(format!(
+                        "{doc}:{number}: a table cell (column {}) of {words} words (at most {CELL_MAX_WORDS}): {}",
+                        column + 1,
+                        opening(cell)
+                    ));
+                }
+            }
+        }
+    }
+    assert!(
+        long.is_empty(),
+        "too long, outside code blocks (shorten the cell, move its detail into prose below the \
+         table, or wrap the line):\n{}",
+        long.join("\n")
+    );
 }
 
 #[test]
@@ -519,6 +588,14 @@ fn the_checks_of_this_module_see_what_they_look_for() {
     );
     let text = "a\nb\n\n- c\n  d\n- e\n\n```\nf\ng\n```\n";
     assert_eq!(longest_paragraph(text), (2, 2));
+    let cells = table_cells(" | a | b \\| c |  d e |");
+    assert_eq!(
+        cells.iter().map(|c| c.trim()).collect::<Vec<_>>(),
+        ["a", "b \\| c", "d e"]
+    );
+    assert!(table_cells("not | a row").is_empty());
+    assert_eq!(opening("one two  three"), "one two three");
+    assert_eq!(opening("1 2 3 4 5 6 7 8 9"), "1 2 3 4 5 6 7 8 ...");
     assert_eq!(
         link_targets("[a](FIGURES.md#c) and [d](e)"),
         [(1, "FIGURES.md#c".to_owned()), (1, "e".to_owned())]
