@@ -280,6 +280,16 @@ fn issue31_every_float_flag_refuses_nan_infinity_and_negatives() {
         &["export", "video", out, "--out", "v.mp4", "--from"],
         &["export", "video", out, "--out", "v.mp4", "--to"],
         &["detect", "paws", "a.png", "--out", out, "--px-per-mm"],
+        &["detect", "paws", "a.png", "--out", out, "--find-scale"],
+        &[
+            "eval",
+            "paws",
+            "--labels",
+            "l.csv",
+            "--label-px-per-mm",
+            "3",
+            "--find-scale",
+        ],
     ];
     for command in commands {
         for value in ["nan", "NaN", "inf", "-inf", "-1"] {
@@ -296,6 +306,11 @@ fn issue31_every_float_flag_refuses_nan_infinity_and_negatives() {
             assert!(first.starts_with("error:") && first.contains(value), "{args:?}: {err}");
         }
     }
+    // A range of scales upside down.
+    let o = run(&["detect", "paws", "a.png", "--out", out, "--find-scale", "4:3"]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.starts_with("error:") && err.contains("above the highest"), "{err}");
     assert!(!Path::new(out).exists(), "nothing written on bad input");
 }
 

@@ -246,7 +246,16 @@ fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
     let head: Vec<&str> = text.lines().take(3 + 12).collect();
     std::fs::write(few.join("CollectedData.csv"), head.join("\n") + "\n").unwrap();
     std::os::unix::fs::symlink(labels.with_file_name("labeled-data"), few.join("labeled-data")).unwrap();
-    let f = eval_mirror_mouse(&few.join("CollectedData.csv"), &["--model".as_ref(), net.as_os_str()]);
+    // Only the figures told the scale are judged here: the search for it looks at one scale.
+    let f = eval_mirror_mouse(
+        &few.join("CollectedData.csv"),
+        &[
+            "--model".as_ref(),
+            net.as_os_str(),
+            "--find-scale".as_ref(),
+            "3.5:3.5".as_ref(),
+        ],
+    );
     assert_eq!(f["told_scale"]["frames"], 12, "{f}");
     assert_eq!(f["detector"], "network");
     assert!(
@@ -341,7 +350,19 @@ fn labels_in_deeplabcuts_h5_and_sleaps_slp_are_read_as_the_csv_is() {
         .unwrap();
     assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
     let bundled = repo_root().join("fixtures/models/paws.xml");
-    let judge = |labels: &Path| eval_mirror_mouse(labels, &["--model".as_ref(), bundled.as_os_str()]);
+    // The scale is looked for between 3 and 4.1 px/mm (4 candidates, where the full search's
+    // 33 find 3.36-3.67): enough to compare what each file's frames give.
+    let judge = |labels: &Path| {
+        eval_mirror_mouse(
+            labels,
+            &[
+                "--model".as_ref(),
+                bundled.as_os_str(),
+                "--find-scale".as_ref(),
+                "3:4.1".as_ref(),
+            ],
+        )
+    };
     let want = judge(&csv);
     assert_eq!(want["told_scale"]["paws"], 180);
     for name in ["CollectedData.h5", "labels.slp", "labels.pkg.slp", "labels-video.slp"] {
@@ -367,6 +388,9 @@ fn a_view_of_one_mouse_keeps_its_four_surest_detections() {
             bundled.as_os_str(),
             "--min-neighbors".as_ref(),
             "0".as_ref(),
+            // Only the figures told the scale are judged: the search looks at one scale.
+            "--find-scale".as_ref(),
+            "3.5:3.5".as_ref(),
         ];
         args.extend(more.iter().map(OsStr::new));
         eval_mirror_mouse(&labels, &args)

@@ -3,7 +3,6 @@
 
 use crate::app::output::{print, print_json};
 use crate::engine::detect::{DETECTIONS_FILE, DetectPawsOptions, ScaleSource};
-use crate::vision::paws::detect::FIND_SCALE_RANGE;
 use clap::{Args, Subcommand};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -33,6 +32,8 @@ pub struct DetectPawsArgs {
     /// Take the scale from a rig calibration's colour camera (`calibrate extrinsics`).
     #[arg(long, value_name = "FILE", conflicts_with = "px_per_mm")]
     pub calibration: Option<PathBuf>,
+    #[command(flatten)]
+    pub find_scale: crate::app::parse::FindScaleArg,
     #[command(flatten)]
     pub max_paws: crate::app::parse::MaxPawsArg,
     /// Print the detections as one JSON object.
@@ -66,10 +67,10 @@ fn paws(args: &DetectPawsArgs) -> crate::app::Outcome {
         scale: match (args.px_per_mm, &args.calibration) {
             (Some(s), _) => ScaleSource::Told(s),
             (None, Some(path)) => ScaleSource::Calibration(path.clone()),
-            (None, None) => ScaleSource::Find {
-                lowest: FIND_SCALE_RANGE.0,
-                highest: FIND_SCALE_RANGE.1,
-            },
+            (None, None) => {
+                let (lowest, highest) = args.find_scale.range();
+                ScaleSource::Find { lowest, highest }
+            }
         },
         max_paws: args.max_paws.max_paws,
         force: args.force,

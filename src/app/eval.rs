@@ -46,6 +46,8 @@ pub struct EvalArgs {
     #[arg(long, value_name = "N", requires = "labels", value_parser = clap::value_parser!(u32).range(0..=50))]
     pub min_neighbors: Option<u32>,
     #[command(flatten)]
+    pub find_scale: crate::app::parse::FindScaleArg,
+    #[command(flatten)]
     pub max_paws: crate::app::parse::MaxPawsArg,
     /// Write tables and PNG charts into this directory.
     #[arg(long, value_name = "DIR")]
@@ -78,7 +80,7 @@ pub fn command(args: &EvalArgs) -> crate::app::Outcome {
                 stages: args.stages,
                 seed: args.seed,
                 min_neighbors: args.min_neighbors,
-                scale_range: crate::vision::paws::detect::FIND_SCALE_RANGE,
+                scale_range: args.find_scale.range(),
                 max_paws: args.max_paws.max_paws,
                 net: args.net.then(|| args.net_settings.params(args.seed)),
                 report: args.report.clone(),

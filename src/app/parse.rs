@@ -91,6 +91,36 @@ pub struct MaxPawsArg {
     pub max_paws: usize,
 }
 
+/// Where `detect paws` and `eval paws` look for a bottom view's scale they are not told.
+#[derive(Clone, Copy, Debug, Args)]
+pub struct FindScaleArg {
+    /// Where to look for the bottom view's scale when it is not told: LOWEST:HIGHEST pixels per
+    /// millimetre, candidates an eighth of an octave apart (default 0.5:8, from a binned camera
+    /// far away to a close macro view). A lab that knows its rig roughly narrows it: faster,
+    /// and no scale the rig cannot have.
+    #[arg(long, value_name = "LO:HI", value_parser = scale_range)]
+    pub find_scale: Option<(f64, f64)>,
+}
+
+impl FindScaleArg {
+    /// The range asked for, or the default.
+    pub fn range(&self) -> (f64, f64) {
+        self.find_scale.unwrap_or(crate::vision::paws::detect::FIND_SCALE_RANGE)
+    }
+}
+
+/// A range of scales, `LOWEST:HIGHEST` pixels per millimetre.
+pub fn scale_range(s: &str) -> Result<(f64, f64), String> {
+    let Some((lowest, highest)) = s.split_once(':') else {
+        return Err(format!("expected LOWEST:HIGHEST pixels per millimetre, got {s:?}"));
+    };
+    let (lowest, highest) = (px_per_mm(lowest)?, px_per_mm(highest)?);
+    if lowest > highest {
+        return Err(format!("the lowest scale {lowest} is above the highest, {highest}"));
+    }
+    Ok((lowest, highest))
+}
+
 /// Real frames a lab labelled (paws), as `train paws` and `eval paws` take them.
 #[derive(Debug, Args)]
 pub struct LabelArgs {
