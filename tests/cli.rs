@@ -311,6 +311,21 @@ fn issue31_every_float_flag_refuses_nan_infinity_and_negatives() {
     let err = stderr(&o);
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(err.starts_with("error:") && err.contains("above the highest"), "{err}");
+    // A scale told and searched for at once.
+    let o = run(&[
+        "detect",
+        "paws",
+        "a.png",
+        "--out",
+        out,
+        "--find-scale",
+        "3:4",
+        "--px-per-mm",
+        "3",
+    ]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.starts_with("error:") && err.contains("--find-scale"), "{err}");
     assert!(!Path::new(out).exists(), "nothing written on bad input");
 }
 

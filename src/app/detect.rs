@@ -60,6 +60,11 @@ pub fn command(command: &DetectCommand) -> crate::app::Outcome {
 /// A missing or unreadable image or model, or an output directory in the way (exit code 1);
 /// a failure writing the output (2).
 fn paws(args: &DetectPawsArgs) -> crate::app::Outcome {
+    if args.find_scale.find_scale.is_some() && (args.px_per_mm.is_some() || args.calibration.is_some()) {
+        return Err(crate::engine::Failure::usage(anyhow::anyhow!(
+            "--find-scale searches for a scale that --px-per-mm or --calibration already gives: give one of them"
+        )));
+    }
     let detections = crate::engine::detect::paws(&DetectPawsOptions {
         images: args.images.clone(),
         out: args.out.clone(),
