@@ -198,9 +198,10 @@ fn paws_learnt_from_labelled_real_frames_are_found_on_frames_held_out() {
 /// The paw network learns from the labelled real frames (`train paws --net`, a short
 /// training: its cross-validated figures, 3,000 iterations, are in FIGURES.md), is written as
 /// `safetensors`, and is read and run by `eval paws --labels --model`: judged here on the
-/// first 12 frames it learnt from (the scale search runs the network at 33 scales on every
-/// frame judged: all 45 took over 3 minutes in the test build), so this checks the plumbing,
-/// not the figure. A file not named `.safetensors` is refused before any training.
+/// first 12 frames it learnt from, told their scale (the search for it, 33 scales on every
+/// frame, took over 3 minutes on all 45 in the test build: `--find-scale` keeps it to one), so
+/// this checks the plumbing, not the figure. A file not named `.safetensors` is refused before
+/// any training.
 #[test]
 fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
     let Some(labels) = real_file("mirror-mouse/CollectedData.csv") else {
