@@ -717,3 +717,92 @@ fn external_crates_are_used_only_in_their_layers() {
         "external crates outside their layers: {misplaced:#?}"
     );
 }
+
+/// The longest a function of the product's code may be, in lines from its `fn` to its closing
+/// brace: one that fits a screen reads at once.
+const LONGEST_FUNCTION: usize = 120;
+
+/// Every function of `text` with a body, as (its name, its first line, its lines), counted
+/// as the project's `rustfmt` lays it out (the suite checks that it does): the body ends at
+/// the first line that is only `}` at the indent its `fn` line has. A declaration without a
+/// body (a trait's, an `extern` block's, ending in `;`) and a function on one line are not
+/// counted.
+fn function_lengths(text: &str) -> Vec<(String, usize, usize)> {
+    const QUALIFIERS: [&str; 5] = ["pub ", "const ", "async ", "unsafe ", "extern \"C\" "];
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = Vec::new();
+    for (at, line) in lines.iter().enumerate() {
+        let code = line.trim_start();
+        let indent = &line[..line.len() - code.len()];
+        let mut rest = code;
+        loop {
+            if let Some(scoped) = rest.strip_prefix("pub(").and_then(|r| r.split_once(") ")) {
+                rest = scoped.1;
+            } else if let Some(q) = QUALIFIERS.iter().find(|q| rest.starts_with(*q)) {
+                rest = &rest[q.len()..];
+            } else {
+                break;
+            }
+        }
+        let Some(signature) = rest.strip_prefix("fn ") else {
+            continue;
+        };
+        let name: String = signature
+            .chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_')
+            .collect();
+        let Some(opens) = (at..lines.len()).find(|&k| {
+            let l = lines[k].trim_end();
+            l.ends_with('{') || l.ends_with(';') || l.ends_with('}')
+        }) else {
+            continue;
+        };
+        let ends_at = lines[opens].trim_end();
+        if !ends_at.ends_with('{') {
+            continue;
+        }
+        let closing = format!("{indent}}}");
+        if let Some(closes) = (opens + 1..lines.len()).find(|&k| lines[k].trim_end() == closing) {
+            out.push((name, at + 1, closes - at + 1));
+        }
+    }
+    out
+}
+
+#[test]
+fn function_lengths_are_counted_from_fn_to_its_closing_brace() {
+    let text = "fn one() -> u32 { 1 }\n\
+                pub(crate) fn three(\n    a: u32,\n) -> u32 {\n    a\n}\n\
+                trait T {\n    fn declared(&self);\n    fn given(&self) {\n        if true {\n        }\n    }\n}\n";
+    assert_eq!(
+        function_lengths(text),
+        vec![("three".to_owned(), 2, 5), ("given".to_owned(), 9, 4)]
+    );
+}
+
+#[test]
+fn no_function_of_the_product_is_over_120_lines() {
+    let root = repo_root();
+    let mut files = Vec::new();
+    rust_files(&root.join("src"), &mut files);
+    for entry in std::fs::read_dir(root.join("crates")).expect("crates/ is readable") {
+        let src = entry.expect("crates/ is readable").path().join("src");
+        if src.is_dir() {
+            rust_files(&src, &mut files);
+        }
+    }
+    let mut long = Vec::new();
+    for path in files {
+        let text = std::fs::read_to_string(&path).expect("a source file is readable");
+        for (name, line, length) in function_lengths(&text) {
+            if length > LONGEST_FUNCTION {
+                let file = path.strip_prefix(&root).expect("under the repository").display();
+                long.push(format!("{file}:{line}: `{name}` is {length} lines"));
+            }
+        }
+    }
+    assert!(
+        long.is_empty(),
+        "functions over {LONGEST_FUNCTION} lines (split them into functions that each do one thing): {long:#?}"
+    );
+}

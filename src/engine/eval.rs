@@ -398,7 +398,7 @@ pub fn eval_real_paws(
     progress: &dyn crate::engine::progress::Progress,
 ) -> Result<RealPawsFigures, Failure> {
     use crate::training::paws_real::{RealPawReport, Scale, fold_frames, judge};
-    use crate::vision::paws::{PawDetector, PawModel};
+    use crate::vision::paws::PawModel;
     let views = options.labels.open()?;
     let n = views.frames.len();
     let found = Scale::Found {
@@ -467,17 +467,12 @@ pub fn eval_real_paws(
                     folds,
                     judged = judged.len()
                 );
-                let mut detector = if let Some(params) = &options.net {
-                    let net = crate::engine::train::fit_paw_net(&views, &learnt, &render_views, params, progress)?;
-                    PawModel::Net(Box::new(crate::vision::paws::net::NetDetector::new(&net)?))
-                } else {
-                    let set =
-                        crate::engine::train::paw_material(renders.as_ref(), Some((&views, &learnt)), options.seed)?;
-                    let trained = crate::engine::train::fit_paw_cascade(&set, options.stages, options.seed, progress)?;
-                    let mut cascade = trained.cascade;
-                    cascade.min_neighbors = options.min_neighbors;
-                    PawModel::Cascade(Box::new(PawDetector::from_cascade(cascade)))
+                let training = FoldTraining {
+                    views: &views,
+                    renders: renders.as_ref(),
+                    render_views: &render_views,
                 };
+                let mut detector = fold_detector(options, &training, &learnt, progress)?;
                 let (told, frames) = judge(&mut detector, &views, &judged, Scale::Told, options.max_paws);
                 figures.told_scale.merge(&told);
                 figures
@@ -503,20 +498,63 @@ pub fn eval_real_paws(
         })
         .collect();
     if let Some(dir) = &options.report {
-        report_dir(dir)?;
-        for outcome in &outcomes {
-            let name = views.labels.images[outcome.frame].image.file_stem().map_or_else(
-                || format!("frame{}", outcome.frame),
-                |s| s.to_string_lossy().into_owned(),
-            );
-            let path = dir.join(format!("{:03}-{name}.png", outcome.frame));
-            real_paws_picture(&views.frames[outcome.frame], outcome, views.px_per_mm)
-                .write_png(&path)
-                .with_context(|| format!("writing {path:?}"))?;
-        }
-        write_report_file(dir, "summary.json", serde_json::to_string_pretty(&figures)?.as_bytes())?;
+        write_real_paws_report(dir, &views, &outcomes, &figures)?;
     }
     Ok(figures)
+}
+
+/// What a fold's paw detector learns from besides its labelled frames: the labelled views,
+/// and the renders as a cascade learns them (`renders`) or as the network does
+/// (`render_views`).
+struct FoldTraining<'a> {
+    views: &'a training::paws_real::RealViews,
+    renders: Option<&'a crate::vision::paws::train::TrainingSet>,
+    render_views: &'a [training::paws_net::NetView],
+}
+
+/// The paw detector one fold of `eval paws --labels --folds` trains on the frames `learnt`:
+/// the network with `options.net`, else a cascade.
+fn fold_detector(
+    options: &RealPawsOptions,
+    training: &FoldTraining<'_>,
+    learnt: &[usize],
+    progress: &dyn crate::engine::progress::Progress,
+) -> Result<crate::vision::paws::PawModel, Failure> {
+    use crate::vision::paws::{PawDetector, PawModel};
+    let views = training.views;
+    Ok(if let Some(params) = &options.net {
+        let net = crate::engine::train::fit_paw_net(views, learnt, training.render_views, params, progress)?;
+        PawModel::Net(Box::new(crate::vision::paws::net::NetDetector::new(&net)?))
+    } else {
+        let set = crate::engine::train::paw_material(training.renders, Some((views, learnt)), options.seed)?;
+        let trained = crate::engine::train::fit_paw_cascade(&set, options.stages, options.seed, progress)?;
+        let mut cascade = trained.cascade;
+        cascade.min_neighbors = options.min_neighbors;
+        PawModel::Cascade(Box::new(PawDetector::from_cascade(cascade)))
+    })
+}
+
+/// `eval paws --labels --report DIR`: each judged frame drawn with its paws found, missed and
+/// false, and `summary.json`.
+fn write_real_paws_report(
+    dir: &std::path::Path,
+    views: &training::paws_real::RealViews,
+    outcomes: &[training::paws_real::FrameOutcome],
+    figures: &RealPawsFigures,
+) -> Result<(), Failure> {
+    report_dir(dir)?;
+    for outcome in outcomes {
+        let name = views.labels.images[outcome.frame].image.file_stem().map_or_else(
+            || format!("frame{}", outcome.frame),
+            |s| s.to_string_lossy().into_owned(),
+        );
+        let path = dir.join(format!("{:03}-{name}.png", outcome.frame));
+        real_paws_picture(&views.frames[outcome.frame], outcome, views.px_per_mm)
+            .write_png(&path)
+            .with_context(|| format!("writing {path:?}"))?;
+    }
+    write_report_file(dir, "summary.json", serde_json::to_string_pretty(figures)?.as_bytes())?;
+    Ok(())
 }
 
 /// A judged frame: found paws' boxes in green, false detections' in red, missed paws circled

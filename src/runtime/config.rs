@@ -396,30 +396,9 @@ impl Checker<'_> {
             ));
         }
         let o = raw.output;
-        let record = match o.record {
-            None | Some(RawRecord::Flag(true)) => true,
-            Some(RawRecord::Flag(false)) => false,
-            Some(RawRecord::Mode(m)) => match m.as_str() {
-                "always" => true,
-                "never" => false,
-                _ => return Err(self.bad("output.record", format!("must be \"always\" or \"never\", not {m:?}"))),
-            },
-        };
+        let record = self.record(o.record)?;
         let chunk_minutes = self.positive("output.chunk_minutes", o.chunk_minutes.unwrap_or(60.0), 1440.0)?;
-        let min_free_gb = o.min_free_gb.unwrap_or(5.0);
-        if !(min_free_gb.is_finite() && (0.0..=1e6).contains(&min_free_gb)) {
-            return Err(self.bad(
-                "output.min_free_gb",
-                format!("must be from 0 to 1000000, not {min_free_gb}"),
-            ));
-        }
-        let min_free_percent = o.min_free_percent.unwrap_or(5.0);
-        if !(min_free_percent.is_finite() && (0.0..=90.0).contains(&min_free_percent)) {
-            return Err(self.bad(
-                "output.min_free_percent",
-                format!("must be from 0 to 90, not {min_free_percent}"),
-            ));
-        }
+        let (min_free_gb, min_free_percent) = self.free_space(o.min_free_gb, o.min_free_percent)?;
         let max_wait_ms = self.positive("reconnect.max_wait_ms", r.max_wait_ms.unwrap_or(10_000.0), 600_000.0)?;
         let secs = |ms: f64| std::time::Duration::from_secs_f64(ms / 1000.0);
         let reconnect = Reconnect {
@@ -428,13 +407,7 @@ impl Checker<'_> {
             max_wait: secs(max_wait_ms),
         };
         if let Some(aravis) = raw.aravis {
-            if !aravis.interfaces.is_empty() {
-                return Err(self.bad(
-                    "aravis.interfaces",
-                    "is not used: mousepose never looks for GigE Vision cameras by broadcast; it opens the [color] address (remove the [aravis] table)",
-                ));
-            }
-            tracing::warn!(config = ?self.path, "the [aravis] table is not used (cameras are opened by their address): remove it");
+            self.aravis(&aravis)?;
         }
         let http = self.http(raw.http)?;
         let stream = raw.stream.as_ref().map(|s| self.stream(s)).transpose()?.flatten();
@@ -460,6 +433,51 @@ impl Checker<'_> {
             stream,
             lsl,
         })
+    }
+
+    /// `output.record`: `true`, `false`, `"always"` or `"never"` (recording unless told not to).
+    fn record(&self, record: Option<RawRecord>) -> Result<bool, ConfigError> {
+        match record {
+            None | Some(RawRecord::Flag(true)) => Ok(true),
+            Some(RawRecord::Flag(false)) => Ok(false),
+            Some(RawRecord::Mode(m)) => match m.as_str() {
+                "always" => Ok(true),
+                "never" => Ok(false),
+                _ => Err(self.bad("output.record", format!("must be \"always\" or \"never\", not {m:?}"))),
+            },
+        }
+    }
+
+    /// `output.min_free_gb` and `output.min_free_percent`, 5 and 5 unless given.
+    fn free_space(&self, gb: Option<f64>, percent: Option<f64>) -> Result<(f64, f64), ConfigError> {
+        let min_free_gb = gb.unwrap_or(5.0);
+        if !(min_free_gb.is_finite() && (0.0..=1e6).contains(&min_free_gb)) {
+            return Err(self.bad(
+                "output.min_free_gb",
+                format!("must be from 0 to 1000000, not {min_free_gb}"),
+            ));
+        }
+        let min_free_percent = percent.unwrap_or(5.0);
+        if !(min_free_percent.is_finite() && (0.0..=90.0).contains(&min_free_percent)) {
+            return Err(self.bad(
+                "output.min_free_percent",
+                format!("must be from 0 to 90, not {min_free_percent}"),
+            ));
+        }
+        Ok((min_free_gb, min_free_percent))
+    }
+
+    /// `[aravis]`: no longer used (cameras are opened by their address); its `interfaces`,
+    /// which asked for discovery by broadcast, refused.
+    fn aravis(&self, aravis: &RawAravis) -> Result<(), ConfigError> {
+        if !aravis.interfaces.is_empty() {
+            return Err(self.bad(
+                "aravis.interfaces",
+                "is not used: mousepose never looks for GigE Vision cameras by broadcast; it opens the [color] address (remove the [aravis] table)",
+            ));
+        }
+        tracing::warn!(config = ?self.path, "the [aravis] table is not used (cameras are opened by their address): remove it");
+        Ok(())
     }
 
     /// `[lsl]`: the outlet, unless `enabled = false`; names must be non-empty.

@@ -95,35 +95,8 @@ fn string_attr(location: &h5::Location, name: &str, longest: usize) -> Option<St
 /// row when it is not HDF5, holds no DataFrame of DeepLabCut's labels, or a coordinate is wrong.
 pub fn read_dlc_h5(path: &Path) -> Result<LabelTable, LabelError> {
     let file = opened(path)?;
-    let groups = file.groups().map_err(|e| wrong(path, "its top level", e.to_string()))?;
-    let (frame, pandas_type) = groups
-        .iter()
-        .find_map(|g| string_attr(g, "pandas_type", 64).map(|t| (g, t)))
-        .ok_or_else(|| {
-            wrong(
-                path,
-                "its top level",
-                "no table written by pandas (DeepLabCut's `df_with_missing`) is in it",
-            )
-        })?;
-    let key = frame.name().trim_start_matches('/').to_owned();
-    match pandas_type.as_str() {
-        "frame" => {}
-        "frame_table" => {
-            return Err(wrong(
-                path,
-                format!("table `{key}`"),
-                "it is in pandas' `table` format; save it in the fixed format DeepLabCut writes (`to_hdf(..., format=\"fixed\")`) or as CSV",
-            ));
-        }
-        other => {
-            return Err(wrong(
-                path,
-                format!("table `{key}`"),
-                format!("pandas wrote a `{other}`, not a DataFrame"),
-            ));
-        }
-    }
+    let (frame, key) = dataframe(path, &file)?;
+    let frame = &frame;
     let table = |what: &str| format!("table `{key}/{what}`");
     let columns = index(path, frame, &key, "axis0")?;
     let Some(column_names) = part_and_coordinate(&columns) else {
@@ -161,16 +134,94 @@ pub fn read_dlc_h5(path: &Path) -> Result<LabelTable, LabelError> {
             parts.push(part);
         }
     }
+    let values = block_columns(path, frame, &key, n_rows)?;
+    let mut labelled = Vec::with_capacity(n_rows);
+    for (r, image) in images.into_iter().enumerate() {
+        let place = || format!("row {} (`{}`)", r + 1, image.display());
+        let mut points = BTreeMap::new();
+        for part in &parts {
+            let coordinate = |c: &str| values.get(&(part.clone(), c.to_owned())).map(|v| v[r]);
+            let (Some(x), Some(y)) = (coordinate("x"), coordinate("y")) else {
+                return Err(wrong(path, table("axis0"), format!("`{part}` has no x and y columns")));
+            };
+            match (x.is_nan(), y.is_nan()) {
+                (true, true) => {}
+                (false, false) if x.is_finite() && y.is_finite() => {
+                    points.insert(part.clone(), (x, y));
+                }
+                (false, false) => return Err(wrong(path, place(), format!("`{part}` is at ({x}, {y})"))),
+                _ => {
+                    return Err(wrong(
+                        path,
+                        place(),
+                        format!("`{part}` has one coordinate without the other"),
+                    ));
+                }
+            }
+        }
+        labelled.push(LabelledImage {
+            source: FrameSource::File(image.clone()),
+            image,
+            points,
+        });
+    }
+    if labelled.is_empty() {
+        return Err(wrong(path, format!("table `{key}`"), "it has no row"));
+    }
+    Ok(LabelTable {
+        path: path.to_owned(),
+        scorer,
+        parts,
+        images: labelled,
+    })
+}
+
+/// The group of `file` that holds the DataFrame pandas wrote in its fixed format, and its key.
+fn dataframe(path: &Path, file: &h5::File) -> Result<(h5::Group, String), LabelError> {
+    let groups = file.groups().map_err(|e| wrong(path, "its top level", e.to_string()))?;
+    let (frame, pandas_type) = groups
+        .into_iter()
+        .find_map(|g| string_attr(&g, "pandas_type", 64).map(|t| (g, t)))
+        .ok_or_else(|| {
+            wrong(
+                path,
+                "its top level",
+                "no table written by pandas (DeepLabCut's `df_with_missing`) is in it",
+            )
+        })?;
+    let key = frame.name().trim_start_matches('/').to_owned();
+    match pandas_type.as_str() {
+        "frame" => Ok((frame, key)),
+        "frame_table" => Err(wrong(
+            path,
+            format!("table `{key}`"),
+            "it is in pandas' `table` format; save it in the fixed format DeepLabCut writes (`to_hdf(..., format=\"fixed\")`) or as CSV",
+        )),
+        other => Err(wrong(
+            path,
+            format!("table `{key}`"),
+            format!("pandas wrote a `{other}`, not a DataFrame"),
+        )),
+    }
+}
+
+/// The columns of a DataFrame's value blocks: (part, coordinate) -> the column's values, one
+/// per row of its `n_rows`.
+fn block_columns(
+    path: &Path,
+    frame: &h5::Group,
+    key: &str,
+    n_rows: usize,
+) -> Result<BTreeMap<(String, String), Vec<f64>>, LabelError> {
     let blocks = frame
         .attr("nblocks")
         .and_then(|a| a.read_scalar::<i64>())
         .map_err(|e| wrong(path, format!("table `{key}`"), format!("no block count ({e})")))?;
-    // (part, coordinate) -> the column's values, one per row.
-    let mut values: BTreeMap<(String, String), Vec<f64>> = BTreeMap::new();
+    let mut values = BTreeMap::new();
     for b in 0..blocks {
-        let items = index(path, frame, &key, &format!("block{b}_items"))?;
+        let items = index(path, frame, key, &format!("block{b}_items"))?;
         let dataset_name = format!("block{b}_values");
-        let place = table(&dataset_name);
+        let place = format!("table `{key}/{dataset_name}`");
         let dataset = frame
             .dataset(&dataset_name)
             .map_err(|e| wrong(path, place.clone(), e.to_string()))?;
@@ -218,45 +269,7 @@ pub fn read_dlc_h5(path: &Path) -> Result<LabelTable, LabelError> {
             values.insert(name, column);
         }
     }
-    let mut labelled = Vec::with_capacity(n_rows);
-    for (r, image) in images.into_iter().enumerate() {
-        let place = || format!("row {} (`{}`)", r + 1, image.display());
-        let mut points = BTreeMap::new();
-        for part in &parts {
-            let coordinate = |c: &str| values.get(&(part.clone(), c.to_owned())).map(|v| v[r]);
-            let (Some(x), Some(y)) = (coordinate("x"), coordinate("y")) else {
-                return Err(wrong(path, table("axis0"), format!("`{part}` has no x and y columns")));
-            };
-            match (x.is_nan(), y.is_nan()) {
-                (true, true) => {}
-                (false, false) if x.is_finite() && y.is_finite() => {
-                    points.insert(part.clone(), (x, y));
-                }
-                (false, false) => return Err(wrong(path, place(), format!("`{part}` is at ({x}, {y})"))),
-                _ => {
-                    return Err(wrong(
-                        path,
-                        place(),
-                        format!("`{part}` has one coordinate without the other"),
-                    ));
-                }
-            }
-        }
-        labelled.push(LabelledImage {
-            source: FrameSource::File(image.clone()),
-            image,
-            points,
-        });
-    }
-    if labelled.is_empty() {
-        return Err(wrong(path, format!("table `{key}`"), "it has no row"));
-    }
-    Ok(LabelTable {
-        path: path.to_owned(),
-        scorer,
-        parts,
-        images: labelled,
-    })
+    Ok(values)
 }
 
 /// The (body part, coordinate) of each column of a DeepLabCut column index: its levels
@@ -379,6 +392,91 @@ enum SlpVideo {
 /// not a finite number.
 pub fn read_slp(path: &Path) -> Result<LabelTable, LabelError> {
     let file = opened(path)?;
+    let (format_id, skeletons) = slp_skeletons(path, &file)?;
+    // SLEAP before format 1.1 put a pixel's top-left corner at (0, 0); now its centre.
+    let offset = if format_id < 1.1 { 0.5 } else { 0.0 };
+    let table = |name: &str| format!("table `{name}`");
+    let read = |name: &str| -> Result<h5::Dataset, LabelError> {
+        file.dataset(name).map_err(|e| wrong(path, table(name), e.to_string()))
+    };
+    let frames: Vec<SlpFrame> = read("frames")?
+        .read_raw()
+        .map_err(|e| wrong(path, table("frames"), e.to_string()))?;
+    let instances: Vec<SlpInstance> = read("instances")?
+        .read_raw()
+        .map_err(|e| wrong(path, table("instances"), e.to_string()))?;
+    let points: Vec<SlpPoint> = read("points")?
+        .read_raw()
+        .map_err(|e| wrong(path, table("points"), e.to_string()))?;
+    let videos = strings(&*read("videos_json")?, LONGEST_JSON)
+        .map_err(|e| wrong(path, table("videos_json"), e))?
+        .iter()
+        .enumerate()
+        .map(|(v, text)| slp_video(path, &file, v, text))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut parts: Vec<String> = Vec::new();
+    for names in &skeletons {
+        for name in names {
+            if !parts.contains(name) {
+                parts.push(name.clone());
+            }
+        }
+    }
+    let mut images = Vec::new();
+    for (f, frame) in frames.iter().enumerate() {
+        let place = || format!("frame {f} (frame {} of video {})", frame.frame_idx, frame.video);
+        let user: Vec<&SlpInstance> = usize::try_from(frame.instance_id_start)
+            .ok()
+            .zip(usize::try_from(frame.instance_id_end).ok())
+            .and_then(|(a, b)| instances.get(a..b))
+            .ok_or_else(|| wrong(path, place(), "its instances are not in the table `instances`"))?
+            .iter()
+            .filter(|i| i.instance_type == 0)
+            .collect();
+        let instance = match user.as_slice() {
+            [] => continue,
+            [one] => *one,
+            several => {
+                return Err(wrong(
+                    path,
+                    place(),
+                    format!(
+                        "{} animals are labelled; paws are learnt from one mouse a frame",
+                        several.len()
+                    ),
+                ));
+            }
+        };
+        let labelled = slp_points(instance, &skeletons, &points, offset).map_err(|e| wrong(path, place(), e))?;
+        let video = usize::try_from(frame.video)
+            .ok()
+            .and_then(|v| videos.get(v))
+            .ok_or_else(|| wrong(path, place(), "its video is not in `videos_json`"))?;
+        let (image, source) = slp_frame(path, &file, video, frame.frame_idx).map_err(|e| wrong(path, place(), e))?;
+        images.push(LabelledImage {
+            image,
+            source,
+            points: labelled,
+        });
+    }
+    if images.is_empty() {
+        return Err(wrong(
+            path,
+            table("instances"),
+            "no frame holds an instance a person placed",
+        ));
+    }
+    Ok(LabelTable {
+        path: path.to_owned(),
+        scorer: String::from("SLEAP"),
+        parts,
+        images,
+    })
+}
+
+/// The format of a SLEAP file and its skeletons (each its nodes' names, in order), from the
+/// attributes of its `metadata`.
+fn slp_skeletons(path: &Path, file: &h5::File) -> Result<(f64, Vec<Vec<String>>), LabelError> {
     let format_id = file
         .group("metadata")
         .and_then(|m| m.attr("format_id"))
@@ -435,114 +533,39 @@ pub fn read_slp(path: &Path) -> Result<LabelTable, LabelError> {
     if skeletons.is_empty() {
         return Err(wrong(path, "`metadata`", "it holds no skeleton"));
     }
-    // SLEAP before format 1.1 put a pixel's top-left corner at (0, 0); now its centre.
-    let offset = if format_id < 1.1 { 0.5 } else { 0.0 };
-    let table = |name: &str| format!("table `{name}`");
-    let read = |name: &str| -> Result<h5::Dataset, LabelError> {
-        file.dataset(name).map_err(|e| wrong(path, table(name), e.to_string()))
-    };
-    let frames: Vec<SlpFrame> = read("frames")?
-        .read_raw()
-        .map_err(|e| wrong(path, table("frames"), e.to_string()))?;
-    let instances: Vec<SlpInstance> = read("instances")?
-        .read_raw()
-        .map_err(|e| wrong(path, table("instances"), e.to_string()))?;
-    let points: Vec<SlpPoint> = read("points")?
-        .read_raw()
-        .map_err(|e| wrong(path, table("points"), e.to_string()))?;
-    let videos = strings(&*read("videos_json")?, LONGEST_JSON)
-        .map_err(|e| wrong(path, table("videos_json"), e))?
-        .iter()
-        .enumerate()
-        .map(|(v, text)| slp_video(path, &file, v, text))
-        .collect::<Result<Vec<_>, _>>()?;
-    let mut parts: Vec<String> = Vec::new();
-    for names in &skeletons {
-        for name in names {
-            if !parts.contains(name) {
-                parts.push(name.clone());
-            }
+    Ok((format_id, skeletons))
+}
+
+/// The points of an instance a person placed, by its skeleton's node names, moved by `offset`
+/// to pixel centres; a point not placed (hidden, or at NaN) is left out. The error says what
+/// is wrong with the instance.
+fn slp_points(
+    instance: &SlpInstance,
+    skeletons: &[Vec<String>],
+    points: &[SlpPoint],
+    offset: f64,
+) -> Result<BTreeMap<String, (f64, f64)>, String> {
+    let names = usize::try_from(instance.skeleton)
+        .ok()
+        .and_then(|s| skeletons.get(s))
+        .ok_or_else(|| format!("skeleton {} is not in `metadata`", instance.skeleton))?;
+    let placed = usize::try_from(instance.point_id_start)
+        .ok()
+        .zip(usize::try_from(instance.point_id_end).ok())
+        .and_then(|(a, b)| points.get(a..b))
+        .filter(|p| p.len() == names.len())
+        .ok_or("its points are not in the table `points`, one per node")?;
+    let mut labelled = BTreeMap::new();
+    for (name, point) in names.iter().zip(placed) {
+        if !point.visible || (point.x.is_nan() && point.y.is_nan()) {
+            continue;
         }
-    }
-    let mut images = Vec::new();
-    for (f, frame) in frames.iter().enumerate() {
-        let place = || format!("frame {f} (frame {} of video {})", frame.frame_idx, frame.video);
-        let user: Vec<&SlpInstance> = usize::try_from(frame.instance_id_start)
-            .ok()
-            .zip(usize::try_from(frame.instance_id_end).ok())
-            .and_then(|(a, b)| instances.get(a..b))
-            .ok_or_else(|| wrong(path, place(), "its instances are not in the table `instances`"))?
-            .iter()
-            .filter(|i| i.instance_type == 0)
-            .collect();
-        let instance = match user.as_slice() {
-            [] => continue,
-            [one] => *one,
-            several => {
-                return Err(wrong(
-                    path,
-                    place(),
-                    format!(
-                        "{} animals are labelled; paws are learnt from one mouse a frame",
-                        several.len()
-                    ),
-                ));
-            }
-        };
-        let names = usize::try_from(instance.skeleton)
-            .ok()
-            .and_then(|s| skeletons.get(s))
-            .ok_or_else(|| {
-                wrong(
-                    path,
-                    place(),
-                    format!("skeleton {} is not in `metadata`", instance.skeleton),
-                )
-            })?;
-        let placed = usize::try_from(instance.point_id_start)
-            .ok()
-            .zip(usize::try_from(instance.point_id_end).ok())
-            .and_then(|(a, b)| points.get(a..b))
-            .filter(|p| p.len() == names.len())
-            .ok_or_else(|| wrong(path, place(), "its points are not in the table `points`, one per node"))?;
-        let mut labelled = BTreeMap::new();
-        for (name, point) in names.iter().zip(placed) {
-            if !point.visible || (point.x.is_nan() && point.y.is_nan()) {
-                continue;
-            }
-            if !(point.x.is_finite() && point.y.is_finite()) {
-                return Err(wrong(
-                    path,
-                    place(),
-                    format!("`{name}` is at ({}, {})", point.x, point.y),
-                ));
-            }
-            labelled.insert(name.clone(), (point.x - offset, point.y - offset));
+        if !(point.x.is_finite() && point.y.is_finite()) {
+            return Err(format!("`{name}` is at ({}, {})", point.x, point.y));
         }
-        let video = usize::try_from(frame.video)
-            .ok()
-            .and_then(|v| videos.get(v))
-            .ok_or_else(|| wrong(path, place(), "its video is not in `videos_json`"))?;
-        let (image, source) = slp_frame(path, &file, video, frame.frame_idx).map_err(|e| wrong(path, place(), e))?;
-        images.push(LabelledImage {
-            image,
-            source,
-            points: labelled,
-        });
+        labelled.insert(name.clone(), (point.x - offset, point.y - offset));
     }
-    if images.is_empty() {
-        return Err(wrong(
-            path,
-            table("instances"),
-            "no frame holds an instance a person placed",
-        ));
-    }
-    Ok(LabelTable {
-        path: path.to_owned(),
-        scorer: String::from("SLEAP"),
-        parts,
-        images,
-    })
+    Ok(labelled)
 }
 
 /// A video of `videos_json`: its backend's `filenames` (a list of images), `dataset` (the

@@ -119,40 +119,7 @@ pub fn read_dlc_csv(path: &Path) -> Result<LabelTable, LabelError> {
         .iter()
         .position(|c| c == "x")
         .ok_or_else(|| bad(coords_row + 1, "the `coords` row names no `x` column".into()))?;
-    // (body part, column of x, column of y)
-    let mut columns: Vec<(String, usize, usize)> = Vec::new();
-    let mut c = index_columns;
-    while c < coords.len() {
-        let name = |row: usize| rows[row].get(c).cloned().unwrap_or_default();
-        let part = if individuals {
-            format!("{}/{}", name(1), name(parts_row))
-        } else {
-            name(parts_row)
-        };
-        match (coords.get(c).map(String::as_str), coords.get(c + 1).map(String::as_str)) {
-            (Some("x"), Some("y")) => {}
-            (x, y) => {
-                let said = |v: Option<&str>| v.map_or("missing".to_owned(), |v| format!("`{v}`"));
-                return Err(bad(
-                    coords_row + 1,
-                    format!(
-                        "the `coords` row's columns {} and {} (of `{part}`) are {} and {}, not x and y",
-                        c + 1,
-                        c + 2,
-                        said(x),
-                        said(y)
-                    ),
-                ));
-            }
-        }
-        columns.push((part, c, c + 1));
-        // DeepLabCut's machine labels add a likelihood after x and y.
-        c += if coords.get(c + 2).is_some_and(|l| l == "likelihood") {
-            3
-        } else {
-            2
-        };
-    }
+    let columns = csv_columns(path, &rows, (parts_row, coords_row), individuals, index_columns)?;
     let scorer = rows[0].get(index_columns).cloned().unwrap_or_default();
     let mut images = Vec::new();
     for (k, row) in rows.iter().enumerate().skip(coords_row + 1) {
@@ -202,6 +169,55 @@ pub fn read_dlc_csv(path: &Path) -> Result<LabelTable, LabelError> {
         parts: columns.into_iter().map(|(p, _, _)| p).collect(),
         images,
     })
+}
+
+/// The body parts of a DeepLabCut CSV's columns (of the file at `path`) from its header rows
+/// (`rows`, the `bodyparts` and `coords` rows at `parts_row` and `coords_row`, an
+/// `individuals` row at 1 when `individuals`), each with its columns of x and y, from `first`
+/// on.
+fn csv_columns(
+    path: &Path,
+    rows: &[Vec<String>],
+    (parts_row, coords_row): (usize, usize),
+    individuals: bool,
+    first: usize,
+) -> Result<Vec<(String, usize, usize)>, LabelError> {
+    let coords = &rows[coords_row];
+    let mut columns: Vec<(String, usize, usize)> = Vec::new();
+    let mut c = first;
+    while c < coords.len() {
+        let name = |row: usize| rows[row].get(c).cloned().unwrap_or_default();
+        let part = if individuals {
+            format!("{}/{}", name(1), name(parts_row))
+        } else {
+            name(parts_row)
+        };
+        match (coords.get(c).map(String::as_str), coords.get(c + 1).map(String::as_str)) {
+            (Some("x"), Some("y")) => {}
+            (x, y) => {
+                let said = |v: Option<&str>| v.map_or("missing".to_owned(), |v| format!("`{v}`"));
+                return Err(LabelError::Malformed {
+                    path: path.to_owned(),
+                    line: coords_row + 1,
+                    what: format!(
+                        "the `coords` row's columns {} and {} (of `{part}`) are {} and {}, not x and y",
+                        c + 1,
+                        c + 2,
+                        said(x),
+                        said(y)
+                    ),
+                });
+            }
+        }
+        columns.push((part, c, c + 1));
+        // DeepLabCut's machine labels add a likelihood after x and y.
+        c += if coords.get(c + 2).is_some_and(|l| l == "likelihood") {
+            3
+        } else {
+            2
+        };
+    }
+    Ok(columns)
 }
 
 /// Which of a lab's body parts are which of our paws.
