@@ -133,3 +133,113 @@ fn issue63_every_write_of_a_short_recording_fails_in_turn_and_the_daemon_goes_on
 const EIO: i32 = 5;
 const ENOSPC: i32 = 28;
 const EROFS: i32 = 30;
+
+/// Starts the daemon recording into `dir/out` (a 32 MB disk of its own when `fill`), waits
+/// for 20 frames, fills the disk when `fill` and lets the writes fail for two seconds, and
+/// kills it (SIGKILL). Returns the chunk it left.
+fn killed_while_recording(dir: &Path, fill: bool) -> (PathBuf, Option<crate::run::Tmpfs>) {
+    let out = dir.join("out");
+    let disk = fill.then(|| crate::run::Tmpfs::mount(&out, "32m"));
+    std::fs::create_dir_all(&out).expect("test set-up");
+    let rig = session_rig(dir);
+    let mut daemon = crate::run::daemon(&rig, None);
+    let start = std::time::Instant::now();
+    let lines = |c: &Path, file: &str| std::fs::read_to_string(c.join(file)).map_or(0, |t| t.lines().count());
+    let recorded = || {
+        let runs = std::fs::read_dir(&out).map_or(0, Iterator::count);
+        runs > 0
+            && chunks(&out)
+                .first()
+                .is_some_and(|c| lines(c, "depth/timestamps.csv") >= 21 && lines(c, "poses.csv") >= 2)
+    };
+    while !recorded() {
+        assert!(start.elapsed().as_secs() < 60, "the daemon wrote no poses");
+        assert!(
+            daemon.0.try_wait().expect("test set-up").is_none(),
+            "the daemon exited early"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    if fill {
+        // Written until the disk is full.
+        drop(std::fs::write(out.join("filler"), vec![1u8; 40 << 20]));
+        std::thread::sleep(std::time::Duration::from_secs(2));
+    }
+    daemon.0.kill().expect("test set-up");
+    daemon.0.wait().expect("test set-up");
+    if fill {
+        std::fs::remove_file(out.join("filler")).expect("test set-up");
+    }
+    (chunks(&out).remove(0), disk)
+}
+
+/// The next start after a daemon was killed in the middle of recording: it closes the chunk
+/// the killed one left open and says so; the chunk then is what a closed one is (its session
+/// ended, its index whole, `summary.json` counting the rows `poses.csv` holds) and replays.
+fn next_start_closes(dir: &Path, chunk: &Path) {
+    assert!(!chunk.join("summary.json").exists(), "{chunk:?}");
+    let before = SessionReader::open(chunk).unwrap_or_else(|e| panic!("{chunk:?}: {e}"));
+    assert!(!before.complete());
+    let frames = before.depth_count();
+    let run = mousepose()
+        .args(["run", "--json", "--seconds", "0.5", "--config"])
+        .arg(dir.join("rig.toml"))
+        .env("MOUSEPOSE_MODELS", repo_root().join("fixtures/models"))
+        .env("RUST_LOG", "info")
+        .output()
+        .expect("test set-up");
+    let log = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{log}");
+    assert!(
+        log.contains("closed a chunk that an earlier run left open") && log.contains(&chunk.display().to_string()),
+        "{log}"
+    );
+    let after = SessionReader::open(chunk).unwrap_or_else(|e| panic!("{chunk:?}: {e}"));
+    assert!(after.complete(), "{chunk:?}");
+    assert_eq!(after.depth_count(), frames);
+    assert!(
+        matches!(
+            after.index_status(mousepose::io::session::CameraRole::Depth),
+            Some(mousepose::io::store::IndexStatus::Loaded)
+        ),
+        "{chunk:?}: the index was not written"
+    );
+    assert!(after.damage().depth.is_clean(), "{chunk:?}");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(chunk.join("summary.json")).expect("summary.json")).expect("whole");
+    assert_eq!(summary["rows"].as_u64(), Some(pose_rows(chunk) as u64), "{summary:#}");
+    assert_eq!(summary["closed_at_next_start"], true, "{summary:#}");
+    let replayed = dir.join("replayed");
+    let replay = mousepose()
+        .arg("replay")
+        .arg(chunk)
+        .arg("--out")
+        .arg(&replayed)
+        .env("MOUSEPOSE_MODELS", repo_root().join("fixtures/models"))
+        .output()
+        .expect("test set-up");
+    assert!(replay.status.success(), "{}", String::from_utf8_lossy(&replay.stderr));
+    assert_eq!(pose_rows(&replayed), frames, "{chunk:?}");
+}
+
+/// Issue 63 item 4: a daemon killed (SIGKILL) while it records leaves its chunk readable, and
+/// the next start closes it.
+#[test]
+fn issue63_the_next_start_closes_the_chunk_a_killed_daemon_left_open() {
+    let tmp = tempfile::tempdir().expect("test set-up");
+    let (chunk, _) = killed_while_recording(tmp.path(), false);
+    next_start_closes(tmp.path(), &chunk);
+}
+
+/// Issue 63 item 4: the same for a daemon killed while the disk is full (its session could
+/// not be closed and `poses.csv` was failing).
+#[test]
+fn issue63_the_next_start_closes_the_chunk_a_daemon_killed_on_a_full_disk_left_open() {
+    if !crate::run::is_root() {
+        eprintln!("skipped: mounting a small tmpfs needs root");
+        return;
+    }
+    let tmp = tempfile::tempdir().expect("test set-up");
+    let (chunk, _disk) = killed_while_recording(tmp.path(), true);
+    next_start_closes(tmp.path(), &chunk);
+}
