@@ -10,6 +10,7 @@ mod capture_v4l2;
 mod cli;
 mod docs;
 mod export;
+mod faults;
 mod forest;
 mod fuzz;
 mod hostile;

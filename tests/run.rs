@@ -31,7 +31,7 @@ pub(crate) fn session_depth() -> String {
 
 /// A rig config in `dir`: the fixture session as the depth camera, no colour camera, chunks of
 /// an hour in `dir/out`, never paused for disk space; its HTTP server on any free port.
-fn session_rig(dir: &Path) -> PathBuf {
+pub(crate) fn session_rig(dir: &Path) -> PathBuf {
     let path = dir.join("rig.toml");
     let text = format!(
         "[depth]\n{}[output]\ndir = {:?}\nchunk_minutes = 60\nmin_free_gb = 0\nmin_free_percent = 0\n\
@@ -1068,6 +1068,46 @@ fn issue37_on_a_full_disk_rows_counted_are_whole_rows_and_every_pause_has_its_re
         err.matches("recording resumed").count(),
         "{err}"
     );
+}
+
+/// Issue 63 item 1: a camera's gaps while the disk is full (the fixture's depth camera misses
+/// a frame each loop, so about once a second) never end the run: each gap's `frames_dropped`
+/// waits for room and is written once the disk has some, in order, none lost.
+#[test]
+fn issue63_camera_gaps_on_a_full_disk_wait_for_room_and_end_nothing() {
+    if !is_root() {
+        eprintln!("skipped: mounting a small tmpfs needs root");
+        return;
+    }
+    let (report, err, chunks, _disk) = run_on_a_disk_freed_later(26, 16, 10);
+    let depth = &report["cameras"]["depth"];
+    assert_accounted(depth);
+    assert!(
+        depth["not_recorded"]["write_error"].as_u64().unwrap_or(0) > 0,
+        "the disk never filled: {report:#}"
+    );
+    // Every gap the recorder saw is in a chunk's events: one a loop of 29 frames, less the
+    // gaps of the loop the run ended in and of the first.
+    let mut gaps = Vec::new();
+    for chunk in &chunks {
+        let text = std::fs::read_to_string(chunk.join("events.jsonl")).unwrap_or_default();
+        for line in text.lines() {
+            let event: serde_json::Value = serde_json::from_str(line).expect("whole lines");
+            if event["kind"] == "frames_dropped" && event["role"] == "depth" {
+                gaps.push(event["seq_from"].as_u64().expect("seq_from"));
+            }
+        }
+    }
+    let loops = depth["captured"].as_u64().expect("captured") / 29;
+    assert!(
+        gaps.len() as u64 + 2 >= loops,
+        "{} gaps logged in {loops} loops: {gaps:?}\n{err}",
+        gaps.len()
+    );
+    assert!(gaps.windows(2).all(|w| w[0] < w[1]), "gaps out of order: {gaps:?}");
+    let recording = &report["recording"];
+    assert_eq!(recording["events_lost"].as_u64(), Some(0), "{report:#}\n{err}");
+    assert_eq!(recording["events_waiting"].as_u64(), Some(0), "{report:#}\n{err}");
 }
 
 /// Issue 37 item 4: a chunk whose session begins only once a disk full from the start has

@@ -406,6 +406,7 @@ pub fn serve(
         .map(|c| LslOutlet::start(c, &project_python()))
         .transpose()?;
     let lsl = outlet.as_ref().map(LslOutlet::handle);
+    crate::runtime::sink::left_open::close_chunks_left_open(&config.output_dir);
     let root = create_run_dir(&config.output_dir)?;
     tracing::info!(dir = ?root, record = config.record, "run started");
     let info = RunInfo {

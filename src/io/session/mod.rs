@@ -21,6 +21,7 @@ pub mod codec;
 pub mod events;
 pub mod meta;
 mod reader;
+mod recover;
 mod text;
 mod writer;
 
@@ -28,6 +29,7 @@ pub use codec::{Codec, CodecError, FrameEncoder, FrameFormat, FrameHeader};
 pub use events::SessionEvent;
 pub use meta::{BackendName, CameraMeta, CameraRole, FORMAT_NAME, FORMAT_VERSION, SessionMeta, SessionSource};
 pub use reader::{ColorFrames, DepthFrames, Frames, SessionReader};
+pub use recover::{ClosedLeftOpen, close_left_open, cut_last_line};
 pub use writer::{SessionWriter, WriterOptions};
 
 use crate::core::pose::JointPositions;

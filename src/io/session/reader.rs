@@ -161,6 +161,24 @@ impl SessionReader {
             .unwrap_or_default()
     }
 
+    /// A camera's index (`(seq, offset)` in file order) and the bytes of the cut record that
+    /// end its frame file (0 when it ends on a whole record); `None` without that camera.
+    pub(super) fn frame_index(&self, role: CameraRole) -> Option<(Vec<(u64, u64)>, u64)> {
+        self.stream(role)
+            .ok()
+            .map(|s| (s.entries.clone(), s.damage.truncated_tail_bytes))
+    }
+
+    /// The host time of a camera's last frame; `None` without that camera, a frame, or a
+    /// last frame that decodes.
+    pub(super) fn last_host_ns(&self, role: CameraRole) -> Option<u64> {
+        let last = self.stream(role).ok()?.entries.len().checked_sub(1)?;
+        match role {
+            CameraRole::Depth => self.depth_frame(last).ok().map(|f| f.stamp.host_ns),
+            CameraRole::Color => self.color_frame(last).ok().map(|f| f.stamp.host_ns),
+        }
+    }
+
     /// The depth frame at `index` (0-based position in the file).
     ///
     /// # Errors

@@ -364,6 +364,12 @@ impl SessionWriter {
         Ok(())
     }
 
+    /// Events taken so far, including one whose write to the operating system failed but
+    /// which waits, whole, in the buffer (the next write or flush writes it).
+    pub fn events_logged(&self) -> u64 {
+        self.events.lines()
+    }
+
     /// Appends an event to `events.jsonl`.
     ///
     /// # Errors

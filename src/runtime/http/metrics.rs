@@ -357,6 +357,18 @@ impl Families<'_> {
                 None,
                 &[(Vec::new(), f64::from(u8::from(g.paused.load(Ordering::Relaxed))))],
             )?;
+            self.gauge(
+                "mousepose_session_events_waiting",
+                "Session events (camera gaps and outages, pauses) waiting for room on the disk.",
+                None,
+                &[(Vec::new(), g.events_waiting.load(Ordering::Relaxed) as f64)],
+            )?;
+            self.counter(
+                "mousepose_session_events_lost",
+                "Session events never written: too many waited for room, or the run ended first.",
+                None,
+                &[(Vec::new(), g.events_lost.load(Ordering::Relaxed))],
+            )?;
         }
         if let Some(stream) = &w.parts.stream {
             self.stream_families(stream.stats())?;

@@ -275,7 +275,16 @@ pub struct RecorderGauges {
     pub disk_free_bytes: AtomicU64,
     /// Raw recording paused (disk low, or after a write error).
     pub paused: AtomicBool,
+    /// Session events (a camera's gap or outage, a pause) not yet written, waiting for room.
+    pub events_waiting: AtomicU64,
+    /// Session events never written: more waited than [`EVENTS_WAITING_MAX`], or the run
+    /// ended before there was room.
+    pub events_lost: AtomicU64,
 }
+
+/// The most session events that wait for room on the disk; beyond it, the newest are counted
+/// as lost (an hour of a camera's gaps every second while the disk is full is about 3,600).
+pub const EVENTS_WAITING_MAX: usize = 4096;
 
 /// The recorder branch of a live run: frames into the current chunk's session.
 #[derive(Debug)]
@@ -303,6 +312,9 @@ pub struct ChunkRecorder {
     /// Sessions (with their chunks) that could not be closed, the disk full: closed once
     /// frames are written again, or at the end.
     unclosed: Vec<(usize, SessionWriter)>,
+    /// Session events not yet written (the disk full, or no session open), oldest first:
+    /// written into the current session as soon as one takes them.
+    waiting: std::collections::VecDeque<SessionEvent>,
     cameras: Vec<SharedHealth>,
     gauges: Arc<RecorderGauges>,
 }
@@ -320,9 +332,71 @@ impl ChunkRecorder {
             paused: None,
             lost: Vec::new(),
             unclosed: Vec::new(),
+            waiting: std::collections::VecDeque::new(),
             cameras,
             gauges,
         }
+    }
+
+    /// Queues a session event; when [`EVENTS_WAITING_MAX`] already wait, it is counted as lost.
+    fn wait_to_log(&mut self, event: SessionEvent) {
+        if self.waiting.len() < EVENTS_WAITING_MAX {
+            self.waiting.push_back(event);
+        } else {
+            let lost_before = self.gauges.events_lost.fetch_add(1, Ordering::Relaxed);
+            if lost_before == 0 {
+                tracing::error!(
+                    waiting = EVENTS_WAITING_MAX,
+                    "session events are lost: too many wait for room on the disk (counted in \
+                     mousepose_session_events_lost_total)"
+                );
+            }
+        }
+        self.gauges
+            .events_waiting
+            .store(self.waiting.len() as u64, Ordering::Relaxed);
+    }
+
+    /// Writes the waiting events into the current session, oldest first, until one cannot be
+    /// written (a full disk: it waits on; one the session took whole into its buffer before
+    /// failing is written with the buffer, so it is not written twice). Nothing is tried
+    /// without a session or while recording waits after a write error.
+    fn log_waiting(&mut self) {
+        if self.paused_until.is_some_and(|t| Instant::now() < t) {
+            return;
+        }
+        let Some(w) = &mut self.writer else {
+            return;
+        };
+        while let Some(event) = self.waiting.front() {
+            let before = w.events_logged();
+            match w.log_event(event) {
+                Ok(()) => {}
+                Err(e) => {
+                    if matches!(e, SessionError::EventEncode { .. }) {
+                        // Never written, whatever the room: lost (no event of ours fails so).
+                        tracing::error!("a session event is lost: {}", error_chain(&e));
+                        self.gauges.events_lost.fetch_add(1, Ordering::Relaxed);
+                        self.waiting.pop_front();
+                        continue;
+                    }
+                    if w.events_logged() > before {
+                        self.waiting.pop_front();
+                    }
+                    tracing::debug!(
+                        chunk = self.index,
+                        waiting = self.waiting.len(),
+                        "session events wait for room: {}",
+                        error_chain(&e)
+                    );
+                    break;
+                }
+            }
+            self.waiting.pop_front();
+        }
+        self.gauges
+            .events_waiting
+            .store(self.waiting.len() as u64, Ordering::Relaxed);
     }
 
     /// Starts a session in the current chunk, which has none (its start failed, or the one
@@ -363,15 +437,15 @@ impl ChunkRecorder {
     /// The frame at `host_ns` is the first recorded after a pause: the pause and its end go
     /// into the session, and the end into the log (a pause for low disk space is logged by
     /// [`DiskWatch`]).
-    fn log_resume(&mut self, host_ns: u64) -> Result<(), SessionError> {
-        let (Some((since_ns, reason)), Some(w)) = (self.paused, &mut self.writer) else {
-            return Ok(());
+    fn log_resume(&mut self, host_ns: u64) {
+        let (Some((since_ns, reason)), Some(_)) = (self.paused, &self.writer) else {
+            return;
         };
-        w.log_event(&SessionEvent::RecordingPaused {
+        self.wait_to_log(SessionEvent::RecordingPaused {
             host_ns: since_ns,
             reason: reason.to_owned(),
-        })?;
-        w.log_event(&SessionEvent::RecordingResumed { host_ns })?;
+        });
+        self.wait_to_log(SessionEvent::RecordingResumed { host_ns });
         if reason != "disk_low" {
             tracing::info!(
                 chunk = self.index,
@@ -380,7 +454,6 @@ impl ChunkRecorder {
             );
         }
         self.paused = None;
-        Ok(())
     }
 
     /// Brings the gauges up to date after a frame was offered.
@@ -444,13 +517,18 @@ impl ChunkRecorder {
         self.broken = false;
     }
 
-    /// The cameras' events (openings, outages) into the session; without one (recording
-    /// paused) they wait for the next, so that a chunk begun on a full disk still gets them.
-    fn log_camera_events(&mut self) -> Result<(), SessionError> {
-        let Some(writer) = &mut self.writer else {
-            return Ok(());
-        };
-        crate::runtime::capture::supervise::log_camera_events(&self.cameras, |e| writer.log_event(e))
+    /// The cameras' events (openings, outages) into the queue of events waiting, which the
+    /// session takes when it can (without one, recording paused, they wait for the next, so
+    /// that a chunk begun on a full disk still gets them).
+    fn log_camera_events(&mut self) {
+        let mut taken = Vec::new();
+        let Ok(()) = crate::runtime::capture::supervise::log_camera_events(&self.cameras, |e| {
+            taken.push(e.clone());
+            Ok::<(), std::convert::Infallible>(())
+        });
+        for event in taken {
+            self.wait_to_log(event);
+        }
     }
 
     /// When the current session's files were removed under the recorder (its chunk's
@@ -552,12 +630,13 @@ impl ChunkRecorder {
         if self.writer.is_none() && !self.start_here(host_ns) {
             return Ok(Some("write_error"));
         }
-        let result = self.log_camera_events();
-        let result = result.and_then(|()| self.log_resume(host_ns));
-        let result = result.and_then(|()| match &mut self.writer {
+        self.log_camera_events();
+        self.log_resume(host_ns);
+        self.log_waiting();
+        let result = match &mut self.writer {
             Some(w) => crate::runtime::sink::session::FrameRecorder::write(w, frame).map(|_| true),
             None => Ok(false),
-        });
+        };
         match result {
             Ok(true) => {
                 if !self.unclosed.is_empty() {
@@ -603,11 +682,11 @@ impl crate::runtime::sink::session::FrameRecorder for ChunkRecorder {
         outcome
     }
 
+    /// Never fails: an event the disk has no room for waits ([`ChunkRecorder::log_waiting`]).
     fn log_event(&mut self, event: &SessionEvent) -> Result<(), SessionError> {
-        match &mut self.writer {
-            Some(w) => w.log_event(event),
-            None => Ok(()),
-        }
+        self.wait_to_log(event.clone());
+        self.log_waiting();
+        Ok(())
     }
 
     fn take_lost(&mut self) -> Vec<(CameraRole, &'static str, u64)> {
@@ -620,7 +699,20 @@ impl crate::runtime::sink::session::FrameRecorder for ChunkRecorder {
 
     fn finish(mut self: Box<Self>) -> Result<Option<SessionSummary>, SessionError> {
         // Events of a camera lost at the very end still belong to the last chunk.
-        self.log_camera_events()?;
+        self.log_camera_events();
+        self.log_waiting();
+        if !self.waiting.is_empty() {
+            tracing::error!(
+                events = self.waiting.len(),
+                "session events never written (the disk full to the end): counted in \
+                 mousepose_session_events_lost_total"
+            );
+            self.gauges
+                .events_lost
+                .fetch_add(self.waiting.len() as u64, Ordering::Relaxed);
+            self.waiting.clear();
+            self.gauges.events_waiting.store(0, Ordering::Relaxed);
+        }
         // The sessions left by a full disk earlier, then the current one: each tried once.
         self.close_unclosed();
         let summary = self.close();

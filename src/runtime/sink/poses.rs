@@ -234,7 +234,7 @@ impl serde::Serialize for PoseRow<'_> {
 /// Writes `poses.csv` and keeps the tally.
 #[derive(Debug)]
 pub struct PoseWriter {
-    out: csv::Writer<File>,
+    out: csv::Writer<RowFile>,
     /// `poses_raw.csv`, when asked for ([`PoseWriter::with_raw_file`]).
     raw_out: Option<csv::Writer<File>>,
     dir: std::path::PathBuf,
@@ -246,6 +246,33 @@ pub struct PoseWriter {
     whole_len: Option<u64>,
 }
 
+/// `poses.csv` under its CSV writer: the file, until a row cut by a write error has been cut
+/// off it again; from then on nowhere, so that what the writer still holds of that row never
+/// reaches the file (dropping a CSV writer flushes it) and the file keeps whole rows only.
+#[derive(Debug)]
+struct RowFile {
+    file: File,
+    cut: std::sync::atomic::AtomicBool,
+}
+
+impl std::io::Write for RowFile {
+    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+        if self.cut.load(std::sync::atomic::Ordering::Relaxed) {
+            Ok(bytes.len())
+        } else {
+            self.file.write(bytes)
+        }
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        if self.cut.load(std::sync::atomic::Ordering::Relaxed) {
+            Ok(())
+        } else {
+            self.file.flush()
+        }
+    }
+}
+
 impl PoseWriter {
     /// Creates `dir/poses.csv` and writes the header. `truth` maps depth sequence numbers to
     /// the true joints (empty for recorded sessions).
@@ -254,7 +281,10 @@ impl PoseWriter {
     /// The file cannot be created or written.
     /// The tally keeps the first pose with a mouse from row `snapshot_row` on.
     pub fn create(dir: &Path, truth: HashMap<u64, JointPositions>, snapshot_row: u64) -> std::io::Result<Self> {
-        let mut out = csv::Writer::from_writer(File::create(dir.join(POSES_FILE))?);
+        let mut out = csv::Writer::from_writer(RowFile {
+            file: File::create(dir.join(POSES_FILE))?,
+            cut: std::sync::atomic::AtomicBool::new(false),
+        });
         out.write_record(columns(true))?;
         Ok(Self {
             out,
@@ -291,20 +321,20 @@ impl PoseWriter {
     pub fn handing_over_each_row(mut self) -> std::io::Result<Self> {
         use std::io::Seek as _;
         self.out.flush()?;
-        self.whole_len = Some(self.out.get_ref().stream_position()?);
+        self.whole_len = Some((&self.out.get_ref().file).stream_position()?);
         Ok(self)
     }
 
     /// Whether `poses.csv` was removed while being written ([`crate::io::unlinked`]): its rows
     /// are lost.
     pub fn removed(&self) -> bool {
-        crate::io::unlinked(self.out.get_ref())
+        crate::io::unlinked(&self.out.get_ref().file)
     }
 
     /// Whether `poses.csv` was removed or moved away while being written
     /// ([`crate::io::gone`]).
     pub fn gone(&self) -> Option<crate::io::Gone> {
-        crate::io::gone(self.out.get_ref(), &self.dir.join(POSES_FILE))
+        crate::io::gone(&self.out.get_ref().file, &self.dir.join(POSES_FILE))
     }
 
     /// The tally, readable while and after the writer runs.
@@ -345,12 +375,17 @@ impl Sink for PoseWriter {
         })?;
         if let Some(len) = self.whole_len {
             use std::io::Seek as _;
-            let handed = self.out.flush().and_then(|()| self.out.get_ref().stream_position());
+            let handed = self
+                .out
+                .flush()
+                .and_then(|()| (&self.out.get_ref().file).stream_position());
             match handed {
                 Ok(end) => self.whole_len = Some(end),
                 Err(e) => {
-                    // Best effort: the error to report is the write's.
-                    let _ = self.out.get_ref().set_len(len);
+                    // Best effort: the error to report is the write's. What the writer still
+                    // holds of the row goes nowhere (dropping it would flush it).
+                    let _ = self.out.get_ref().file.set_len(len);
+                    self.out.get_ref().cut.store(true, std::sync::atomic::Ordering::Relaxed);
                     return Err(e.into());
                 }
             }
@@ -410,7 +445,7 @@ impl Sink for PoseWriter {
             raw_out.flush()?;
         }
         self.out.flush()?;
-        self.out.get_ref().sync_all()?;
+        self.out.get_ref().file.sync_all()?;
         Ok(())
     }
 }

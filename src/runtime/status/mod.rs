@@ -46,6 +46,10 @@ pub struct RecordingReport {
     pub disk_free_bytes: u64,
     /// Paused: disk low, or after a write error (poses go on).
     pub paused: bool,
+    /// Session events (camera gaps and outages, pauses) waiting for room on the disk, and
+    /// those never written (too many waited, or the run ended first).
+    pub events_waiting: u64,
+    pub events_lost: u64,
 }
 
 /// What the run was started with.
@@ -148,6 +152,13 @@ impl RunReport {
                 size(r.disk_free_bytes),
                 if r.paused { ", PAUSED" } else { "" }
             );
+            if r.events_waiting + r.events_lost > 0 {
+                let _ = writeln!(
+                    text,
+                    "recording: {} session events waiting for room, {} lost",
+                    r.events_waiting, r.events_lost
+                );
+            }
         }
         if let Some(s) = &self.stream {
             let _ = writeln!(
@@ -290,6 +301,8 @@ impl Watch {
                 frame_bytes_lost_after_recording: g.lost_bytes.lock().unwrap_or_else(PoisonError::into_inner).clone(),
                 disk_free_bytes: g.disk_free_bytes.load(Ordering::Relaxed),
                 paused: g.paused.load(Ordering::Relaxed),
+                events_waiting: g.events_waiting.load(Ordering::Relaxed),
+                events_lost: g.events_lost.load(Ordering::Relaxed),
             }),
             stream: self.parts.stream.as_ref().map(StreamHandle::summary),
             lsl: self.parts.lsl.as_ref().map(LslHandle::summary),
