@@ -3,7 +3,7 @@
 //! close) no `session_ended`. Each reads back as it is, up to its last whole frame and row;
 //! closing it makes it what a closed chunk is, and the log says so.
 
-use crate::io::session::{ClosedLeftOpen, SessionError, close_left_open, cut_last_line};
+use crate::io::session::{ClosedLeftOpen, close_left_open, cut_last_line};
 use crate::runtime::sink::chunks::{CHUNK_SUMMARY_FILE, write_whole};
 use crate::runtime::sink::poses::{POSES_FILE, RAW_POSES_FILE};
 use std::collections::BTreeMap;
@@ -78,7 +78,7 @@ fn chunks_in(output: &Path) -> Vec<PathBuf> {
 fn close_chunk(chunk: &Path) -> Result<Closed, String> {
     let mut closed = Closed::default();
     if chunk.join(crate::io::session::META_FILE).is_file() {
-        closed.session = close_left_open(chunk).map_err(|e| session_error(&e))?;
+        closed.session = close_left_open(chunk).map_err(|e| crate::core::error_chain(&e))?;
     }
     if !chunk.join(CHUNK_SUMMARY_FILE).exists() {
         closed.rows = Some(close_rows(chunk)?);
@@ -86,15 +86,11 @@ fn close_chunk(chunk: &Path) -> Result<Closed, String> {
     Ok(closed)
 }
 
-fn session_error(e: &SessionError) -> String {
-    crate::core::error_chain(e)
-}
-
 /// Cuts the cut last row of `poses.csv` and `poses_raw.csv` off and writes `summary.json` from
 /// the rows `poses.csv` holds; returns how many.
 fn close_rows(chunk: &Path) -> Result<u64, String> {
     for file in [POSES_FILE, RAW_POSES_FILE] {
-        cut_last_line(&chunk.join(file)).map_err(|e| session_error(&e))?;
+        cut_last_line(&chunk.join(file)).map_err(|e| crate::core::error_chain(&e))?;
     }
     let tally = RowTally::of(&chunk.join(POSES_FILE))?;
     let index = chunk
