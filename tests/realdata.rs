@@ -272,7 +272,8 @@ fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
         "recall {recall}, precision {precision}"
     );
 
-    // With rendered views in half of each batch; one seed, one network, byte for byte.
+    // With rendered views in half of each batch; one seed, one network, byte for byte (ten
+    // iterations: each draws its batch and steps the optimiser as the thousands do).
     let data = tmp.path().join("renders");
     let out = mousepose()
         .args([
@@ -298,7 +299,7 @@ fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
                 "--data".as_ref(),
                 data.as_os_str(),
                 "--net-iterations".as_ref(),
-                "30".as_ref(),
+                "10".as_ref(),
                 "--seed".as_ref(),
                 seed,
             ],
