@@ -62,6 +62,93 @@ fn issue46_a_stuck_subscriber_holds_at_most_the_high_water_marks_and_every_messa
     );
 }
 
+/// A reader that fell behind reads every message waiting at once: of the poses, only the
+/// newest (the others skipped, as their `seq` shows), and every event in the order sent; the
+/// next read waits for the next message. Read one at a time instead, the same messages come
+/// oldest first (issue 64).
+#[test]
+fn issue64_a_reader_that_fell_behind_gets_the_newest_pose_and_every_event() {
+    let tmp = tempfile::tempdir().unwrap();
+    let endpoint = Endpoint::Ipc(tmp.path().join("stream.sock"));
+    let config = StreamConfig {
+        queue: 1000,
+        high_water_mark: 1000,
+        ..StreamConfig::at(endpoint.clone())
+    };
+    let publisher = Publisher::start(&config).unwrap();
+    let handle = publisher.handle();
+    let newest = Subscriber::connect(&endpoint, &Topic::ALL).unwrap();
+    let oldest = Subscriber::connect(&endpoint, &Topic::ALL).unwrap();
+    wait_for_subscribers(&publisher, 2);
+    let message = |topic: &str, seq: u64| format!(r#"{{"topic":"{topic}","seq":{seq}}}"#).into_bytes();
+    let seq = |body: &str| {
+        serde_json::from_str::<serde_json::Value>(body).unwrap()["seq"]
+            .as_u64()
+            .unwrap()
+    };
+    // A subscription reaches the publisher after the connection: poses until both hear one.
+    let start = Instant::now();
+    let (mut heard_newest, mut heard_oldest) = (false, false);
+    while !(heard_newest && heard_oldest) {
+        assert!(start.elapsed() < Duration::from_secs(30), "no subscription took");
+        handle.publish(Topic::Poses, |seq| message("poses", seq));
+        heard_newest |= !newest.newest(Duration::from_millis(20)).unwrap().is_empty();
+        heard_oldest |= !oldest.newest(Duration::from_millis(20)).unwrap().is_empty();
+    }
+    while !newest.newest(Duration::from_millis(200)).unwrap().is_empty() {}
+    while !oldest.newest(Duration::from_millis(200)).unwrap().is_empty() {}
+    let base = handle.summary().published["poses"];
+    for k in 0..300 {
+        handle.publish(Topic::Poses, |seq| message("poses", seq));
+        if k % 100 == 50 {
+            handle.publish(Topic::Events, |seq| message("events", seq));
+        }
+    }
+    // All sent (the thread sends what it was given before it ends).
+    publisher.stop();
+    assert_eq!(handle.summary().sent["poses"], base + 300, "{:?}", handle.summary());
+    let last = base + 299;
+    // One at a time: the oldest first.
+    let first = oldest.next(Duration::from_secs(10)).unwrap().expect("a message");
+    assert_eq!((first.0, seq(&first.1)), (Topic::Poses, base));
+    // All at once: by the time the other reader has heard the last pose, it has come here
+    // too (the same messages, from one publisher, on the same machine).
+    while oldest
+        .next(Duration::from_secs(10))
+        .unwrap()
+        .is_some_and(|(t, b)| !(t == Topic::Poses && seq(&b) == last))
+    {
+        assert!(start.elapsed() < Duration::from_secs(60), "the poses never all came");
+    }
+    let mut heard = Vec::new();
+    while heard
+        .last()
+        .is_none_or(|(t, b): &(Topic, String)| *t != Topic::Poses || seq(b) != last)
+    {
+        heard.extend(newest.newest(Duration::from_secs(10)).unwrap());
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "the newest pose never came: {heard:?}"
+        );
+    }
+    let poses: Vec<u64> = heard
+        .iter()
+        .filter(|(t, _)| *t == Topic::Poses)
+        .map(|(_, b)| seq(b))
+        .collect();
+    let events: Vec<u64> = heard
+        .iter()
+        .filter(|(t, _)| *t == Topic::Events)
+        .map(|(_, b)| seq(b))
+        .collect();
+    assert_eq!(events, [0, 1, 2], "every event, in order: {heard:?}");
+    assert!(
+        poses.len() <= 3 && poses.ends_with(&[last]),
+        "a backlog of poses: {poses:?}"
+    );
+    assert!(newest.newest(Duration::from_millis(200)).unwrap().is_empty());
+}
+
 /// The ```python block of docs/FORMATS.md, as written there.
 fn documented_subscriber() -> String {
     let text = std::fs::read_to_string(repo_root().join("docs/FORMATS.md")).expect("test set-up");
@@ -161,6 +248,33 @@ fn issue46_the_documented_python_subscriber_and_listen_read_a_running_daemon() {
         text.starts_with("events #") && text.contains("chunk_begun chunk="),
         "{text}"
     );
+    // `listen --newest`: the newest pose each time, in order.
+    let out = mousepose()
+        .args([
+            "listen",
+            &endpoint,
+            "--newest",
+            "--topic",
+            "poses",
+            "--json",
+            "--count",
+            "2",
+            "--seconds",
+            "60",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let seqs: Vec<u64> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["seq"]
+                .as_u64()
+                .unwrap()
+        })
+        .collect();
+    assert!(seqs.len() == 2 && seqs[0] < seqs[1], "{seqs:?}");
 
     let (status, stdout, err) = terminate(daemon, Duration::from_secs(30));
     assert!(status.success(), "{status}: {err}");

@@ -29,6 +29,10 @@ pub struct ListenArgs {
     /// Stop after this many seconds.
     #[arg(long, value_name = "S", value_parser = crate::app::parse::seconds)]
     pub seconds: Option<f64>,
+    /// Each time, only the newest pose waiting (and every event), the poses skipped counted as
+    /// missed: a reader slower than the poses then acts on the mouse as it is now.
+    #[arg(long)]
+    pub newest: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -52,6 +56,7 @@ pub fn command(args: &ListenArgs) -> Outcome {
         topics,
         count: args.count,
         seconds: args.seconds,
+        newest: args.newest,
     };
     listen(&options, |heard| {
         if heard.missed > 0 {

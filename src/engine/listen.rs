@@ -21,6 +21,9 @@ pub struct ListenOptions {
     pub count: Option<u64>,
     /// Stop after this long.
     pub seconds: Option<f64>,
+    /// Each time, only the newest pose waiting (and every event): what a reader slower than
+    /// the poses acts on ([`Subscriber::newest`]); the poses skipped are counted as missed.
+    pub newest: bool,
 }
 
 /// One message heard.
@@ -64,29 +67,33 @@ pub fn listen(options: &ListenOptions, mut heard: impl FnMut(&Heard) -> anyhow::
     let mut count = 0u64;
     while options.count.is_none_or(|n| count < n) && until.is_none_or(|u| Instant::now() < u) {
         let wait = until.map_or(POLL, |u| u.saturating_duration_since(Instant::now()).min(POLL));
-        let Some((topic, body)) = subscriber
-            .next(wait)
-            .with_context(|| format!("cannot read from {endpoint}"))?
-        else {
-            continue;
+        let round = if options.newest {
+            subscriber.newest(wait)
+        } else {
+            subscriber.next(wait).map(Vec::from_iter)
         };
-        let Ok(value) = serde_json::from_str::<serde_json::Value>(&body) else {
-            continue;
-        };
-        let seq = value["seq"].as_u64();
-        let expected = &mut next_seq[Topic::ALL.iter().position(|t| *t == topic).unwrap_or(0)];
-        let missed = match (seq, *expected) {
-            (Some(seq), Some(e)) => seq.saturating_sub(e),
-            _ => 0,
-        };
-        *expected = seq.map(|s| s + 1);
-        heard(&Heard {
-            topic,
-            body,
-            value,
-            missed,
-        })?;
-        count += 1;
+        for (topic, body) in round.with_context(|| format!("cannot read from {endpoint}"))? {
+            let Ok(value) = serde_json::from_str::<serde_json::Value>(&body) else {
+                continue;
+            };
+            let seq = value["seq"].as_u64();
+            let expected = &mut next_seq[Topic::ALL.iter().position(|t| *t == topic).unwrap_or(0)];
+            let missed = match (seq, *expected) {
+                (Some(seq), Some(e)) => seq.saturating_sub(e),
+                _ => 0,
+            };
+            *expected = seq.map(|s| s + 1);
+            heard(&Heard {
+                topic,
+                body,
+                value,
+                missed,
+            })?;
+            count += 1;
+            if options.count.is_some_and(|n| count >= n) {
+                break;
+            }
+        }
     }
     Ok(())
 }

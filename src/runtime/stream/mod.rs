@@ -465,19 +465,58 @@ impl Subscriber {
     /// # Errors
     /// The socket failed.
     pub fn next(&self, timeout: Duration) -> Result<Option<(Topic, String)>, zmq::Error> {
-        let ms = i64::try_from(timeout.as_millis()).unwrap_or(i64::MAX);
-        if self.socket.poll(zmq::POLLIN, ms)? == 0 {
+        if !self.wait(timeout)? {
             return Ok(None);
         }
-        let mut frames = self.socket.recv_multipart(0)?;
-        let (Some(body), Some(topic), None) = (frames.pop(), frames.pop(), frames.pop()) else {
-            return Ok(None);
-        };
-        Ok(std::str::from_utf8(&topic)
-            .ok()
-            .and_then(Topic::from_name)
-            .zip(String::from_utf8(body).ok()))
+        Ok(split(self.socket.recv_multipart(0)?))
     }
+
+    /// What a reader that fell behind should act on: every message waiting (waiting at most
+    /// `timeout` for the first) read at once, of which the newest pose and every event, in the
+    /// order sent. The poses read past are only skipped (their `seq` says how many); libzmq
+    /// keeps reading the socket into this subscriber's queue while the reader is busy, so
+    /// reading it empty each time leaves no backlog anywhere. Empty when none came.
+    ///
+    /// # Errors
+    /// The socket failed.
+    pub fn newest(&self, timeout: Duration) -> Result<Vec<(Topic, String)>, zmq::Error> {
+        let mut heard = Vec::new();
+        let mut pose = None;
+        if !self.wait(timeout)? {
+            return Ok(heard);
+        }
+        loop {
+            let frames = match self.socket.recv_multipart(zmq::DONTWAIT) {
+                Ok(frames) => frames,
+                Err(zmq::Error::EAGAIN) => break,
+                Err(e) => return Err(e),
+            };
+            match split(frames) {
+                Some((Topic::Poses, body)) => pose = Some(body),
+                Some(event) => heard.push(event),
+                None => {}
+            }
+        }
+        heard.extend(pose.map(|body| (Topic::Poses, body)));
+        Ok(heard)
+    }
+
+    /// Whether a message came within `timeout`.
+    fn wait(&self, timeout: Duration) -> Result<bool, zmq::Error> {
+        let ms = i64::try_from(timeout.as_millis()).unwrap_or(i64::MAX);
+        Ok(self.socket.poll(zmq::POLLIN, ms)? > 0)
+    }
+}
+
+/// A message's topic and JSON body; `None` for a message of another shape.
+fn split(mut frames: Vec<Vec<u8>>) -> Option<(Topic, String)> {
+    let (Some(body), Some(topic), None) = (frames.pop(), frames.pop(), frames.pop()) else {
+        return None;
+    };
+    std::str::from_utf8(&topic)
+        .ok()
+        .and_then(Topic::from_name)
+        .zip(String::from_utf8(body).ok())
 }
 
 /// Wraps a pose sink: each pose is published (on the ZeroMQ stream, the LSL outlet, or both)
