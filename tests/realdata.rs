@@ -226,7 +226,13 @@ fn a_paw_network_learnt_from_labelled_real_frames_is_written_read_and_run() {
             .output()
             .unwrap()
     };
-    let train = |out: &Path| train_with(out, &["--net-iterations".as_ref(), "400".as_ref(), "--json".as_ref()]);
+    // Eight channels instead of the default twelve: two thirds of the training's time, and the
+    // width written in the file is read back from it (recall 0.73, precision 0.83 here; six
+    // channels learnt nothing in 400 iterations, 200 iterations of twelve reached recall 0.5).
+    let train = |out: &Path| {
+        let args = ["--net-iterations", "400", "--net-width", "8", "--json"];
+        train_with(out, &args.map(OsStr::new))
+    };
     let wrong = tmp.path().join("paws.xml");
     let out = train(&wrong);
     let err = String::from_utf8_lossy(&out.stderr);
