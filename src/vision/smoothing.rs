@@ -4,8 +4,14 @@
 //! a low-pass filter takes most of that out, and the One Euro filter's cut-off rises with the
 //! joint's speed, so that a still mouse is held steady and a running one is followed closely.
 //! Causal: a frame's smoothed joints depend on that frame and the ones before it only, so the
-//! daemon's latency does not grow by a frame; the cost is a lag behind a moving joint of about
-//! `1 / (2 pi f)` seconds at the cut-off `f` its speed gives (see [`SmootherConfig::lag_s`]).
+//! daemon's latency does not grow by a frame. A low-pass filter alone trails a moving joint by
+//! its time constant, `1 / (2 pi f)` seconds at the cut-off `f` its speed gives: 1.5-2.3 mm at
+//! a walk or a run, behind the body. So each joint's velocity is followed too (the filtered
+//! position's own, low-passed), and the joint is moved ahead by that velocity times the lag of
+//! the step just taken, in full when the joint moves clearly faster than the filter's own
+//! wobble and not at all when it is still (see [`SmootherConfig::lead_speed_mm_s`]): a still
+//! mouse is held as steady as the filter alone holds it, a moving one is not placed behind
+//! itself. The same velocity gives the pose predicted a little ahead ([`Smoother::velocities`]).
 //!
 //! `mid_back` is then placed along the body by the spine rather than by its own filter: the
 //! filtered centre of `neck`, `withers`, `mid_back` and `rump` plus `mid_back`'s place along
@@ -48,6 +54,14 @@ pub struct SmootherConfig {
     /// centre of the spine's four joints (`neck`, `withers`, `mid_back`, `rump`), is averaged.
     /// `0` leaves `mid_back` to its own filter like every other joint.
     pub back_along_s: f64,
+    /// The cut-off (Hz) of the low-pass filter on each joint's velocity (the filtered
+    /// position's change per second), which moves the joint ahead by its lag and predicts it.
+    pub velocity_cutoff_hz: f64,
+    /// The speed (mm/s) at which the joint is moved half its lag ahead: by a share
+    /// `s^2 / (s^2 + lead_speed^2)` of it at speed `s`, so that the velocity's own wobble on a
+    /// still joint (2-5 mm/s) moves it by a few hundredths of a millimetre. `0` moves it the
+    /// whole lag at any speed; infinity not at all (the plain One Euro filter).
+    pub lead_speed_mm_s: f64,
     /// Half the thickness (mm) of the slab across the body, through `mid_back`, in which its
     /// place across the body is taken from the body's surface (see [`ridge_across`]). `0`
     /// leaves it where the frame placed it.
@@ -66,6 +80,8 @@ impl Default for SmootherConfig {
             max_gap_s: 0.5,
             max_jump_mm: 40.0,
             back_along_s: 10.0,
+            velocity_cutoff_hz: 2.0,
+            lead_speed_mm_s: 15.0,
             across_slab_mm: 2.0,
             ridge_height_share: 0.8,
         }
@@ -73,10 +89,23 @@ impl Default for SmootherConfig {
 }
 
 impl SmootherConfig {
-    /// The lag (s) behind a joint moving steadily at `speed_mm_s`: the time constant of the
-    /// low-pass filter at the cut-off that speed gives.
-    pub fn lag_s(&self, speed_mm_s: f64) -> f64 {
+    /// The lag (s) the low-pass filter alone leaves behind a joint moving steadily at
+    /// `speed_mm_s`: its time constant at the cut-off that speed gives.
+    pub fn filter_lag_s(&self, speed_mm_s: f64) -> f64 {
         1.0 / (2.0 * std::f64::consts::PI * self.cutoff_hz(speed_mm_s))
+    }
+
+    /// The share of the filter's lag a joint moving at `speed_mm_s` is moved ahead by.
+    fn lead_share(&self, speed_mm_s: f64) -> f64 {
+        let s2 = speed_mm_s * speed_mm_s;
+        let l2 = self.lead_speed_mm_s * self.lead_speed_mm_s;
+        if l2.is_infinite() {
+            0.0
+        } else if s2 + l2 > 0.0 {
+            s2 / (s2 + l2)
+        } else {
+            1.0
+        }
     }
 
     fn cutoff_hz(&self, speed_mm_s: f64) -> f64 {
@@ -90,11 +119,40 @@ fn alpha(cutoff_hz: f64, dt_s: f64) -> f64 {
     1.0 / (1.0 + tau / dt_s)
 }
 
-/// One joint's filter state: its smoothed position and speed.
+/// One joint's filter state: its low-passed position and speed (the One Euro filter's own,
+/// which sets its cut-off), the low-passed position's velocity, and how far ahead of the
+/// low-passed position the joint is placed.
 #[derive(Clone, Copy, Debug)]
 struct OneEuro {
     position_mm: Point3<f64>,
     velocity_mm_s: Vector3<f64>,
+    trend_mm_s: Vector3<f64>,
+    lead_mm: Vector3<f64>,
+}
+
+impl OneEuro {
+    /// A filter started at `position_mm`, still.
+    fn at(position_mm: Point3<f64>) -> Self {
+        Self {
+            position_mm,
+            velocity_mm_s: Vector3::zeros(),
+            trend_mm_s: Vector3::zeros(),
+            lead_mm: Vector3::zeros(),
+        }
+    }
+
+    /// Where the joint is placed: the low-passed position moved ahead by its lag.
+    fn placed(&self) -> Point3<f64> {
+        self.position_mm + self.lead_mm
+    }
+
+    /// The same filter moved by `by` (its velocities kept).
+    fn moved(self, by: Vector3<f64>) -> Self {
+        Self {
+            position_mm: self.position_mm + by,
+            ..self
+        }
+    }
 }
 
 /// Smooths the main-body joints of successive frames of one mouse.
@@ -124,6 +182,15 @@ impl Smoother {
         }
     }
 
+    /// Each main-body joint's velocity (mm/s, world frame) as the last frame left it: its
+    /// smoothed position's own, low-passed (zero just after the filter started afresh);
+    /// `None` for a joint it does not follow (not placed in the last frame, or the tail tip).
+    /// A joint `t` seconds after that frame is predicted at its smoothed place plus `t` times
+    /// this.
+    pub fn velocities(&self) -> [Option<Vector3<f64>>; 12] {
+        self.joints.map(|state| state.map(|s| s.trend_mm_s))
+    }
+
     /// Forgets every joint: the next frame starts afresh (a frame without a mouse).
     pub fn reset(&mut self) {
         *self = Self::new(self.config);
@@ -147,7 +214,7 @@ impl Smoother {
         let smoothed: BodyJoints = std::array::from_fn(|k| {
             let mut j = joints[k];
             if let Some(state) = self.joints[k] {
-                j.position_mm = state.position_mm;
+                j.position_mm = state.placed();
             }
             j
         });
@@ -219,10 +286,7 @@ impl Smoother {
         // Starting afresh, the centre is taken where it puts `mid_back` at its own filter's
         // place, so that `mid_back` does not jump when a spine joint comes back.
         let filtered_centre = match (self.spine, self.joints[Joint::MidBack.index()]) {
-            (None, Some(own)) => OneEuro {
-                position_mm: own.position_mm - offset,
-                velocity_mm_s: own.velocity_mm_s,
-            },
+            (None, Some(own)) => own.moved(-offset),
             (state, _) => filtered(&config, state, centre, dt_s),
         };
         let along = match (self.back_along_mm, dt_s) {
@@ -236,7 +300,7 @@ impl Smoother {
         // Along the body from the spine; across it and in height its own filter's place.
         let own = mid_back.position_mm;
         mid_back.position_mm =
-            own + (filtered_centre.position_mm + along * along_axis - own).dot(&along_axis) * along_axis;
+            own + (filtered_centre.placed() + along * along_axis - own).dot(&along_axis) * along_axis;
     }
 }
 
@@ -325,12 +389,15 @@ fn step(
         return None;
     }
     let next = filtered(config, state, joint.position_mm, dt_s);
-    joint.position_mm = next.position_mm;
+    joint.position_mm = next.placed();
     Some(next)
 }
 
 /// The One Euro filter's step from `state` to the new sample `position_mm`, `dt_s` after it
-/// (`None`: start afresh, as it also does after a jump farther than `max_jump_mm`).
+/// (`None`: start afresh, as it also does after a jump farther than `max_jump_mm`), and the
+/// lead that undoes its lag. A step that takes the share `a` of the new sample leaves a joint
+/// moving steadily at `v` behind by `v dt (1 - a) / a` (the continuous filter's `v tau`);
+/// `v` is the low-passed position's own velocity, which at a steady speed is the joint's.
 fn filtered(config: &SmootherConfig, state: Option<OneEuro>, position_mm: Point3<f64>, dt_s: Option<f64>) -> OneEuro {
     match (state, dt_s) {
         (Some(s), Some(dt)) if (position_mm - s.position_mm).norm() <= config.max_jump_mm => {
@@ -338,15 +405,17 @@ fn filtered(config: &SmootherConfig, state: Option<OneEuro>, position_mm: Point3
             let velocity_mm_s =
                 s.velocity_mm_s + alpha(config.derivative_cutoff_hz, dt) * (raw_velocity - s.velocity_mm_s);
             let a = alpha(config.cutoff_hz(velocity_mm_s.norm()), dt);
+            let moved = a * (position_mm - s.position_mm);
+            let trend_mm_s = s.trend_mm_s + alpha(config.velocity_cutoff_hz, dt) * (moved / dt - s.trend_mm_s);
+            let lag_s = dt * (1.0 - a) / a;
             OneEuro {
-                position_mm: s.position_mm + a * (position_mm - s.position_mm),
+                position_mm: s.position_mm + moved,
                 velocity_mm_s,
+                trend_mm_s,
+                lead_mm: trend_mm_s * (lag_s * config.lead_share(trend_mm_s.norm())),
             }
         }
-        _ => OneEuro {
-            position_mm,
-            velocity_mm_s: Vector3::zeros(),
-        },
+        _ => OneEuro::at(position_mm),
     }
 }
 
@@ -389,24 +458,59 @@ mod tests {
         assert!(smooth_sq < 0.3 * raw_sq, "smoothed {smooth_sq} against raw {raw_sq}");
     }
 
-    #[test]
-    fn a_moving_mouse_is_followed_with_the_lag_the_config_gives() {
-        let config = SmootherConfig::default();
+    /// The mouse moving steadily along +x at `speed_mm_s` for two seconds: how far (mm) its
+    /// smoothed `mid_back` and `snout` end behind the true ones.
+    fn behind_after_two_seconds(config: SmootherConfig, speed_mm_s: f64) -> [f64; 2] {
         let mut smoother = Smoother::new(config);
-        let speed_mm_s = 200.0;
-        let mut lag_mm = 0.0;
+        let mut behind = [0.0; 2];
         for k in 0..60u64 {
             let x = speed_mm_s * k as f64 * FRAME_NS as f64 * 1e-9;
             let mut joints = body(x);
             smoother.smooth(k * FRAME_NS, &mut joints, &[]);
-            lag_mm = x - x_of(&joints, Joint::MidBack);
+            behind = [Joint::MidBack, Joint::Snout].map(|j| x_of(&body(x), j) - x_of(&joints, j));
         }
-        let expected_mm = speed_mm_s * config.lag_s(speed_mm_s);
-        // The discrete filter lags a little more than the continuous one's time constant.
-        assert!(
-            lag_mm > 0.0 && lag_mm < 1.5 * expected_mm + 0.5,
-            "lag {lag_mm} mm, expected {expected_mm} mm"
-        );
+        behind
+    }
+
+    #[test]
+    fn a_moving_mouse_is_not_placed_behind_itself() {
+        let config = SmootherConfig::default();
+        for speed_mm_s in [20.0, 50.0, 100.0, 200.0, 400.0] {
+            // Half a frame's travel at this speed, and 1 mm: the goals.
+            let bound = (0.5 * speed_mm_s * FRAME_NS as f64 * 1e-9).min(1.0);
+            for behind in behind_after_two_seconds(config, speed_mm_s) {
+                assert!(behind.abs() < bound, "{speed_mm_s} mm/s: {behind} mm behind");
+            }
+            // The low-pass filter alone trails by about its time constant (a little more:
+            // the discrete filter), which is what the lead undoes.
+            let plain = SmootherConfig {
+                lead_speed_mm_s: f64::INFINITY,
+                ..config
+            };
+            let expected_mm = speed_mm_s * config.filter_lag_s(speed_mm_s);
+            for behind in behind_after_two_seconds(plain, speed_mm_s) {
+                assert!(
+                    behind > 0.5 * expected_mm && behind < 1.5 * expected_mm + 0.5,
+                    "{speed_mm_s} mm/s, the filter alone: {behind} mm behind, expected {expected_mm} mm"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_velocities_are_the_mouses() {
+        let mut smoother = Smoother::new(SmootherConfig::default());
+        for k in 0..60u64 {
+            let x = 150.0 * k as f64 * FRAME_NS as f64 * 1e-9;
+            smoother.smooth(k * FRAME_NS, &mut body(x), &[]);
+        }
+        for (joint, v) in Joint::MAIN_BODY.iter().zip(smoother.velocities()) {
+            match (joint, v) {
+                (Joint::TailTip, v) => assert_eq!(v, None),
+                (_, Some(v)) => assert!((v - Vector3::new(150.0, 0.0, 0.0)).norm() < 1.0, "{joint:?}: {v}"),
+                (_, None) => panic!("{joint:?} has no velocity"),
+            }
+        }
     }
 
     #[test]
