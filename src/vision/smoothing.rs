@@ -5,13 +5,14 @@
 //! joint's speed, so that a still mouse is held steady and a running one is followed closely.
 //! Causal: a frame's smoothed joints depend on that frame and the ones before it only, so the
 //! daemon's latency does not grow by a frame. A low-pass filter alone trails a moving joint by
-//! its time constant, `1 / (2 pi f)` seconds at the cut-off `f` its speed gives: 1.5-2.3 mm at
-//! a walk or a run, behind the body. So each joint's velocity is followed too (the filtered
+//! its time constant, `1 / (2 pi f)` seconds at the cut-off `f` its speed gives: 1-2.3 mm at a
+//! walk or a run, behind the body. So each joint's velocity is followed too (the filtered
 //! position's own, low-passed), and the joint is moved ahead by that velocity times the lag of
 //! the step just taken, in full when the joint moves clearly faster than the filter's own
-//! wobble and not at all when it is still (see [`SmootherConfig::lead_speed_mm_s`]): a still
-//! mouse is held as steady as the filter alone holds it, a moving one is not placed behind
-//! itself. The same velocity gives the pose predicted a little ahead ([`Smoother::velocities`]).
+//! wobble and hardly at all when it is still (see [`SmootherConfig::lead_speed_mm_s`]): a still
+//! mouse is held nearly as steady as the filter alone holds it (a real one's joints, wobbling
+//! faster, a little less: `docs/FIGURES.md`), a moving one is not placed behind itself. The
+//! same velocity gives the pose predicted a little ahead ([`Smoother::velocities`]).
 //!
 //! `mid_back` is then placed along the body by the spine rather than by its own filter: the
 //! filtered centre of `neck`, `withers`, `mid_back` and `rump` plus `mid_back`'s place along
