@@ -96,17 +96,12 @@ impl SmootherConfig {
         1.0 / (2.0 * std::f64::consts::PI * self.cutoff_hz(speed_mm_s))
     }
 
-    /// The share of the filter's lag a joint moving at `speed_mm_s` is moved ahead by.
+    /// The share of the filter's lag a joint moving at `speed_mm_s` is moved ahead by (none
+    /// with an infinite `lead_speed_mm_s`: a finite number over infinity is 0).
     fn lead_share(&self, speed_mm_s: f64) -> f64 {
         let s2 = speed_mm_s * speed_mm_s;
         let l2 = self.lead_speed_mm_s * self.lead_speed_mm_s;
-        if l2.is_infinite() {
-            0.0
-        } else if s2 + l2 > 0.0 {
-            s2 / (s2 + l2)
-        } else {
-            1.0
-        }
+        if s2 + l2 > 0.0 { s2 / (s2 + l2) } else { 1.0 }
     }
 
     fn cutoff_hz(&self, speed_mm_s: f64) -> f64 {

@@ -472,8 +472,8 @@ impl Subscriber {
     }
 
     /// What a reader that fell behind should act on: every message waiting (waiting at most
-    /// `timeout` for the first) read at once, of which the newest pose and every event, in the
-    /// order sent. The poses read past are only skipped (their `seq` says how many); libzmq
+    /// `timeout` for the first) read at once, of which every event in the order sent, then the
+    /// newest pose. The poses read past are only skipped (their `seq` says how many); libzmq
     /// keeps reading the socket into this subscriber's queue while the reader is busy, so
     /// reading it empty each time leaves no backlog anywhere. Empty when none came.
     ///
