@@ -22,6 +22,7 @@ fn replay_to(session: &Path, out: &Path, calibration: Option<PathBuf>) {
     replay(&ReplayOptions {
         stream: None,
         lsl: None,
+        lead_ns: None,
         calibration,
         ..crate::util::replay_options(session, out, 1)
     })

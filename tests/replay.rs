@@ -683,3 +683,62 @@ fn a_single_replay_shows_its_progress_on_a_terminal_only() {
     assert!(piped.status.success());
     assert!(!String::from_utf8_lossy(&piped.stderr).contains("replay ["));
 }
+
+#[test]
+fn issue64_the_pose_predicted_ahead_is_written_beside_and_nearer_where_the_mouse_then_is() {
+    use mousepose::core::skeleton::Joint;
+    use mousepose::runtime::sink::poses::read_poses;
+    let tmp = tempfile::tempdir().unwrap();
+    let replay_at = |lead: &str| {
+        let out = tmp.path().join(format!("lead-{lead}"));
+        let done = mousepose()
+            .args(["replay", fixture().to_str().unwrap(), "--out", out.to_str().unwrap(), "--lead", lead])
+            .output()
+            .unwrap();
+        assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
+        out
+    };
+    // At no lead the prediction is the pose itself, byte for byte.
+    let out = replay_at("0");
+    let read = |name: &str| std::fs::read_to_string(out.join(name)).unwrap();
+    assert_eq!(read("poses_predicted.csv"), read("poses.csv"));
+
+    // 100 ms ahead (three frames): joints 1-12 but the tail tip moved on, nearer the truth
+    // three frames later than the pose held; the rest as placed.
+    let out = replay_at("100");
+    let poses = read_poses(&out.join("poses.csv")).unwrap();
+    let predicted = read_poses(&out.join("poses_predicted.csv")).unwrap();
+    assert_eq!(poses.len(), predicted.len());
+    let truth = SessionReader::open(fixture()).unwrap().truth().unwrap().unwrap();
+    let later = |seq: u64| truth.joints.iter().find(|(s, _, _)| *s == seq + 3).map(|(_, _, j)| *j);
+    let moved = [Joint::Snout, Joint::Neck, Joint::MidBack, Joint::Rump, Joint::TailBase, Joint::LeftHip];
+    let (mut held_mm, mut ahead_mm, mut n) = (0.0, 0.0, 0);
+    for (now, ahead) in poses.iter().zip(&predicted) {
+        assert_eq!(now.depth.seq, ahead.depth.seq);
+        for joint in Joint::ALL.into_iter().filter(|j| !moved.contains(j) && j.index() >= 12) {
+            assert_eq!(now.pose.joint(joint), ahead.pose.joint(joint), "{joint:?}");
+        }
+        assert_eq!(now.pose.joint(Joint::TailTip), ahead.pose.joint(Joint::TailTip));
+        let Some(truth) = later(now.depth.seq) else { continue };
+        for joint in moved.into_iter().filter(|j| now.pose.joint(*j).position_mm.x.is_finite()) {
+            held_mm += (now.pose.joint(joint).position_mm - truth[joint.index()]).norm();
+            ahead_mm += (ahead.pose.joint(joint).position_mm - truth[joint.index()]).norm();
+            n += 1;
+        }
+    }
+    assert!(n > 50, "{n} joints judged");
+    let (held_mm, ahead_mm) = (held_mm / f64::from(n), ahead_mm / f64::from(n));
+    eprintln!("100 ms ahead: predicted {ahead_mm:.2} mm from where the mouse then is, held {held_mm:.2} mm");
+    assert!(ahead_mm < held_mm, "predicted {ahead_mm:.2} mm, held {held_mm:.2} mm");
+
+    // A lead past a second, or with a batch: one sentence, refused.
+    for args in [vec!["--lead", "5000"], vec!["--lead", "40", "a", "b"]] {
+        let done = mousepose()
+            .args(["replay", fixture().to_str().unwrap(), "--out", tmp.path().join("x").to_str().unwrap()])
+            .args(&args)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&done.stderr);
+        assert!(!done.status.success() && stderr.contains("lead"), "{args:?}: {stderr}");
+    }
+}

@@ -153,17 +153,18 @@ fn issue64_a_reader_that_fell_behind_gets_the_newest_pose_and_every_event() {
 fn documented_subscriber() -> String {
     let text = std::fs::read_to_string(repo_root().join("docs/FORMATS.md")).expect("test set-up");
     let start = text
-        .find("```python\nimport json, zmq")
+        .find("```python\nimport json, time, zmq")
         .expect("the subscriber in FORMATS.md")
         + 10;
     let end = start + text[start..].find("```").expect("the block ends");
     text[start..end].to_owned()
 }
 
-/// A daemon on the fixture session with its stream on a socket file of `dir`.
+/// A daemon on the fixture session with its stream on a socket file of `dir`, each pose
+/// predicted 30 ms ahead beside it.
 fn streaming_daemon(dir: &Path) -> (crate::capture_aravis::ChildGuard, String) {
     let endpoint = format!("ipc://{}", dir.join("stream.sock").display());
-    let http = format!("address = \"127.0.0.1:0\"\n[stream]\nendpoint = \"{endpoint}\"\n");
+    let http = format!("address = \"127.0.0.1:0\"\n[stream]\nendpoint = \"{endpoint}\"\nlead_ms = 30\n");
     let rig = rig_full(dir, &session_depth(), false, "min_free_percent = 0\n", &http);
     (daemon(&rig, None), endpoint)
 }
@@ -228,6 +229,14 @@ fn issue46_the_documented_python_subscriber_and_listen_read_a_running_daemon() {
             m["published_ns"].as_u64().unwrap(),
         );
         assert!(published >= arrived, "{m}");
+        // The pose predicted for the config's lead, for the frame's arrival plus the lead.
+        let predicted = &m["predicted"];
+        assert_eq!(predicted["lead_ms"], 30.0, "{m}");
+        assert_eq!(predicted["for_ns"].as_u64(), Some(arrived + 30_000_000), "{m}");
+        assert_eq!(predicted["joints"].as_object().unwrap().len(), 24, "{m}");
+        for (name, joint) in m["joints"].as_object().unwrap() {
+            assert_eq!(joint.is_null(), predicted["joints"][name].is_null(), "{name}: {m}");
+        }
     }
     let out = mousepose()
         .args([

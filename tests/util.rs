@@ -24,6 +24,7 @@ pub fn replay_options(
     mousepose::engine::replay::ReplayOptions {
         stream: None,
         lsl: None,
+        lead_ns: None,
         session: session.to_owned(),
         out: out.to_owned(),
         models: Some(repo_root().join("fixtures/models")),

@@ -46,6 +46,16 @@ pub fn subset(s: &str) -> Result<f64, String> {
     Ok(v)
 }
 
+/// A prediction's lead in milliseconds, as nanoseconds
+/// ([`crate::runtime::pose_record::lead_ns`]).
+pub fn lead_ms(s: &str) -> Result<u64, String> {
+    let ms: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("expected a lead in milliseconds, got {s:?}"))?;
+    crate::runtime::pose_record::lead_ns(ms)
+}
+
 /// A frame rate.
 pub fn fps(s: &str) -> Result<f64, String> {
     ranged(s, "a frame rate", 1.0, 1000.0)

@@ -131,6 +131,12 @@ pub struct ReplayArgs {
     /// `run` does with its config's `[lsl]`: what LabRecorder records (with --realtime).
     #[arg(long, value_name = "NAME", num_args = 0..=1, default_missing_value = "mousepose")]
     pub lsl: Option<String>,
+    /// Beside each pose, the pose predicted MS milliseconds after its depth frame was taken
+    /// (the rig's latency to what the pose drives), by each joint's velocity: in
+    /// DIR/poses_predicted.csv, and on --stream and --lsl as `run` does with its config's
+    /// `lead_ms`.
+    #[arg(long, value_name = "MS", value_parser = crate::app::parse::lead_ms)]
+    pub lead: Option<u64>,
     /// Body-forest worker threads (0: one per core).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=64))]
     pub workers: u32,
@@ -167,12 +173,15 @@ pub fn command(args: &ReplayArgs) -> Outcome {
     let options = ReplayOptions {
         stream: args.stream.clone().map(|endpoint| StreamConfig {
             host_clock: "recording",
+            lead_ns: args.lead,
             ..StreamConfig::at(endpoint)
         }),
         lsl: args.lsl.as_deref().map(|name| LslConfig {
             live_clock: false,
+            lead_ns: args.lead,
             ..LslConfig::named(name)
         }),
+        lead_ns: args.lead,
         session: session.clone(),
         out: args.out.clone(),
         models: args.models.clone(),
@@ -201,9 +210,9 @@ pub fn command(args: &ReplayArgs) -> Outcome {
 
 /// `mousepose replay` with several sessions or a pattern.
 fn replay_many(args: &ReplayArgs) -> Outcome {
-    if args.realtime || args.overlays.is_some() || args.stream.is_some() || args.lsl.is_some() {
+    if args.realtime || args.overlays.is_some() || args.stream.is_some() || args.lsl.is_some() || args.lead.is_some() {
         return Err(Failure::usage(anyhow::anyhow!(
-            "--realtime, --overlays, --stream and --lsl are for one session, not a batch"
+            "--realtime, --overlays, --stream, --lsl and --lead are for one session, not a batch"
         )));
     }
     let options = BatchOptions {

@@ -328,6 +328,7 @@ fn replay_options(recording: &Path, options: &AdaptOptions, out: PathBuf, models
         force: true,
         stream: None,
         lsl: None,
+        lead_ns: None,
     }
 }
 

@@ -256,6 +256,7 @@ pub fn run_local(
                 &ReplayOptions {
                     stream: None,
                     lsl: None,
+                    lead_ns: None,
                     session: item.session.clone(),
                     out: item.out.clone(),
                     models: options.models.clone(),

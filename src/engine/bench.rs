@@ -439,6 +439,7 @@ fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Erro
     let options = |out: &str, realtime: bool| ReplayOptions {
         stream: None,
         lsl: None,
+        lead_ns: None,
         session: session.clone(),
         out: root.join(out),
         models: None,

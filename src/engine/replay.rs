@@ -58,6 +58,9 @@ pub struct ReplayOptions {
     pub stream: Option<StreamConfig>,
     /// Offer each pose as this LSL stream as it is made (`--lsl`).
     pub lsl: Option<LslConfig>,
+    /// Also write `poses_predicted.csv`: each pose predicted this long (ns) after its depth
+    /// frame (`--lead`).
+    pub lead_ns: Option<u64>,
 }
 
 /// Why a replay failed.
@@ -416,6 +419,10 @@ pub fn replay_with(
         .unwrap_or_default();
     let writer = PoseWriter::create(staging.path(), truth_joints, recording.depth_count() as u64 / 2)
         .and_then(PoseWriter::with_raw_file)
+        .and_then(|w| match options.lead_ns {
+            Some(ns) => w.with_predicted_file(ns as f64 * 1e-9),
+            None => Ok(w),
+        })
         .map_err(|source| ReplayError::Write {
             path: staging.path().join(POSES_FILE),
             source,

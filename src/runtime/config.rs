@@ -159,6 +159,7 @@ struct RawStream {
     allow_remote: Option<bool>,
     queue: Option<usize>,
     high_water_mark: Option<usize>,
+    lead_ms: Option<f64>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -171,6 +172,7 @@ struct RawLsl {
     source_id: Option<String>,
     library: Option<PathBuf>,
     queue: Option<usize>,
+    lead_ms: Option<f64>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -503,6 +505,7 @@ impl Checker<'_> {
         if let Some(queue) = l.queue {
             config.queue = self.capacity("lsl.queue", queue)?;
         }
+        config.lead_ns = self.lead("lsl.lead_ms", l.lead_ms)?;
         Ok(Some(config))
     }
 
@@ -531,7 +534,14 @@ impl Checker<'_> {
         if let Some(hwm) = s.high_water_mark {
             config.high_water_mark = i32::try_from(self.capacity("stream.high_water_mark", hwm)?).unwrap_or(4096);
         }
+        config.lead_ns = self.lead("stream.lead_ms", s.lead_ms)?;
         Ok(Some(config))
+    }
+
+    /// A prediction's lead (`lead_ms`), as nanoseconds.
+    fn lead(&self, key: &str, ms: Option<f64>) -> Result<Option<u64>, ConfigError> {
+        ms.map(|ms| crate::runtime::pose_record::lead_ns(ms).map_err(|reason| self.bad(key, reason)))
+            .transpose()
     }
 
     /// `[http]`: a loopback address unless `allow_remote`, and then a token.
@@ -778,14 +788,14 @@ mod tests {
         let c = parse(&format!("{base}[stream]\nendpoint = \"off\"\n")).unwrap();
         assert_eq!(c.stream, None);
         let c = parse(&format!(
-            "{base}[stream]\nendpoint = \"tcp://0.0.0.0:9000\"\nallow_remote = true\nqueue = 8\nhigh_water_mark = 5\n"
+            "{base}[stream]\nendpoint = \"tcp://0.0.0.0:9000\"\nallow_remote = true\nqueue = 8\nhigh_water_mark = 5\nlead_ms = 40\n"
         ))
         .unwrap()
         .stream
         .unwrap();
         assert_eq!(
-            (c.endpoint.to_string(), c.queue, c.high_water_mark),
-            ("tcp://0.0.0.0:9000".to_owned(), 8, 5)
+            (c.endpoint.to_string(), c.queue, c.high_water_mark, c.lead_ns),
+            ("tcp://0.0.0.0:9000".to_owned(), 8, 5, Some(40_000_000))
         );
         for (stream, why) in [
             ("endpoint = \"tcp://0.0.0.0:9000\"\n", "allow_remote"),
@@ -794,6 +804,8 @@ mod tests {
             ("endpoint = \"ipc://\"\n", "ipc://PATH"),
             ("queue = 0\n", "from 1 to 4096"),
             ("high_water_mark = 5000\n", "from 1 to 4096"),
+            ("lead_ms = 5000\n", "from 0 to 1000 ms"),
+            ("lead_ms = -1\n", "from 0 to 1000 ms"),
             ("topic = \"poses\"\n", "unknown field"),
         ] {
             let e = parse(&format!("{base}[stream]\n{stream}")).unwrap_err().to_string();

@@ -367,6 +367,7 @@ mod tests {
             headings: None,
             orientation: None,
             raw_body: None,
+            velocities: None,
         };
         let frame = ColorFrame {
             stamp: Stamp::default(),

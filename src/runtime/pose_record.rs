@@ -53,4 +53,45 @@ pub struct PoseRecord {
     /// The main-body joints as the frame alone placed them, before the fusion stage smoothed
     /// them over time (see [`crate::vision::smoothing`]); `None` without a mouse.
     pub raw_body: Option<Box<crate::vision::orientation::BodyJoints>>,
+    /// Each main-body joint's velocity (mm/s, world frame) as the smoothing follows it, in
+    /// [`crate::core::skeleton::Joint::MAIN_BODY`]'s order (see
+    /// [`crate::vision::smoothing::Smoother::velocities`]); `None` without a mouse.
+    pub velocities: Option<Box<[Option<nalgebra::Vector3<f64>>; 12]>>,
+}
+
+/// The longest lead a pose is predicted for (ms): past a second, a mouse's velocity says
+/// nothing of where it is.
+pub const MAX_LEAD_MS: f64 = 1000.0;
+
+/// A prediction's lead of `ms` milliseconds, as nanoseconds: from 0 to [`MAX_LEAD_MS`].
+///
+/// # Errors
+/// Another number, in one sentence.
+pub fn lead_ns(ms: f64) -> Result<u64, String> {
+    if !(0.0..=MAX_LEAD_MS).contains(&ms) {
+        return Err(format!("a lead must be from 0 to {MAX_LEAD_MS} ms, not {ms}"));
+    }
+    Ok((ms * 1e6).round() as u64)
+}
+
+impl PoseRecord {
+    /// The velocity of `joint` (mm/s), where the smoothing follows it: a main-body joint
+    /// but the tail tip, in a frame with a mouse. Limbs and paws have none: a paw on the
+    /// floor stands while the body passes over it.
+    pub fn velocity(&self, joint: crate::core::skeleton::Joint) -> Option<nalgebra::Vector3<f64>> {
+        let k = crate::core::skeleton::Joint::MAIN_BODY.iter().position(|j| *j == joint)?;
+        self.velocities.as_ref().and_then(|v| v[k])
+    }
+
+    /// The pose predicted `lead_s` seconds after the depth frame was taken: each joint with a
+    /// [`velocity`](Self::velocity) moved on by it for that long, every other joint as placed.
+    pub fn predicted(&self, lead_s: f64) -> Pose {
+        let mut pose = self.pose.clone();
+        for joint in crate::core::skeleton::Joint::MAIN_BODY {
+            if let Some(v) = self.velocity(joint) {
+                pose.joint_mut(joint).position_mm += v * lead_s;
+            }
+        }
+        pose
+    }
 }

@@ -63,6 +63,13 @@ pub struct SmootherConfig {
     /// still joint (2-5 mm/s) moves it by a few hundredths of a millimetre. `0` moves it the
     /// whole lag at any speed; infinity not at all (the plain One Euro filter).
     pub lead_speed_mm_s: f64,
+    /// The speed (mm/s) of the body as a whole (the mean of its joints' velocities) at which
+    /// the pose predicted ahead takes half of each joint's velocity: a share
+    /// `s^2 / (s^2 + predict_speed^2)` of it at the body's speed `s`. A real mouse sitting
+    /// still wobbles its joints by millimetres a frame, velocities of 20-40 mm/s that point
+    /// nowhere; moved on by them, its pose predicted 100 ms ahead lands farther from where it
+    /// then is than the pose held (`scripts/prediction-error`). `0` takes the whole velocity.
+    pub predict_speed_mm_s: f64,
     /// Half the thickness (mm) of the slab across the body, through `mid_back`, in which its
     /// place across the body is taken from the body's surface (see [`ridge_across`]). `0`
     /// leaves it where the frame placed it.
@@ -83,6 +90,7 @@ impl Default for SmootherConfig {
             back_along_s: 10.0,
             velocity_cutoff_hz: 2.0,
             lead_speed_mm_s: 15.0,
+            predict_speed_mm_s: 30.0,
             across_slab_mm: 2.0,
             ridge_height_share: 0.8,
         }
@@ -96,17 +104,22 @@ impl SmootherConfig {
         1.0 / (2.0 * std::f64::consts::PI * self.cutoff_hz(speed_mm_s))
     }
 
-    /// The share of the filter's lag a joint moving at `speed_mm_s` is moved ahead by (none
-    /// with an infinite `lead_speed_mm_s`: a finite number over infinity is 0).
+    /// The share of the filter's lag a joint moving at `speed_mm_s` is moved ahead by.
     fn lead_share(&self, speed_mm_s: f64) -> f64 {
-        let s2 = speed_mm_s * speed_mm_s;
-        let l2 = self.lead_speed_mm_s * self.lead_speed_mm_s;
-        if s2 + l2 > 0.0 { s2 / (s2 + l2) } else { 1.0 }
+        share(speed_mm_s, self.lead_speed_mm_s)
     }
 
     fn cutoff_hz(&self, speed_mm_s: f64) -> f64 {
         self.min_cutoff_hz + self.beta_hz_per_mm_s * speed_mm_s
     }
+}
+
+/// `s^2 / (s^2 + half^2)` at the speed `s`: 0 when still, a half at `half`, nearly 1 well
+/// above it (none with an infinite `half`: a finite number over infinity is 0; all with `0`).
+fn share(speed_mm_s: f64, half_mm_s: f64) -> f64 {
+    let s2 = speed_mm_s * speed_mm_s;
+    let h2 = half_mm_s * half_mm_s;
+    if s2 + h2 > 0.0 { s2 / (s2 + h2) } else { 1.0 }
 }
 
 /// The share of a new sample an exponential filter with this cut-off takes after `dt_s`.
@@ -178,13 +191,21 @@ impl Smoother {
         }
     }
 
-    /// Each main-body joint's velocity (mm/s, world frame) as the last frame left it: its
-    /// smoothed position's own, low-passed (zero just after the filter started afresh);
-    /// `None` for a joint it does not follow (not placed in the last frame, or the tail tip).
-    /// A joint `t` seconds after that frame is predicted at its smoothed place plus `t` times
-    /// this.
+    /// Each main-body joint's velocity (mm/s, world frame) as the last frame left it, for the
+    /// pose predicted ahead: its smoothed position's own, low-passed (zero just after the
+    /// filter started afresh), taken by a share that the body's speed as a whole gives (see
+    /// [`SmootherConfig::predict_speed_mm_s`]); `None` for a joint it does not follow (not
+    /// placed in the last frame, or the tail tip). A joint `t` seconds after that frame is
+    /// predicted at its smoothed place plus `t` times this.
     pub fn velocities(&self) -> [Option<Vector3<f64>>; 12] {
-        self.joints.map(|state| state.map(|s| s.trend_mm_s))
+        let (sum, n) = self
+            .joints
+            .iter()
+            .flatten()
+            .fold((Vector3::zeros(), 0.0), |(sum, n), s| (sum + s.trend_mm_s, n + 1.0));
+        let body_mm_s = if n > 0.0 { (sum / n).norm() } else { 0.0 };
+        let taken = share(body_mm_s, self.config.predict_speed_mm_s);
+        self.joints.map(|state| state.map(|s| s.trend_mm_s * taken))
     }
 
     /// Forgets every joint: the next frame starts afresh (a frame without a mouse).
@@ -495,18 +516,35 @@ mod tests {
 
     #[test]
     fn the_velocities_are_the_mouses() {
+        use rand::Rng as _;
+        use rand_distr::StandardNormal;
         let mut smoother = Smoother::new(SmootherConfig::default());
         for k in 0..60u64 {
             let x = 150.0 * k as f64 * FRAME_NS as f64 * 1e-9;
             smoother.smooth(k * FRAME_NS, &mut body(x), &[]);
         }
+        // Running: nearly the whole velocity (150^2 / (150^2 + 30^2) of it).
+        let taken = 150.0 * 150.0 / (150.0 * 150.0 + 30.0 * 30.0);
         for (joint, v) in Joint::MAIN_BODY.iter().zip(smoother.velocities()) {
             match (joint, v) {
                 (Joint::TailTip, v) => assert_eq!(v, None),
-                (_, Some(v)) => assert!((v - Vector3::new(150.0, 0.0, 0.0)).norm() < 1.0, "{joint:?}: {v}"),
+                (_, Some(v)) => assert!((v - Vector3::new(150.0 * taken, 0.0, 0.0)).norm() < 1.0, "{joint:?}: {v}"),
                 (_, None) => panic!("{joint:?} has no velocity"),
             }
         }
+        // Still, each joint wobbling by its own millimetre or two a frame: next to nothing.
+        let mut smoother = Smoother::new(SmootherConfig::default());
+        let mut rng = crate::core::rng::item_rng(7, 0, 0);
+        for k in 0..90u64 {
+            let mut joints = body(0.0);
+            for j in &mut joints {
+                let (dx, dy): (f64, f64) = (rng.sample(StandardNormal), rng.sample(StandardNormal));
+                j.position_mm += Vector3::new(dx, dy, 0.0) * 1.5;
+            }
+            smoother.smooth(k * FRAME_NS, &mut joints, &[]);
+        }
+        let fastest = smoother.velocities().iter().flatten().map(|v| v.norm()).fold(0.0, f64::max);
+        assert!(fastest < 5.0, "a still mouse's joints predicted to move at {fastest:.1} mm/s");
     }
 
     #[test]

@@ -1135,6 +1135,7 @@ mod tests {
             headings: None,
             orientation: None,
             raw_body: None,
+            velocities: None,
         };
         let frames = FramePair {
             depth: Arc::new(DepthFrame {

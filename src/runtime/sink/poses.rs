@@ -29,6 +29,9 @@ pub const POSES_FILE: &str = "poses.csv";
 /// columns as `poses.csv`.
 pub const RAW_POSES_FILE: &str = "poses_raw.csv";
 
+/// The file of the poses predicted ahead ([`PoseWriter::with_predicted_file`]).
+pub const PREDICTED_POSES_FILE: &str = "poses_predicted.csv";
+
 /// The directory the pictures of `--overlays` go to, one PNG per pictured frame named by its
 /// depth sequence number.
 pub const OVERLAYS_DIR: &str = "overlays";
@@ -231,12 +234,38 @@ impl serde::Serialize for PoseRow<'_> {
     }
 }
 
+/// Which pose a file beside `poses.csv` holds, in the same rows and columns.
+#[derive(Clone, Copy, Debug)]
+enum Beside {
+    /// The main-body joints before smoothing (`poses_raw.csv`).
+    Raw,
+    /// The pose predicted this long after the depth frame (`poses_predicted.csv`).
+    Predicted { lead_s: f64 },
+}
+
+impl Beside {
+    /// `record` with this file's pose in it.
+    fn of(self, record: &PoseRecord) -> PoseRecord {
+        let mut out = record.clone();
+        match self {
+            Beside::Raw => {
+                for (j, estimate) in out.pose.joints.iter_mut().zip(record.raw_body.iter().flat_map(|b| b.iter())) {
+                    *j = *estimate;
+                }
+            }
+            Beside::Predicted { lead_s } => out.pose = record.predicted(lead_s),
+        }
+        out
+    }
+}
+
 /// Writes `poses.csv` and keeps the tally.
 #[derive(Debug)]
 pub struct PoseWriter {
     out: csv::Writer<RowFile>,
-    /// `poses_raw.csv`, when asked for ([`PoseWriter::with_raw_file`]).
-    raw_out: Option<csv::Writer<File>>,
+    /// `poses_raw.csv` and `poses_predicted.csv`, when asked for
+    /// ([`PoseWriter::with_raw_file`], [`PoseWriter::with_predicted_file`]).
+    beside: Vec<(Beside, csv::Writer<File>)>,
     dir: std::path::PathBuf,
     truth: HashMap<u64, JointPositions>,
     snapshot_row: u64,
@@ -288,7 +317,7 @@ impl PoseWriter {
         out.write_record(columns(true))?;
         Ok(Self {
             out,
-            raw_out: None,
+            beside: Vec::new(),
             dir: dir.to_owned(),
             truth,
             snapshot_row,
@@ -302,10 +331,23 @@ impl PoseWriter {
     ///
     /// # Errors
     /// The file cannot be created or its header written.
-    pub fn with_raw_file(mut self) -> std::io::Result<Self> {
-        let mut raw = csv::Writer::from_writer(File::create(self.dir.join(RAW_POSES_FILE))?);
-        raw.write_record(columns(true))?;
-        self.raw_out = Some(raw);
+    pub fn with_raw_file(self) -> std::io::Result<Self> {
+        self.with_beside(Beside::Raw, RAW_POSES_FILE)
+    }
+
+    /// Also writes `dir/poses_predicted.csv`: the same rows with the pose predicted `lead_s`
+    /// seconds after each depth frame ([`PoseRecord::predicted`]).
+    ///
+    /// # Errors
+    /// The file cannot be created or its header written.
+    pub fn with_predicted_file(self, lead_s: f64) -> std::io::Result<Self> {
+        self.with_beside(Beside::Predicted { lead_s }, PREDICTED_POSES_FILE)
+    }
+
+    fn with_beside(mut self, which: Beside, name: &str) -> std::io::Result<Self> {
+        let mut out = csv::Writer::from_writer(File::create(self.dir.join(name))?);
+        out.write_record(columns(true))?;
+        self.beside.push((which, out));
         Ok(self)
     }
 
@@ -354,19 +396,15 @@ impl Sink for PoseWriter {
             picture.write_png(&dir.join(format!("{:06}.png", r.depth.seq)))?;
         }
         let mut tally = self.tally.lock().unwrap_or_else(PoisonError::into_inner);
-        // The joints before smoothing first: a row it cannot take is not written to
-        // `poses.csv` either, whose rows the tally counts.
-        if let Some(raw_out) = &mut self.raw_out {
-            let mut raw = r.clone();
-            for (j, estimate) in raw.pose.joints.iter_mut().zip(r.raw_body.iter().flat_map(|b| b.iter())) {
-                *j = *estimate;
-            }
-            raw_out.serialize(PoseRow {
+        // The files beside first: a row one cannot take is not written to `poses.csv`
+        // either, whose rows the tally counts.
+        for (which, out) in &mut self.beside {
+            out.serialize(PoseRow {
                 frame: tally.rows,
-                record: &raw,
+                record: &which.of(&r),
             })?;
             if self.whole_len.is_some() {
-                raw_out.flush()?;
+                out.flush()?;
             }
         }
         self.out.serialize(PoseRow {
@@ -441,8 +479,8 @@ impl Sink for PoseWriter {
     }
 
     fn flush(&mut self) -> Result<(), StageError> {
-        if let Some(raw_out) = &mut self.raw_out {
-            raw_out.flush()?;
+        for (_, out) in &mut self.beside {
+            out.flush()?;
         }
         self.out.flush()?;
         self.out.get_ref().file.sync_all()?;
@@ -640,6 +678,7 @@ fn parse_row(record: &csv::StringRecord, orientation: bool) -> Result<PoseRecord
             tail: None,
         }),
         raw_body: None,
+        velocities: None,
     })
 }
 

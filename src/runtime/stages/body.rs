@@ -188,6 +188,7 @@ impl Map for BodyStage {
             headings: None,
             orientation: None,
             raw_body: None,
+            velocities: None,
         };
         if let Some(mouse) = mouse {
             let r = mouse.region;

@@ -54,6 +54,7 @@ impl Map for FuseStage {
                 *record.pose.joint_mut(*joint) = estimate;
             }
             record.raw_body = Some(Box::new(raw));
+            record.velocities = Some(Box::new(self.smoother.velocities()));
             record.orientation = Some(Orientation {
                 confidence: decision.confidence,
                 frame_alone: orientation::heading(&headings.joints[decision.frame_alone]),

@@ -112,6 +112,7 @@ mod tests {
                     headings: None,
                     orientation: None,
                     raw_body: None,
+                    velocities: None,
                 };
                 w.process(Posed { pair, record }).unwrap();
             }

@@ -27,6 +27,10 @@ use std::time::Duration;
 /// frame counter.
 pub const CHANNELS: usize = 3 * Joint::ALL.len() + 3;
 
+/// Channels after those with a lead (`[lsl] lead_ms`): x, y, z of each joint of the pose
+/// predicted for the lead ([`PoseRecord::predicted`]).
+pub const PREDICTED_CHANNELS: usize = 3 * Joint::ALL.len();
+
 /// Samples waiting for the `lsl` thread; more are dropped (`queue_full`).
 pub const DEFAULT_QUEUE: usize = 64;
 
@@ -51,6 +55,9 @@ pub struct LslConfig {
     /// Whether the frames' host stamps are this machine's monotonic clock (live) or a
     /// recording's (a replay: samples are then stamped when they are sent).
     pub live_clock: bool,
+    /// With each pose, the pose predicted this long after its depth frame was taken, in
+    /// [`PREDICTED_CHANNELS`] more channels; `None`: no prediction.
+    pub lead_ns: Option<u64>,
 }
 
 impl LslConfig {
@@ -63,6 +70,7 @@ impl LslConfig {
             source_id: "mousepose".to_owned(),
             queue: DEFAULT_QUEUE,
             live_clock: true,
+            lead_ns: None,
         }
     }
 }
@@ -139,6 +147,7 @@ pub struct LslHandle {
     /// LSL's clock minus `CLOCK_MONOTONIC` (seconds).
     clock_offset_s: f64,
     live_clock: bool,
+    lead_ns: Option<u64>,
 }
 
 impl LslHandle {
@@ -155,7 +164,7 @@ impl LslHandle {
             monotonic_ns()
         };
         let stamp = host_ns as f64 * 1e-9 + self.clock_offset_s;
-        if let Err(TrySendError::Full(_)) = self.tx.try_send((sample(record), stamp)) {
+        if let Err(TrySendError::Full(_)) = self.tx.try_send((sample(record, self.lead_ns), stamp)) {
             self.stats.dropped[0].fetch_add(1, Ordering::Relaxed);
         }
     }
@@ -175,41 +184,55 @@ impl LslHandle {
     }
 }
 
-/// The sample of a pose; see [`channels`] for the order.
-pub fn sample(record: &PoseRecord) -> Vec<f64> {
-    let mut values = Vec::with_capacity(CHANNELS);
-    for &joint in &Joint::ALL {
-        let j = record.pose.joint(joint);
-        if j.source == crate::core::pose::JointSource::Missing {
-            values.extend([f64::NAN; 3]);
-        } else {
-            values.extend([j.position_mm.x, j.position_mm.y, j.position_mm.z]);
+/// The sample of a pose, with the pose predicted `lead_ns` after it when there is a lead; see
+/// [`channels`] for the order.
+pub fn sample(record: &PoseRecord, lead_ns: Option<u64>) -> Vec<f64> {
+    let mut values = Vec::with_capacity(CHANNELS + PREDICTED_CHANNELS);
+    let push_joints = |values: &mut Vec<f64>, pose: &crate::core::pose::Pose| {
+        for &joint in &Joint::ALL {
+            if record.pose.joint(joint).source == crate::core::pose::JointSource::Missing {
+                values.extend([f64::NAN; 3]);
+            } else {
+                let p = pose.joint(joint).position_mm;
+                values.extend([p.x, p.y, p.z]);
+            }
         }
-    }
+    };
+    push_joints(&mut values, &record.pose);
     let status = PoseStatus::ALL.iter().position(|s| *s == record.status).unwrap_or(0);
     values.push(status as f64);
     values.push(record.orientation.as_ref().map_or(f64::NAN, |o| o.confidence));
     values.push(record.depth.seq as f64);
+    if let Some(lead_ns) = lead_ns {
+        push_joints(&mut values, &record.predicted(lead_ns as f64 * 1e-9));
+    }
     values
 }
 
 /// The channels' labels, units and types, in a sample's order (what the stream's description
-/// says, and XDF readers show).
-pub fn channels() -> Vec<Channel> {
+/// says, and XDF readers show); with a lead, the predicted joints' after the rest
+/// (`snout_predicted_x`, ...).
+pub fn channels(lead: bool) -> Vec<Channel> {
     let channel = |label: String, unit: &str, kind: &str| Channel {
         label,
         unit: unit.to_owned(),
         kind: kind.to_owned(),
     };
-    let mut out = Vec::with_capacity(CHANNELS);
-    for joint in Joint::ALL {
-        for (axis, kind) in [("x", "PositionX"), ("y", "PositionY"), ("z", "PositionZ")] {
-            out.push(channel(format!("{}_{axis}", joint.name()), "millimeters", kind));
+    let joints = |out: &mut Vec<Channel>, suffix: &str| {
+        for joint in Joint::ALL {
+            for (axis, kind) in [("x", "PositionX"), ("y", "PositionY"), ("z", "PositionZ")] {
+                out.push(channel(format!("{}{suffix}_{axis}", joint.name()), "millimeters", kind));
+            }
         }
-    }
+    };
+    let mut out = Vec::with_capacity(CHANNELS + PREDICTED_CHANNELS);
+    joints(&mut out, "");
     out.push(channel("status".into(), "code", "Status"));
     out.push(channel("orientation_confidence".into(), "probability", "Confidence"));
     out.push(channel("depth_seq".into(), "count", "FrameNumber"));
+    if lead {
+        joints(&mut out, "_predicted");
+    }
     out
 }
 
@@ -262,15 +285,19 @@ impl LslOutlet {
             kind: config.kind.clone(),
             nominal_rate: 0.0,
             source_id: config.source_id.clone(),
-            channels: channels(),
-            desc: vec![
+            channels: channels(config.lead_ns.is_some()),
+            desc: [
+
                 ("manufacturer".into(), "mousepose".into()),
                 ("version".into(), env!("CARGO_PKG_VERSION").into()),
                 (
                     "coordinates".into(),
                     "the rig's world frame: origin on the glass, z up".into(),
                 ),
-            ],
+            ]
+            .into_iter()
+            .chain(config.lead_ns.map(|ns| ("lead_ms".into(), format!("{}", ns as f64 * 1e-6))))
+            .collect(),
             // Irregular rate: liblsl counts this in hundreds of samples.
             max_buffered: MAX_BUFFERED_SAMPLES / 100,
         };
@@ -303,6 +330,7 @@ impl LslOutlet {
                 name: config.name.as_str().into(),
                 clock_offset_s,
                 live_clock: config.live_clock,
+                lead_ns: config.lead_ns,
             },
             thread,
         })
@@ -375,9 +403,10 @@ mod tests {
             headings: None,
             orientation: None,
             raw_body: None,
+            velocities: None,
         };
-        let values = sample(&record);
-        let labels: Vec<String> = channels().into_iter().map(|c| c.label).collect();
+        let values = sample(&record, None);
+        let labels: Vec<String> = channels(false).into_iter().map(|c| c.label).collect();
         assert_eq!((values.len(), labels.len()), (CHANNELS, CHANNELS));
         assert_eq!(&values[..3], [1.5, -2.0, 30.25]);
         assert_eq!(labels[0], format!("{}_x", Joint::ALL[0].name()));
@@ -387,6 +416,22 @@ mod tests {
         assert_eq!(values[72], 1.0);
         assert!(values[73].is_nan());
         assert_eq!(values[74], 77.0);
+
+        // With a lead, the predicted pose after the rest: the snout moved on by its velocity.
+        let mut velocities = [None; 12];
+        velocities[0] = Some(nalgebra::Vector3::new(100.0, 0.0, -10.0));
+        let record = PoseRecord {
+            velocities: Some(Box::new(velocities)),
+            ..record
+        };
+        let values = sample(&record, Some(50_000_000));
+        let labels: Vec<String> = channels(true).into_iter().map(|c| c.label).collect();
+        let all = CHANNELS + PREDICTED_CHANNELS;
+        assert_eq!((values.len(), labels.len()), (all, all));
+        assert_eq!(&values[..3], [1.5, -2.0, 30.25]);
+        assert_eq!(labels[CHANNELS], format!("{}_predicted_x", Joint::ALL[0].name()));
+        assert_eq!(&values[CHANNELS..CHANNELS + 3], [6.5, -2.0, 29.75]);
+        assert!(values[CHANNELS + 3..].iter().all(|v| v.is_nan()));
     }
 
     #[test]

@@ -28,7 +28,8 @@ impl From<crate::core::frame::Stamp> for Stamp {
     }
 }
 
-/// One joint: millimetres in the rig's world frame, its score and source; `null` when missing.
+/// One joint: millimetres in the rig's world frame, its score and source, and its velocity
+/// (mm/s) where the smoothing follows it; `null` when missing.
 #[derive(Serialize)]
 struct JointOut {
     x: f64,
@@ -36,6 +37,24 @@ struct JointOut {
     z: f64,
     score: f64,
     source: &'static str,
+    velocity: Option<[f64; 3]>,
+}
+
+/// A joint of the predicted pose: millimetres in the rig's world frame.
+#[derive(Serialize)]
+struct PlaceOut {
+    x: f64,
+    y: f64,
+    z: f64,
+}
+
+/// The pose predicted `lead_ms` after the depth frame was taken, for `for_ns` (the host
+/// clock of the frames' stamps).
+#[derive(Serialize)]
+struct PredictedOut {
+    lead_ms: f64,
+    for_ns: u64,
+    joints: BTreeMap<&'static str, Option<PlaceOut>>,
 }
 
 #[derive(Serialize)]
@@ -52,26 +71,48 @@ struct PoseMessage {
     status: &'static str,
     orientation_confidence: Option<f64>,
     joints: BTreeMap<&'static str, Option<JointOut>>,
+    predicted: Option<PredictedOut>,
 }
 
 /// The `poses` message of `record`, numbered `seq`; `host_clock` says what its frames' host
-/// stamps are (`monotonic` or `recording`).
-pub fn pose(seq: u64, record: &PoseRecord, host_clock: &'static str) -> Vec<u8> {
+/// stamps are (`monotonic` or `recording`); with a `lead_ns`, the pose predicted that long
+/// after the depth frame was taken is beside it ([`PoseRecord::predicted`]).
+pub fn pose(seq: u64, record: &PoseRecord, host_clock: &'static str, lead_ns: Option<u64>) -> Vec<u8> {
+    let known = |joint: Joint| record.pose.joint(joint).source != crate::core::pose::JointSource::Missing;
     let joints = Joint::ALL
         .iter()
         .map(|&joint| {
             let j = record.pose.joint(joint);
-            let known = j.source != crate::core::pose::JointSource::Missing;
-            let out = known.then(|| JointOut {
+            let out = known(joint).then(|| JointOut {
                 x: round(j.position_mm.x, 100.0),
                 y: round(j.position_mm.y, 100.0),
                 z: round(j.position_mm.z, 100.0),
                 score: round(j.score, 1000.0),
                 source: j.source.name(),
+                velocity: record.velocity(joint).map(|v| v.map(|c| round(c, 10.0)).into()),
             });
             (joint.name(), out)
         })
         .collect();
+    let predicted = lead_ns.map(|lead_ns| {
+        let pose = record.predicted(lead_ns as f64 * 1e-9);
+        PredictedOut {
+            lead_ms: lead_ns as f64 * 1e-6,
+            for_ns: record.depth.host_ns.saturating_add(lead_ns),
+            joints: Joint::ALL
+                .iter()
+                .map(|&joint| {
+                    let p = pose.joint(joint).position_mm;
+                    let out = known(joint).then(|| PlaceOut {
+                        x: round(p.x, 100.0),
+                        y: round(p.y, 100.0),
+                        z: round(p.z, 100.0),
+                    });
+                    (joint.name(), out)
+                })
+                .collect(),
+        }
+    });
     let message = PoseMessage {
         topic: "poses",
         version: VERSION,
@@ -84,6 +125,7 @@ pub fn pose(seq: u64, record: &PoseRecord, host_clock: &'static str) -> Vec<u8> 
         status: record.status.name(),
         orientation_confidence: record.orientation.as_ref().map(|o| round(o.confidence, 1000.0)),
         joints,
+        predicted,
     };
     to_json(&message)
 }
@@ -159,5 +201,49 @@ mod tests {
         assert_eq!(v["event"], "camera_away");
         assert_eq!(v["camera"], "depth");
         assert!(v["published_ns"].as_u64().unwrap() > 0);
+    }
+
+    #[test]
+    fn a_pose_message_carries_the_velocities_and_the_pose_predicted_for_the_lead() {
+        use crate::core::pose::{JointSource, Pose};
+        let mut pose = Pose::default();
+        for (joint, x) in [(Joint::Snout, 10.0), (Joint::LeftForePaw, -5.0)] {
+            let j = pose.joint_mut(joint);
+            j.position_mm = nalgebra::Point3::new(x, 0.0, 20.0);
+            j.source = JointSource::Depth;
+        }
+        let mut velocities = [None; 12];
+        velocities[0] = Some(nalgebra::Vector3::new(200.0, -100.0, 0.0));
+        let record = PoseRecord {
+            depth: crate::core::frame::Stamp {
+                seq: 3,
+                device_ns: 5,
+                host_ns: 1_000_000_000,
+            },
+            color: None,
+            skew_ns: 0,
+            status: crate::runtime::pose_record::PoseStatus::Ok,
+            pose,
+            paws: Vec::new(),
+            headings: None,
+            orientation: None,
+            raw_body: None,
+            velocities: Some(Box::new(velocities)),
+        };
+        let v: serde_json::Value = serde_json::from_slice(&pose_message(&record, None)).unwrap();
+        assert_eq!(v["joints"]["snout"]["velocity"], serde_json::json!([200.0, -100.0, 0.0]));
+        assert_eq!(v["joints"]["left_fore_paw"]["velocity"], serde_json::Value::Null);
+        assert_eq!(v["predicted"], serde_json::Value::Null);
+        let v: serde_json::Value = serde_json::from_slice(&pose_message(&record, Some(50_000_000))).unwrap();
+        let predicted = &v["predicted"];
+        assert_eq!((predicted["lead_ms"].as_f64(), predicted["for_ns"].as_u64()), (Some(50.0), Some(1_050_000_000)));
+        assert_eq!(predicted["joints"]["snout"], serde_json::json!({"x": 20.0, "y": -5.0, "z": 20.0}));
+        // A paw has no velocity: predicted where it was placed; a joint not estimated is null.
+        assert_eq!(predicted["joints"]["left_fore_paw"]["x"], -5.0);
+        assert_eq!(predicted["joints"]["head"], serde_json::Value::Null);
+    }
+
+    fn pose_message(record: &PoseRecord, lead_ns: Option<u64>) -> Vec<u8> {
+        pose(0, record, "monotonic", lead_ns)
     }
 }

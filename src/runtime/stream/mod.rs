@@ -133,6 +133,9 @@ pub struct StreamConfig {
     /// What the frames' host stamps are: `monotonic` live (this machine's `CLOCK_MONOTONIC`,
     /// as `published_ns`), `recording` in a replay (the recorded stamps).
     pub host_clock: &'static str,
+    /// With each pose, the pose predicted this long after its depth frame was taken (the
+    /// rig's latency to what the pose drives); `None`: no prediction.
+    pub lead_ns: Option<u64>,
 }
 
 impl StreamConfig {
@@ -143,6 +146,7 @@ impl StreamConfig {
             queue: DEFAULT_QUEUE,
             high_water_mark: DEFAULT_HIGH_WATER_MARK,
             host_clock: "monotonic",
+            lead_ns: None,
         }
     }
 }
@@ -223,6 +227,7 @@ pub struct StreamHandle {
     seq: Arc<[AtomicU64; 2]>,
     endpoint: Arc<str>,
     host_clock: &'static str,
+    lead_ns: Option<u64>,
 }
 
 impl StreamHandle {
@@ -367,6 +372,7 @@ impl Publisher {
                 seq: Arc::default(),
                 endpoint: endpoint.into(),
                 host_clock: config.host_clock,
+                lead_ns: config.lead_ns,
             },
             thread,
         })
@@ -535,8 +541,8 @@ impl<S: crate::runtime::pipeline::Sink<In = crate::runtime::stages::Fused>> crat
 
     fn write(&mut self, item: Self::In) -> Result<(), crate::runtime::pipeline::StageError> {
         if let Some(stream) = &self.stream {
-            let host_clock = stream.host_clock;
-            stream.publish(Topic::Poses, |seq| message::pose(seq, &item.record, host_clock));
+            let (host_clock, lead_ns) = (stream.host_clock, stream.lead_ns);
+            stream.publish(Topic::Poses, |seq| message::pose(seq, &item.record, host_clock, lead_ns));
         }
         if let Some(lsl) = &self.lsl {
             lsl.publish(&item.record);
