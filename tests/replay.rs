@@ -692,7 +692,14 @@ fn issue64_the_pose_predicted_ahead_is_written_beside_and_nearer_where_the_mouse
     let replay_at = |lead: &str| {
         let out = tmp.path().join(format!("lead-{lead}"));
         let done = mousepose()
-            .args(["replay", fixture().to_str().unwrap(), "--out", out.to_str().unwrap(), "--lead", lead])
+            .args([
+                "replay",
+                fixture().to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "--lead",
+                lead,
+            ])
             .output()
             .unwrap();
         assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
@@ -711,7 +718,14 @@ fn issue64_the_pose_predicted_ahead_is_written_beside_and_nearer_where_the_mouse
     assert_eq!(poses.len(), predicted.len());
     let truth = SessionReader::open(fixture()).unwrap().truth().unwrap().unwrap();
     let later = |seq: u64| truth.joints.iter().find(|(s, _, _)| *s == seq + 3).map(|(_, _, j)| *j);
-    let moved = [Joint::Snout, Joint::Neck, Joint::MidBack, Joint::Rump, Joint::TailBase, Joint::LeftHip];
+    let moved = [
+        Joint::Snout,
+        Joint::Neck,
+        Joint::MidBack,
+        Joint::Rump,
+        Joint::TailBase,
+        Joint::LeftHip,
+    ];
     let (mut held_mm, mut ahead_mm, mut n) = (0.0, 0.0, 0);
     for (now, ahead) in poses.iter().zip(&predicted) {
         assert_eq!(now.depth.seq, ahead.depth.seq);
@@ -720,7 +734,10 @@ fn issue64_the_pose_predicted_ahead_is_written_beside_and_nearer_where_the_mouse
         }
         assert_eq!(now.pose.joint(Joint::TailTip), ahead.pose.joint(Joint::TailTip));
         let Some(truth) = later(now.depth.seq) else { continue };
-        for joint in moved.into_iter().filter(|j| now.pose.joint(*j).position_mm.x.is_finite()) {
+        for joint in moved
+            .into_iter()
+            .filter(|j| now.pose.joint(*j).position_mm.x.is_finite())
+        {
             held_mm += (now.pose.joint(joint).position_mm - truth[joint.index()]).norm();
             ahead_mm += (ahead.pose.joint(joint).position_mm - truth[joint.index()]).norm();
             n += 1;
@@ -734,7 +751,12 @@ fn issue64_the_pose_predicted_ahead_is_written_beside_and_nearer_where_the_mouse
     // A lead past a second, or with a batch: one sentence, refused.
     for args in [vec!["--lead", "5000"], vec!["--lead", "40", "a", "b"]] {
         let done = mousepose()
-            .args(["replay", fixture().to_str().unwrap(), "--out", tmp.path().join("x").to_str().unwrap()])
+            .args([
+                "replay",
+                fixture().to_str().unwrap(),
+                "--out",
+                tmp.path().join("x").to_str().unwrap(),
+            ])
             .args(&args)
             .output()
             .unwrap();

@@ -79,7 +79,9 @@ impl PoseRecord {
     /// but the tail tip, in a frame with a mouse. Limbs and paws have none: a paw on the
     /// floor stands while the body passes over it.
     pub fn velocity(&self, joint: crate::core::skeleton::Joint) -> Option<nalgebra::Vector3<f64>> {
-        let k = crate::core::skeleton::Joint::MAIN_BODY.iter().position(|j| *j == joint)?;
+        let k = crate::core::skeleton::Joint::MAIN_BODY
+            .iter()
+            .position(|j| *j == joint)?;
         self.velocities.as_ref().and_then(|v| v[k])
     }
 

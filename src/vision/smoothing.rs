@@ -528,7 +528,10 @@ mod tests {
         for (joint, v) in Joint::MAIN_BODY.iter().zip(smoother.velocities()) {
             match (joint, v) {
                 (Joint::TailTip, v) => assert_eq!(v, None),
-                (_, Some(v)) => assert!((v - Vector3::new(150.0 * taken, 0.0, 0.0)).norm() < 1.0, "{joint:?}: {v}"),
+                (_, Some(v)) => assert!(
+                    (v - Vector3::new(150.0 * taken, 0.0, 0.0)).norm() < 1.0,
+                    "{joint:?}: {v}"
+                ),
                 (_, None) => panic!("{joint:?} has no velocity"),
             }
         }
@@ -543,8 +546,16 @@ mod tests {
             }
             smoother.smooth(k * FRAME_NS, &mut joints, &[]);
         }
-        let fastest = smoother.velocities().iter().flatten().map(|v| v.norm()).fold(0.0, f64::max);
-        assert!(fastest < 5.0, "a still mouse's joints predicted to move at {fastest:.1} mm/s");
+        let fastest = smoother
+            .velocities()
+            .iter()
+            .flatten()
+            .map(|v| v.norm())
+            .fold(0.0, f64::max);
+        assert!(
+            fastest < 5.0,
+            "a still mouse's joints predicted to move at {fastest:.1} mm/s"
+        );
     }
 
     #[test]

@@ -249,7 +249,12 @@ impl Beside {
         let mut out = record.clone();
         match self {
             Beside::Raw => {
-                for (j, estimate) in out.pose.joints.iter_mut().zip(record.raw_body.iter().flat_map(|b| b.iter())) {
+                for (j, estimate) in out
+                    .pose
+                    .joints
+                    .iter_mut()
+                    .zip(record.raw_body.iter().flat_map(|b| b.iter()))
+                {
                     *j = *estimate;
                 }
             }

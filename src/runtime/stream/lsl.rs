@@ -287,7 +287,6 @@ impl LslOutlet {
             source_id: config.source_id.clone(),
             channels: channels(config.lead_ns.is_some()),
             desc: [
-
                 ("manufacturer".into(), "mousepose".into()),
                 ("version".into(), env!("CARGO_PKG_VERSION").into()),
                 (
@@ -296,7 +295,11 @@ impl LslOutlet {
                 ),
             ]
             .into_iter()
-            .chain(config.lead_ns.map(|ns| ("lead_ms".into(), format!("{}", ns as f64 * 1e-6))))
+            .chain(
+                config
+                    .lead_ns
+                    .map(|ns| ("lead_ms".into(), format!("{}", ns as f64 * 1e-6))),
+            )
             .collect(),
             // Irregular rate: liblsl counts this in hundreds of samples.
             max_buffered: MAX_BUFFERED_SAMPLES / 100,

@@ -231,13 +231,22 @@ mod tests {
             velocities: Some(Box::new(velocities)),
         };
         let v: serde_json::Value = serde_json::from_slice(&pose_message(&record, None)).unwrap();
-        assert_eq!(v["joints"]["snout"]["velocity"], serde_json::json!([200.0, -100.0, 0.0]));
+        assert_eq!(
+            v["joints"]["snout"]["velocity"],
+            serde_json::json!([200.0, -100.0, 0.0])
+        );
         assert_eq!(v["joints"]["left_fore_paw"]["velocity"], serde_json::Value::Null);
         assert_eq!(v["predicted"], serde_json::Value::Null);
         let v: serde_json::Value = serde_json::from_slice(&pose_message(&record, Some(50_000_000))).unwrap();
         let predicted = &v["predicted"];
-        assert_eq!((predicted["lead_ms"].as_f64(), predicted["for_ns"].as_u64()), (Some(50.0), Some(1_050_000_000)));
-        assert_eq!(predicted["joints"]["snout"], serde_json::json!({"x": 20.0, "y": -5.0, "z": 20.0}));
+        assert_eq!(
+            (predicted["lead_ms"].as_f64(), predicted["for_ns"].as_u64()),
+            (Some(50.0), Some(1_050_000_000))
+        );
+        assert_eq!(
+            predicted["joints"]["snout"],
+            serde_json::json!({"x": 20.0, "y": -5.0, "z": 20.0})
+        );
         // A paw has no velocity: predicted where it was placed; a joint not estimated is null.
         assert_eq!(predicted["joints"]["left_fore_paw"]["x"], -5.0);
         assert_eq!(predicted["joints"]["head"], serde_json::Value::Null);
