@@ -23,6 +23,7 @@ fn replay_to(session: &Path, out: &Path, calibration: Option<PathBuf>) {
         stream: None,
         lsl: None,
         lead_ns: None,
+        partner_wait: None,
         calibration,
         ..crate::util::replay_options(session, out, 1)
     })

@@ -25,6 +25,7 @@ pub fn replay_options(
         stream: None,
         lsl: None,
         lead_ns: None,
+        partner_wait: None,
         session: session.to_owned(),
         out: out.to_owned(),
         models: Some(repo_root().join("fixtures/models")),

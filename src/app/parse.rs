@@ -56,6 +56,11 @@ pub fn lead_ms(s: &str) -> Result<u64, String> {
     crate::runtime::pose_record::lead_ns(ms)
 }
 
+/// A pairing time in milliseconds (`--partner-wait`, `--partner-reach`), as nanoseconds.
+pub fn partner_ms(s: &str) -> Result<u64, String> {
+    ranged(s, "a number of milliseconds", 0.0_f64, 1000.0).map(|ms| (ms * 1e6).round() as u64)
+}
+
 /// A frame rate.
 pub fn fps(s: &str) -> Result<f64, String> {
     ranged(s, "a frame rate", 1.0, 1000.0)

@@ -137,6 +137,15 @@ pub struct ReplayArgs {
     /// `lead_ms`.
     #[arg(long, value_name = "MS", value_parser = crate::app::parse::lead_ms)]
     pub lead: Option<u64>,
+    /// Pair as a live run with `[sync] partner_wait_ms = MS` does, from the recorded arrival
+    /// stamps: a depth frame waits at most MS after its arrival for a nearer colour frame,
+    /// then takes the nearest in (by default each depth frame pairs with its nearest).
+    #[arg(long, value_name = "MS", value_parser = crate::app::parse::partner_ms)]
+    pub partner_wait: Option<u64>,
+    /// With --partner-wait: as `[sync] partner_reach_ms = MS`, the colour frame taken up to MS
+    /// from the depth frame pairs at the end of the wait (by default up to the tolerance).
+    #[arg(long, value_name = "MS", requires = "partner_wait", value_parser = crate::app::parse::partner_ms)]
+    pub partner_reach: Option<u64>,
     /// Body-forest worker threads (0: one per core).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=64))]
     pub workers: u32,
@@ -182,6 +191,7 @@ pub fn command(args: &ReplayArgs) -> Outcome {
             ..LslConfig::named(name)
         }),
         lead_ns: args.lead,
+        partner_wait: args.partner_wait.map(|wait| (wait, args.partner_reach)),
         session: session.clone(),
         out: args.out.clone(),
         models: args.models.clone(),
@@ -210,9 +220,15 @@ pub fn command(args: &ReplayArgs) -> Outcome {
 
 /// `mousepose replay` with several sessions or a pattern.
 fn replay_many(args: &ReplayArgs) -> Outcome {
-    if args.realtime || args.overlays.is_some() || args.stream.is_some() || args.lsl.is_some() || args.lead.is_some() {
+    if args.realtime
+        || args.overlays.is_some()
+        || args.stream.is_some()
+        || args.lsl.is_some()
+        || args.lead.is_some()
+        || args.partner_wait.is_some()
+    {
         return Err(Failure::usage(anyhow::anyhow!(
-            "--realtime, --overlays, --stream, --lsl and --lead are for one session, not a batch"
+            "--realtime, --overlays, --stream, --lsl, --lead and --partner-wait are for one session, not a batch"
         )));
     }
     let options = BatchOptions {

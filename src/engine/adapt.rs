@@ -329,6 +329,7 @@ fn replay_options(recording: &Path, options: &AdaptOptions, out: PathBuf, models
         stream: None,
         lsl: None,
         lead_ns: None,
+        partner_wait: None,
     }
 }
 

@@ -257,6 +257,7 @@ pub fn run_local(
                     stream: None,
                     lsl: None,
                     lead_ns: None,
+                    partner_wait: None,
                     session: item.session.clone(),
                     out: item.out.clone(),
                     models: options.models.clone(),

@@ -440,6 +440,7 @@ fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Erro
         stream: None,
         lsl: None,
         lead_ns: None,
+        partner_wait: None,
         session: session.clone(),
         out: root.join(out),
         models: None,

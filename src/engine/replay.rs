@@ -61,6 +61,10 @@ pub struct ReplayOptions {
     /// Also write `poses_predicted.csv`: each pose predicted this long (ns) after its depth
     /// frame (`--lead`).
     pub lead_ns: Option<u64>,
+    /// Pair as a live run with `[sync] partner_wait_ms` (and `partner_reach_ms`) does, from
+    /// the recorded arrival stamps: the wait and the reach (ns; `--partner-wait`,
+    /// `--partner-reach`). `None`: each depth frame with its nearest partner.
+    pub partner_wait: Option<(u64, Option<u64>)>,
 }
 
 /// Why a replay failed.
@@ -654,7 +658,11 @@ fn replay_topology<'a>(
             realtime: options.realtime,
             depth_size: Some(depth_size),
         },
-        sync: recording.sync_config(),
+        sync: crate::runtime::pairing::SyncConfig {
+            partner_wait_ns: options.partner_wait.map(|(wait, _)| wait),
+            partner_reach_ns: options.partner_wait.and_then(|(_, reach)| reach),
+            ..recording.sync_config()
+        },
         edges: Edges::replay(),
         processing: Some(Processing {
             segment: SegmentStage::new(segmenter),

@@ -84,6 +84,7 @@ struct RawSync {
     color_latency_ms: Option<f64>,
     max_wait_ms: Option<f64>,
     partner_wait_ms: Option<RawPartnerWait>,
+    partner_reach_ms: Option<f64>,
 }
 
 /// `[sync] partner_wait_ms`: milliseconds, or `"nearest"`.
@@ -330,6 +331,28 @@ impl Checker<'_> {
         String::new()
     }
 
+    /// `[sync] partner_reach_ms`: with a partner wait only, at most two depth frame intervals.
+    fn partner_reach(&self, reach_ms: Option<f64>, fps: f64, wait: bool) -> Result<Option<u64>, ConfigError> {
+        let Some(ms) = reach_ms else {
+            return Ok(None);
+        };
+        let key = "sync.partner_reach_ms";
+        let most = 2000.0 / fps;
+        if !wait {
+            return Err(self.bad(
+                key,
+                "needs a `partner_wait_ms`: without one each depth frame waits for its nearest partner",
+            ));
+        }
+        if !ms.is_finite() || !(0.0..=most).contains(&ms) {
+            return Err(self.bad(
+                key,
+                format!("must be from 0 to two depth frame intervals ({most:.1} ms), not {ms}"),
+            ));
+        }
+        Ok(Some((ms * 1e6) as u64))
+    }
+
     fn capacity(&self, key: &str, v: usize) -> Result<usize, ConfigError> {
         if (1..=4096).contains(&v) {
             Ok(v)
@@ -383,6 +406,7 @@ impl Checker<'_> {
             max_wait_ns: (ms("sync.max_wait_ms", raw.sync.max_wait_ms)?.unwrap_or(stall_ms) * 1e6) as u64,
             color_latency_ns: (latency * 1e6) as i64,
             partner_wait_ns: partner_wait_ms.map(|ms| (ms * 1e6) as u64),
+            partner_reach_ns: self.partner_reach(raw.sync.partner_reach_ms, fps, partner_wait_ms.is_some())?,
         };
         let p = raw.pipeline;
         let capture_edge = EdgeConfig {
@@ -829,6 +853,27 @@ mod tests {
                 .to_string();
             assert!(
                 e.contains("sync.partner_wait_ms") && e.contains(why) && !e.contains('\n'),
+                "{e}"
+            );
+        }
+
+        // The partner reach: with a partner wait, up to two depth frame intervals.
+        let reach = |sync: &str| parse(&format!("{base}[sync]\n{sync}")).map(|c| c.sync.partner_reach_ns);
+        assert_eq!(reach("partner_wait_ms = 3\n").unwrap(), None);
+        assert_eq!(
+            reach("partner_wait_ms = 3\npartner_reach_ms = 34\n").unwrap(),
+            Some(34_000_000)
+        );
+        for (bad, why) in [
+            ("partner_reach_ms = 34\n", "needs a `partner_wait_ms`"),
+            (
+                "partner_wait_ms = 3\npartner_reach_ms = 90\n",
+                "two depth frame intervals",
+            ),
+        ] {
+            let e = reach(bad).unwrap_err().to_string();
+            assert!(
+                e.contains("sync.partner_reach_ms") && e.contains(why) && !e.contains('\n'),
                 "{e}"
             );
         }

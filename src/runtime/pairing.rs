@@ -56,6 +56,11 @@ pub struct SyncConfig {
     /// at the latest at the end of the wait only if something calls [`Synchronizer::tick`]
     /// then ([`Synchronizer::due_ns`] says when); without ticks, at the next frame's arrival.
     pub partner_wait_ns: Option<u64>,
+    /// How far (capture time) from a depth frame the colour frame it pairs with at the end of
+    /// its partner wait may have been taken; `None`: the tolerance. One colour frame interval
+    /// pairs a depth frame whose nearer partner is still to come with the one taken before
+    /// it: every pose keeps its paws, seen up to an interval earlier.
+    pub partner_reach_ns: Option<u64>,
 }
 
 impl Default for SyncConfig {
@@ -66,6 +71,7 @@ impl Default for SyncConfig {
             max_wait_ns: DEFAULT_MAX_WAIT_NS,
             color_latency_ns: 0,
             partner_wait_ns: None,
+            partner_reach_ns: None,
         }
     }
 }
@@ -425,6 +431,12 @@ impl Synchronizer {
         if !self.admit(Role::Color, stamp, out) {
             return;
         }
+        // Depth frames whose partner wait ended before this frame arrived are decided without
+        // it, as ticks would have decided them live: a replay of the recorded stamps pairs as
+        // the live run did.
+        if self.config.partner_wait_ns.is_some() {
+            self.tick(stamp.host_ns, out);
+        }
         if let Some(last) = self.last_color {
             self.color_intervals.push_back(per_step(last, stamp));
             if self.color_intervals.len() > COLOR_INTERVALS {
@@ -509,10 +521,21 @@ impl Synchronizer {
         self.color_clock.host_time(stamp) - self.config.color_latency_ns
     }
 
+    /// The widest capture-time difference of a pair decided at the end of the partner wait
+    /// ([`SyncConfig::partner_reach_ns`], at least the tolerance `tol`).
+    fn reach_ns(&self, tol: i64) -> i64 {
+        match (self.config.partner_wait_ns, self.config.partner_reach_ns) {
+            (Some(_), Some(reach)) => tol.max(reach as i64),
+            _ => tol,
+        }
+    }
+
     /// Decides the oldest pending depth frames whose partner cannot change any more, and
     /// releases the colour frames no pending or future depth frame can claim.
     fn decide(&mut self, out: &mut Vec<SyncOutput>, end: bool) {
         let tol = self.tolerance_ns() as i64;
+        // Colour frames this old may still pair at the end of a partner wait.
+        let keep = self.reach_ns(tol);
         while let Some(d) = self.depth.front() {
             let td = self.depth_clock.host_time(d.stamp);
             // Colour frames come in capture order: once one taken at or after this depth frame
@@ -540,8 +563,9 @@ impl Synchronizer {
                 break;
             };
             // Colour frames too old for this depth frame are too old for every later one.
+            let reach = if unproven { keep } else { tol };
             while let Some(c) = self.color.front() {
-                if self.color_time(c.stamp) < td - tol {
+                if self.color_time(c.stamp) < td - keep {
                     if let Some(c) = self.color.pop_front() {
                         out.push(SyncOutput::UnpairedColor(c.frame));
                     }
@@ -554,7 +578,7 @@ impl Synchronizer {
                 .iter()
                 .enumerate()
                 .map(|(i, c)| (i, self.color_time(c.stamp) - td))
-                .filter(|(_, dt)| dt.abs() <= tol)
+                .filter(|(_, dt)| dt.abs() <= reach)
                 .min_by_key(|(_, dt)| dt.abs());
             let (color, skew_ns) = match best {
                 Some((i, dt)) => {
@@ -588,11 +612,11 @@ impl Synchronizer {
             }));
         }
         // Without pending depth frames, colour frames older than the newest depth frame by
-        // more than the tolerance can never pair.
+        // more than the tolerance (or the partner reach) can never pair.
         if self.depth.is_empty() {
             if let Some(nd) = self.newest_depth {
                 while let Some(c) = self.color.front() {
-                    if self.color_time(c.stamp) < nd - tol {
+                    if self.color_time(c.stamp) < nd - keep {
                         if let Some(c) = self.color.pop_front() {
                             out.push(SyncOutput::UnpairedColor(c.frame));
                         }
@@ -1012,8 +1036,19 @@ mod tests {
     /// tick at the end of its wait (`None`: still not decided); and the unproven decisions at
     /// the end.
     fn decided_with_wait(lead_ms: u64, wait_ms: Option<u64>, frames: u64) -> (Vec<Decided>, (u64, u64)) {
+        decided_with_reach(lead_ms, wait_ms, None, frames)
+    }
+
+    /// As [`decided_with_wait`], with a partner reach of `reach_ms` (`None`: the tolerance).
+    fn decided_with_reach(
+        lead_ms: u64,
+        wait_ms: Option<u64>,
+        reach_ms: Option<u64>,
+        frames: u64,
+    ) -> (Vec<Decided>, (u64, u64)) {
         let mut sync = Synchronizer::new(SyncConfig {
             partner_wait_ns: wait_ms.map(|w| w * 1_000_000),
+            partner_reach_ns: reach_ms.map(|r| r * 1_000_000),
             ..SyncConfig::default()
         });
         let ms = 1_000_000;
@@ -1087,6 +1122,26 @@ mod tests {
         // A wait of 0: never waits for a later colour frame.
         let (now, _) = decided_with_wait(16, Some(0), 20);
         assert!(each_on_arrival(&now, 1), "{now:?}");
+    }
+
+    #[test]
+    fn with_a_partner_reach_the_colour_frame_taken_before_pairs_at_the_end_of_the_wait() {
+        // 20 ms: the frame before is out of the tolerance and the nearer one still to come.
+        // Reaching a colour frame interval, the frame before pairs at the end of the wait
+        // (unproven, counted) instead of none.
+        let (late, unproven) = decided_with_reach(20, Some(3), Some(34), 20);
+        assert!(
+            late.iter().enumerate().all(|(k, d)| *d == (None, Some(Some(k as u64)))),
+            "{late:?}"
+        );
+        assert_eq!(unproven, (20, 0));
+        // Farther than the reach: depth-only still.
+        let (far, unproven) = decided_with_reach(20, Some(3), Some(18), 20);
+        assert!(far.iter().all(|d| *d == (None, Some(None))), "{far:?}");
+        assert_eq!(unproven, (0, 20));
+        // Without a partner wait the reach changes nothing: the nearest partner is waited for.
+        let (exact, _) = decided_with_reach(20, None, Some(34), 20);
+        assert_eq!(exact, decided_with_wait(20, None, 20).0);
     }
 
     #[test]

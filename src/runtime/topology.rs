@@ -231,13 +231,8 @@ impl Topology<'_> {
         let end_to_end = Arc::new(Histogram::default());
         let branches = (processing.is_some(), recorder.is_some());
         let (tee, mut edge_stats, frames, recorded) = Tee::declare(edges.capture, branches);
-        // The partner wait is told the time by the host clock: live cameras only, so that a
-        // replay (on its own clock) pairs with the nearest and is the same every time.
+        // A partner wait ends by the host clock live; a replay's stamps are of another clock.
         let live = matches!(sources, Sources::Cameras { .. });
-        let sync = SyncConfig {
-            partner_wait_ns: sync.partner_wait_ns.filter(|_| live),
-            ..sync
-        };
         let (capture, color, epochs) = sources.declare(sync.color)?;
         for thread in capture {
             thread.spawn(&mut runner, &tee, &acct).map_err(threads)?;
@@ -249,6 +244,7 @@ impl Topology<'_> {
         };
         if let (Some(p), Some(frames)) = (processing, frames) {
             let sync = SyncStage::new(sync, Arc::clone(&acct), epochs);
+            let sync = if live { sync } else { sync.replaying() };
             let chain = Chain::head(&mut runner, edges.stage, p.workers(), sync, frames);
             edge_stats.extend(declare_processing(chain, p, Arc::clone(&end_to_end)).map_err(threads)?);
         }

@@ -24,6 +24,9 @@ pub struct SyncStage {
     outputs: Vec<SyncOutput>,
     /// The synchroniser's unproven decisions already counted (paired, depth-only).
     unproven: (u64, u64),
+    /// Whether the frames' host stamps are this machine's clock, which then tells the end of
+    /// a partner wait between frames ([`SyncStage::replaying`]: not).
+    live_clock: bool,
 }
 
 impl SyncStage {
@@ -35,6 +38,17 @@ impl SyncStage {
             seen_epochs: [0; 2],
             outputs: Vec::new(),
             unproven: (0, 0),
+            live_clock: true,
+        }
+    }
+
+    /// For recorded frames, whose host stamps are of the recording's clock: a partner wait
+    /// ends by the stamps of the frames that follow (as the live run's ticks ended it), never
+    /// by this machine's clock.
+    pub fn replaying(self) -> Self {
+        Self {
+            live_clock: false,
+            ..self
         }
     }
 
@@ -106,7 +120,7 @@ impl FlatMap for SyncStage {
     }
 
     fn due_ns(&self) -> Option<u64> {
-        self.sync.due_ns()
+        self.sync.due_ns().filter(|_| self.live_clock)
     }
 
     fn tick(&mut self, now_ns: u64, out: &mut Vec<FramePair>) -> Result<(), StageError> {
