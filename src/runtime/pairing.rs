@@ -18,7 +18,10 @@
 //! Live, a partner wait ([`SyncConfig::partner_wait_ns`]) bounds that: at its end (told by
 //! [`Synchronizer::tick`], or at once when the next colour frame cannot arrive before it) the
 //! depth frame pairs with the nearest colour frame in within the tolerance, or goes out
-//! depth-only, and the decision is counted as unproven. Replay pairs exactly.
+//! depth-only, and the decision is counted as unproven; a partner reach
+//! ([`SyncConfig::partner_reach_ns`]) widens what it may pair with then. Replay pairs exactly,
+//! unless told to pair as a live run with a partner wait did (the frames' own arrivals then
+//! end the wait: [`Synchronizer::push_color`] first decides what ended before it).
 //!
 //! Faults a rig meets: frames held up and delivered in a burst (a USB or network stall) are
 //! paired by the model but do not fit it (a frame 20 ms later than the model expects, and its
@@ -59,7 +62,8 @@ pub struct SyncConfig {
     /// How far (capture time) from a depth frame the colour frame it pairs with at the end of
     /// its partner wait may have been taken; `None`: the tolerance. One colour frame interval
     /// pairs a depth frame whose nearer partner is still to come with the one taken before
-    /// it: every pose keeps its paws, seen up to an interval earlier.
+    /// it, when that one is not paired yet (a colour frame pairs once): its paws are then
+    /// seen up to an interval earlier.
     pub partner_reach_ns: Option<u64>,
 }
 
