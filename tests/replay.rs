@@ -764,3 +764,59 @@ fn issue64_the_pose_predicted_ahead_is_written_beside_and_nearer_where_the_mouse
         assert!(!done.status.success() && stderr.contains("lead"), "{args:?}: {stderr}");
     }
 }
+
+#[test]
+fn issue64_a_replay_pairs_as_a_live_partner_wait_and_reach_would_the_same_every_time() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Colour frames taken a few ms after the depth frames (the renders' phase), arriving
+    // about when the depth frames do.
+    let session = tmp.path().join("session");
+    synth(&session, 4.0, 123, true);
+    let replay_with = |name: &str, args: &[&str]| -> serde_json::Value {
+        let out = tmp.path().join(name);
+        let done = mousepose()
+            .args([
+                "replay",
+                session.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "--json",
+            ])
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
+        serde_json::from_slice(&done.stdout).unwrap()
+    };
+    let paired = |s: &serde_json::Value| s["cameras"]["depth"]["paired"].as_u64().unwrap();
+    let unproven = |s: &serde_json::Value| s["cameras"]["depth"]["paired_unproven"].as_u64().unwrap_or(0);
+    let nearest = replay_with("nearest", &[]);
+    let at_once = replay_with("at-once", &["--partner-wait", "0"]);
+    let waited = replay_with("wait", &["--partner-wait", "3"]);
+    let reached = replay_with("reach", &["--partner-wait", "3", "--partner-reach", "34"]);
+    let again = replay_with("again", &["--partner-wait", "3", "--partner-reach", "34"]);
+    // Not waiting for the later frame costs pairs, waiting 3 ms (ended by the recorded
+    // arrivals, not this machine's clock) fewer; reaching back to the frame before wins
+    // more back, decided at the end of the wait; and two replays pair alike.
+    let counts = [&nearest, &at_once, &waited, &reached].map(paired);
+    eprintln!("paired: nearest, no wait, 3 ms, 3 ms reaching 34 ms: {counts:?}");
+    assert!(paired(&at_once) < paired(&waited), "{counts:?}");
+    assert!(paired(&waited) < paired(&nearest), "{counts:?}");
+    assert!(paired(&reached) > paired(&waited), "{counts:?}");
+    assert!(unproven(&reached) > 0, "{reached}");
+    assert_eq!(paired(&again), paired(&reached));
+    let poses = |name: &str| std::fs::read_to_string(tmp.path().join(name).join("poses.csv")).unwrap();
+    assert_eq!(poses("again"), poses("reach"));
+    // A reach needs a wait.
+    let done = mousepose()
+        .args([
+            "replay",
+            session.to_str().unwrap(),
+            "--out",
+            tmp.path().join("x").to_str().unwrap(),
+        ])
+        .args(["--partner-reach", "34"])
+        .output()
+        .unwrap();
+    assert!(!done.status.success());
+}

@@ -89,9 +89,10 @@ impl PoseRecord {
     /// [`velocity`](Self::velocity) moved on by it for that long, every other joint as placed.
     pub fn predicted(&self, lead_s: f64) -> Pose {
         let mut pose = self.pose.clone();
-        for joint in crate::core::skeleton::Joint::MAIN_BODY {
-            if let Some(v) = self.velocity(joint) {
-                pose.joint_mut(joint).position_mm += v * lead_s;
+        let velocities = self.velocities.iter().flat_map(|v| v.iter());
+        for (joint, v) in crate::core::skeleton::Joint::MAIN_BODY.iter().zip(velocities) {
+            if let Some(v) = v {
+                pose.joint_mut(*joint).position_mm += v * lead_s;
             }
         }
         pose
