@@ -22,6 +22,11 @@
 //! ([`TrackerConfig::tail_confirm_frames`]) unless the tail is seen at its other end: a real
 //! Kinect's tail reads broken and goes unseen for a few frames, and the tail's stump left on
 //! the body makes its rear look like a head meanwhile.
+//! A tail turns a confident heading at once only when it has shown it is one: seen at the same
+//! end in the frame before too, and not reaching a wall or the arena's rim
+//! ([`Headings::tail_at_wall`]), where bedding and clutter lie: a strand of it joined to the
+//! snout reads as a tail for a frame or a few. A tail at a wall counts as one cue among the
+//! others ([`TrackerConfig::wall_tail_clip`]) and holds no heading longer.
 //! It decides each frame when it comes (no look-ahead, so the daemon's latency does not
 //! grow), and its margin between the two hypotheses is the frame's orientation confidence.
 
@@ -60,6 +65,10 @@ pub struct Headings {
     /// leaves the body at its `+axis` end, positive at its `-axis` end, 0 when no tail is
     /// seen (`vision::tail`).
     pub tail: f64,
+    /// The tail seen reaches within [`WALL_REACH_MM`](crate::vision::segment::WALL_REACH_MM)
+    /// of a wall or the arena's rim, where clutter lies: it may be a strand of clutter joined
+    /// to the mouse, and counts at most [`TrackerConfig::wall_tail_clip`].
+    pub tail_at_wall: bool,
     /// The main-body joints with the head toward `+axis` (`[0]`) and toward `-axis` (`[1]`).
     pub joints: [BodyJoints; 2],
     /// Tail base to neck of the forest's own estimate (world x, y), when it has both.
@@ -99,8 +108,15 @@ pub struct TrackerConfig {
     /// recursion alone).
     pub confirm_frames: u32,
     /// A visible tail's log-odds at least this large, on the side the recursion prefers,
-    /// turns a confident heading at once (where a tail is seen, its end has been right).
+    /// turns a confident heading at once (where a tail is seen, its end has been right), when
+    /// it has shown it is a tail: seen at the same end in the frame before too, and not
+    /// reaching a wall (clutter at the rim joined to the head reads as a tail for a frame or
+    /// a few, and stays where it lies).
     pub decisive_tail: f64,
+    /// A tail that reaches a wall or the arena's rim ([`Headings::tail_at_wall`]) counts at
+    /// most this (log-odds, either way), as one cue among the others, and never holds a
+    /// heading longer.
+    pub wall_tail_clip: f64,
     /// A confident heading that a seen tail backed within the last `tail_memory_ns` turns only
     /// after `tail_confirm_frames` frames of evidence against it (instead of
     /// `confirm_frames`), unless a tail is seen at its other end: a real tail reads broken and
@@ -126,6 +142,7 @@ impl Default for TrackerConfig {
             confident_margin: 3.0,
             confirm_frames: 3,
             decisive_tail: 8.0,
+            wall_tail_clip: 4.0,
             tail_memory_ns: 500_000_000,
             tail_confirm_frames: 9,
         }
@@ -135,7 +152,17 @@ impl Default for TrackerConfig {
 impl TrackerConfig {
     /// The log-odds of the head toward `+axis` from the frame alone (votes, shape and tail).
     pub fn frame_evidence(&self, h: &Headings) -> f64 {
-        self.votes_weight * h.votes + self.shape_weight * self.shape(h) + self.tail_weight * h.tail
+        self.votes_weight * h.votes + self.shape_weight * self.shape(h) + self.tail(h)
+    }
+
+    /// The frame's tail log-odds, weighted; clipped for a tail at a wall.
+    fn tail(&self, h: &Headings) -> f64 {
+        let tail = self.tail_weight * h.tail;
+        if h.tail_at_wall {
+            tail.clamp(-self.wall_tail_clip, self.wall_tail_clip)
+        } else {
+            tail
+        }
     }
 
     /// The frame's body-shape log-odds, clipped.
@@ -183,6 +210,9 @@ pub struct Tracker {
     held: Hold,
     /// When a seen tail last backed the held heading.
     tail_backed_ns: Option<u64>,
+    /// The hypothesis (index as [`Decision::chosen`]) a tail away from the walls put the head
+    /// at in the previous frame, when one was seen there.
+    tail_end: Option<usize>,
 }
 
 /// The heading the tracker gives, and how sure it has been of it.
@@ -217,6 +247,7 @@ impl Tracker {
                 if axis.dot(&h.axis) < 0.0 {
                     self.cost.swap(0, 1);
                     self.held.chosen = 1 - self.held.chosen;
+                    self.tail_end = self.tail_end.map(|end| 1 - end);
                 }
                 let dt = (time_ns - t) as f64 * 1e-9;
                 let velocity = (h.centre - centre) / dt;
@@ -232,6 +263,7 @@ impl Tracker {
                 self.cost = [0.0; 2];
                 self.held = Hold::default();
                 self.tail_backed_ns = None;
+                self.tail_end = None;
                 evidence += still_extra;
             }
         }
@@ -248,11 +280,15 @@ impl Tracker {
         self.cost = [next[0] - low, next[1] - low];
         let preferred = usize::from(self.cost[1] < self.cost[0]);
         let margin = (self.cost[0] - self.cost[1]).abs();
-        let decisive_tail = c.tail_weight * h.tail * if preferred == 0 { 1.0 } else { -1.0 } >= c.decisive_tail;
+        // A tail away from the walls, and the end it puts the head at.
+        let trusted = (h.tail != 0.0 && !h.tail_at_wall).then_some(usize::from(h.tail < 0.0));
+        let persisted = trusted.is_some() && trusted == self.tail_end;
+        self.tail_end = trusted;
+        let decisive_tail = persisted && c.tail(h) * if preferred == 0 { 1.0 } else { -1.0 } >= c.decisive_tail;
         // The frame's own evidence (travel included) for the held end or against it.
         let held_sign = if self.held.chosen == 0 { 1.0 } else { -1.0 };
         let toward_held = evidence * held_sign > 0.0;
-        if h.tail * held_sign > 0.0 {
+        if trusted == Some(self.held.chosen) {
             self.tail_backed_ns = Some(time_ns);
         }
         let confirm = if self.tail_backed_ns.is_some_and(|t| time_ns - t <= c.tail_memory_ns) {
@@ -349,6 +385,7 @@ mod tests {
             votes,
             shape: 0.0,
             tail: 0.0,
+            tail_at_wall: false,
             joints: [[JointEstimate::default(); Joint::MAIN_BODY.len()]; 2],
             forest_heading: None,
             body: Vec::new(),
@@ -497,20 +534,39 @@ mod tests {
         assert_eq!(turned, Some(2));
     }
 
+    /// Issue 64: a tail seen at the held head's end turns a confident heading only once it has
+    /// shown it is one: seen there two frames running, away from the walls. One frame of it is
+    /// one contrary frame.
     #[test]
-    fn a_seen_tail_turns_a_confident_heading_at_once() {
+    fn a_tail_seen_two_frames_running_turns_a_confident_heading_and_one_frame_does_not() {
         let axis = Vector2::new(1.0, 0.0);
-        let mut tracker = Tracker::new(TrackerConfig::default());
-        let k = settled(&mut tracker, axis);
-        let mut h = contrary(k, axis);
-        h.tail = -16.0;
-        assert_eq!(tracker.update(k * 33_000_000, &h).chosen, 1);
+        let run = |frames: &[(f64, bool)]| {
+            let mut tracker = Tracker::new(TrackerConfig::default());
+            let start = settled(&mut tracker, axis);
+            (start..)
+                .zip(frames)
+                .map(|(k, &(tail, tail_at_wall))| {
+                    let mut h = frame(axis, Point2::new(k as f64 * 4.0, 0.0), 0.3);
+                    (h.tail, h.tail_at_wall) = (tail, tail_at_wall);
+                    tracker.update(k * 33_000_000, &h).chosen
+                })
+                .collect::<Vec<_>>()
+        };
+        let away = (-16.0, false);
+        let none = (0.0, false);
+        assert_eq!(run(&[away, away, away]), [0, 1, 1]);
+        assert_eq!(run(&[away, none, none, none, none]), [0; 5]);
+        assert_eq!(run(&[away, none, away, none, away, none]), [0; 6]);
+        // At the wall (clutter at the rim touching the snout): one cue among the others.
+        let wall = (-16.0, true);
+        assert_eq!(run(&[wall; 5]), [0; 5]);
+        assert_eq!(run(&[wall, wall, none, none]), [0; 4]);
     }
 
     /// Issue 49: a real Kinect's tail, seen behind a confident heading, goes unseen for a few
     /// frames (broken by noise), while the body's shape with the tail's stump left on it points
     /// firmly the wrong way: the heading holds for `tail_confirm_frames - 1` such frames; it
-    /// turns at once when the tail is seen at the other end, and after `confirm_frames` once
+    /// turns when the tail is seen at the other end two frames running, and after `confirm_frames` once
     /// the tail has not been seen for `tail_memory_ns`.
     #[test]
     fn a_tail_seen_a_moment_ago_holds_the_heading_while_it_goes_unseen() {
@@ -530,15 +586,20 @@ mod tests {
         let confirm = u64::from(c.tail_confirm_frames);
         assert_eq!(held_for(confirm - 1), None);
         assert_eq!(held_for(confirm + 5), Some(confirm as usize - 1));
-        // The tail seen at the other end turns it at once.
+        // The tail seen at the other end turns it once it is seen there again.
         let mut tracker = Tracker::new(c);
         let k = settled(&mut tracker, axis);
         let mut h = frame(axis, Point2::new(k as f64 * 4.0, 0.0), 0.3);
         h.tail = 16.0;
         tracker.update(k * 33_000_000, &h);
-        let mut h = contrary(k + 1, axis);
-        h.tail = -16.0;
-        assert_eq!(tracker.update((k + 1) * 33_000_000, &h).chosen, 1);
+        let chosen: Vec<usize> = (k + 1..k + 3)
+            .map(|k| {
+                let mut h = contrary(k, axis);
+                h.tail = -16.0;
+                tracker.update(k * 33_000_000, &h).chosen
+            })
+            .collect();
+        assert_eq!(chosen, [0, 1]);
         // A tail seen long ago holds it no longer than `confirm_frames`.
         let mut tracker = Tracker::new(c);
         let k = settled(&mut tracker, axis);

@@ -75,13 +75,7 @@ pub struct Tail {
 /// searched at the scale of its mean depth; with the millimetres a pixel spans there.
 pub fn find_tail_in(image: &DepthImage, fx: f64) -> Option<(Tail, f64)> {
     let mask: Vec<bool> = (0..image.depth.len()).map(|k| image.mouse_depth(k).is_some()).collect();
-    let (sum, n) = image
-        .on_mouse()
-        .fold((0.0, 0usize), |(s, n), (_, d)| (s + f64::from(d), n + 1));
-    if n == 0 || fx <= 0.0 {
-        return None;
-    }
-    let mm_per_px = sum / n as f64 / fx;
+    let mm_per_px = mm_per_px(image, fx)?;
     let r = image.region;
     let tail = find_tail(
         &mask,
@@ -90,6 +84,15 @@ pub fn find_tail_in(image: &DepthImage, fx: f64) -> Option<(Tail, f64)> {
         &TailSearch::at_scale(mm_per_px),
     )?;
     Some((tail, mm_per_px))
+}
+
+/// The millimetres a pixel spans at the mean depth of the segmented mouse of `image`, seen by
+/// a camera of focal length `fx` pixels (`None` without a reading or a focal length).
+pub fn mm_per_px(image: &DepthImage, fx: f64) -> Option<f64> {
+    let (sum, n) = image
+        .on_mouse()
+        .fold((0.0, 0usize), |(s, n), (_, d)| (s + f64::from(d), n + 1));
+    (n > 0 && fx > 0.0).then(|| sum / n as f64 / fx)
 }
 
 /// The tail of the mouse in `mask` (`width` x `height`, row-major), or `None` when no thin
@@ -168,6 +171,23 @@ pub fn find_tail(mask: &[bool], width: usize, height: usize, search: &TailSearch
         }
     }
     best
+}
+
+/// The thin pieces of the mouse in `mask` (what the opening of `search` takes off its body, in
+/// 8-connected pieces) that touch a pixel set in `wall` (row-major over the mask): strands of
+/// clutter lying at a wall or the arena's rim joined to the mouse, which are not its body.
+pub fn thin_pieces_at(mask: &[bool], wall: &[bool], width: usize, height: usize, search: &TailSearch) -> Vec<usize> {
+    if width == 0 || mask.len() != width * height || wall.len() != mask.len() {
+        return Vec::new();
+    }
+    let body = largest_part(&opening(mask, width, height, search.radius_px), width, height);
+    let pieces = removed_pieces(mask, &body, width, height);
+    pieces
+        .pieces
+        .iter()
+        .filter(|piece| piece.iter().any(|&i| wall[pieces.pixels[i]]))
+        .flat_map(|piece| piece.iter().map(|&i| pieces.pixels[i]))
+        .collect()
 }
 
 /// The 8 neighbours of pixel `k` of a `width` x `height` image, with the length of the step

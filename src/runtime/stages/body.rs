@@ -12,7 +12,7 @@ use crate::vision::body_shape::{ShapeModel, aligned};
 use crate::vision::forest::depth::{BODY_JOINTS, DepthImage};
 use crate::vision::forest::infer::{BodyEstimator, JointGuess, Oriented, Pixel, sample_pixels};
 use crate::vision::orientation::{self, BodyJoints, Headings, TrackerConfig};
-use crate::vision::tail::{Tail, find_tail_in};
+use crate::vision::tail::{Tail, TailSearch, find_tail_in, mm_per_px, thin_pieces_at};
 use nalgebra::{Point2, Point3, Vector2, Vector3};
 
 /// Pixels of the mouse run through the forest per frame in the pipeline, at most. Fewer than
@@ -38,8 +38,11 @@ pub struct BodyStage {
     budget: usize,
     pixels: Vec<Pixel>,
     mask: Vec<bool>,
-    /// The region's pixels that are a tail found as one.
-    tail: Vec<bool>,
+    /// The region's pixels left out of the body: a tail found as one, and the thin pieces
+    /// joined to the mouse at a wall or the arena's rim (clutter, `vision::segment::walls`).
+    left_out: Vec<bool>,
+    /// The region's pixels near a wall ([`crate::vision::segment::Mouse::wall`]).
+    wall: Vec<bool>,
     crop: Vec<u16>,
     points: Vec<Point3<f64>>,
 }
@@ -56,23 +59,24 @@ impl BodyStage {
             budget: budget.max(1),
             pixels: Vec::new(),
             mask: Vec::new(),
-            tail: Vec::new(),
+            left_out: Vec::new(),
+            wall: Vec::new(),
             crop: Vec::new(),
             points: Vec::new(),
         }
     }
 
-    /// Puts every mouse pixel of `image` that reads and is not on its tail into `self.points`,
-    /// in the world frame.
+    /// Puts every mouse pixel of `image` that reads and is not left out (its tail, clutter at a
+    /// wall) into `self.points`, in the world frame.
     fn body_points(&mut self, image: &DepthImage) {
         let r = image.region;
         let (intrinsics, world) = (&self.camera.intrinsics, &self.camera.world_from_camera);
-        let tail = &self.tail;
+        let left_out = &self.left_out;
         self.points.clear();
         self.points.extend(
             image
                 .on_mouse()
-                .filter(|(k, _)| !tail.get(*k).copied().unwrap_or(false))
+                .filter(|(k, _)| !left_out.get(*k).copied().unwrap_or(false))
                 .map(|(k, d)| {
                     let pixel = Point2::new(
                         f64::from(r.x0) + (k % r.width as usize) as f64,
@@ -95,16 +99,28 @@ impl BodyStage {
         aligned(&self.points).map_or(0.0, |a| model.log_odds(&a.features) * a.axis.dot(axis))
     }
 
-    /// Looks for a visible tail on the mouse of `image`, marks its pixels in `self.tail`, and
-    /// returns it with the millimetres a pixel spans at the mouse.
-    fn find_tail(&mut self, image: &DepthImage) -> Option<(Tail, f64)> {
-        self.tail.clear();
-        self.tail.resize(image.depth.len(), false);
-        let found = find_tail_in(image, self.camera.intrinsics.fx)?;
-        for &k in &found.0.pixels {
-            self.tail[k] = true;
+    /// Looks for a visible tail on the mouse of `image`, marks its pixels in `self.left_out`
+    /// with the thin pieces joined to the mouse where it lies near a wall (`wall`, over the
+    /// region), and returns the tail with the millimetres a pixel spans at the mouse.
+    fn find_tail(&mut self, image: &DepthImage, wall: &[u8]) -> Option<(Tail, f64)> {
+        self.left_out.clear();
+        self.left_out.resize(image.depth.len(), false);
+        let found = find_tail_in(image, self.camera.intrinsics.fx);
+        for &k in found.iter().flat_map(|(tail, _)| &tail.pixels) {
+            self.left_out[k] = true;
         }
-        Some(found)
+        if wall.len() == self.mask.len() && wall.iter().any(|&w| w != 0) {
+            if let Some(scale) = mm_per_px(image, self.camera.intrinsics.fx) {
+                self.wall.clear();
+                self.wall.extend(wall.iter().map(|&w| w != 0));
+                let r = image.region;
+                let search = TailSearch::at_scale(scale);
+                for k in thin_pieces_at(&self.mask, &self.wall, r.width as usize, r.height as usize, &search) {
+                    self.left_out[k] = true;
+                }
+            }
+        }
+        found
     }
 
     /// A visible tail's log-odds that the head lies toward `+axis` of `headings` (see
@@ -156,6 +172,7 @@ impl BodyStage {
             votes: f64::from(oriented.votes),
             shape: 0.0,
             tail: 0.0,
+            tail_at_wall: false,
             joints: oriented.ahead.each_ref().map(to_world),
             forest_heading: orientation::heading(&to_world(&oriented.raw)),
             body: Vec::new(),
@@ -203,12 +220,16 @@ impl Map for BodyStage {
             self.mask.extend(mouse.mask.iter().map(|&m| m != 0));
             if self.crop.len() == self.mask.len() {
                 let image = DepthImage::from_mask(r, &self.crop, &self.mask);
-                let tail = self.find_tail(&image);
+                let tail = self.find_tail(&image, &mouse.wall);
                 sample_pixels(&image, self.budget, &mut self.pixels);
                 let up = (self.camera.world_from_camera.rotation.inverse() * Vector3::z()).cast::<f32>();
-                let oriented =
-                    self.estimator
-                        .estimate_oriented(&image, &self.pixels, &self.camera.intrinsics, &up, &self.tail);
+                let oriented = self.estimator.estimate_oriented(
+                    &image,
+                    &self.pixels,
+                    &self.camera.intrinsics,
+                    &up,
+                    &self.left_out,
+                );
                 let mut headings = self.headings(&oriented);
                 self.body_points(&image);
                 headings.shape = self.shape(&headings.axis);
@@ -217,6 +238,7 @@ impl Map for BodyStage {
                 headings.body = std::mem::replace(&mut self.points, next);
                 if let Some((tail, mm_per_px)) = &tail {
                     headings.tail = self.tail_evidence(&image, tail, *mm_per_px, &headings);
+                    headings.tail_at_wall = tail.pixels.iter().any(|&k| mouse.wall.get(k).is_some_and(|&w| w != 0));
                 }
                 let alone = TrackerConfig::default().frame_evidence(&headings) < 0.0;
                 for (joint, estimate) in Joint::MAIN_BODY.iter().zip(headings.joints[usize::from(alone)]) {

@@ -383,10 +383,11 @@ impl BodyEstimator {
     /// across the centre, scored by the votes near it. Last, the joints off the mouse are
     /// judged ([`judge_placement`]): a tail tip off it is `None`.
     ///
-    /// `tail` marks the region's pixels that are a tail found as one
-    /// (`vision::tail::find_tail`; empty when none is): they vote like every other
-    /// pixel, but the long axis and its centre are the body's alone, as a long tail would
-    /// swing them toward itself.
+    /// `tail` marks the region's pixels left out of the body: a tail found as one
+    /// (`vision::tail::find_tail`) and thin pieces of clutter joined to the mouse at a wall
+    /// (`vision::tail::thin_pieces_at`); empty when there are none. They vote like every other
+    /// pixel, but the long axis and its centre are the body's alone, as a long tail or a strand
+    /// of bedding would swing them toward itself.
     pub fn estimate_oriented(
         &mut self,
         image: &DepthImage,

@@ -164,6 +164,7 @@ impl SegmenterConfig {
             world_from_camera: None,
             lo: vec![0; n],
             hi_strong: vec![0; n],
+            near_wall: Vec::new(),
             scratch: Scratch {
                 strong: vec![0; n],
                 jump: vec![0; n],

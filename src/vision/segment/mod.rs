@@ -39,7 +39,8 @@
 //! This file holds the front, [`Segmenter`], with its errors, the buffers it reuses and the
 //! checks of what it is given. The rest is one job a file: `config` (the settings, and a
 //! segmenter built from them), `background` (the empty-cage model), `arena` (where the mouse
-//! can be: the flat region the mouse is seen on, or a given mask), `activity` (the
+//! can be: the flat region the mouse is seen on, or a given mask), `walls` (the pixels near
+//! the cage's walls and the arena's rim, where clutter lies), `activity` (the
 //! mouse-sized things that moved in the frames the background is made of), `floor` (the floor
 //! plane fitted inside it), `mask` (steps 1 to 4: the strong mask, the densest tiles, depth jumps, the
 //! floor's noise, the largest component and its growth) and `mouse` (steps 5 and 6: the mask
@@ -54,6 +55,7 @@ mod floor;
 mod mask;
 mod mouse;
 mod picture;
+mod walls;
 
 pub use activity::{ArenaCheck, MOUSE_MAX_AREA_MM2};
 pub use arena::ARENA_MARGIN_MM;
@@ -62,6 +64,7 @@ pub use config::SegmenterConfig;
 pub use floor::FloorPlane;
 pub use mouse::{Mouse, PoseFrame};
 pub use picture::{PICTURE_HEIGHT_MM, caption, frame_picture, height_picture};
+pub use walls::{WALL_HEIGHT_MM, WALL_REACH_MM};
 
 use crate::core::frame::DepthFrame;
 use crate::core::image::Region;
@@ -131,6 +134,8 @@ pub struct Segmenter {
     /// least 1, so no reading is never foreground).
     lo: Vec<u16>,
     hi_strong: Vec<u16>,
+    /// Per background pixel: 1 within [`walls::WALL_REACH_MM`] of a wall or the arena's rim.
+    near_wall: Vec<u8>,
     scratch: Scratch,
 }
 
@@ -201,6 +206,16 @@ impl Segmenter {
             *lo = to_u16(z_at(a, cfg.max_height_mm).ceil()).max(1);
             *hs = to_u16(hi);
         }
+        let bg = &self.background;
+        let reach_px = (WALL_REACH_MM * bg.intrinsics.fx / bg.floor.camera_height_mm().max(1.0)).ceil();
+        self.near_wall = walls::near_walls(
+            &bg.depth,
+            &bg.rays,
+            &bg.arena,
+            &bg.floor,
+            bg.region.width as usize,
+            reach_px.max(1.0) as usize,
+        );
     }
 
     /// Segments a full depth frame.

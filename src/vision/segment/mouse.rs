@@ -59,6 +59,9 @@ pub struct Mouse {
     pub area_mm2: f64,
     /// Mean height of the mask's readings above the floor (mm).
     pub mean_height_mm: f64,
+    /// 1 where a pixel of `region` lies within [`super::WALL_REACH_MM`] of the cage's walls,
+    /// something fixed on its floor or the arena's rim (clutter gathers there), row-major.
+    pub wall: Vec<u8>,
 }
 
 impl fmt::Debug for Mouse {
@@ -213,6 +216,12 @@ impl Segmenter {
             }
         }
         let n_points = sums.points.len() as f64;
+        let wall = (0..lb.bh)
+            .flat_map(|y| {
+                let at = (g.oy + b.y0 + y) * g.bg_w + g.ox + b.x0;
+                self.near_wall[at..at + lb.bw].iter().copied()
+            })
+            .collect();
         Ok(Some(Mouse {
             region: Region {
                 x0: region.x0 + b.x0 as u32,
@@ -220,6 +229,7 @@ impl Segmenter {
                 width: lb.bw as u32,
                 height: lb.bh as u32,
             },
+            wall,
             mask: sums.mask,
             pixel_count: sums.pixel_count,
             points_mm: sums.points,
