@@ -65,9 +65,9 @@ pub struct Headings {
     /// leaves the body at its `+axis` end, positive at its `-axis` end, 0 when no tail is
     /// seen (`vision::tail`).
     pub tail: f64,
-    /// The tail seen reaches within [`WALL_REACH_MM`](crate::vision::segment::WALL_REACH_MM)
-    /// of a wall or the arena's rim, where clutter lies: it may be a strand of clutter joined
-    /// to the mouse, and counts at most [`TrackerConfig::wall_tail_clip`].
+    /// The tail seen reaches within the segmenter's `WALL_REACH_MM` of a wall or the arena's
+    /// rim, where clutter lies: it may be a strand of clutter joined to the mouse, and counts
+    /// at most [`TrackerConfig::wall_tail_clip`].
     pub tail_at_wall: bool,
     /// The main-body joints with the head toward `+axis` (`[0]`) and toward `-axis` (`[1]`).
     pub joints: [BodyJoints; 2],
