@@ -16,6 +16,9 @@ packages=(
   ffmpeg
   # the live pose stream (ZeroMQ PUB, linked to Debian's libzmq through pkg-config)
   libzmq3-dev
+  # sessions' compressed records (zstd, linked to Debian's libzstd through pkg-config: the
+  # copy the crate would build of it is half a minute of every build from scratch)
+  libzstd-dev
   # label files kept as HDF5 (DeepLabCut's .h5, SLEAP's .slp), linked through pkg-config
   libhdf5-dev
   # the soak through faults (scripts/soak): its own ext4 file system, filled at once, and

@@ -7,12 +7,11 @@ use mousepose::vision::paws::cascade::Cascade;
 use mousepose::vision::paws::detect::scan_like_opencv;
 use mousepose::vision::paws::grey::GreyImage;
 use mousepose::vision::paws::{PawDetector, xml};
-use opencv::core::{Rect, Size, Vector};
-use opencv::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+use std::process::Command;
 
 const FACE: &str = "/usr/share/opencv4/haarcascades/haarcascade_frontalface_default.xml";
 
@@ -52,23 +51,55 @@ fn images(seed: u64, n: usize, width: usize, height: usize) -> Vec<GreyImage> {
         .collect()
 }
 
-/// OpenCV's raw windows at scale 1 (`minNeighbors = 0`, min = max size = the window).
-fn opencv_windows(path: &Path, c: &Cascade, img: &GreyImage) -> BTreeSet<(u32, u32)> {
-    opencv::core::set_use_opencl(false).expect("opencl off");
-    let mut cc = opencv::objdetect::CascadeClassifier::new(path.to_str().expect("utf-8 path")).expect("loads");
-    assert!(!cc.empty().expect("empty"), "OpenCV could not read {path:?}");
-    let mat = Mat::new_rows_cols_with_data(img.height as i32, img.width as i32, &img.data).expect("mat");
-    let mut found = Vector::<Rect>::new();
-    let win = Size::new(c.width as i32, c.height as i32);
-    cc.detect_multi_scale(&mat, &mut found, 1.1, 0, 0, win, win)
-        .expect("detects");
-    found
-        .iter()
-        .map(|r| {
-            assert_eq!((r.width, r.height), (win.width, win.height));
-            (r.x as u32, r.y as u32)
-        })
-        .collect()
+/// OpenCV's own `CascadeClassifier`, through a small program built against the system's
+/// OpenCV (`tests/paws/opencv_windows.cpp`): the crate's build then needs no bindings of
+/// objdetect, nor of dnn, which objdetect pulls in (a minute of the suite's build).
+struct OpenCv {
+    dir: tempfile::TempDir,
+    program: PathBuf,
+}
+
+impl OpenCv {
+    fn build() -> Self {
+        let dir = tempfile::tempdir().expect("tmp");
+        let program = dir.path().join("opencv_windows");
+        let flags = Command::new("pkg-config")
+            .args(["--cflags", "opencv4"])
+            .output()
+            .expect("pkg-config");
+        assert!(flags.status.success(), "pkg-config knows no opencv4");
+        let out = Command::new("c++")
+            .args(["-O1", "-o"])
+            .arg(&program)
+            .arg(repo_root().join("tests/paws/opencv_windows.cpp"))
+            .args(String::from_utf8_lossy(&flags.stdout).split_whitespace())
+            .args(["-lopencv_objdetect", "-lopencv_imgcodecs", "-lopencv_core"])
+            .output()
+            .expect("a C++ compiler (c++)");
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        Self { dir, program }
+    }
+
+    /// Its raw windows at scale 1 (`minNeighbors = 0`, min = max size = the window), per image.
+    fn windows(&self, path: &Path, c: &Cascade, images: &[GreyImage]) -> Vec<BTreeSet<(u32, u32)>> {
+        let mut run = Command::new(&self.program);
+        run.arg(path).arg(c.width.to_string()).arg(c.height.to_string());
+        for (k, img) in images.iter().enumerate() {
+            let pgm = self.dir.path().join(format!("{k}.pgm"));
+            let mut bytes = format!("P5\n{} {}\n255\n", img.width, img.height).into_bytes();
+            bytes.extend_from_slice(&img.data);
+            std::fs::write(&pgm, bytes).expect("writes");
+            run.arg(pgm);
+        }
+        let out = run.output().expect("runs");
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let mut found = vec![BTreeSet::new(); images.len()];
+        for line in String::from_utf8_lossy(&out.stdout).lines() {
+            let v: Vec<u32> = line.split(' ').map(|n| n.parse().expect("a number")).collect();
+            found[v[0] as usize].insert((v[1], v[2]));
+        }
+        found
+    }
 }
 
 fn ours(c: &Cascade, img: &GreyImage) -> BTreeSet<(u32, u32)> {
@@ -78,10 +109,10 @@ fn ours(c: &Cascade, img: &GreyImage) -> BTreeSet<(u32, u32)> {
 }
 
 /// Compares both on `images`, returning the total number of windows found.
-fn agree(path: &Path, c: &Cascade, images: &[GreyImage]) -> usize {
+fn agree(opencv: &OpenCv, path: &Path, c: &Cascade, images: &[GreyImage]) -> usize {
     let mut total = 0;
-    for (k, img) in images.iter().enumerate() {
-        let (a, b) = (opencv_windows(path, c, img), ours(c, img));
+    for (k, (img, a)) in images.iter().zip(opencv.windows(path, c, images)).enumerate() {
+        let b = ours(c, img);
         assert_eq!(
             a,
             b,
@@ -99,8 +130,9 @@ fn debian_face_cascade_agrees_with_opencv_through_our_writer() {
     let full = xml::load(Path::new(FACE)).expect("Debian's face cascade reads");
     assert_eq!((full.width, full.height, full.stages.len()), (24, 24, 25));
     let imgs = images(7, 4, 160, 120);
+    let opencv = OpenCv::build();
     // The full cascade as Debian ships it.
-    agree(Path::new(FACE), &full, &imgs);
+    agree(&opencv, Path::new(FACE), &full, &imgs);
     // Its first stages, written by our writer and read by OpenCV: many raw windows.
     let tmp = tempfile::tempdir().expect("tmp");
     for n in [1, 3] {
@@ -108,7 +140,7 @@ fn debian_face_cascade_agrees_with_opencv_through_our_writer() {
         let path = tmp.path().join(format!("face{n}.xml"));
         xml::save(&cut, &path).expect("writes");
         assert_eq!(xml::load(&path).expect("reads back"), cut);
-        let found = agree(&path, &cut, &imgs);
+        let found = agree(&opencv, &path, &cut, &imgs);
         assert!(found > 50, "only {found} windows with {n} stages");
     }
 }
@@ -131,14 +163,15 @@ fn debian_cascades_read_or_are_refused_clearly() {
 fn paw_cascade_agrees_with_opencv() {
     let c = xml::load(&paw_model()).expect("the committed paw model reads");
     let imgs = images(11, 3, 200, 140);
+    let opencv = OpenCv::build();
     // Its first stage accepts many windows; the whole cascade few.
     let tmp = tempfile::tempdir().expect("tmp");
     let path = tmp.path().join("paws1.xml");
     let cut = c.truncated(1);
     xml::save(&cut, &path).expect("writes");
-    let found = agree(&path, &cut, &imgs);
+    let found = agree(&opencv, &path, &cut, &imgs);
     assert!(found > 10, "only {found} windows");
-    agree(&paw_model(), &c, &imgs);
+    agree(&opencv, &paw_model(), &c, &imgs);
     // And on a grey bottom view at the canonical scale.
     let ds = mousepose::synth::dataset::DatasetSpec {
         count: 1,
@@ -160,8 +193,8 @@ fn paw_cascade_agrees_with_opencv() {
         &mut greyer,
     )
     .expect("grey");
-    agree(&path, &cut, std::slice::from_ref(&grey));
-    agree(&paw_model(), &c, std::slice::from_ref(&grey));
+    agree(&opencv, &path, &cut, std::slice::from_ref(&grey));
+    agree(&opencv, &paw_model(), &c, std::slice::from_ref(&grey));
 }
 
 #[test]
