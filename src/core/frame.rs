@@ -163,4 +163,8 @@ pub struct FramePair {
     /// Colour time minus depth time on the depth device's clock, after offset and drift
     /// correction; 0 without colour.
     pub skew_ns: i64,
+    /// Whether `color` was the depth frame before's partner too: with a partner wait and
+    /// reach (`[sync] partner_reach_ms`), no other colour frame was left in reach, so its paws
+    /// are seen again, as they were up to a frame earlier.
+    pub color_again: bool,
 }

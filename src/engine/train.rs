@@ -409,6 +409,11 @@ pub fn fit_paw_net(
     progress: &dyn Progress,
 ) -> Result<crate::vision::paws::net::PawNet> {
     let material = training::paws_net::real_views(views, which);
+    // candle makes and frees a tensor of up to a few megabytes per operation, which glibc
+    // would map and unmap each time: two thirds of the training's time went to the kernel
+    // faulting those pages in again. Kept, they are reused (the same network, three times
+    // sooner); this process only trains and ends.
+    glibc_malloc::keep_freed(32 << 20, 512 << 20);
     progress.start("iterations", params.iterations as u64);
     let net = training::paws_net::train(&material, renders, params, &mut |done, loss| {
         progress.advance(1);

@@ -26,6 +26,10 @@ pub struct CameraCounters {
     /// nearest colour frame in, or depth-only while a partner could still have come.
     pub paired_unproven: AtomicU64,
     pub unpaired_unproven: AtomicU64,
+    /// Depth frames among `paired` whose colour frame had paired with the depth frame before
+    /// (`[sync] partner_reach_ms`: none other in reach at the end of the wait), counted
+    /// `paired` once, with that depth frame.
+    pub paired_again: AtomicU64,
     /// Delivered but not processed, by reason.
     pub dropped: Mutex<BTreeMap<String, u64>>,
     /// Written by the recorder.
@@ -90,6 +94,8 @@ pub struct CameraSummary {
     /// known to be with the nearest partner.
     pub paired_unproven: u64,
     pub unpaired_unproven: u64,
+    /// Of `paired` (depth frames): with the colour frame the depth frame before had.
+    pub paired_again: u64,
     pub dropped: BTreeMap<String, u64>,
     pub dropped_total: u64,
     pub lost_before_capture: BTreeMap<String, u64>,
@@ -120,6 +126,7 @@ impl CameraSummary {
             unpaired: c.unpaired.load(Ordering::Relaxed),
             paired_unproven: c.paired_unproven.load(Ordering::Relaxed),
             unpaired_unproven: c.unpaired_unproven.load(Ordering::Relaxed),
+            paired_again: c.paired_again.load(Ordering::Relaxed),
             dropped_total: dropped.values().sum(),
             dropped,
             lost_before_capture: read(&c.lost),

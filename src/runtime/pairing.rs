@@ -62,8 +62,8 @@ pub struct SyncConfig {
     /// How far (capture time) from a depth frame the colour frame it pairs with at the end of
     /// its partner wait may have been taken; `None`: the tolerance. One colour frame interval
     /// pairs a depth frame whose nearer partner is still to come with the one taken before
-    /// it, when that one is not paired yet (a colour frame pairs once): its paws are then
-    /// seen up to an interval earlier.
+    /// it: its paws are then seen up to an interval earlier. When that one went to the depth
+    /// frame before, it pairs again if in reach ([`FramePair::color_again`]).
     pub partner_reach_ns: Option<u64>,
 }
 
@@ -319,6 +319,10 @@ pub struct Synchronizer {
     /// nearest partner was known: paired with the nearest colour frame in, or depth-only.
     unproven_paired: u64,
     unproven_unpaired: u64,
+    /// The colour frame the last depth frame with a partner paired with, and its capture time
+    /// (host time line): with a partner reach, a depth frame left without one at the end of
+    /// its wait pairs with it again when it is in reach.
+    last_partner: Option<(Arc<ColorFrame>, i64)>,
 }
 
 impl Synchronizer {
@@ -345,6 +349,7 @@ impl Synchronizer {
             now_ns: 0,
             unproven_paired: 0,
             unproven_unpaired: 0,
+            last_partner: None,
         }
     }
 
@@ -507,6 +512,7 @@ impl Synchronizer {
                 // A reopened camera may run at another rate.
                 self.color_intervals.clear();
                 self.color_interval_ns = None;
+                self.last_partner = None;
             }
         }
     }
@@ -584,7 +590,7 @@ impl Synchronizer {
                 .map(|(i, c)| (i, self.color_time(c.stamp) - td))
                 .filter(|(_, dt)| dt.abs() <= reach)
                 .min_by_key(|(_, dt)| dt.abs());
-            let (color, skew_ns) = match best {
+            let (mut color, mut skew_ns) = match best {
                 Some((i, dt)) => {
                     // Frames before the chosen one can no longer pair with anything.
                     for _ in 0..i {
@@ -596,6 +602,21 @@ impl Synchronizer {
                 }
                 None => (None, 0),
             };
+            let mut color_again = false;
+            match &color {
+                Some(c) => self.last_partner = Some((Arc::clone(c), td + skew_ns)),
+                // With a partner wait and reach, a depth frame left without a partner (at the
+                // end of its wait, or none within the tolerance to come): the last partner,
+                // again, if in reach (a colour frame that paired once is no longer pending).
+                None if self.config.partner_wait_ns.is_some() && self.config.partner_reach_ns.is_some() => {
+                    if let Some((c, tc)) = self.last_partner.as_ref().filter(|(_, tc)| (tc - td).abs() <= keep) {
+                        color = Some(Arc::clone(c));
+                        skew_ns = tc - td;
+                        color_again = true;
+                    }
+                }
+                None => {}
+            }
             if unproven {
                 if color.is_some() {
                     self.unproven_paired += 1;
@@ -613,6 +634,7 @@ impl Synchronizer {
                 depth: d.frame,
                 color,
                 skew_ns,
+                color_again,
             }));
         }
         // Without pending depth frames, colour frames older than the newest depth frame by
@@ -1146,6 +1168,70 @@ mod tests {
         // Without a partner wait the reach changes nothing: the nearest partner is waited for.
         let (exact, _) = decided_with_reach(20, None, Some(34), 20);
         assert_eq!(exact, decided_with_wait(20, None, 20).0);
+    }
+
+    #[test]
+    fn with_a_partner_reach_a_depth_frame_left_without_one_pairs_again_with_the_last_partner() {
+        let ms = 1_000_000;
+        // Colour at half the depth rate, each frame taken 5 ms before an even depth frame: at
+        // the end of an odd one's wait no colour frame is pending (the one before paired with
+        // the even frame, the next is still to come). (depth seq, colour seq, again, skew ms).
+        let run = |reach_ms: u64| {
+            let mut sync = Synchronizer::new(SyncConfig {
+                partner_wait_ns: Some(3 * ms),
+                partner_reach_ns: Some(reach_ms * ms),
+                ..SyncConfig::default()
+            });
+            let mut pairs = Vec::new();
+            for k in 0..20u64 {
+                let t = 1_000 * ms + k * 33 * ms;
+                let mut out = Vec::new();
+                if k % 2 == 0 {
+                    let c = Stamp {
+                        seq: k / 2,
+                        device_ns: t - 5 * ms,
+                        host_ns: t - 3 * ms,
+                    };
+                    sync.push_color(color(c), &mut out);
+                }
+                let d = Stamp {
+                    seq: k,
+                    device_ns: t,
+                    host_ns: t + 2 * ms,
+                };
+                sync.push_depth(depth(d), &mut out);
+                sync.tick(t + 5 * ms, &mut out);
+                pairs.extend(out.into_iter().filter_map(|o| match o {
+                    SyncOutput::Pair(p) => Some((
+                        p.depth.stamp.seq,
+                        p.color.map(|c| c.stamp.seq),
+                        p.color_again,
+                        (p.skew_ns as f64 / ms as f64).round() as i64,
+                    )),
+                    _ => None,
+                }));
+            }
+            pairs
+        };
+        // Reaching 50 ms: each odd depth frame pairs with the colour frame 38 ms before it,
+        // again, and says so.
+        let again = run(50);
+        assert_eq!(again.len(), 20);
+        for &(k, c, is_again, skew) in &again {
+            if k % 2 == 0 {
+                assert_eq!((c, is_again, skew), (Some(k / 2), false, -5), "{again:?}");
+            } else {
+                assert_eq!((c, is_again, skew), (Some(k / 2), true, -38), "{again:?}");
+            }
+        }
+        // Reaching 34 ms, that frame is out of reach: depth-only.
+        let short = run(34);
+        assert!(
+            short
+                .iter()
+                .all(|&(k, c, is_again, _)| !is_again && c.is_some() == (k % 2 == 0)),
+            "{short:?}"
+        );
     }
 
     #[test]

@@ -34,7 +34,7 @@ use crate::runtime::pipeline::{
     Chain, EdgeConfig, EdgeSender, Histogram, LatencySummary, NamedEdge, PipelineError, Runner, Sent, Shutdown, Sink,
     StageError, StageReport, StageStats, edge,
 };
-use crate::runtime::recording::session::SessionPlayer;
+use crate::runtime::recording::session::{SessionPlayer, recorded_reopens};
 use crate::runtime::recording::{Recording, RecordingError};
 use crate::runtime::sink::session::{FrameRecorder, write_frames};
 use crate::runtime::stages::Fused;
@@ -42,7 +42,7 @@ use crate::runtime::stages::body::{BodyStage, PIPELINE_VOTE_BUDGET};
 use crate::runtime::stages::fuse::FuseStage;
 use crate::runtime::stages::paws::PawStage;
 use crate::runtime::stages::segment::SegmentStage;
-use crate::runtime::stages::sync::SyncStage;
+use crate::runtime::stages::sync::{Reopens, SyncStage};
 use crate::runtime::stream::lsl::LslHandle;
 use crate::runtime::stream::{Published, StreamHandle};
 use crate::vision::fusion::{Fuser, FusionConfig};
@@ -233,7 +233,7 @@ impl Topology<'_> {
         let (tee, mut edge_stats, frames, recorded) = Tee::declare(edges.capture, branches);
         // A partner wait ends by the host clock live; a replay's stamps are of another clock.
         let live = matches!(sources, Sources::Cameras { .. });
-        let (capture, color, epochs) = sources.declare(sync.color)?;
+        let (capture, color, reopens) = sources.declare(sync.color)?;
         for thread in capture {
             thread.spawn(&mut runner, &tee, &acct).map_err(threads)?;
         }
@@ -243,7 +243,7 @@ impl Topology<'_> {
             None => None,
         };
         if let (Some(p), Some(frames)) = (processing, frames) {
-            let sync = SyncStage::new(sync, Arc::clone(&acct), epochs);
+            let sync = SyncStage::new(sync, Arc::clone(&acct), reopens);
             let sync = if live { sync } else { sync.replaying() };
             let chain = Chain::head(&mut runner, edges.stage, p.workers(), sync, frames);
             edge_stats.extend(declare_processing(chain, p, Arc::clone(&end_to_end)).map_err(threads)?);
@@ -268,14 +268,14 @@ impl Topology<'_> {
 impl Sources<'_> {
     /// The capture threads these sources run, whether a colour camera feeds the pipeline, and
     /// the cameras' reopen counters. `color` is the configuration's word for a recording.
-    fn declare(self, color: bool) -> Result<(Vec<CaptureThread>, bool, Epochs), RecordingError> {
+    fn declare(self, color: bool) -> Result<(Vec<CaptureThread>, bool, Reopens), RecordingError> {
         Ok(match self {
             Sources::Cameras { depth, color, epochs } => {
                 let clock = Clock::Monotonic;
                 let has_color = color.is_some();
                 let mut threads = vec![CaptureThread::new("cap-depth", depth, &clock, Captured::depth)];
                 threads.extend(color.map(|c| CaptureThread::new("cap-color", c, &clock, Captured::color)));
-                (threads, has_color, epochs)
+                (threads, has_color, Reopens::live(epochs))
             }
             Sources::Recording {
                 recording,
@@ -283,16 +283,21 @@ impl Sources<'_> {
                 depth_size,
             } => {
                 let clock = Clock::replay(0);
-                let thread = match recording {
+                let (thread, reopens) = match recording {
                     Recording::Session(reader) => {
                         let player = SessionPlayer::new(reader, realtime).with_depth_size(depth_size);
-                        CaptureThread::new("replay", player, &clock, |c| c)
+                        let thread = CaptureThread::new("replay", player, &clock, |c| c);
+                        (thread, recorded_reopens(reader))
                     }
                     Recording::Moseq { config, .. } => {
-                        CaptureThread::new("replay", Recording::moseq(config)?, &clock, Captured::depth)
+                        let player = Recording::moseq(config)?;
+                        (
+                            CaptureThread::new("replay", player, &clock, Captured::depth),
+                            Reopens::none(),
+                        )
                     }
                 };
-                (vec![thread], color, Epochs::default())
+                (vec![thread], color, reopens)
             }
         })
     }

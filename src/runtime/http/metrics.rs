@@ -168,6 +168,12 @@ impl Families<'_> {
             &per_camera(&|c| c.unpaired_unproven),
         )?;
         self.counter(
+            "mousepose_frames_paired_again",
+            "Depth frames paired at the end of the partner wait with the colour frame the depth frame before had, none other in the partner reach ([sync] partner_reach_ms; of frames_paired).",
+            None,
+            &per_camera(&|c| c.paired_again),
+        )?;
+        self.counter(
             "mousepose_frames_dropped",
             "Frames delivered but not processed, by reason.",
             None,

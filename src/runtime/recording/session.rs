@@ -7,8 +7,10 @@
 use crate::core::frame::{ColorFrame, DepthFrame};
 use crate::io::session::meta::{CameraMeta, CameraRole};
 use crate::io::session::{ColorFrames, DepthFrames};
-use crate::io::session::{SessionError, SessionReader};
+use crate::io::session::{SessionError, SessionEvent, SessionReader};
 use crate::runtime::capture::{CaptureError, Captured, Clock, FrameSource};
+use crate::runtime::stages::sync::Reopens;
+use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -128,6 +130,34 @@ impl SessionPlayer {
             source: Box::new(e),
         }
     }
+}
+
+/// The camera reopens a session's events tell of, for the synchroniser to learn each camera's
+/// clock again at the frame where it started again, as the live run did. Events that cannot
+/// be read are said and go without: the synchroniser then learns a restarted clock late,
+/// refusing the frames between (counted, `time_not_increasing`).
+pub fn recorded_reopens(reader: &SessionReader) -> Reopens {
+    let events = reader.events().unwrap_or_else(|e| {
+        tracing::warn!(
+            "cannot read the events of {:?}, so reopened cameras are not known: {e}",
+            reader.dir()
+        );
+        Vec::new()
+    });
+    let mut at: [VecDeque<u64>; 2] = Default::default();
+    for event in events {
+        if let SessionEvent::CameraReconnected { host_ns, role } = event {
+            let slot = match role {
+                CameraRole::Depth => 0,
+                CameraRole::Color => 1,
+            };
+            at[slot].push_back(host_ns);
+        }
+    }
+    for times in &mut at {
+        times.make_contiguous().sort_unstable();
+    }
+    Reopens::Recorded(at)
 }
 
 impl FrameSource for SessionPlayer {

@@ -1138,6 +1138,7 @@ mod tests {
             velocities: None,
         };
         let frames = FramePair {
+            color_again: false,
             depth: Arc::new(DepthFrame {
                 stamp,
                 width: 1,

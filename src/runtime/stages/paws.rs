@@ -101,6 +101,7 @@ mod tests {
                     depth: Arc::new(DepthFrame::empty(stamp, 4, 4)),
                     color: Some(Arc::new(color)),
                     skew_ns: 0,
+                    color_again: false,
                 };
                 let record = PoseRecord {
                     depth: stamp,

@@ -9,18 +9,61 @@ use crate::runtime::accounting::{Accounting, bump};
 use crate::runtime::capture::Captured;
 use crate::runtime::pairing::{Role, SyncConfig, SyncOutput, Synchronizer};
 use crate::runtime::pipeline::{FlatMap, StageError};
+use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
 use crate::runtime::capture::supervise::Epochs;
+
+/// How the synchroniser learns that a camera was reopened (its clock and counter then start
+/// again, and are learnt again).
+#[derive(Debug)]
+pub enum Reopens {
+    /// Live: the supervisors' reopen counters (depth, colour), read at each frame.
+    Live { epochs: Epochs, seen: [u64; 2] },
+    /// Replayed: per camera (depth, colour), the host times of its first frames after a
+    /// reopen, as the session's `camera_reconnected` events recorded them, earliest first.
+    /// Known before the first frame, so a reopen is learnt at its very frame, never early.
+    Recorded([VecDeque<u64>; 2]),
+}
+
+impl Reopens {
+    pub fn live(epochs: Epochs) -> Self {
+        Reopens::Live { epochs, seen: [0; 2] }
+    }
+
+    /// None: a recording whose cameras were never reopened.
+    pub fn none() -> Self {
+        Reopens::Recorded(Default::default())
+    }
+
+    /// Whether the camera in `slot` was reopened since its last frame, this one at `host_ns`.
+    fn since_last(&mut self, slot: usize, host_ns: u64) -> bool {
+        match self {
+            Reopens::Live { epochs, seen } => {
+                let epoch = epochs[slot].load(Ordering::Acquire);
+                let reopened = epoch != seen[slot];
+                seen[slot] = epoch;
+                reopened
+            }
+            Reopens::Recorded(at) => {
+                let mut reopened = false;
+                while at[slot].front().is_some_and(|&ns| ns <= host_ns) {
+                    at[slot].pop_front();
+                    reopened = true;
+                }
+                reopened
+            }
+        }
+    }
+}
 
 /// Runs a [`Synchronizer`] on the captured frames.
 #[derive(Debug)]
 pub struct SyncStage {
     sync: Synchronizer,
     acct: Arc<Accounting>,
-    epochs: Epochs,
-    seen_epochs: [u64; 2],
+    reopens: Reopens,
     outputs: Vec<SyncOutput>,
     /// The synchroniser's unproven decisions already counted (paired, depth-only).
     unproven: (u64, u64),
@@ -30,12 +73,11 @@ pub struct SyncStage {
 }
 
 impl SyncStage {
-    pub fn new(config: SyncConfig, acct: Arc<Accounting>, epochs: Epochs) -> Self {
+    pub fn new(config: SyncConfig, acct: Arc<Accounting>, reopens: Reopens) -> Self {
         Self {
             sync: Synchronizer::new(config),
             acct,
-            epochs,
-            seen_epochs: [0; 2],
+            reopens,
             outputs: Vec::new(),
             unproven: (0, 0),
             live_clock: true,
@@ -66,7 +108,11 @@ impl SyncStage {
         for o in self.outputs.drain(..) {
             match o {
                 SyncOutput::Pair(pair) => {
-                    if pair.color.is_some() {
+                    if pair.color_again {
+                        // Its colour frame was counted paired with the depth frame before.
+                        acct.depth.paired.fetch_add(1, Ordering::Relaxed);
+                        acct.depth.paired_again.fetch_add(1, Ordering::Relaxed);
+                    } else if pair.color.is_some() {
                         acct.depth.paired.fetch_add(1, Ordering::Relaxed);
                         acct.color.paired.fetch_add(1, Ordering::Relaxed);
                     } else {
@@ -95,14 +141,12 @@ impl FlatMap for SyncStage {
     const NAME: &'static str = "sync";
 
     fn process(&mut self, captured: Captured, out: &mut Vec<FramePair>) -> Result<(), StageError> {
-        let (slot, role) = match &captured {
-            Captured::Depth(_) => (0, Role::Depth),
-            Captured::Color(_) => (1, Role::Color),
+        let (slot, role, host_ns) = match &captured {
+            Captured::Depth(f) => (0, Role::Depth, f.stamp.host_ns),
+            Captured::Color(f) => (1, Role::Color, f.stamp.host_ns),
         };
         // A camera reopened since its last frame: its clock and counter start again.
-        let epoch = self.epochs[slot].load(Ordering::Acquire);
-        if epoch != self.seen_epochs[slot] {
-            self.seen_epochs[slot] = epoch;
+        if self.reopens.since_last(slot, host_ns) {
             self.sync.restart(role);
         }
         match captured {
@@ -137,12 +181,49 @@ mod tests {
 
     fn depth(seq: u64) -> Captured {
         let ns = seq * 33_000_000;
+        stamped(seq, ns, ns)
+    }
+
+    fn stamped(seq: u64, device_ns: u64, host_ns: u64) -> Captured {
         let stamp = Stamp {
             seq,
-            device_ns: ns,
-            host_ns: ns,
+            device_ns,
+            host_ns,
         };
         Captured::Depth(Arc::new(DepthFrame::empty(stamp, 1, 1)))
+    }
+
+    /// Depth-only pairs out of a recording of six frames whose camera was reopened before its
+    /// fourth, as the supervisor recorded it: the numbers go on, the device clock starts again.
+    fn replayed(reopens: Reopens) -> (usize, u64) {
+        let acct = Arc::new(Accounting::default());
+        let config = SyncConfig {
+            color: false,
+            ..SyncConfig::default()
+        };
+        let mut stage = SyncStage::new(config, Arc::clone(&acct), reopens).replaying();
+        let mut out = Vec::new();
+        for seq in 0..6 {
+            let device_ns = (seq % 3) * 33_000_000;
+            let host_ns = seq * 33_000_000 + if seq >= 3 { 2_000_000_000 } else { 0 };
+            stage.process(stamped(seq, device_ns, host_ns), &mut out).unwrap();
+        }
+        stage.finish(&mut out).unwrap();
+        let dropped = acct.depth.dropped.lock().unwrap().values().sum();
+        (out.len(), dropped)
+    }
+
+    #[test]
+    fn a_reopen_a_recording_tells_of_is_learnt_at_its_frame_and_no_frame_is_refused() {
+        let reopened_at = 3 * 33_000_000 + 2_000_000_000;
+        let told = Reopens::Recorded([VecDeque::from([reopened_at]), VecDeque::new()]);
+        assert_eq!(replayed(told), (6, 0));
+        // Untold, the restarted clock refuses frames until the synchroniser learns it again.
+        let (pairs, refused) = replayed(Reopens::none());
+        assert!(
+            refused > 0 && pairs + refused as usize == 6,
+            "{pairs} pairs, {refused} refused"
+        );
     }
 
     #[test]
@@ -153,7 +234,7 @@ mod tests {
             color: false,
             ..SyncConfig::default()
         };
-        let mut stage = SyncStage::new(config, Arc::clone(&acct), epochs.clone());
+        let mut stage = SyncStage::new(config, Arc::clone(&acct), Reopens::live(epochs.clone()));
         let mut out = Vec::new();
         for seq in 0..3 {
             stage.process(depth(seq), &mut out).unwrap();

@@ -18,7 +18,7 @@ use super::grey::{GreyImage, Greyer};
 use super::{PawDetection, PawError, WINDOW_PX};
 use crate::core::frame::ColorFrame;
 use crate::vision::forest::simd::{self, CONV_BLOCK, Kernel};
-use candle_core::{DType, Device, Module, Tensor};
+use candle_core::{DType, Device, Tensor};
 use candle_nn::{Conv2d, Conv2dConfig, VarBuilder, conv2d};
 use std::collections::HashMap;
 use std::path::Path;
@@ -92,11 +92,11 @@ impl PawNet {
     /// # Errors
     /// The input is not of that shape.
     pub fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
-        let mut x = self.convs[0].forward(x)?.relu()?.max_pool2d(NET_STRIDE)?;
+        let mut x = unfolded(&self.convs[0], x)?.relu()?.max_pool2d(NET_STRIDE)?;
         for conv in &self.convs[1..] {
-            x = conv.forward(&x)?.relu()?;
+            x = unfolded(conv, &x)?.relu()?;
         }
-        self.head.forward(&x)
+        unfolded(&self.head, &x)
     }
 
     /// Reads a weights file.
@@ -153,6 +153,39 @@ impl PawNet {
             source: std::io::Error::other(e.to_string()),
         })
     }
+}
+
+/// `conv` on `x` `(n, c, h, w)`, padded to keep its size (as every layer here is), as one
+/// matrix product: the kernel's taps are shifted views of `x` side by side, `(n, taps * c, h *
+/// w)`, and the weights `(outputs, taps * c)`. This is what training runs, forward and
+/// backward: `candle`'s own convolution on these few channels went through a dot product per
+/// output pixel, unvectorised, and took several times as long; its matrix product is `gemm`'s,
+/// vectorised for the processor it runs on.
+fn unfolded(conv: &Conv2d, x: &Tensor) -> candle_core::Result<Tensor> {
+    let (n, c, h, w) = x.dims4()?;
+    let (outputs, _, k, _) = conv.weight().dims4()?;
+    let Conv2dConfig { padding, dilation, .. } = *conv.config();
+    let columns = if k == 1 {
+        x.reshape((n, c, h * w))?
+    } else {
+        let padded = x
+            .pad_with_zeros(2, padding, padding)?
+            .pad_with_zeros(3, padding, padding)?;
+        let mut taps = Vec::with_capacity(k * k);
+        for ky in 0..k {
+            for kx in 0..k {
+                taps.push(padded.narrow(2, ky * dilation, h)?.narrow(3, kx * dilation, w)?);
+            }
+        }
+        Tensor::cat(&taps, 1)?.reshape((n, k * k * c, h * w))?
+    };
+    // `[output][input][ky][kx]` to `[output][(ky * k + kx) * c + input]`, the columns' order.
+    let weights = conv.weight().permute((0, 2, 3, 1))?.reshape((outputs, k * k * c))?;
+    let mut y = weights.broadcast_matmul(&columns)?;
+    if let Some(bias) = conv.bias() {
+        y = y.broadcast_add(&bias.reshape((1, outputs, 1))?)?;
+    }
+    y.reshape((n, outputs, h, w))
 }
 
 /// One convolution's weights, as the run-time loops read them ([`simd::ConvLayer`]).
@@ -412,6 +445,7 @@ impl NetDetector {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use candle_core::Module;
 
     #[test]
     fn peaks_are_local_maxima_refined_to_their_neighbours() {
@@ -430,6 +464,38 @@ mod tests {
             "{found:?}"
         );
         assert!(found[1].0 > 6.0 && found[1].0 < 6.5, "{found:?}");
+    }
+
+    #[test]
+    fn the_unfolded_convolution_is_candles_forward_and_backward() {
+        let vm = candle_nn::VarMap::new();
+        let vb = VarBuilder::from_varmap(&vm, DType::F32, &Device::Cpu);
+        let net = PawNet::new(&vb, 6, 0.4).unwrap();
+        let worst = |a: &Tensor, b: &Tensor| -> f32 {
+            let d = (a - b).unwrap().abs().unwrap().flatten_all().unwrap();
+            d.max(0).unwrap().to_scalar().unwrap()
+        };
+        for conv in net.convs.iter().chain([&net.head]) {
+            let c = conv.weight().dims4().unwrap().1;
+            let x = Tensor::randn(0f32, 1f32, (2, c, 13, 11), &Device::Cpu).unwrap();
+            let (ours, candles) = (unfolded(conv, &x).unwrap(), conv.forward(&x).unwrap());
+            assert_eq!(ours.dims(), candles.dims());
+            assert!(
+                worst(&ours, &candles) < 1e-5,
+                "{:?}: {}",
+                conv.config(),
+                worst(&ours, &candles)
+            );
+            // The same gradient for the weights and the bias, through a loss that weighs the
+            // outputs unequally.
+            let weigh = Tensor::randn(0f32, 1f32, ours.dims(), &Device::Cpu).unwrap();
+            let loss = |y: &Tensor| (y * &weigh).unwrap().sum_all().unwrap();
+            let (g, h) = (loss(&ours).backward().unwrap(), loss(&candles).backward().unwrap());
+            for v in [conv.weight(), conv.bias().unwrap()] {
+                let (a, b) = (g.get(v).unwrap(), h.get(v).unwrap());
+                assert!(worst(a, b) < 1e-3, "{:?}: {}", conv.config(), worst(a, b));
+            }
+        }
     }
 
     #[test]
