@@ -42,7 +42,7 @@ on_disk = {"depth": 0, "color": 0}
 replay_drops = 0
 poses_only = 0
 for chunk in chunks:
-    if sorted(p.name for p in chunk.iterdir()) == ["poses.csv", "summary.json"]:
+    if sorted(p.name for p in chunk.iterdir()) == ["poses.csv", "poses_raw.csv", "summary.json"]:
         # Its whole time the disk was full: its poses, no session (its frames not recorded).
         poses_only += 1
         continue

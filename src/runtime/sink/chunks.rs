@@ -286,6 +286,16 @@ pub struct RecorderGauges {
 /// as lost (an hour of a camera's gaps every second while the disk is full is about 3,600).
 pub const EVENTS_WAITING_MAX: usize = 4096;
 
+/// The sessions closed in a run directory: the directory (open, to tell when it is moved away
+/// or removed), its path, and their frames (depth, colour) and bytes.
+#[derive(Debug)]
+struct ClosedHere {
+    dir: std::fs::File,
+    root: PathBuf,
+    frames: [u64; 2],
+    bytes: u64,
+}
+
 /// The recorder branch of a live run: frames into the current chunk's session.
 #[derive(Debug)]
 pub struct ChunkRecorder {
@@ -312,6 +322,9 @@ pub struct ChunkRecorder {
     /// Sessions (with their chunks) that could not be closed, the disk full: closed once
     /// frames are written again, or at the end.
     unclosed: Vec<(usize, SessionWriter)>,
+    /// The sessions closed in the run directory as it is now: when it is moved away (or
+    /// removed), they went with it, as the session being written did.
+    closed_here: Option<ClosedHere>,
     /// Session events not yet written (the disk full, or no session open), oldest first:
     /// written into the current session as soon as one takes them.
     waiting: std::collections::VecDeque<SessionEvent>,
@@ -332,6 +345,7 @@ impl ChunkRecorder {
             paused: None,
             lost: Vec::new(),
             unclosed: Vec::new(),
+            closed_here: None,
             waiting: std::collections::VecDeque::new(),
             cameras,
             gauges,
@@ -480,8 +494,12 @@ impl ChunkRecorder {
     /// Closes a session; one that cannot be closed now (a full disk) is kept and closed later
     /// ([`ChunkRecorder::close_unclosed`]), so that every chunk ends closed.
     fn close_or_keep(&mut self, index: usize, mut writer: SessionWriter) -> Option<SessionSummary> {
+        let held = [writer.depth_frames(), writer.color_frames(), writer.frame_bytes()];
         match writer.close() {
-            Ok(s) => Some(s),
+            Ok(s) => {
+                self.note_closed(index, held);
+                Some(s)
+            }
             Err(e) => {
                 tracing::warn!(
                     chunk = index,
@@ -540,6 +558,9 @@ impl ChunkRecorder {
         if self.forget_gone() {
             let index = self.chunks.replace(self.index, host_ns);
             self.switch(index);
+        } else if self.writer.is_none() {
+            // No session to find gone (recording paused): the run directory may be.
+            self.forget_closed_here();
         }
     }
 
@@ -557,8 +578,64 @@ impl ChunkRecorder {
         true
     }
 
+    /// Adds a session closed in chunk `index` (its depth and colour frames, and bytes) to those
+    /// of the run directory as it is now, which is opened the first time.
+    fn note_closed(&mut self, index: usize, [depth, color, bytes]: [u64; 3]) {
+        if self.closed_here.is_none() {
+            let Some(root) = self.chunks.dir(index).parent().map(Path::to_path_buf) else {
+                return;
+            };
+            match std::fs::File::open(&root) {
+                Ok(dir) => {
+                    self.closed_here = Some(ClosedHere {
+                        dir,
+                        root,
+                        frames: [0; 2],
+                        bytes: 0,
+                    });
+                }
+                // Unseen, a move of it leaves these frames counted where they no longer are.
+                Err(e) => tracing::warn!("cannot watch the run directory {root:?} for a move: {e}"),
+            }
+        }
+        if let Some(c) = &mut self.closed_here {
+            c.frames[0] += depth;
+            c.frames[1] += color;
+            c.bytes += bytes;
+        }
+    }
+
+    /// After a session was found gone: when the run directory it was in is gone too (moved
+    /// away, or removed), so are the sessions closed in it, counted as lost after recording.
+    fn forget_closed_here(&mut self) {
+        let Some(gone) = self.closed_here.as_ref().and_then(|c| crate::io::gone(&c.dir, &c.root)) else {
+            return;
+        };
+        let Some(c) = self.closed_here.take() else {
+            return;
+        };
+        let reason = gone.reason();
+        tracing::info!(
+            depth_frames = c.frames[0],
+            color_frames = c.frames[1],
+            "the run directory went with its closed chunks too ({reason}): their frames are counted as lost after recording"
+        );
+        self.lost.extend([
+            (CameraRole::Depth, reason, c.frames[0]),
+            (CameraRole::Color, reason, c.frames[1]),
+        ]);
+        *self
+            .gauges
+            .lost_bytes
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .entry(reason)
+            .or_default() += c.bytes;
+    }
+
     /// Counts the frames of a session that is gone (and `bytes` of it that the gauges have
-    /// counted) as lost after recording, and drops it.
+    /// counted) as lost after recording, and drops it; so are the sessions closed in its run
+    /// directory, when that went with it.
     fn forget(&mut self, index: usize, w: SessionWriter, gone: crate::io::Gone, bytes: u64) {
         let (depth, color) = (w.depth_frames(), w.color_frames());
         let reason = gone.reason();
@@ -581,6 +658,7 @@ impl ChunkRecorder {
         drop(w);
         self.lost
             .extend([(CameraRole::Depth, reason, depth), (CameraRole::Color, reason, color)]);
+        self.forget_closed_here();
         *self
             .gauges
             .lost_bytes
@@ -695,6 +773,7 @@ impl crate::runtime::sink::session::FrameRecorder for ChunkRecorder {
 
     fn notice_gone(&mut self) {
         self.forget_gone();
+        self.forget_closed_here();
     }
 
     fn finish(mut self: Box<Self>) -> Result<Option<SessionSummary>, SessionError> {
