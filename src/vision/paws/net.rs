@@ -6,7 +6,9 @@
 //! convolutions (the last two dilated 2 and 4, so that a cell sees 17 mm of the glass around
 //! it: a paw and the toes, heel and floor beside it), each followed by a ReLU, and a 1x1
 //! convolution to one logit per cell. A peak whose centre lies in the box of a surer one is
-//! the same paw (its toes and its heel), dropped as the cascade drops a paw found twice. It is trained through `candle` on the CPU; the weights
+//! the same paw (its toes and its heel), dropped as the cascade drops a paw found twice. It is
+//! trained through `candle` on the CPU, each convolution one matrix product over its kernel's
+//! shifted views of the input (`unfolded`); the weights
 //! are a `safetensors` file ([`PawNet::load`]) that `mousepose train paws --net` writes. At run
 //! time the same layers run as plain loops ([`Layers`], [`crate::vision::forest::simd::conv`]: twelve
 //! output channels by eight columns held in registers, in AVX2 where the processor has it):
