@@ -620,6 +620,8 @@ const EXTERNAL: &[(&str, &[&str])] = &[
     ("roxmltree", ALL),
     // The paw network: its module, and its training.
     ("candle_core", &["vision::paws", "training::paws_net"]),
+    // glibc's allocator told to keep what candle frees, around the paw network's training.
+    ("glibc_malloc", &["engine::train"]),
     ("candle_nn", &["vision::paws", "training::paws_net"]),
     ("safe_arch", ALL),
     ("wide", ALL),
