@@ -231,8 +231,6 @@ impl Topology<'_> {
         let end_to_end = Arc::new(Histogram::default());
         let branches = (processing.is_some(), recorder.is_some());
         let (tee, mut edge_stats, frames, recorded) = Tee::declare(edges.capture, branches);
-        // A partner wait ends by the host clock live; a replay's stamps are of another clock.
-        let live = matches!(sources, Sources::Cameras { .. });
         let (capture, color, reopens) = sources.declare(sync.color)?;
         for thread in capture {
             thread.spawn(&mut runner, &tee, &acct).map_err(threads)?;
@@ -243,8 +241,9 @@ impl Topology<'_> {
             None => None,
         };
         if let (Some(p), Some(frames)) = (processing, frames) {
+            // A partner wait ends by the host clock live; a replay's stamps are of another
+            // clock (`Reopens::Recorded`).
             let sync = SyncStage::new(sync, Arc::clone(&acct), reopens);
-            let sync = if live { sync } else { sync.replaying() };
             let chain = Chain::head(&mut runner, edges.stage, p.workers(), sync, frames);
             edge_stats.extend(declare_processing(chain, p, Arc::clone(&end_to_end)).map_err(threads)?);
         }

@@ -15,15 +15,19 @@ use std::sync::atomic::Ordering;
 
 use crate::runtime::capture::supervise::Epochs;
 
-/// How the synchroniser learns that a camera was reopened (its clock and counter then start
-/// again, and are learnt again).
+/// Where the frames come from, as the synchroniser needs to know it: how it learns that a
+/// camera was reopened (its clock and counter then start again, and are learnt again), and
+/// which clock ends a partner wait.
 #[derive(Debug)]
 pub enum Reopens {
-    /// Live: the supervisors' reopen counters (depth, colour), read at each frame.
+    /// Live: the supervisors' reopen counters (depth, colour), read at each frame. The frames'
+    /// host stamps are this machine's clock, which also ends a partner wait between frames.
     Live { epochs: Epochs, seen: [u64; 2] },
     /// Replayed: per camera (depth, colour), the host times of its first frames after a
     /// reopen, as the session's `camera_reconnected` events recorded them, earliest first.
     /// Known before the first frame, so a reopen is learnt at its very frame, never early.
+    /// The host stamps are of the recording's clock: a partner wait ends by the stamps of the
+    /// frames that follow (as the live run's ticks ended it), never by this machine's clock.
     Recorded([VecDeque<u64>; 2]),
 }
 
@@ -67,9 +71,6 @@ pub struct SyncStage {
     outputs: Vec<SyncOutput>,
     /// The synchroniser's unproven decisions already counted (paired, depth-only).
     unproven: (u64, u64),
-    /// Whether the frames' host stamps are this machine's clock, which then tells the end of
-    /// a partner wait between frames ([`SyncStage::replaying`]: not).
-    live_clock: bool,
 }
 
 impl SyncStage {
@@ -80,17 +81,6 @@ impl SyncStage {
             reopens,
             outputs: Vec::new(),
             unproven: (0, 0),
-            live_clock: true,
-        }
-    }
-
-    /// For recorded frames, whose host stamps are of the recording's clock: a partner wait
-    /// ends by the stamps of the frames that follow (as the live run's ticks ended it), never
-    /// by this machine's clock.
-    pub fn replaying(self) -> Self {
-        Self {
-            live_clock: false,
-            ..self
         }
     }
 
@@ -164,7 +154,9 @@ impl FlatMap for SyncStage {
     }
 
     fn due_ns(&self) -> Option<u64> {
-        self.sync.due_ns().filter(|_| self.live_clock)
+        self.sync
+            .due_ns()
+            .filter(|_| matches!(self.reopens, Reopens::Live { .. }))
     }
 
     fn tick(&mut self, now_ns: u64, out: &mut Vec<FramePair>) -> Result<(), StageError> {
@@ -201,7 +193,7 @@ mod tests {
             color: false,
             ..SyncConfig::default()
         };
-        let mut stage = SyncStage::new(config, Arc::clone(&acct), reopens).replaying();
+        let mut stage = SyncStage::new(config, Arc::clone(&acct), reopens);
         let mut out = Vec::new();
         for seq in 0..6 {
             let device_ns = (seq % 3) * 33_000_000;
