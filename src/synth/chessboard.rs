@@ -334,7 +334,7 @@ pub fn write_chessboards(
 mod tests {
     use super::*;
     use crate::core::rng::item_rng;
-    use crate::vision::calibrate::board::{Side, grey_mat};
+    use crate::vision::calibrate::board::{GreyPicture, Side};
 
     #[test]
     fn extrinsics_views_are_found_in_physical_order() {
@@ -343,10 +343,10 @@ mod tests {
         for (camera, side) in [(&rig.depth, Side::Front), (&rig.color, Side::Back)] {
             let mut rng = item_rng(1, 2, 3);
             let img = render_view(&camera.intrinsics, &camera.camera_from_world(), &board, &mut rng);
-            let mat = grey_mat(img.width, img.height, &img.data).expect("mat");
+            let grey = GreyPicture::new(img.width, img.height, img.data.clone()).expect("picture");
             let path = Path::new("rendered");
-            let found = board.find_corners(&mat, path).expect("runs").expect("board found");
-            let ordered = board.physical_order(&found, &mat, side, path).expect("ordered");
+            let found = board.find_corners(&grey, path).expect("runs").expect("board found");
+            let ordered = board.physical_order(&found, &grey, side, path).expect("ordered");
             let mut mean = nalgebra::Vector2::zeros();
             let mut sq = 0.0;
             for (p, obj) in ordered.iter().zip(board.object_points()) {

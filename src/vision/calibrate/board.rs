@@ -11,9 +11,6 @@
 
 use crate::core::image::RgbImage;
 use nalgebra::{Point2, Point3};
-use opencv::core::{self, Mat, Point2f, Size, TermCriteria, Vector};
-use opencv::prelude::*;
-use opencv::{calib3d, imgproc};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -151,37 +148,39 @@ impl Board {
     ///
     /// # Errors
     /// OpenCV fails (not: no board found).
-    pub fn find_corners(&self, grey: &Mat, image: &Path) -> Result<Option<Vec<Point2<f64>>>, BoardError> {
-        let cv = |source: opencv::Error| BoardError::OpenCv {
+    pub fn find_corners(&self, grey: &GreyPicture, image: &Path) -> Result<Option<Vec<Point2<f64>>>, BoardError> {
+        let cv = |source: opencv_calib::Error| BoardError::OpenCv {
             image: image.to_owned(),
             source: source.into(),
         };
-        let mut corners: Vector<Point2f> = Vector::new();
-        let flags =
-            calib3d::CALIB_CB_ADAPTIVE_THRESH | calib3d::CALIB_CB_NORMALIZE_IMAGE | calib3d::CALIB_CB_FAST_CHECK;
-        let size = Size::new(self.cols as i32, self.rows as i32);
-        let found = calib3d::find_chessboard_corners(grey, size, &mut corners, flags).map_err(cv)?;
-        if !found || corners.len() != self.corner_count() {
+        let flags = opencv_calib::CALIB_CB_ADAPTIVE_THRESH
+            | opencv_calib::CALIB_CB_NORMALIZE_IMAGE
+            | opencv_calib::CALIB_CB_FAST_CHECK;
+        let found = opencv_calib::find_chessboard_corners(grey.view(), self.cols, self.rows, flags).map_err(cv)?;
+        let Some(mut corners) = found.filter(|c| c.len() == self.corner_count()) else {
             return Ok(None);
-        }
+        };
         // The refinement window: under half the smallest spacing between neighbours.
-        let pts: Vec<Point2f> = corners.to_vec();
         let mut spacing = f32::INFINITY;
-        for (k, p) in pts.iter().enumerate() {
+        for (k, p) in corners.iter().enumerate() {
             if (k + 1) % self.cols as usize != 0 {
-                spacing = spacing.min(dist(*p, pts[k + 1]));
+                spacing = spacing.min(dist(*p, corners[k + 1]));
             }
-            if k + (self.cols as usize) < pts.len() {
-                spacing = spacing.min(dist(*p, pts[k + self.cols as usize]));
+            if k + (self.cols as usize) < corners.len() {
+                spacing = spacing.min(dist(*p, corners[k + self.cols as usize]));
             }
         }
         let half = ((spacing * 0.4).floor() as i32).clamp(2, 11);
-        let criteria = TermCriteria::new(core::TermCriteria_EPS + core::TermCriteria_COUNT, 60, 1e-4).map_err(cv)?;
-        imgproc::corner_sub_pix(grey, &mut corners, Size::new(half, half), Size::new(-1, -1), criteria).map_err(cv)?;
+        let criteria = opencv_calib::TermCriteria {
+            kind: opencv_calib::TERM_EPS | opencv_calib::TERM_COUNT,
+            max_count: 60,
+            epsilon: 1e-4,
+        };
+        opencv_calib::corner_sub_pix(grey.view(), &mut corners, (half, half), (-1, -1), criteria).map_err(cv)?;
         Ok(Some(
             corners
                 .iter()
-                .map(|p| Point2::new(f64::from(p.x), f64::from(p.y)))
+                .map(|p| Point2::new(f64::from(p[0]), f64::from(p[1])))
                 .collect(),
         ))
     }
@@ -197,7 +196,7 @@ impl Board {
     pub fn physical_order(
         &self,
         detected: &[Point2<f64>],
-        grey: &Mat,
+        grey: &GreyPicture,
         side: Side,
         image: &Path,
     ) -> Result<Vec<Point2<f64>>, BoardError> {
@@ -276,13 +275,13 @@ impl Board {
     }
 }
 
-fn dist(a: Point2f, b: Point2f) -> f32 {
-    ((a.x - b.x).powi(2) + (a.y - b.y).powi(2)).sqrt()
+fn dist(a: [f32; 2], b: [f32; 2]) -> f32 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
 }
 
 /// Mean grey level in a disc; `None` when the disc is not wholly inside the image.
-fn mean_around(grey: &Mat, centre: Point2<f64>, radius: f64) -> Option<f64> {
-    let (w, h) = (f64::from(grey.cols()), f64::from(grey.rows()));
+fn mean_around(grey: &GreyPicture, centre: Point2<f64>, radius: f64) -> Option<f64> {
+    let (w, h) = (f64::from(grey.width), f64::from(grey.height));
     if centre.x - radius < 0.0 || centre.y - radius < 0.0 || centre.x + radius >= w || centre.y + radius >= h {
         return None;
     }
@@ -294,8 +293,8 @@ fn mean_around(grey: &Mat, centre: Point2<f64>, radius: f64) -> Option<f64> {
             if f64::from(dx * dx + dy * dy) > radius * radius {
                 continue;
             }
-            if let Ok(v) = grey.at_2d::<u8>(cy + dy, cx + dx) {
-                sum += f64::from(*v);
+            if let Some(v) = grey.pixel(cx + dx, cy + dy) {
+                sum += f64::from(v);
                 n += 1;
             }
         }
@@ -303,23 +302,61 @@ fn mean_around(grey: &Mat, centre: Point2<f64>, radius: f64) -> Option<f64> {
     (n > 0).then(|| sum / f64::from(n))
 }
 
+/// An 8-bit grey picture, row-major: what boards are found in.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct GreyPicture {
+    width: u32,
+    height: u32,
+    pixels: Vec<u8>,
+}
+
+impl GreyPicture {
+    /// A picture of `width * height` row-major pixels; `None` when the buffer holds another
+    /// number, or the picture is empty or wider or taller than OpenCV's `int`.
+    pub fn new(width: u32, height: u32, pixels: Vec<u8>) -> Option<Self> {
+        let fits = |n: u32| n > 0 && i32::try_from(n).is_ok();
+        let count = (width as usize).checked_mul(height as usize);
+        (fits(width) && fits(height) && count == Some(pixels.len())).then_some(Self { width, height, pixels })
+    }
+
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// The pixels, row-major.
+    pub fn pixels(&self) -> &[u8] {
+        &self.pixels
+    }
+
+    /// The pixel at column `x`, row `y`; `None` outside the picture.
+    pub fn pixel(&self, x: i32, y: i32) -> Option<u8> {
+        let x = u32::try_from(x).ok().filter(|&x| x < self.width)?;
+        let y = u32::try_from(y).ok().filter(|&y| y < self.height)?;
+        Some(self.pixels[y as usize * self.width as usize + x as usize])
+    }
+
+    /// The picture as OpenCV's calls take it.
+    pub(crate) fn view(&self) -> opencv_calib::Grey<'_> {
+        opencv_calib::Grey {
+            pixels: &self.pixels,
+            width: self.width,
+            height: self.height,
+        }
+    }
+}
+
 /// Reads an image file as 8-bit grey ([`RgbImage::read`]'s formats).
 ///
 /// # Errors
 /// [`BoardError::Unreadable`] when the file cannot be read or decoded.
-pub fn read_grey(path: &Path) -> Result<Mat, BoardError> {
+pub fn read_grey(path: &Path) -> Result<GreyPicture, BoardError> {
     let unreadable = || BoardError::Unreadable(path.to_owned());
     let picture = RgbImage::read(path).map_err(|_| unreadable())?;
-    grey_mat(picture.width, picture.height, &picture.grey()).map_err(|_| unreadable())
-}
-
-/// An 8-bit grey `Mat` from row-major pixels.
-///
-/// # Errors
-/// The buffer does not hold `width * height` pixels.
-pub fn grey_mat(width: u32, height: u32, pixels: &[u8]) -> Result<Mat, opencv::Error> {
-    let m = Mat::new_rows_cols_with_data(height as i32, width as i32, pixels)?;
-    m.try_clone()
+    GreyPicture::new(picture.width, picture.height, picture.grey()).ok_or_else(unreadable)
 }
 
 #[cfg(test)]

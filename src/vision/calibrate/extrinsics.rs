@@ -6,16 +6,12 @@
 //! below through the glass and the transparent film, mirrored. [`Board::physical_order`] maps
 //! each view's detected corners onto the same physical corners, so both poses share one frame.
 
-use super::board::{Board, Side, read_grey};
+use super::board::{Board, GreyPicture, Side, read_grey};
 use super::{CalibrationError, CameraCalibration, RigCalibration};
 use crate::core::geometry::Intrinsics;
 use crate::core::image::RgbImage;
 use crate::io::session::CameraRole;
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
-use opencv::calib3d;
-use opencv::core::{self, Mat, Point2f, Point3f, Scalar, TermCriteria, Vector};
-use opencv::imgproc;
-use opencv::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -26,8 +22,8 @@ pub enum ExtrinsicsError {
     SizeMismatch {
         role: CameraRole,
         image: PathBuf,
-        image_w: i32,
-        image_h: i32,
+        image_w: u32,
+        image_h: u32,
         intrinsics: PathBuf,
         w: u32,
         h: u32,
@@ -54,29 +50,24 @@ pub struct CameraPose {
     pub max_px: f64,
 }
 
-fn cv_err(what: &str) -> impl FnOnce(opencv::Error) -> CalibrationError + '_ {
+fn cv_err(what: &str) -> impl FnOnce(opencv_calib::Error) -> CalibrationError + '_ {
     move |source| CalibrationError::Solve {
         what: what.to_owned(),
         source: source.into(),
     }
 }
 
-fn camera_matrix(i: &Intrinsics) -> Result<Mat, CalibrationError> {
-    Mat::from_slice_2d(&[[i.fx, 0.0, i.cx], [0.0, i.fy, i.cy], [0.0, 0.0, 1.0]])
-        .map_err(cv_err("build a camera matrix"))
+/// The camera matrix `[fx 0 cx; 0 fy cy; 0 0 1]`, row-major.
+fn camera_matrix(i: &Intrinsics) -> [f64; 9] {
+    [i.fx, 0.0, i.cx, 0.0, i.fy, i.cy, 0.0, 0.0, 1.0]
 }
 
-fn distortion(i: &Intrinsics) -> Result<Mat, CalibrationError> {
-    Mat::from_slice_2d(&[i.distortion]).map_err(cv_err("build distortion coefficients"))
+fn vec3(v: [f64; 3]) -> Vector3<f64> {
+    Vector3::new(v[0], v[1], v[2])
 }
 
-fn vec3(m: &Mat) -> Result<Vector3<f64>, CalibrationError> {
-    let get = |k: i32| m.at::<f64>(k).copied().map_err(cv_err("read a pose"));
-    Ok(Vector3::new(get(0)?, get(1)?, get(2)?))
-}
-
-fn mat3(v: &Vector3<f64>) -> Result<Mat, CalibrationError> {
-    Mat::from_slice_2d(&[[v.x], [v.y], [v.z]]).map_err(cv_err("build a pose"))
+fn array3(v: &Vector3<f64>) -> [f64; 3] {
+    [v.x, v.y, v.z]
 }
 
 /// Poses a camera from corresponding world points and image points: OpenCV's iterative PnP,
@@ -96,34 +87,33 @@ pub fn solve_pose(
                 object.len(),
                 image.len()
             ),
-            source: opencv::Error::new(core::StsBadArg, "need at least 4 matching points").into(),
+            source: opencv_calib::Error {
+                operation: "solvePnP",
+                message: "need at least 4 matching points".to_owned(),
+            }
+            .into(),
         });
     }
-    let obj: Vector<Point3f> = object
-        .iter()
-        .map(|p| Point3f::new(p.x as f32, p.y as f32, p.z as f32))
-        .collect();
-    let img: Vector<Point2f> = image.iter().map(|p| Point2f::new(p.x as f32, p.y as f32)).collect();
-    let k = camera_matrix(intrinsics)?;
-    let d = distortion(intrinsics)?;
-    let mut rvec = Mat::default();
-    let mut tvec = Mat::default();
-    calib3d::solve_pnp(
-        &obj,
-        &img,
-        &k,
-        &d,
-        &mut rvec,
-        &mut tvec,
-        false,
-        calib3d::SOLVEPNP_ITERATIVE,
-    )
-    .map_err(cv_err("solve PnP"))?;
-    let criteria = TermCriteria::new(core::TermCriteria_EPS + core::TermCriteria_COUNT, 100, 1e-12)
-        .map_err(cv_err("solve PnP"))?;
-    calib3d::solve_pnp_refine_lm(&obj, &img, &k, &d, &mut rvec, &mut tvec, criteria).map_err(cv_err("refine PnP"))?;
-    let r = vec3(&rvec)?;
-    let t = vec3(&tvec)?;
+    let obj: Vec<[f32; 3]> = object.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect();
+    let img: Vec<[f32; 2]> = image.iter().map(|p| [p.x as f32, p.y as f32]).collect();
+    let k = camera_matrix(intrinsics);
+    let d = &intrinsics.distortion;
+    let pose = opencv_calib::solve_pnp(&obj, &img, &k, d, None, opencv_calib::SOLVEPNP_ITERATIVE)
+        .map_err(cv_err("solve PnP"))?
+        .ok_or_else(|| {
+            cv_err("solve PnP")(opencv_calib::Error {
+                operation: "solvePnP",
+                message: "no pose found".to_owned(),
+            })
+        })?;
+    let criteria = opencv_calib::TermCriteria {
+        kind: opencv_calib::TERM_EPS | opencv_calib::TERM_COUNT,
+        max_count: 100,
+        epsilon: 1e-12,
+    };
+    let pose = opencv_calib::solve_pnp_refine_lm(&obj, &img, &k, d, pose, criteria).map_err(cv_err("refine PnP"))?;
+    let r = vec3(pose.rvec);
+    let t = vec3(pose.tvec);
     let camera_from_world = Isometry3::from_parts(Translation3::from(t), UnitQuaternion::from_scaled_axis(r));
     let mut sq = 0.0;
     let mut max_px: f64 = 0.0;
@@ -202,8 +192,8 @@ fn pose_view(
     role: CameraRole,
 ) -> Result<(CameraPose, Vec<u8>), CalibrationError> {
     let grey = read_grey(&view.image)?;
-    let (w, h) = (grey.cols(), grey.rows());
-    if (w, h) != (view.intrinsics.width as i32, view.intrinsics.height as i32) {
+    let (w, h) = (grey.width(), grey.height());
+    if (w, h) != (view.intrinsics.width, view.intrinsics.height) {
         return Err(ExtrinsicsError::SizeMismatch {
             role,
             image: view.image.clone(),
@@ -247,46 +237,41 @@ fn pose_view(
 
 /// The grey view in colour with the board's axes drawn, three squares long, encoded as PNG.
 fn axes_png(
-    grey: &Mat,
+    grey: &GreyPicture,
     intrinsics: &Intrinsics,
     pose: &CameraPose,
     board: &Board,
 ) -> Result<Vec<u8>, CalibrationError> {
-    let mut bgr = Mat::default();
-    imgproc::cvt_color_def(grey, &mut bgr, imgproc::COLOR_GRAY2BGR).map_err(cv_err("draw the axes"))?;
     let camera_from_world = pose.world_from_camera.inverse();
-    let rvec = mat3(&camera_from_world.rotation.scaled_axis())?;
-    let tvec = mat3(&camera_from_world.translation.vector)?;
+    let axes = opencv_calib::Pose {
+        rvec: array3(&camera_from_world.rotation.scaled_axis()),
+        tvec: array3(&camera_from_world.translation.vector),
+    };
     let thickness = (intrinsics.width / 320).max(2) as i32;
-    calib3d::draw_frame_axes(
-        &mut bgr,
-        &camera_matrix(intrinsics)?,
-        &distortion(intrinsics)?,
-        &rvec,
-        &tvec,
-        (3.0 * board.square_mm) as f32,
-        thickness,
-    )
-    .map_err(cv_err("draw the axes"))?;
     // Mark corner (0, 0) so a reader sees which corner the frame starts from.
     let first = board.corner_mm(0, 0);
-    if let Some(p) = intrinsics.project(&(camera_from_world * first)) {
-        imgproc::circle(
-            &mut bgr,
-            core::Point::new(p.x.round() as i32, p.y.round() as i32),
-            thickness * 3,
-            Scalar::new(0.0, 200.0, 255.0, 0.0),
+    let mark = intrinsics
+        .project(&(camera_from_world * first))
+        .map(|p| opencv_calib::Circle {
+            centre: [p.x.round() as i32, p.y.round() as i32],
+            radius: thickness * 3,
+            colour_bgr: [0.0, 200.0, 255.0],
             thickness,
-            imgproc::LINE_AA,
-            0,
-        )
-        .map_err(cv_err("draw the axes"))?;
-    }
-    let bytes = bgr.data_bytes().map_err(cv_err("encode a PNG"))?;
+        });
+    let bgr = opencv_calib::draw_frame_axes(
+        grey.view(),
+        &camera_matrix(intrinsics),
+        &intrinsics.distortion,
+        &axes,
+        (3.0 * board.square_mm) as f32,
+        thickness,
+        mark.as_ref(),
+    )
+    .map_err(cv_err("draw the axes"))?;
     let picture = RgbImage {
-        width: u32::try_from(bgr.cols()).unwrap_or(0),
-        height: u32::try_from(bgr.rows()).unwrap_or(0),
-        data: bytes.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect(),
+        width: grey.width(),
+        height: grey.height(),
+        data: bgr.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]]).collect(),
     };
     picture.to_png().map_err(CalibrationError::Png)
 }

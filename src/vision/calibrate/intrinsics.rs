@@ -6,9 +6,6 @@ use super::board::{Board, read_grey};
 use super::storage::YamlWriter;
 use super::{CalibrationError, INTRINSICS_FORMAT_NAME, INTRINSICS_FORMAT_VERSION};
 use crate::core::geometry::Intrinsics;
-use opencv::calib3d;
-use opencv::core::{self, Mat, Point2f, Point3f, Size, TermCriteria, Vector};
-use opencv::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -25,11 +22,11 @@ pub enum IntrinsicsError {
     )]
     MixedSizes {
         first: PathBuf,
-        first_w: i32,
-        first_h: i32,
+        first_w: u32,
+        first_h: u32,
         other: PathBuf,
-        other_w: i32,
-        other_h: i32,
+        other_w: u32,
+        other_h: u32,
     },
     #[error("a {board} board was found in only {found} of {total} images, at least {needed} needed (not found in: {})", .skipped.join(", "))]
     TooFewViews {
@@ -69,7 +66,7 @@ impl IntrinsicsCalibration {
         super::write_intrinsics(&mut w, &self.intrinsics)?;
         w.real("rms", self.rms_px)?;
         if !self.per_view_errors_px.is_empty() {
-            let n = self.per_view_errors_px.len() as i32;
+            let n = self.per_view_errors_px.len();
             w.matrix("per_view_errors", n, 1, &self.per_view_errors_px)?;
         }
         if !self.views.is_empty() {
@@ -81,11 +78,7 @@ impl IntrinsicsCalibration {
     }
 }
 
-fn at(m: &impl MatTraitConst, r: i32, c: i32) -> Result<f64, CalibrationError> {
-    m.at_2d::<f64>(r, c).copied().map_err(solve_err("read the calibration"))
-}
-
-fn solve_err(what: &str) -> impl FnOnce(opencv::Error) -> CalibrationError + '_ {
+fn solve_err(what: &str) -> impl FnOnce(opencv_calib::Error) -> CalibrationError + '_ {
     move |source| CalibrationError::Solve {
         what: what.to_owned(),
         source: source.into(),
@@ -122,52 +115,37 @@ pub fn calibrate_intrinsics(images: &[PathBuf], board: &Board) -> Result<Intrins
         return Err(IntrinsicsError::NoImages.into());
     };
     let grid = board_grid(board);
-    let object_points: Vector<Vector<Point3f>> = (0..views.len()).map(|_| grid.clone()).collect();
-    let mut k = Mat::default();
-    let mut d = Mat::default();
-    let mut rvecs: Vector<Mat> = Vector::new();
-    let mut tvecs: Vector<Mat> = Vector::new();
-    let mut std_in = Mat::default();
-    let mut std_ex = Mat::default();
-    let mut per_view = Mat::default();
-    let criteria = TermCriteria::new(core::TermCriteria_COUNT + core::TermCriteria_EPS, 100, f64::EPSILON)
-        .map_err(solve_err("set up the calibration"))?;
-    let rms = calib3d::calibrate_camera_extended(
+    let object_points: Vec<Vec<[f32; 3]>> = (0..views.len()).map(|_| grid.clone()).collect();
+    let criteria = opencv_calib::TermCriteria {
+        kind: opencv_calib::TERM_COUNT | opencv_calib::TERM_EPS,
+        max_count: 100,
+        epsilon: f64::EPSILON,
+    };
+    let found = opencv_calib::calibrate_camera(
         &object_points,
         &image_points,
         size,
-        &mut k,
-        &mut d,
-        &mut rvecs,
-        &mut tvecs,
-        &mut std_in,
-        &mut std_ex,
-        &mut per_view,
-        calib3d::CALIB_FIX_K3,
+        opencv_calib::CALIB_FIX_K3,
         criteria,
     )
     .map_err(solve_err("calibrate the camera"))?;
     let mut distortion = [0.0; 5];
-    let flat = d.reshape(1, 1).map_err(solve_err("read the distortion"))?;
-    for (i, v) in distortion.iter_mut().enumerate() {
-        if (i as i32) < flat.cols() {
-            *v = at(&flat, 0, i as i32)?;
-        }
+    for (v, d) in distortion.iter_mut().zip(&found.distortion) {
+        *v = *d;
     }
-    let pv = per_view.reshape(1, 1).map_err(solve_err("read the per-view errors"))?;
-    let per_view_errors_px = (0..pv.cols()).map(|i| at(&pv, 0, i)).collect::<Result<Vec<_>, _>>()?;
+    let k = found.camera_matrix;
     Ok(IntrinsicsCalibration {
         intrinsics: Intrinsics {
-            width: size.width as u32,
-            height: size.height as u32,
-            fx: at(&k, 0, 0)?,
-            fy: at(&k, 1, 1)?,
-            cx: at(&k, 0, 2)?,
-            cy: at(&k, 1, 2)?,
+            width: size.0,
+            height: size.1,
+            fx: k[0],
+            fy: k[4],
+            cx: k[2],
+            cy: k[5],
             distortion,
         },
-        rms_px: rms,
-        per_view_errors_px,
+        rms_px: found.rms,
+        per_view_errors_px: found.per_view_errors,
         views,
         skipped,
         board: *board,
@@ -177,31 +155,31 @@ pub fn calibrate_intrinsics(images: &[PathBuf], board: &Board) -> Result<Intrins
 /// The images' views of the board: their common size (and the first image, for messages),
 /// each found board's corners and its image's name, and the images without a board.
 struct FoundViews {
-    size: Option<(PathBuf, Size)>,
-    image_points: Vector<Vector<Point2f>>,
+    size: Option<(PathBuf, (u32, u32))>,
+    image_points: Vec<Vec<[f32; 2]>>,
     views: Vec<String>,
     skipped: Vec<String>,
 }
 
 /// Finds the board in each of `images`, refusing images of different sizes.
 fn find_views(images: &[PathBuf], board: &Board) -> Result<FoundViews, CalibrationError> {
-    let mut size: Option<(PathBuf, Size)> = None;
-    let mut image_points: Vector<Vector<Point2f>> = Vector::new();
+    let mut size: Option<(PathBuf, (u32, u32))> = None;
+    let mut image_points: Vec<Vec<[f32; 2]>> = Vec::new();
     let mut views = Vec::new();
     let mut skipped = Vec::new();
     for path in images {
         let grey = read_grey(path)?;
-        let s = grey.size().map_err(solve_err("read an image size"))?;
+        let s = (grey.width(), grey.height());
         match &size {
             None => size = Some((path.clone(), s)),
             Some((first, fs)) if *fs != s => {
                 return Err(IntrinsicsError::MixedSizes {
                     first: first.clone(),
-                    first_w: fs.width,
-                    first_h: fs.height,
+                    first_w: fs.0,
+                    first_h: fs.1,
                     other: path.clone(),
-                    other_w: s.width,
-                    other_h: s.height,
+                    other_w: s.0,
+                    other_h: s.1,
                 }
                 .into());
             }
@@ -209,7 +187,7 @@ fn find_views(images: &[PathBuf], board: &Board) -> Result<FoundViews, Calibrati
         }
         match board.find_corners(&grey, path)? {
             Some(corners) => {
-                image_points.push(corners.iter().map(|p| Point2f::new(p.x as f32, p.y as f32)).collect());
+                image_points.push(corners.iter().map(|p| [p.x as f32, p.y as f32]).collect());
                 views.push(path.display().to_string());
             }
             None => skipped.push(path.display().to_string()),
@@ -224,15 +202,15 @@ fn find_views(images: &[PathBuf], board: &Board) -> Result<FoundViews, Calibrati
 }
 
 /// Any consistent planar object works for intrinsics: the detection order's own grid.
-fn board_grid(board: &Board) -> Vector<Point3f> {
+fn board_grid(board: &Board) -> Vec<[f32; 3]> {
     (0..board.rows)
         .flat_map(|j| (0..board.cols).map(move |i| (i, j)))
         .map(|(i, j)| {
-            Point3f::new(
+            [
                 (f64::from(i) * board.square_mm) as f32,
                 (f64::from(j) * board.square_mm) as f32,
                 0.0,
-            )
+            ]
         })
         .collect()
 }

@@ -128,7 +128,7 @@ impl CalibrationError {
 /// An OpenCV error shown on one line (OpenCV's own messages hold newlines); the original is
 /// kept whole in the field.
 #[derive(Debug)]
-pub struct CvError(pub opencv::Error);
+pub struct CvError(pub opencv_calib::Error);
 
 impl std::fmt::Display for CvError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -139,8 +139,8 @@ impl std::fmt::Display for CvError {
 
 impl std::error::Error for CvError {}
 
-impl From<opencv::Error> for CvError {
-    fn from(e: opencv::Error) -> Self {
+impl From<opencv_calib::Error> for CvError {
+    fn from(e: opencv_calib::Error) -> Self {
         Self(e)
     }
 }

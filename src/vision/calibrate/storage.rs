@@ -5,68 +5,69 @@
 //! renamed into place, so a crash never leaves a half-written file that looks complete.
 
 use super::CalibrationError;
-use opencv::core::{self, FileNode, FileNodeTraitConst, FileStorage, FileStorageTrait, FileStorageTraitConst, Mat};
-use opencv::prelude::*;
+use opencv_calib::{NodeKind, StorageNode, StorageReader, StorageWriter};
 use std::path::{Path, PathBuf};
 
 /// A YAML document being composed in memory.
 pub(crate) struct YamlWriter {
-    fs: FileStorage,
+    fs: StorageWriter,
     path: PathBuf,
 }
 
 impl YamlWriter {
     /// A new document destined for `path` (named in errors).
     pub(crate) fn new(path: &Path) -> Result<Self, CalibrationError> {
-        let flags = core::FileStorage_WRITE | core::FileStorage_MEMORY | core::FileStorage_FORMAT_YAML;
-        let fs = FileStorage::new(".yaml", flags, "").map_err(|e| cv(path, "compose", e))?;
+        let fs = StorageWriter::new().map_err(|e| cv(path, "compose", e))?;
         Ok(Self {
             fs,
             path: path.to_owned(),
         })
     }
 
-    fn err(&self, e: opencv::Error) -> CalibrationError {
+    fn err(&self, e: opencv_calib::Error) -> CalibrationError {
         cv(&self.path, "compose", e)
     }
 
     pub(crate) fn int(&mut self, name: &str, value: i32) -> Result<(), CalibrationError> {
-        self.fs.write_i32(name, value).map_err(|e| self.err(e))
+        self.fs.int(name, value).map_err(|e| self.err(e))
     }
 
     pub(crate) fn real(&mut self, name: &str, value: f64) -> Result<(), CalibrationError> {
-        self.fs.write_f64(name, value).map_err(|e| self.err(e))
+        self.fs.real(name, value).map_err(|e| self.err(e))
     }
 
     pub(crate) fn text(&mut self, name: &str, value: &str) -> Result<(), CalibrationError> {
-        self.fs.write_str(name, value).map_err(|e| self.err(e))
+        self.fs.text(name, value).map_err(|e| self.err(e))
     }
 
     pub(crate) fn texts(&mut self, name: &str, values: &[String]) -> Result<(), CalibrationError> {
-        let v: core::Vector<String> = values.iter().map(String::as_str).collect();
-        self.fs.write_str_vec(name, &v).map_err(|e| self.err(e))
+        self.fs.texts(name, values).map_err(|e| self.err(e))
     }
 
     /// A `rows` x `cols` matrix of doubles (`!!opencv-matrix`, row-major `data`).
-    pub(crate) fn matrix(&mut self, name: &str, rows: i32, cols: i32, data: &[f64]) -> Result<(), CalibrationError> {
-        let m = Mat::new_rows_cols_with_data(rows, cols, data).map_err(|e| self.err(e))?;
-        self.fs.write_mat(name, &m).map_err(|e| self.err(e))
+    pub(crate) fn matrix(
+        &mut self,
+        name: &str,
+        rows: usize,
+        cols: usize,
+        data: &[f64],
+    ) -> Result<(), CalibrationError> {
+        self.fs.matrix(name, rows, cols, data).map_err(|e| self.err(e))
     }
 
     pub(crate) fn begin_map(&mut self, name: &str) -> Result<(), CalibrationError> {
-        self.fs
-            .start_write_struct(name, core::FileNode_MAP, "")
-            .map_err(|e| self.err(e))
+        self.fs.begin_map(name).map_err(|e| self.err(e))
     }
 
     pub(crate) fn end_map(&mut self) -> Result<(), CalibrationError> {
-        self.fs.end_write_struct().map_err(|e| self.err(e))
+        self.fs.end_map().map_err(|e| self.err(e))
     }
 
     /// Writes the document to its path atomically.
-    pub(crate) fn finish(mut self) -> Result<(), CalibrationError> {
-        let text = self.fs.release_and_get_string().map_err(|e| self.err(e))?;
-        write_atomically(&self.path, text.as_bytes())
+    pub(crate) fn finish(self) -> Result<(), CalibrationError> {
+        let Self { fs, path } = self;
+        let text = fs.finish().map_err(|e| cv(&path, "compose", e))?;
+        write_atomically(&path, text.as_bytes())
     }
 }
 
@@ -92,7 +93,7 @@ pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), Calibrat
     result.map_err(io)
 }
 
-fn cv(path: &Path, action: &'static str, source: opencv::Error) -> CalibrationError {
+fn cv(path: &Path, action: &'static str, source: opencv_calib::Error) -> CalibrationError {
     CalibrationError::OpenCv {
         path: path.to_owned(),
         action,
@@ -105,13 +106,13 @@ const MAX_YAML_BYTES: u64 = 1 << 20;
 
 /// A parsed YAML document.
 pub(crate) struct YamlReader {
-    fs: FileStorage,
+    fs: StorageReader,
     path: PathBuf,
 }
 
 /// A node of a document with its dotted name, for error messages.
 pub(crate) struct Node<'a> {
-    node: FileNode,
+    node: StorageNode<'a>,
     name: String,
     path: &'a Path,
 }
@@ -147,9 +148,8 @@ impl YamlReader {
                 ),
             });
         }
-        let flags = core::FileStorage_READ | core::FileStorage_MEMORY | core::FileStorage_FORMAT_YAML;
-        let fs = FileStorage::new(&text, flags, "").map_err(|e| cv(path, "parse", e))?;
-        if !fs.is_opened().map_err(|e| cv(path, "parse", e))? {
+        let fs = StorageReader::from_yaml(&text).map_err(|e| cv(path, "parse", e))?;
+        if !fs.is_opened() {
             return Err(CalibrationError::Empty(path.to_owned()));
         }
         Ok(Self {
@@ -173,15 +173,19 @@ impl YamlReader {
     }
 }
 
-fn wrap<'a>(node: FileNode, name: String, path: &'a Path) -> Result<Option<Node<'a>>, CalibrationError> {
-    let missing =
-        node.is_none().map_err(|e| cv(path, "parse", e))? || node.empty().map_err(|e| cv(path, "parse", e))?;
+fn wrap<'a>(node: StorageNode<'a>, name: String, path: &'a Path) -> Result<Option<Node<'a>>, CalibrationError> {
+    let kind = node.kind().map_err(|e| cv(path, "parse", e))?;
+    let missing = kind.is_none || kind.empty;
     Ok((!missing).then_some(Node { node, name, path }))
 }
 
 impl<'a> Node<'a> {
-    fn err(&self, e: opencv::Error) -> CalibrationError {
+    fn err(&self, e: opencv_calib::Error) -> CalibrationError {
         cv(self.path, "parse", e)
+    }
+
+    fn kind(&self) -> Result<NodeKind, CalibrationError> {
+        self.node.kind().map_err(|e| self.err(e))
     }
 
     fn wrong(&self, expected: &str) -> CalibrationError {
@@ -194,7 +198,7 @@ impl<'a> Node<'a> {
 
     /// The child `name` of this map, if present.
     pub(crate) fn get(&self, name: &str) -> Result<Option<Node<'a>>, CalibrationError> {
-        if !self.node.is_map().map_err(|e| self.err(e))? {
+        if !self.kind()?.is_map {
             return Err(self.wrong("a map"));
         }
         let child = self.node.get(name).map_err(|e| self.err(e))?;
@@ -210,17 +214,18 @@ impl<'a> Node<'a> {
     }
 
     pub(crate) fn int(&self) -> Result<i32, CalibrationError> {
-        if !self.node.is_int().map_err(|e| self.err(e))? {
+        if !self.kind()?.is_int {
             return Err(self.wrong("an integer"));
         }
-        self.node.to_i32().map_err(|e| self.err(e))
+        self.node.int().map_err(|e| self.err(e))
     }
 
     pub(crate) fn real(&self) -> Result<f64, CalibrationError> {
-        if !(self.node.is_real().map_err(|e| self.err(e))? || self.node.is_int().map_err(|e| self.err(e))?) {
+        let kind = self.kind()?;
+        if !(kind.is_real || kind.is_int) {
             return Err(self.wrong("a number"));
         }
-        let v = self.node.to_f64().map_err(|e| self.err(e))?;
+        let v = self.node.real().map_err(|e| self.err(e))?;
         if !v.is_finite() {
             return Err(self.wrong("a finite number"));
         }
@@ -228,16 +233,17 @@ impl<'a> Node<'a> {
     }
 
     pub(crate) fn text(&self) -> Result<String, CalibrationError> {
-        if !self.node.is_string().map_err(|e| self.err(e))? {
+        if !self.kind()?.is_string {
             return Err(self.wrong("a string"));
         }
-        self.node.to_string().map_err(|e| self.err(e))
+        self.node.string().map_err(|e| self.err(e))
     }
 
     /// A sequence of numbers (or an `!!opencv-matrix` with one row or column).
     pub(crate) fn reals(&self) -> Result<Vec<f64>, CalibrationError> {
-        if self.node.is_seq().map_err(|e| self.err(e))? {
-            let n = self.node.size().map_err(|e| self.err(e))?;
+        let kind = self.kind()?;
+        if kind.is_seq {
+            let n = kind.size;
             let mut out = Vec::with_capacity(n);
             for i in 0..n {
                 let idx = i32::try_from(i).map_err(|_| self.wrong("a shorter sequence"))?;
@@ -259,22 +265,14 @@ impl<'a> Node<'a> {
     }
 
     fn any_matrix(&self) -> Result<(i32, i32, Vec<f64>), CalibrationError> {
-        if !self.node.is_map().map_err(|e| self.err(e))? {
+        if !self.kind()?.is_map {
             return Err(self.wrong("an !!opencv-matrix"));
         }
-        let m = self.node.mat().map_err(|e| self.err(e))?;
-        if m.empty() || m.channels() != 1 {
+        // OpenCV's matrix as doubles; none when it is empty or has more than one channel.
+        let Some(m) = self.node.matrix().map_err(|e| self.err(e))? else {
             return Err(self.wrong("an !!opencv-matrix"));
-        }
-        let mut d = Mat::default();
-        m.convert_to(&mut d, core::CV_64F, 1.0, 0.0).map_err(|e| self.err(e))?;
-        let (rows, cols) = (d.rows(), d.cols());
-        let mut data = Vec::with_capacity((rows * cols).max(0) as usize);
-        for r in 0..rows {
-            for c in 0..cols {
-                data.push(*d.at_2d::<f64>(r, c).map_err(|e| self.err(e))?);
-            }
-        }
+        };
+        let opencv_calib::Matrix { rows, cols, data } = m;
         if data.iter().any(|v| !v.is_finite()) {
             return Err(self.wrong("a matrix of finite numbers"));
         }

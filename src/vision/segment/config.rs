@@ -1,8 +1,7 @@
 //! The segmenter's settings ([`SegmenterConfig`]): their defaults, their checks, and a
 //! [`Segmenter`] built from them and a [`Background`].
 
-use super::{Background, Scratch, SegmentError, Segmenter, cv_err};
-use opencv::core::{self as cv, Mat};
+use super::{Background, Scratch, SegmentError, Segmenter};
 use serde::{Deserialize, Serialize};
 
 /// The segmenter's settings: plain data, read from a config file (missing fields take their
@@ -145,17 +144,12 @@ impl SegmenterConfig {
         Ok(())
     }
 
-    /// Checks the settings and makes a segmenter for `background`. It also tells OpenCV to
-    /// run on the calling thread only (a setting of the whole process): a pipeline stage has
-    /// one thread and OpenCV's own workers would compete with the other stages.
+    /// Checks the settings and makes a segmenter for `background`.
     ///
     /// # Errors
     /// [`SegmentError::Config`] when a setting is out of range.
     pub fn build(&self, background: Background) -> Result<Segmenter, SegmentError> {
         self.validate()?;
-        // The segmenter runs on its pipeline stage's one thread: OpenCV is not to start
-        // worker threads of its own (this setting is the process's).
-        cv::set_num_threads(1).map_err(cv_err("setNumThreads"))?;
         let n = background.region.len();
         let padded = (background.region.width as usize + 2) * (background.region.height as usize + 2);
         let mut segmenter = Segmenter {
@@ -183,9 +177,8 @@ impl SegmenterConfig {
                 column_first: Vec::new(),
                 column_last: Vec::new(),
                 branch: Vec::new(),
-                stats: Mat::default(),
-                centroids: Mat::default(),
-                core_kernel: None,
+                components: Default::default(),
+                open_tmp: Vec::new(),
             },
         };
         segmenter.background.refit_every = self.background_frames;

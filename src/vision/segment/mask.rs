@@ -1,14 +1,10 @@
 //! Steps 1 to 4 of a frame: the strong mask with its pixels counted in tiles, the box of the
 //! densest cluster of tiles, the pixels on depth jumps around it, the floor's noise, the
-//! largest strong component in the box (OpenCV), and that component grown into the tail
+//! largest strong component in the box, and that component grown into the tail
 //! (across the gaps noise cuts in a tail). What comes out is the grown mask, left in the
 //! segmenter's buffers for the last steps.
 
-use super::{
-    Background, Bounds, FloorPlane, Grid, Scratch, SegmentError, Segmenter, cv_err, mat_over, mat_over_mut, same_buffer,
-};
-use opencv::core::{self as cv, Mat, MatTraitConst};
-use opencv::imgproc;
+use super::{Background, Bounds, FloorPlane, Grid, Scratch, Segmenter};
 
 /// Side of the square tiles in which strong pixels are counted to find the mouse.
 const TILE: usize = 16;
@@ -174,32 +170,13 @@ impl Segmenter {
         (2.0 * sum / floor as f64).sqrt() as f32
     }
 
-    /// The largest 8-connected component of strong pixels inside `search` (OpenCV): its label
-    /// in `scratch.labels` (laid out over `search`), or `None` when there is none.
-    pub(super) fn largest_component(&mut self, g: &Grid, search: Bounds) -> Result<Option<i32>, SegmentError> {
+    /// The largest 8-connected component of strong pixels inside `search`: its label in
+    /// `scratch.labels` (laid out over `search`), or `None` when there is none.
+    pub(super) fn largest_component(&mut self, g: &Grid, search: Bounds) -> Option<i32> {
         let s = &mut self.scratch;
-        let full = mat_over(&s.strong, g.h, g.w)?;
-        let roi = Mat::roi(&full, search.rect()?).map_err(cv_err("Mat::roi"))?;
-        let labels_ptr = s.labels.as_ptr();
-        let mut labels = mat_over_mut(&mut s.labels, search.height(), search.width())?;
-        let count =
-            imgproc::connected_components_with_stats(&roi, &mut labels, &mut s.stats, &mut s.centroids, 8, cv::CV_32S)
-                .map_err(cv_err("connectedComponentsWithStats"))?;
-        same_buffer(&labels, labels_ptr, "connectedComponentsWithStats")?;
-        drop(labels);
-        let mut best = None;
-        let mut best_area = 0;
-        for label in 1..count {
-            let area = *s
-                .stats
-                .at_2d::<i32>(label, imgproc::CC_STAT_AREA)
-                .map_err(cv_err("Mat::at_2d"))?;
-            if area > best_area {
-                best_area = area;
-                best = Some(label);
-            }
-        }
-        Ok(best)
+        let area = (search.x0, search.y0, search.width(), search.height());
+        s.components.label(&s.strong, g.w, area, &mut s.labels);
+        s.components.largest().map(|l| l as i32)
     }
 
     /// Puts the seed component into the mask and grows it into connected pixels at least

@@ -12,7 +12,7 @@
 //!
 //! 1. one pass over the pixels comparing each reading with its interval (the *strong* mask),
 //!    counting strong pixels in 16x16 tiles;
-//! 2. the densest cluster of tiles gives a box, and OpenCV's connected components (8-connected)
+//! 2. the densest cluster of tiles gives a box, and the connected components (8-connected)
 //!    inside it give the largest strong component;
 //! 3. around it, readings that differ from a neighbour's by more than a few millimetres are
 //!    marked as lying on a depth jump (a time-of-flight camera mixes both sides there), and the
@@ -31,8 +31,8 @@
 //!    width.
 //!
 //! Missing readings (0) are never foreground, but holes of them inside the mouse are filled.
-//! `segment` is pure: no threads (OpenCV is told to use none of its own), no clock, no I/O;
-//! the buffers it needs live in the [`Segmenter`] and are reused from frame to frame.
+//! `segment` is pure: no threads, no clock, no I/O; the buffers it needs live in the
+//! [`Segmenter`] and are reused from frame to frame.
 //!
 //! # Where the parts are
 //!
@@ -44,12 +44,14 @@
 //! mouse-sized things that moved in the frames the background is made of), `floor` (the floor
 //! plane fitted inside it), `mask` (steps 1 to 4: the strong mask, the densest tiles, depth jumps, the
 //! floor's noise, the largest component and its growth) and `mouse` (steps 5 and 6: the mask
-//! tidied inside its box, and the [`Mouse`] with its figures); `picture` colours a depth
-//! image by height above the fitted floor for every picture the program draws.
+//! tidied inside its box, and the [`Mouse`] with its figures); `components` labels a mask's
+//! connected components and opens a mask by a square; `picture` colours a depth image by
+//! height above the fitted floor for every picture the program draws.
 
 mod activity;
 mod arena;
 mod background;
+mod components;
 mod config;
 mod floor;
 mod mask;
@@ -69,7 +71,6 @@ pub use walls::{WALL_HEIGHT_MM, WALL_REACH_MM};
 use crate::core::frame::DepthFrame;
 use crate::core::image::Region;
 use nalgebra::{Isometry3, Vector3};
-use opencv::core::{self as cv, Mat, MatTraitConst, Rect};
 use std::fmt;
 
 /// The raw growing height is this many times the floor's noise (about one floor reading in a
@@ -110,18 +111,6 @@ pub enum SegmentError {
     NoFrames,
     #[error("floor plane cannot be fitted to the background: {reason}")]
     Floor { reason: String },
-    #[error("opencv {operation} failed")]
-    OpenCv {
-        operation: &'static str,
-        #[source]
-        source: opencv::Error,
-    },
-    #[error("opencv {operation} wrote its result outside the buffer it was given")]
-    OpenCvBuffer { operation: &'static str },
-}
-
-fn cv_err(operation: &'static str) -> impl FnOnce(opencv::Error) -> SegmentError {
-    move |source| SegmentError::OpenCv { operation, source }
 }
 
 /// The mouse segmenter: a background model, the per-pixel foreground intervals derived from it
@@ -221,8 +210,8 @@ impl Segmenter {
     /// Segments a full depth frame.
     ///
     /// # Errors
-    /// A frame of another size than the background (which must cover the whole image), or an
-    /// OpenCV failure. An empty cage or a mouse smaller than `min_area_mm2` is `Ok(None)`.
+    /// A frame of another size than the background (which must cover the whole image). An
+    /// empty cage or a mouse smaller than `min_area_mm2` is `Ok(None)`.
     pub fn segment(&mut self, frame: &DepthFrame) -> Result<Option<Mouse>, SegmentError> {
         check_frame(frame, self.background.region)?;
         self.segment_region(&frame.data, self.background.region)
@@ -234,7 +223,7 @@ impl Segmenter {
     /// that crop.
     ///
     /// # Errors
-    /// A region outside the background, a buffer of the wrong length, or an OpenCV failure.
+    /// A region outside the background, or a buffer of the wrong length.
     pub fn segment_region(&mut self, depth: &[u16], region: Region) -> Result<Option<Mouse>, SegmentError> {
         let bg_region = self.background.region;
         check_buffer(depth.len(), region, bg_region)?;
@@ -254,7 +243,7 @@ impl Segmenter {
         let cfg = &self.config;
         let grow_mm = (GROW_SIGMAS * sigma).clamp(cfg.grow_height_mm, cfg.min_height_mm);
         let ridge_mm = (RIDGE_SIGMAS * sigma).max(cfg.ridge_height_mm);
-        let Some(seed) = self.largest_component(&grid, search)? else {
+        let Some(seed) = self.largest_component(&grid, search) else {
             return Ok(None);
         };
         let bounds = self.grow(depth, &grid, search, seed, grow_mm, ridge_mm);
@@ -292,10 +281,9 @@ struct Scratch {
     /// Per column of the local image: its first and last row in the mask.
     column_first: Vec<usize>,
     column_last: Vec<usize>,
-    stats: Mat,
-    centroids: Mat,
-    /// The body core's structuring element and its radius in pixels.
-    core_kernel: Option<(i32, Mat)>,
+    components: components::Components,
+    /// The opening's pass between rows and columns.
+    open_tmp: Vec<u8>,
 }
 
 /// Geometry of a segmented region inside the background.
@@ -338,46 +326,6 @@ impl Bounds {
     }
     fn height(&self) -> usize {
         self.y1.saturating_sub(self.y0)
-    }
-    fn rect(&self) -> Result<Rect, SegmentError> {
-        let c = |v: usize| i32::try_from(v).map_err(|_| SegmentError::OpenCvBuffer { operation: "rect" });
-        Ok(Rect::new(c(self.x0)?, c(self.y0)?, c(self.width())?, c(self.height())?))
-    }
-}
-
-fn cv_dim(v: usize) -> Result<i32, SegmentError> {
-    i32::try_from(v).map_err(|_| SegmentError::OpenCvBuffer { operation: "mat" })
-}
-
-/// A header over `data` as a `rows` x `cols` matrix of one channel.
-fn mat_over<T: cv::DataType>(
-    data: &[T],
-    rows: usize,
-    cols: usize,
-) -> Result<opencv::boxed_ref::BoxedRef<'_, Mat>, SegmentError> {
-    let slice = data
-        .get(..rows * cols)
-        .ok_or(SegmentError::OpenCvBuffer { operation: "mat" })?;
-    Mat::new_rows_cols_with_data(cv_dim(rows)?, cv_dim(cols)?, slice).map_err(cv_err("Mat"))
-}
-
-fn mat_over_mut<T: cv::DataType>(
-    data: &mut [T],
-    rows: usize,
-    cols: usize,
-) -> Result<opencv::boxed_ref::BoxedRefMut<'_, Mat>, SegmentError> {
-    let slice = data
-        .get_mut(..rows * cols)
-        .ok_or(SegmentError::OpenCvBuffer { operation: "mat" })?;
-    Mat::new_rows_cols_with_data_mut(cv_dim(rows)?, cv_dim(cols)?, slice).map_err(cv_err("Mat"))
-}
-
-/// Fails when OpenCV put an output somewhere other than the buffer `expected` it was given.
-fn same_buffer<T>(mat: &impl MatTraitConst, expected: *const T, operation: &'static str) -> Result<(), SegmentError> {
-    if std::ptr::eq(mat.data(), expected.cast::<u8>()) {
-        Ok(())
-    } else {
-        Err(SegmentError::OpenCvBuffer { operation })
     }
 }
 

@@ -3,11 +3,9 @@
 //! filled, the body core opened out of it), then the figures MoSeq users know from its 3D
 //! points: area, mean height, and the body's centroid, heading, length and width.
 
-use super::{Bounds, Grid, Scratch, SegmentError, Segmenter, cv_err, mat_over, mat_over_mut, same_buffer};
+use super::{Bounds, Grid, Scratch, SegmentError, Segmenter};
 use crate::core::image::Region;
 use nalgebra::{Matrix2, Point3, SymmetricEigen, Vector2, Vector3};
-use opencv::core::{self as cv, Mat};
-use opencv::imgproc;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
@@ -193,7 +191,7 @@ impl Segmenter {
             self.scratch.fill_holes(&lb, max_hole);
         }
         let radius = (f64::from(self.config.body_core_mm) * fx / mean_z).round() as i32;
-        self.scratch.open_core(&lb, radius)?;
+        self.scratch.open_core(&lb, radius);
 
         // Figures from the 3D points.
         let sums = self.readings(depth, g, &lb);
@@ -519,54 +517,16 @@ impl Scratch {
 
     /// The body core into `core`: the mask opened by a square of `radius` pixels (separable,
     /// so fast), for the body's figures only; the mask itself when that leaves nothing.
-    fn open_core(&mut self, lb: &LocalBox, radius: i32) -> Result<(), SegmentError> {
+    fn open_core(&mut self, lb: &LocalBox, radius: i32) {
         let (lw, lh) = (lb.lw, lb.lh);
         let s = self;
         let mut core_empty = true;
         if radius > 0 {
-            if s.core_kernel.as_ref().is_none_or(|(r, _)| *r != radius) {
-                let k = imgproc::get_structuring_element(
-                    imgproc::MORPH_RECT,
-                    cv::Size::new(2 * radius + 1, 2 * radius + 1),
-                    cv::Point::new(-1, -1),
-                )
-                .map_err(cv_err("getStructuringElement"))?;
-                s.core_kernel = Some((radius, k));
-            }
-            if let Some((_, kernel)) = &s.core_kernel {
-                let src = mat_over(&s.local, lh, lw)?;
-                let dst_ptr = s.core.as_ptr();
-                let mut dst = mat_over_mut(&mut s.core, lh, lw)?;
-                morphology(&src, &mut dst, imgproc::MORPH_OPEN, kernel)?;
-                same_buffer(&dst, dst_ptr, "morphologyEx")?;
-                drop(dst);
-                drop(src);
-                core_empty = s.core[..lw * lh].iter().all(|&v| v == 0);
-            }
+            super::components::open_square(&s.local, &mut s.core, lw, lh, radius as usize, &mut s.open_tmp);
+            core_empty = s.core[..lw * lh].iter().all(|&v| v == 0);
         }
         if core_empty {
             s.core[..lw * lh].copy_from_slice(&s.local[..lw * lh]);
         }
-        Ok(())
     }
-}
-
-fn morphology(
-    src: &impl cv::ToInputArray,
-    dst: &mut impl cv::ToOutputArray,
-    op: i32,
-    kernel: &Mat,
-) -> Result<(), SegmentError> {
-    let border = imgproc::morphology_default_border_value().map_err(cv_err("morphologyDefaultBorderValue"))?;
-    imgproc::morphology_ex(
-        src,
-        dst,
-        op,
-        kernel,
-        cv::Point::new(-1, -1),
-        1,
-        cv::BORDER_CONSTANT,
-        border,
-    )
-    .map_err(cv_err("morphologyEx"))
 }
