@@ -17,6 +17,7 @@ mod hostile;
 mod http;
 mod layers;
 mod lsl;
+mod mice;
 mod packaging;
 mod paws;
 mod realdata;

@@ -279,6 +279,7 @@ fn a_full_session_reads_back_identically() {
                 .map(|s| (s, stamp(s, 5_000).device_ns, joints(s)))
                 .collect(),
             pairs: (0..DEPTH_FRAMES).map(|s| (s, pair(s))).collect(),
+            others: Vec::new(),
         }
     );
     assert!(r.damage().is_clean());

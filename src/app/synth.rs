@@ -11,7 +11,7 @@ use crate::engine::calibrate::{self, ChessboardOptions};
 use crate::engine::synth::{self as engine, DatasetOptions, MoseqOptions, SessionOptions};
 use crate::synth::dataset::DatasetSpec;
 use crate::synth::moseq::MoseqSpec;
-use crate::synth::session::{SessionSpec, TailLook};
+use crate::synth::session::{MOST_MICE, SessionSpec, TailLook};
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 
@@ -201,11 +201,12 @@ pub struct SessionArgs {
     /// `preview`).
     #[arg(long)]
     json: bool,
-    /// standard: mice like the ones the bundled forests were trained on; varied: sizes,
-    /// body shapes, backs and tails well outside that range (a stress test); mixed: varied
-    /// for odd seeds.
-    #[arg(long, value_name = "KIND", default_value = "standard")]
-    mice: crate::synth::Mice,
+    /// How many mice share the cage (1 to 5; the others each of a build of its own), or what
+    /// the first is like: standard, like the ones the bundled forests were trained on; varied,
+    /// sizes, body shapes, backs and tails well outside that range (a stress test); mixed,
+    /// varied for odd seeds. Given twice for both, e.g. `--mice 2 --mice varied`.
+    #[arg(long, value_name = "N|KIND", value_parser = parse_mice, action = clap::ArgAction::Append, allow_negative_numbers = true)]
+    mice: Vec<MiceArg>,
     /// What the mouse does: anything (mixed), stays in place (still: standing, sniffing,
     /// grooming, rearing, bending), or walks (walking).
     #[arg(long, value_name = "mixed|still|walking", default_value = "mixed", value_parser = parse_activity)]
@@ -321,10 +322,27 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         color_binning: args.color_binning,
         color_format: PixelFormat::BayerRg8,
         color: !args.no_color,
-        mice: args.mice,
+        mice: args
+            .mice
+            .iter()
+            .rev()
+            .find_map(|m| match m {
+                MiceArg::Kind(kind) => Some(*kind),
+                MiceArg::Count(_) => None,
+            })
+            .unwrap_or_default(),
         build: None,
         activity: args.activity,
         tail: args.tail,
+        count: args
+            .mice
+            .iter()
+            .rev()
+            .find_map(|m| match m {
+                MiceArg::Count(n) => Some(*n),
+                MiceArg::Kind(_) => None,
+            })
+            .unwrap_or(1),
     };
     let summary = engine::synth_session(
         &SessionOptions {
@@ -343,6 +361,22 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         }))?;
     }
     Ok(())
+}
+
+/// A value of `synth session --mice`: how many, or what kind.
+#[derive(Clone, Copy, Debug)]
+enum MiceArg {
+    Count(usize),
+    Kind(crate::synth::Mice),
+}
+
+/// `--mice N|KIND`: a number of mice from 1 to [`MOST_MICE`], or a kind of mice.
+fn parse_mice(s: &str) -> Result<MiceArg, String> {
+    match s.parse::<i64>() {
+        Ok(n) if (1..=MOST_MICE as i64).contains(&n) => Ok(MiceArg::Count(n as usize)),
+        Ok(n) => Err(format!("a synthetic session renders 1 to {MOST_MICE} mice, not {n}")),
+        Err(_) => s.parse().map(MiceArg::Kind),
+    }
 }
 
 /// `--tail visible|hidden|raised`: how the depth camera shows the tail.

@@ -210,3 +210,240 @@ impl Animator {
         self.params = next;
     }
 }
+
+/// How close a mouse walks to the point it approaches before it stops there (mm).
+const APPROACH_REACH_MM: f64 = 30.0;
+/// The longest an approach lasts (s): a mouse that has not got there by then gives up.
+const APPROACH_LONGEST_S: f64 = 5.0;
+/// Seconds between two approaches in a group, at random in this range.
+const APPROACH_EVERY_S: (f64, f64) = (1.0, 4.0);
+/// The trunk's length from the rump forward and its half width, at scale 1 (mm): the capsule
+/// two mice may touch but not pass into.
+const TRUNK_LENGTH_MM: f64 = 54.0;
+const TRUNK_HALF_WIDTH_MM: f64 = 13.0;
+/// The nose ahead of the rump and the tail's base behind it, at scale 1 (mm; the default bones').
+const NOSE_MM: f64 = 81.0;
+const TAIL_BASE_MM: f64 = 18.0;
+
+/// Where a mouse goes when it approaches another: its nose (nose to nose), its tail's base
+/// (nose to tail) or its flank (side by side).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Goal {
+    Nose,
+    TailBase,
+    Flank,
+}
+
+/// One mouse approaching another.
+#[derive(Clone, Copy, Debug)]
+struct Approach {
+    by: usize,
+    to: usize,
+    goal: Goal,
+    left_s: f64,
+}
+
+/// Several mice animated together in one cage: each its own [`Animator`] (its own build and
+/// behaviour), and between them every few seconds one walks up to another (to its nose, its
+/// tail's base or its flank), while no two trunks pass into each other: mice touching, side by
+/// side, nose to nose and nose to tail, as group-housed mice do. One mouse alone moves exactly
+/// as its [`Animator`] does.
+#[derive(Clone, Debug)]
+pub struct Group {
+    mice: Vec<Animator>,
+    rng: ChaCha8Rng,
+    approach: Option<Approach>,
+    next_approach_s: f64,
+}
+
+impl Group {
+    /// The mice of `mice`, moved apart where they start inside each other; `rng` draws who
+    /// approaches whom, and when.
+    pub fn new(mice: Vec<Animator>, mut rng: ChaCha8Rng) -> Self {
+        let next_approach_s = rng.gen_range(APPROACH_EVERY_S.0..APPROACH_EVERY_S.1);
+        let mut group = Self {
+            mice,
+            rng,
+            approach: None,
+            next_approach_s,
+        };
+        for _ in 0..200 {
+            if !group.separate() {
+                break;
+            }
+        }
+        group
+    }
+
+    /// The mice, in their order.
+    pub fn mice(&self) -> &[Animator] {
+        &self.mice
+    }
+
+    /// Advances every mouse by `dt_s` seconds, in steps of at most 5 ms as [`Animator::advance`].
+    pub fn advance(&mut self, dt_s: f64) {
+        if self.mice.len() == 1 {
+            self.mice[0].advance(dt_s);
+            return;
+        }
+        let mut left = dt_s.max(0.0);
+        while left > 1e-12 {
+            let dt = left.min(0.005);
+            self.social(dt);
+            for mouse in &mut self.mice {
+                mouse.step(dt);
+            }
+            self.separate();
+            left -= dt;
+        }
+    }
+
+    /// Starts, steers and ends approaches.
+    fn social(&mut self, dt: f64) {
+        self.next_approach_s -= dt;
+        if self.approach.is_none() && self.next_approach_s <= 0.0 {
+            let n = self.mice.len();
+            let by = self.rng.gen_range(0..n);
+            let to = (by + self.rng.gen_range(1..n)) % n;
+            let goal = match self.rng.gen_range(0..3) {
+                0 => Goal::Nose,
+                1 => Goal::TailBase,
+                _ => Goal::Flank,
+            };
+            self.approach = Some(Approach {
+                by,
+                to,
+                goal,
+                left_s: APPROACH_LONGEST_S,
+            });
+        }
+        let Some(a) = &mut self.approach else {
+            return;
+        };
+        a.left_s -= dt;
+        let target = self.mice[a.to].point(a.goal);
+        let nose = self.mice[a.by].point(Goal::Nose);
+        let reached = (target.0 - nose.0).hypot(target.1 - nose.1) < APPROACH_REACH_MM;
+        if reached || a.left_s <= 0.0 {
+            // There: it stops and sniffs a moment.
+            if reached {
+                let by = &mut self.mice[a.by];
+                by.behaviour = Behaviour::Sniff;
+                by.remaining_s = self.rng.gen_range(0.5..1.5);
+            }
+            self.approach = None;
+            self.next_approach_s = self.rng.gen_range(APPROACH_EVERY_S.0..APPROACH_EVERY_S.1);
+            return;
+        }
+        self.mice[a.by].steer_to(target);
+    }
+
+    /// Pushes apart every two trunks that pass into each other, half each; whether any did.
+    fn separate(&mut self) -> bool {
+        let mut moved = false;
+        for i in 0..self.mice.len() {
+            for j in i + 1..self.mice.len() {
+                let (a, b) = (self.mice[i].trunk(), self.mice[j].trunk());
+                let (pa, pb) = closest_points(a.0, a.1, b.0, b.1);
+                let (dx, dy) = (pb.0 - pa.0, pb.1 - pa.1);
+                let d = dx.hypot(dy);
+                let touch = a.2 + b.2;
+                if d >= touch {
+                    continue;
+                }
+                let (ux, uy) = if d > 1e-6 { (dx / d, dy / d) } else { (1.0, 0.0) };
+                let push = (touch - d) / 2.0;
+                self.mice[i].shift(-ux * push, -uy * push);
+                self.mice[j].shift(ux * push, uy * push);
+                moved = true;
+            }
+        }
+        moved
+    }
+}
+
+impl Animator {
+    /// A point of the mouse on the floor: its nose, its tail's base or beside its flank's
+    /// middle (on its left).
+    fn point(&self, goal: Goal) -> (f64, f64) {
+        let p = &self.placement;
+        let (c, s) = (p.heading.cos(), p.heading.sin());
+        let along = |mm: f64, side: f64| (p.x_mm + mm * c - side * s, p.y_mm + mm * s + side * c);
+        match goal {
+            Goal::TailBase => along(-TAIL_BASE_MM * p.scale, 0.0),
+            Goal::Nose => along(NOSE_MM * p.scale, 0.0),
+            Goal::Flank => along(
+                0.5 * TRUNK_LENGTH_MM * p.scale,
+                2.2 * TRUNK_HALF_WIDTH_MM * p.scale * p.girth,
+            ),
+        }
+    }
+
+    /// The trunk as a capsule on the floor: from the rump forward, and its half width (mm).
+    fn trunk(&self) -> ((f64, f64), (f64, f64), f64) {
+        let p = &self.placement;
+        let length = TRUNK_LENGTH_MM * p.scale;
+        let end = (p.x_mm + length * p.heading.cos(), p.y_mm + length * p.heading.sin());
+        ((p.x_mm, p.y_mm), end, TRUNK_HALF_WIDTH_MM * p.scale * p.girth)
+    }
+
+    /// Walks towards `target` (world x, y): the body bends the way it has to turn.
+    fn steer_to(&mut self, target: (f64, f64)) {
+        let nose = self.point(Goal::Nose);
+        let want = (target.1 - nose.1).atan2(target.0 - nose.0);
+        let mut diff = (want - self.placement.heading).rem_euclid(TAU);
+        if diff > PI {
+            diff -= TAU;
+        }
+        if self.activity != Activity::Still {
+            self.behaviour = Behaviour::Walk;
+            self.remaining_s = self.remaining_s.max(0.3);
+            self.bend_target = (1.5 * diff).clamp(-1.0, 1.0);
+        }
+    }
+
+    /// Moves the mouse by `(dx, dy)` mm on the floor, kept inside the cage as [`Self::step`]
+    /// keeps it.
+    fn shift(&mut self, dx: f64, dy: f64) {
+        let hx = CAGE_X_MM / 2.0 - WALL_MARGIN_MM * 0.6;
+        let hy = CAGE_Y_MM / 2.0 - WALL_MARGIN_MM * 0.6;
+        self.placement.x_mm = (self.placement.x_mm + dx).clamp(-hx, hx);
+        self.placement.y_mm = (self.placement.y_mm + dy).clamp(-hy, hy);
+    }
+}
+
+/// The closest points of the segments `a0 a1` and `b0 b1` (in the plane).
+fn closest_points(a0: (f64, f64), a1: (f64, f64), b0: (f64, f64), b1: (f64, f64)) -> ((f64, f64), (f64, f64)) {
+    let on = |p: (f64, f64), q0: (f64, f64), q1: (f64, f64)| {
+        let (dx, dy) = (q1.0 - q0.0, q1.1 - q0.1);
+        let len2 = dx * dx + dy * dy;
+        let t = if len2 > 0.0 {
+            (((p.0 - q0.0) * dx + (p.1 - q0.1) * dy) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        (q0.0 + t * dx, q0.1 + t * dy)
+    };
+    let dist = |p: (f64, f64), q: (f64, f64)| (p.0 - q.0).hypot(p.1 - q.1);
+    // Segments that cross: their crossing, both.
+    let (da, db) = ((a1.0 - a0.0, a1.1 - a0.1), (b1.0 - b0.0, b1.1 - b0.1));
+    let denom = da.0 * db.1 - da.1 * db.0;
+    if denom.abs() > 1e-12 {
+        let t = ((b0.0 - a0.0) * db.1 - (b0.1 - a0.1) * db.0) / denom;
+        let u = ((b0.0 - a0.0) * da.1 - (b0.1 - a0.1) * da.0) / denom;
+        if (0.0..=1.0).contains(&t) && (0.0..=1.0).contains(&u) {
+            let p = (a0.0 + t * da.0, a0.1 + t * da.1);
+            return (p, p);
+        }
+    }
+    // Otherwise an end of one against the other.
+    [
+        (a0, on(a0, b0, b1)),
+        (a1, on(a1, b0, b1)),
+        (on(b0, a0, a1), b0),
+        (on(b1, a0, a1), b1),
+    ]
+    .into_iter()
+    .min_by(|x, y| dist(x.0, x.1).total_cmp(&dist(y.0, y.1)))
+    .unwrap_or((a0, b0))
+}

@@ -3,7 +3,7 @@
 //! and drifting from the other), host arrival times with jitter, an occasional dropped frame
 //! in the event log, and the ground truth (24 joints per depth frame and the true pairing).
 
-use super::animate::Animator;
+use super::animate::{Animator, Group};
 use super::body::skin;
 use super::mouse::{MouseInstance, fit_in_cage, pose_mouse};
 use super::render::Cage;
@@ -47,7 +47,14 @@ pub struct SessionSpec {
     pub activity: super::animate::Activity,
     /// How the depth camera shows the tail (the truth keeps the tail's joints).
     pub tail: TailLook,
+    /// How many mice share the cage (1 to [`MOST_MICE`]): the first is the mouse of the seed,
+    /// the others each of a build of its own ([`super::varied_build`]), animated together
+    /// ([`Group`]).
+    pub count: usize,
 }
+
+/// The most mice a synthetic session renders in its cage.
+pub const MOST_MICE: usize = 5;
 
 /// How a depth camera shows a mouse's tail: real ones show it in each of these ways.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -87,8 +94,23 @@ impl Default for SessionSpec {
             build: None,
             activity: super::animate::Activity::Mixed,
             tail: TailLook::Visible,
+            count: 1,
         }
     }
+}
+
+/// The mice of a session, animated together, with their carriages: the first is the mouse of
+/// the seed ([`session_mouse`]), each other one of a varied build drawn from streams of its own.
+fn session_group(spec: &SessionSpec) -> (Group, Vec<Carriage>) {
+    let (first, carriage) = session_mouse(spec.seed, spec.mice, spec.build);
+    let mut mice = vec![first.with_activity(spec.activity)];
+    let mut carriages = vec![carriage];
+    for k in 1..spec.count.clamp(1, MOST_MICE) as u64 {
+        let (build, carriage) = varied_build(&mut item_rng(spec.seed, STREAM_VARIETY, k));
+        mice.push(Animator::new(item_rng(spec.seed, STREAM_MOUSE, k), build).with_activity(spec.activity));
+        carriages.push(carriage);
+    }
+    (Group::new(mice, item_rng(spec.seed, STREAM_GROUP, 0)), carriages)
 }
 
 /// The animated mouse of the session of a seed, at its start: what [`write_session`] renders
@@ -121,6 +143,7 @@ const STREAM_CLOCKS: u64 = 11;
 const STREAM_DEPTH: u64 = 12;
 const STREAM_COLOR: u64 = 13;
 const STREAM_VARIETY: u64 = 14;
+const STREAM_GROUP: u64 = 15;
 
 /// The simulated cameras' minimal transport latencies (ms), recorded in the session's
 /// metadata as the colour camera's latency relative to the depth camera's.
@@ -159,13 +182,13 @@ impl CameraClock {
     }
 }
 
-/// A frame to render: which camera, its stamp, the true time and the posed mouse.
+/// A frame to render: which camera, its stamp, the true time and the posed mice.
 struct Shot {
     role: CameraRole,
     stamp: Stamp,
     time_s: f64,
     dropped: bool,
-    mouse: MouseInstance,
+    mice: Vec<MouseInstance>,
 }
 
 /// The camera metadata of a synthetic session.
@@ -225,19 +248,26 @@ fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
         .collect();
     times.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
 
-    let (animator, carriage) = session_mouse(spec.seed, spec.mice, spec.build);
-    let mut animator = animator.with_activity(spec.activity);
+    let (mut group, carriages) = session_group(spec);
     let mut now = 0.0;
     let mut shots = Vec::with_capacity(times.len());
     let mut events = Vec::new();
     let mut last_host = [0u64; 2];
     for (t, role, seq) in times {
-        animator.advance(t - now);
+        group.advance(t - now);
         now = t;
-        let (mut params, placement) = animator.state();
-        carriage.apply(&mut params);
-        let mut mouse = pose_mouse(&params, &placement);
-        fit_in_cage(&mut mouse, 3.0);
+        let mice = group
+            .mice()
+            .iter()
+            .zip(&carriages)
+            .map(|(animator, carriage)| {
+                let (mut params, placement) = animator.state();
+                carriage.apply(&mut params);
+                let mut mouse = pose_mouse(&params, &placement);
+                fit_in_cage(&mut mouse, 3.0);
+                mouse
+            })
+            .collect();
         let (clock, forced) = match role {
             CameraRole::Depth => (&depth_clock, forced_depth),
             CameraRole::Color => (&color_clock, forced_color),
@@ -265,7 +295,7 @@ fn plan(spec: &SessionSpec) -> (Vec<Shot>, Vec<SessionEvent>, u64) {
             },
             time_s: t,
             dropped,
-            mouse,
+            mice,
         });
     }
     let end_host = last_host.into_iter().max().unwrap_or(host0_ns as u64) + 1;
@@ -287,7 +317,7 @@ fn depth_frame(
         stamp: shot.stamp,
         width: i.width,
         height: i.height,
-        data: render_top_frame(&rig.depth, background, &seen_skin(&shot.mouse, tail), noise, &mut rng),
+        data: render_top_frame(&rig.depth, background, &skins(&shot.mice, tail), noise, &mut rng),
     }
 }
 
@@ -296,10 +326,10 @@ fn color_frame(rig: &Rig, shot: &Shot, format: PixelFormat, seed: u64, tail: Tai
     let mut rng = item_rng(seed, STREAM_COLOR, shot.stamp.seq);
     let (data, _) = render_bottom_frame(
         &rig.color,
-        &shot.mouse,
+        &shot.mice[0],
         // Seen from below, a raised tail is the tail as it is.
-        &seen_skin(
-            &shot.mouse,
+        &skins(
+            &shot.mice,
             if tail == TailLook::Raised {
                 TailLook::Visible
             } else {
@@ -360,6 +390,10 @@ fn session_meta(rig: &Rig, spec: &SessionSpec) -> SessionMeta {
         toml::Value::Integer(i64::from(spec.color_binning)),
     );
     table.insert("engine_version".into(), toml::Value::Integer(i64::from(ENGINE_VERSION)));
+    // How many mice: only with more than one, so one mouse's sessions stay as they were.
+    if spec.count > 1 {
+        table.insert("mice".into(), toml::Value::Integer(spec.count as i64));
+    }
     // Only when not the default, so the default sessions' files stay as they were.
     if spec.activity != super::animate::Activity::Mixed {
         let name = format!("{:?}", spec.activity).to_lowercase();
@@ -433,7 +467,14 @@ pub fn write_session(
             match frame {
                 Some(Rendered::Depth(f)) => {
                     writer.write_depth(&f)?;
-                    writer.write_truth(shot.stamp.seq, (shot.time_s * 1e9).round() as u64, &shot.mouse.joints)?;
+                    let time_ns = (shot.time_s * 1e9).round() as u64;
+                    if let [one] = shot.mice.as_slice() {
+                        writer.write_truth(shot.stamp.seq, time_ns, &one.joints)?;
+                    } else {
+                        for (k, mouse) in shot.mice.iter().enumerate() {
+                            writer.write_truth_of(shot.stamp.seq, time_ns, k + 1, &mouse.joints)?;
+                        }
+                    }
                     writer.write_truth_pair(shot.stamp.seq, true_partner(&colors, shot.time_s, spec.fps))?;
                 }
                 Some(Rendered::Color(f)) => writer.write_color(&f)?,
@@ -454,7 +495,7 @@ pub fn write_session(
     {
         let mut rng = item_rng(spec.seed, STREAM_DEPTH, u64::MAX);
         let path = dir.join(PREVIEW_FILE);
-        super::preview::preview(&rig, &mid.mouse, &spec.noise, &mut rng)
+        super::preview::preview(&rig, &mid.mice[0], &spec.noise, &mut rng)
             .write_png(&path)
             .map_err(|source| SynthSessionError::Preview { path, source })?;
     }
@@ -477,6 +518,11 @@ fn true_partner(colors: &[(f64, u64)], depth_time_s: f64, fps: f64) -> Option<u6
         .filter(|(dt, _)| *dt < 0.5 / fps)
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map(|(_, seq)| seq)
+}
+
+/// The skins of several mice together, each seen as [`seen_skin`] says.
+fn skins(mice: &[MouseInstance], tail: TailLook) -> Vec<super::body::Primitive> {
+    mice.iter().flat_map(|m| seen_skin(m, tail)).collect()
 }
 
 /// The skin the cameras see, its tail as `tail` says.

@@ -63,7 +63,17 @@ pub const PAIRS_HEADER: &str = "depth_seq,color_seq";
 /// The header line of `truth/joints.csv`: `depth_seq,time_ns,` then `{joint}_x,{joint}_y,
 /// {joint}_z` for the 24 joints in joint order.
 pub fn joints_header() -> String {
-    let mut header = String::from("depth_seq,time_ns");
+    joints_header_for(false)
+}
+
+/// The header of `truth/joints.csv`, with the `mouse` column after `time_ns` for a session
+/// of several mice (`per_mouse`).
+pub fn joints_header_for(per_mouse: bool) -> String {
+    let mut header = String::from(if per_mouse {
+        "depth_seq,time_ns,mouse"
+    } else {
+        "depth_seq,time_ns"
+    });
     for joint in crate::core::skeleton::Joint::ALL {
         for axis in ["x", "y", "z"] {
             header.push(',');
@@ -207,7 +217,13 @@ pub struct Truth {
     /// `(depth_seq, color_seq)`: the colour frame truly taken with each depth frame, `None`
     /// when it has no partner.
     pub pairs: Vec<(u64, Option<u64>)>,
+    /// In a session of several mice, the rows of mice 2, 3, ... (`joints` holds mouse 1's);
+    /// empty for one mouse.
+    pub others: Vec<Vec<(u64, u64, JointPositions)>>,
 }
+
+/// The highest mouse number a session's truth may name.
+pub const MOST_TRUE_MICE: u64 = 64;
 
 /// What readers stepped over in each camera's frames.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]

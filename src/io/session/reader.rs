@@ -6,8 +6,9 @@ use super::events::SessionEvent;
 use super::meta::{CameraRole, FORMAT_NAME, FORMAT_VERSION, SessionMeta};
 use super::text::{Csv, read_lines};
 use super::{
-    EVENTS_FILE, FRAMES_FILE, FrameLocation, INDEX_FILE, JOINTS_FILE, META_FILE, PAIRS_FILE, PAIRS_HEADER, Result,
-    SessionDamage, SessionError, TIMESTAMPS_FILE, TIMESTAMPS_HEADER, TRUTH_DIR, Truth, io_error, joints_header,
+    EVENTS_FILE, FRAMES_FILE, FrameLocation, INDEX_FILE, JOINTS_FILE, META_FILE, MOST_TRUE_MICE, PAIRS_FILE,
+    PAIRS_HEADER, Result, SessionDamage, SessionError, TIMESTAMPS_FILE, TIMESTAMPS_HEADER, TRUTH_DIR, Truth, io_error,
+    joints_header, joints_header_for,
 };
 use crate::core::frame::{ColorFrame, DepthFrame, Stamp};
 use crate::core::pose::JointPositions;
@@ -291,16 +292,47 @@ impl SessionReader {
         if !dir.is_dir() {
             return Ok(None);
         }
-        let joints = Csv::read(&dir.join(JOINTS_FILE), &joints_header())?.rows(|r| {
+        let path = dir.join(JOINTS_FILE);
+        // One mouse's header, or several mice's with the `mouse` column after `time_ns`.
+        let (csv, per_mouse) = match Csv::read(&path, &joints_header()) {
+            Ok(csv) => (csv, false),
+            Err(one) => match Csv::read(&path, &joints_header_for(true)) {
+                Ok(csv) => (csv, true),
+                Err(_) => return Err(one),
+            },
+        };
+        let first = if per_mouse { 3 } else { 2 };
+        let rows = csv.rows(|r| {
             let mut positions: JointPositions = [Point3::origin(); JOINT_COUNT];
             for (j, p) in positions.iter_mut().enumerate() {
-                let at = 2 + 3 * j;
+                let at = first + 3 * j;
                 *p = Point3::new(r.f64(at)?, r.f64(at + 1)?, r.f64(at + 2)?);
             }
-            Ok((r.u64(0)?, r.u64(1)?, positions))
+            let mouse = if per_mouse { r.u64(2)? } else { 1 };
+            Ok((mouse, (r.u64(0)?, r.u64(1)?, positions)))
         })?;
+        let mut joints = Vec::new();
+        let mut others: Vec<Vec<(u64, u64, JointPositions)>> = Vec::new();
+        for (mouse, row) in rows {
+            match mouse {
+                1 => joints.push(row),
+                m @ 2..=MOST_TRUE_MICE => {
+                    let k = m as usize - 2;
+                    if others.len() <= k {
+                        others.resize_with(k + 1, Vec::new);
+                    }
+                    others[k].push(row);
+                }
+                m => {
+                    return Err(SessionError::Format {
+                        path,
+                        reason: format!("its truth names mouse {m}: mice are numbered 1 to {MOST_TRUE_MICE}"),
+                    });
+                }
+            }
+        }
         let pairs = Csv::read(&dir.join(PAIRS_FILE), PAIRS_HEADER)?.rows(|r| Ok((r.u64(0)?, r.opt_u64(1)?)))?;
-        Ok(Some(Truth { joints, pairs }))
+        Ok(Some(Truth { joints, pairs, others }))
     }
 }
 

@@ -7,7 +7,7 @@ use super::meta::{CameraRole, SessionMeta};
 use super::text::LineWriter;
 use super::{
     EVENTS_FILE, FRAMES_FILE, INDEX_FILE, JOINTS_FILE, META_FILE, PAIRS_FILE, PAIRS_HEADER, Result, SessionError,
-    SessionSummary, TIMESTAMPS_FILE, TIMESTAMPS_HEADER, TRUTH_DIR, io_error, joints_header,
+    SessionSummary, TIMESTAMPS_FILE, TIMESTAMPS_HEADER, TRUTH_DIR, io_error, joints_header_for,
 };
 use crate::core::frame::{ColorFrame, DepthFrame, Stamp};
 use crate::core::pose::JointPositions;
@@ -103,6 +103,8 @@ impl StreamWriter {
 struct TruthWriter {
     joints: LineWriter,
     pairs: LineWriter,
+    /// Whether `joints.csv` has the `mouse` column (a session of several mice).
+    per_mouse: bool,
 }
 
 /// The files and directories a session writer creates in `dir`.
@@ -387,19 +389,31 @@ impl SessionWriter {
         Ok(())
     }
 
-    fn truth(&mut self) -> Result<&mut TruthWriter> {
+    /// The truth's writers, created on first use with the `mouse` column when `per_mouse`
+    /// says so (`None`: as they are, or without it); rows of one kind into a file of the other
+    /// are refused.
+    fn truth(&mut self, per_mouse: Option<bool>) -> Result<&mut TruthWriter> {
         let truth = match self.truth.take() {
             Some(truth) => truth,
             None => {
                 let dir = self.dir.join(TRUTH_DIR);
                 fs::create_dir(&dir).map_err(io_error(&dir, "create directory"))?;
+                let per_mouse = per_mouse.unwrap_or(false);
                 TruthWriter {
-                    joints: LineWriter::create(dir.join(JOINTS_FILE), Some(&joints_header()))?,
+                    joints: LineWriter::create(dir.join(JOINTS_FILE), Some(&joints_header_for(per_mouse)))?,
                     pairs: LineWriter::create(dir.join(PAIRS_FILE), Some(PAIRS_HEADER))?,
+                    per_mouse,
                 }
             }
         };
-        Ok(self.truth.insert(truth))
+        let truth = self.truth.insert(truth);
+        if per_mouse.is_some_and(|p| p != truth.per_mouse) {
+            return Err(SessionError::Format {
+                path: self.dir.join(TRUTH_DIR).join(JOINTS_FILE),
+                reason: "the truth of one mouse and of several mice cannot share a file".to_owned(),
+            });
+        }
+        Ok(truth)
     }
 
     /// Appends the true joint positions of a depth frame to `truth/joints.csv` (creating the
@@ -409,7 +423,27 @@ impl SessionWriter {
     /// [`SessionError::Io`] when a truth file can not be created or written.
     pub fn write_truth(&mut self, depth_seq: u64, time_ns: u64, joints: &JointPositions) -> Result<()> {
         let coordinates: Vec<Exact> = joints.iter().flat_map(|p| [p.x, p.y, p.z]).map(Exact).collect();
-        self.truth()?.joints.write_row(&(depth_seq, time_ns, coordinates))
+        self.truth(Some(false))?
+            .joints
+            .write_row(&(depth_seq, time_ns, coordinates))
+    }
+
+    /// Appends the true joint positions of mouse `mouse` (1..) in a depth frame of a session
+    /// of several mice to `truth/joints.csv`, whose `mouse` column follows `time_ns`.
+    ///
+    /// # Errors
+    /// As [`SessionWriter::write_truth`]; [`SessionError::Format`] after rows of one mouse.
+    pub fn write_truth_of(
+        &mut self,
+        depth_seq: u64,
+        time_ns: u64,
+        mouse: usize,
+        joints: &JointPositions,
+    ) -> Result<()> {
+        let coordinates: Vec<Exact> = joints.iter().flat_map(|p| [p.x, p.y, p.z]).map(Exact).collect();
+        self.truth(Some(true))?
+            .joints
+            .write_row(&(depth_seq, time_ns, mouse, coordinates))
     }
 
     /// Appends a depth frame's true colour partner (or none) to `truth/pairs.csv`.
@@ -417,7 +451,7 @@ impl SessionWriter {
     /// # Errors
     /// [`SessionError::Io`] when a truth file can not be created or written.
     pub fn write_truth_pair(&mut self, depth_seq: u64, color_seq: Option<u64>) -> Result<()> {
-        self.truth()?.pairs.write_row(&(depth_seq, color_seq))
+        self.truth(None)?.pairs.write_row(&(depth_seq, color_seq))
     }
 
     /// Depth frames written so far.

@@ -1,0 +1,182 @@
+//! Several mice in one cage (issue 60): what is built so far. Synthetic sessions of several
+//! mice, each its own build, with the truth per mouse; one mouse's sessions as they were.
+#![allow(clippy::unwrap_used)] // the helpers below are test code too
+
+use crate::util::{mousepose, repo_root};
+use mousepose::core::pose::JointPositions;
+use mousepose::core::skeleton::Joint;
+use mousepose::io::session::SessionReader;
+use std::path::Path;
+
+/// Every file under `a` is under `b` with the same bytes, and the other way round.
+fn same_files(a: &Path, b: &Path) {
+    let list = |root: &Path| {
+        let mut files: Vec<_> = walk(root)
+            .into_iter()
+            .map(|p| p.strip_prefix(root).unwrap().to_owned())
+            .collect();
+        files.sort();
+        files
+    };
+    let (fa, fb) = (list(a), list(b));
+    assert_eq!(fa, fb, "{a:?} and {b:?} hold different files");
+    for f in fa {
+        assert!(
+            std::fs::read(a.join(&f)).unwrap() == std::fs::read(b.join(&f)).unwrap(),
+            "{f:?} differs"
+        );
+    }
+}
+
+fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            out.extend(walk(&path));
+        } else {
+            out.push(path);
+        }
+    }
+    out
+}
+
+/// One mouse, as every session so far: `synth session` without `--mice`, and with `--mice 1`,
+/// writes the committed fixture byte for byte (its command is in `scripts/fixtures`).
+#[test]
+fn one_mouses_session_is_the_committed_fixture_byte_for_byte() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (name, more) in [("plain", &[][..]), ("one", &["--mice", "1"][..])] {
+        let out = tmp.path().join(name);
+        let status = mousepose()
+            .args([
+                "synth",
+                "session",
+                "--seconds",
+                "1",
+                "--seed",
+                "7",
+                "--color-binning",
+                "4",
+                "--out",
+            ])
+            .arg(&out)
+            .args(more)
+            .output()
+            .unwrap();
+        assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+        same_files(&out, &repo_root().join("fixtures/sessions/synthetic-small"));
+    }
+}
+
+/// The distance between two mice: the nearest two of their main-body joints (mm).
+fn nearest(a: &[nalgebra::Point3<f64>], b: &[nalgebra::Point3<f64>]) -> f64 {
+    let main = |p: &[nalgebra::Point3<f64>]| Joint::MAIN_BODY.iter().map(|j| p[j.index()]).collect::<Vec<_>>();
+    let (a, b) = (main(a), main(b));
+    a.iter()
+        .flat_map(|p| b.iter().map(move |q| (p.xy() - q.xy()).norm()))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// `synth session --mice 3`: three mice, each with its own truth (the `mouse` column) for every
+/// depth frame, of builds of their own; they come into contact (nose to nose, to the tail, side
+/// by side) and part again, and their trunks never pass into each other.
+#[test]
+fn three_rendered_mice_each_have_their_truth_touch_and_never_pass_into_each_other() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("three");
+    let made = mousepose()
+        .args([
+            "synth",
+            "session",
+            "--seconds",
+            "12",
+            "--seed",
+            "5",
+            "--no-color",
+            "--mice",
+            "3",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let header = std::fs::read_to_string(out.join("truth/joints.csv")).unwrap();
+    assert!(
+        header.starts_with("depth_seq,time_ns,mouse,snout_x,"),
+        "{}",
+        &header[..80]
+    );
+    assert!(
+        std::fs::read_to_string(out.join("session.toml"))
+            .unwrap()
+            .contains("mice = 3")
+    );
+    let reader = SessionReader::open(&out).unwrap();
+    let truth = reader.truth().unwrap().unwrap();
+    assert_eq!(truth.others.len(), 2);
+    let frames = truth.joints.len();
+    assert_eq!(frames, reader.depth_count());
+    for other in &truth.others {
+        assert_eq!(other.len(), frames);
+    }
+    // Builds of their own: their lengths, snout to tail base, differ.
+    let length = |p: &[nalgebra::Point3<f64>]| (p[Joint::Snout.index()] - p[Joint::TailBase.index()]).norm();
+    let lengths: Vec<f64> = std::iter::once(&truth.joints)
+        .chain(&truth.others)
+        .map(|rows| rows.iter().map(|r| length(&r.2)).sum::<f64>() / frames as f64)
+        .collect();
+    assert!(
+        (lengths[0] - lengths[1]).abs() > 1.0 || (lengths[1] - lengths[2]).abs() > 1.0,
+        "{lengths:?}"
+    );
+    // Contacts: frames where two mice are within 12 mm, in at least 3 separate episodes, and
+    // apart again between them; the spines (mid-back to withers) never closer than 10 mm.
+    let mut episodes = 0;
+    let mut touching = false;
+    for (f, first) in truth.joints.iter().enumerate() {
+        let poses: Vec<&JointPositions> = std::iter::once(&first.2)
+            .chain(truth.others.iter().map(|rows| &rows[f].2))
+            .collect();
+        let mut touch = false;
+        for (i, a) in poses.iter().enumerate() {
+            for (j, b) in poses.iter().enumerate().skip(i + 1) {
+                touch |= nearest(&a[..], &b[..]) < 12.0;
+                let spine = |p: &JointPositions| [p[Joint::MidBack.index()].xy(), p[Joint::Withers.index()].xy()];
+                for p in spine(a) {
+                    for q in spine(b) {
+                        assert!(
+                            (p - q).norm() > 10.0,
+                            "frame {f}: mice {} and {} pass into each other",
+                            i + 1,
+                            j + 1
+                        );
+                    }
+                }
+            }
+        }
+        if touch && !touching {
+            episodes += 1;
+        }
+        touching = touch;
+    }
+    assert!(episodes >= 3, "{episodes} contacts in 12 s");
+}
+
+/// A number of mice that cannot be rendered is refused in one sentence.
+#[test]
+fn a_synthetic_session_of_no_mice_or_fifty_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    for n in ["0", "50", "-1"] {
+        let out = mousepose()
+            .args(["synth", "session", "--seconds", "1", "--mice", n, "--out"])
+            .arg(tmp.path().join(n))
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(&format!("renders 1 to 5 mice, not {n}")), "{err}");
+        assert!(!tmp.path().join(n).exists());
+    }
+}
