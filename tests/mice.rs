@@ -180,3 +180,126 @@ fn a_synthetic_session_of_no_mice_or_fifty_is_refused() {
         assert!(!tmp.path().join(n).exists());
     }
 }
+
+/// Where a segmented mouse's mask lies in the image: the mean of its pixels.
+fn image_centre(m: &mousepose::vision::segment::Mouse) -> (f64, f64) {
+    let w = m.region.width as usize;
+    let (mut sx, mut sy, mut n) = (0.0, 0.0, 0.0f64);
+    for (i, &v) in m.mask.iter().enumerate() {
+        if v != 0 {
+            sx += f64::from(m.region.x0) + (i % w) as f64;
+            sy += f64::from(m.region.y0) + (i / w) as f64;
+            n += 1.0;
+        }
+    }
+    (sx / n.max(1.0), sy / n.max(1.0))
+}
+
+/// Two rendered mice (depth only, 10 s, a seed not tuned on): each frame's mice segmented
+/// alone (`Segmenter::segment_mice`) and numbered (`Identities`). Both are found in most frames,
+/// each centre near its true mouse's back, and numbers follow the true mice through their
+/// contacts.
+#[test]
+fn two_rendered_mice_are_segmented_apart_and_keep_their_numbers() {
+    use mousepose::core::geometry::Rig;
+    use mousepose::core::image::Region;
+    use mousepose::vision::identity::{Identities, Seen};
+    use mousepose::vision::segment::{Background, SegmenterConfig};
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("two");
+    let made = mousepose()
+        .args([
+            "synth",
+            "session",
+            "--seconds",
+            "10",
+            "--seed",
+            "11",
+            "--no-color",
+            "--mice",
+            "2",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let reader = SessionReader::open(&out).unwrap();
+    let truth = reader.truth().unwrap().unwrap();
+    let rig = Rig::default_rig();
+    let full = Region::full(&rig.depth.intrinsics);
+    let cage = mousepose::synth::render::Cage::new(&rig.depth).depth(full);
+    let cfg = SegmenterConfig::default();
+    let background = Background::from_depth(&cage, full, &rig.depth.intrinsics, &cfg).unwrap();
+    let mut segmenter = cfg.build(background).unwrap().with_world(rig.depth.world_from_camera);
+    let mut ids = Identities::new(2);
+    let mut last = Vec::new();
+    let (mut both, mut errors, mut swaps, mut possible) = (0, Vec::new(), 0, 0);
+    let (mut contacts, mut touching, mut touching_errors) = (0, false, Vec::new());
+    // Which true mouse each number follows (from the first frame both are found in).
+    let mut follows: Option<[usize; 2]> = None;
+    for (k, first) in truth.joints.iter().enumerate() {
+        let frame = reader.depth_frame(k).unwrap();
+        assert_eq!(frame.stamp.seq, first.0);
+        let time_s = first.1 as f64 / 1e9;
+        let mice = segmenter.segment_mice(&frame, 2, &last).unwrap();
+        last = mice.iter().map(image_centre).collect();
+        let seen: Vec<Seen> = mice
+            .iter()
+            .map(|m| Seen {
+                centre: m.centroid_mm.xy(),
+                build: [m.length_mm, m.width_mm, m.mean_height_mm],
+            })
+            .collect();
+        let numbered = ids.assign(&seen, time_s);
+        possible += usize::from(numbered.possible_swap.is_some());
+        if mice.len() < 2 {
+            continue;
+        }
+        both += 1;
+        let touch = nearest(&first.2, &truth.others[0][k].2) < 12.0;
+        contacts += usize::from(touch && !touching);
+        touching = touch;
+        let backs = [&first.2, &truth.others[0][k].2].map(|p| p[Joint::MidBack.index()].xy());
+        // Each numbered mouse's nearest true mouse.
+        let mut nearest_of = [0usize; 2];
+        for n in &numbered.numbered {
+            let c = seen[n.found].centre;
+            let d: Vec<f64> = backs.iter().map(|b| (c - *b).norm()).collect();
+            let t = usize::from(d[1] < d[0]);
+            errors.push(d[t]);
+            if touch {
+                touching_errors.push(d[t]);
+            }
+            nearest_of[n.mouse - 1] = t;
+        }
+        if nearest_of[0] == nearest_of[1] {
+            continue;
+        }
+        match follows {
+            None => follows = Some(nearest_of),
+            Some(f) if f != nearest_of => {
+                swaps += 1;
+                follows = Some(nearest_of);
+            }
+            Some(_) => {}
+        }
+    }
+    errors.sort_by(f64::total_cmp);
+    touching_errors.sort_by(f64::total_cmp);
+    let frames = truth.joints.len();
+    let median = errors[errors.len() / 2];
+    let touching_median = touching_errors
+        .get(touching_errors.len() / 2)
+        .copied()
+        .unwrap_or(f64::NAN);
+    eprintln!(
+        "both found in {both} of {frames} frames, centre to true mid-back median {median:.1} mm \
+         ({touching_median:.1} mm in the {} touching), {contacts} contacts, {swaps} swaps, {possible} possible swaps listed",
+        touching_errors.len() / 2
+    );
+    assert!(contacts >= 2, "{contacts} contacts");
+    assert!(both * 10 >= frames * 8, "both mice in {both} of {frames} frames");
+    assert!(median < 20.0, "median {median} mm");
+    assert!(swaps <= 1, "{swaps} identity swaps in 10 s");
+}

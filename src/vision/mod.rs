@@ -8,6 +8,7 @@ pub mod body_shape;
 pub mod calibrate;
 pub mod forest;
 pub mod fusion;
+pub mod identity;
 pub mod measure;
 pub mod movement;
 pub mod orientation;
