@@ -32,12 +32,12 @@ fn real_file(name: &str) -> Option<PathBuf> {
 }
 
 /// moseq2-extract's results file of the real session, when it is there.
-fn moseq_results() -> Option<PathBuf> {
+pub(crate) fn moseq_results() -> Option<PathBuf> {
     real_file("moseq2-viz/results_00.h5")
 }
 
 /// Runs `scripts/real-moseq-session` with `args`; its stdout.
-fn script(args: &[&OsStr]) -> String {
+pub(crate) fn script(args: &[&OsStr]) -> String {
     let out = Command::new(project_python())
         .arg(repo_root().join("scripts/real-moseq-session"))
         .args(args)
