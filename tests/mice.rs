@@ -195,6 +195,36 @@ fn image_centre(m: &mousepose::vision::segment::Mouse) -> (f64, f64) {
     (sx / n.max(1.0), sy / n.max(1.0))
 }
 
+/// What identity is told of segmented mice: each one's centre on the floor and its build.
+fn seen_of(mice: &[mousepose::vision::segment::Mouse]) -> Vec<mousepose::vision::identity::Seen> {
+    mice.iter()
+        .map(|m| mousepose::vision::identity::Seen {
+            centre: m.centroid_mm.xy(),
+            build: [m.length_mm, m.width_mm, m.mean_height_mm],
+        })
+        .collect()
+}
+
+/// The true mouse each of two numbers follows, from the first frame that tells them apart, and
+/// how often that changed: the identity swaps.
+#[derive(Default)]
+struct Follows {
+    now: Option<[usize; 2]>,
+    swaps: usize,
+}
+
+impl Follows {
+    /// A frame where number k's nearest true mouse is `nearest_of[k - 1]` (one where both are
+    /// nearest the same mouse says nothing).
+    fn frame(&mut self, nearest_of: [usize; 2]) {
+        if nearest_of[0] == nearest_of[1] {
+            return;
+        }
+        self.swaps += usize::from(self.now.is_some_and(|f| f != nearest_of));
+        self.now = Some(nearest_of);
+    }
+}
+
 /// Two rendered mice (depth only, 10 s, a seed not tuned on): each frame's mice segmented
 /// alone (`Segmenter::segment_mice`) and numbered (`Identities`). Both are found in most frames,
 /// each centre near its true mouse's back, and numbers follow the true mice through their
@@ -203,7 +233,7 @@ fn image_centre(m: &mousepose::vision::segment::Mouse) -> (f64, f64) {
 fn two_rendered_mice_are_segmented_apart_and_keep_their_numbers() {
     use mousepose::core::geometry::Rig;
     use mousepose::core::image::Region;
-    use mousepose::vision::identity::{Identities, Seen};
+    use mousepose::vision::identity::Identities;
     use mousepose::vision::segment::{Background, SegmenterConfig};
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("two");
@@ -234,23 +264,16 @@ fn two_rendered_mice_are_segmented_apart_and_keep_their_numbers() {
     let mut segmenter = cfg.build(background).unwrap().with_world(rig.depth.world_from_camera);
     let mut ids = Identities::new(2);
     let mut last = Vec::new();
-    let (mut both, mut errors, mut swaps, mut possible) = (0, Vec::new(), 0, 0);
+    let (mut both, mut errors, mut possible) = (0, Vec::new(), 0);
     let (mut contacts, mut touching, mut touching_errors) = (0, false, Vec::new());
-    // Which true mouse each number follows (from the first frame both are found in).
-    let mut follows: Option<[usize; 2]> = None;
+    let mut follows = Follows::default();
     for (k, first) in truth.joints.iter().enumerate() {
         let frame = reader.depth_frame(k).unwrap();
         assert_eq!(frame.stamp.seq, first.0);
         let time_s = first.1 as f64 / 1e9;
         let mice = segmenter.segment_mice(&frame, 2, &last).unwrap();
         last = mice.iter().map(image_centre).collect();
-        let seen: Vec<Seen> = mice
-            .iter()
-            .map(|m| Seen {
-                centre: m.centroid_mm.xy(),
-                build: [m.length_mm, m.width_mm, m.mean_height_mm],
-            })
-            .collect();
+        let seen = seen_of(&mice);
         let numbered = ids.assign(&seen, time_s);
         possible += usize::from(numbered.possible_swap.is_some());
         if mice.len() < 2 {
@@ -273,18 +296,9 @@ fn two_rendered_mice_are_segmented_apart_and_keep_their_numbers() {
             }
             nearest_of[n.mouse - 1] = t;
         }
-        if nearest_of[0] == nearest_of[1] {
-            continue;
-        }
-        match follows {
-            None => follows = Some(nearest_of),
-            Some(f) if f != nearest_of => {
-                swaps += 1;
-                follows = Some(nearest_of);
-            }
-            Some(_) => {}
-        }
+        follows.frame(nearest_of);
     }
+    let swaps = follows.swaps;
     errors.sort_by(f64::total_cmp);
     touching_errors.sort_by(f64::total_cmp);
     let frames = truth.joints.len();
@@ -336,7 +350,7 @@ fn moseq_frame(dat: &mut std::fs::File, i: usize, w: u32, h: u32) -> mousepose::
 /// issue's goal, and the figure is in FIGURES.md.
 #[test]
 fn two_real_mice_pasted_in_one_arena_are_segmented_apart_and_keep_their_numbers() {
-    use mousepose::vision::identity::{Identities, Seen};
+    use mousepose::vision::identity::Identities;
     use mousepose::vision::segment::{Background, SegmenterConfig};
     use std::ffi::OsStr;
     let Some(results) = crate::realdata::moseq_results() else {
@@ -374,20 +388,14 @@ fn two_real_mice_pasted_in_one_arena_are_segmented_apart_and_keep_their_numbers(
     assert_eq!(truth.len(), frames);
     let mut ids = Identities::new(2);
     let mut last = Vec::new();
-    let (mut apart, mut both_apart, mut errors, mut swaps, mut met) = (0, 0, Vec::new(), 0, 0);
+    let (mut apart, mut both_apart, mut errors, mut met) = (0, 0, Vec::new(), 0);
     let (mut meetings, mut meeting) = (0, false);
-    let mut follows: Option<[usize; 2]> = None;
+    let mut follows = Follows::default();
     for (i, t) in truth.iter().enumerate() {
         let frame = moseq_frame(&mut dat, i, w, h);
         let mice = segmenter.segment_mice(&frame, 2, &last).unwrap();
         last = mice.iter().map(image_centre).collect();
-        let seen: Vec<Seen> = mice
-            .iter()
-            .map(|m| Seen {
-                centre: m.centroid_mm.xy(),
-                build: [m.length_mm, m.width_mm, m.mean_height_mm],
-            })
-            .collect();
+        let seen = seen_of(&mice);
         let numbered = ids.assign(&seen, i as f64 / 30.0);
         if t.iter().any(|c| c.0.is_nan() || c.1.is_nan()) {
             continue;
@@ -413,18 +421,9 @@ fn two_real_mice_pasted_in_one_arena_are_segmented_apart_and_keep_their_numbers(
             errors.push(d[k]);
             nearest_of[n.mouse - 1] = k;
         }
-        if nearest_of[0] == nearest_of[1] {
-            continue;
-        }
-        match follows {
-            None => follows = Some(nearest_of),
-            Some(f) if f != nearest_of => {
-                swaps += 1;
-                follows = Some(nearest_of);
-            }
-            Some(_) => {}
-        }
+        follows.frame(nearest_of);
     }
+    let swaps = follows.swaps;
     errors.sort_by(f64::total_cmp);
     let median = errors[errors.len() / 2];
     eprintln!(
