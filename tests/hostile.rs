@@ -1,6 +1,7 @@
 //! Files that are not files: a FIFO (opening one waits for a writer) or a device such as
 //! `/dev/zero` (reading one never ends) where a reader expects a file is refused at once.
 
+use crate::util::walk;
 use mousepose::io::session::{CameraRole, SessionReader};
 use mousepose::runtime::recording::moseq::{MoseqConfig, MoseqDepth};
 use mousepose::vision::calibrate::{RigCalibration, load_intrinsics};
@@ -44,19 +45,6 @@ fn session_copy(dir: &Path) -> PathBuf {
         std::fs::copy(&entry, &dest).expect("copies");
     }
     to
-}
-
-fn walk(dir: &Path) -> Vec<PathBuf> {
-    let mut out = Vec::new();
-    for entry in std::fs::read_dir(dir).expect("directory") {
-        let path = entry.expect("entry").path();
-        if path.is_dir() {
-            out.extend(walk(&path));
-        } else {
-            out.push(path);
-        }
-    }
-    out
 }
 
 #[test]

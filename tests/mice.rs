@@ -2,7 +2,7 @@
 //! mice, each its own build, with the truth per mouse; one mouse's sessions as they were.
 #![allow(clippy::unwrap_used)] // the helpers below are test code too
 
-use crate::util::{mousepose, repo_root};
+use crate::util::{mousepose, repo_root, walk};
 use mousepose::core::pose::JointPositions;
 use mousepose::core::skeleton::Joint;
 use mousepose::io::session::SessionReader;
@@ -26,19 +26,6 @@ fn same_files(a: &Path, b: &Path) {
             "{f:?} differs"
         );
     }
-}
-
-fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
-    let mut out = Vec::new();
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_dir() {
-            out.extend(walk(&path));
-        } else {
-            out.push(path);
-        }
-    }
-    out
 }
 
 /// One mouse, as every session so far: `synth session` without `--mice`, and with `--mice 1`,

@@ -311,6 +311,14 @@ fn synth_dataset(args: &DatasetArgs) -> Outcome {
 }
 
 fn synth_session(args: &SessionArgs) -> Outcome {
+    // `--mice` given as a number, a kind, or both: the last of each counts.
+    let (mut kind, mut count) = (crate::synth::Mice::default(), 1);
+    for m in &args.mice {
+        match *m {
+            MiceArg::Kind(k) => kind = k,
+            MiceArg::Count(n) => count = n,
+        }
+    }
     let spec = SessionSpec {
         seconds: args.seconds,
         fps: args.fps,
@@ -322,27 +330,11 @@ fn synth_session(args: &SessionArgs) -> Outcome {
         color_binning: args.color_binning,
         color_format: PixelFormat::BayerRg8,
         color: !args.no_color,
-        mice: args
-            .mice
-            .iter()
-            .rev()
-            .find_map(|m| match m {
-                MiceArg::Kind(kind) => Some(*kind),
-                MiceArg::Count(_) => None,
-            })
-            .unwrap_or_default(),
+        mice: kind,
         build: None,
         activity: args.activity,
         tail: args.tail,
-        count: args
-            .mice
-            .iter()
-            .rev()
-            .find_map(|m| match m {
-                MiceArg::Count(n) => Some(*n),
-                MiceArg::Kind(_) => None,
-            })
-            .unwrap_or(1),
+        count,
     };
     let summary = engine::synth_session(
         &SessionOptions {
