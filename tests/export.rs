@@ -24,6 +24,7 @@ fn replay_to(session: &Path, out: &Path, calibration: Option<PathBuf>) {
         lsl: None,
         lead_ns: None,
         partner_wait: None,
+        mice: 1,
         calibration,
         ..crate::util::replay_options(session, out, 1)
     })

@@ -168,30 +168,6 @@ fn a_synthetic_session_of_no_mice_or_fifty_is_refused() {
     }
 }
 
-/// Where a segmented mouse's mask lies in the image: the mean of its pixels.
-fn image_centre(m: &mousepose::vision::segment::Mouse) -> (f64, f64) {
-    let w = m.region.width as usize;
-    let (mut sx, mut sy, mut n) = (0.0, 0.0, 0.0f64);
-    for (i, &v) in m.mask.iter().enumerate() {
-        if v != 0 {
-            sx += f64::from(m.region.x0) + (i % w) as f64;
-            sy += f64::from(m.region.y0) + (i / w) as f64;
-            n += 1.0;
-        }
-    }
-    (sx / n.max(1.0), sy / n.max(1.0))
-}
-
-/// What identity is told of segmented mice: each one's centre on the floor and its build.
-fn seen_of(mice: &[mousepose::vision::segment::Mouse]) -> Vec<mousepose::vision::identity::Seen> {
-    mice.iter()
-        .map(|m| mousepose::vision::identity::Seen {
-            centre: m.centroid_mm.xy(),
-            build: [m.length_mm, m.width_mm, m.mean_height_mm],
-        })
-        .collect()
-}
-
 /// The true mouse each of two numbers follows, from the first frame that tells them apart, and
 /// how often that changed: the identity swaps.
 #[derive(Default)]
@@ -220,7 +196,7 @@ impl Follows {
 fn two_rendered_mice_are_segmented_apart_and_keep_their_numbers() {
     use mousepose::core::geometry::Rig;
     use mousepose::core::image::Region;
-    use mousepose::vision::identity::Identities;
+    use mousepose::vision::identity::MiceTracker;
     use mousepose::vision::segment::{Background, SegmenterConfig};
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("two");
@@ -249,21 +225,16 @@ fn two_rendered_mice_are_segmented_apart_and_keep_their_numbers() {
     let cfg = SegmenterConfig::default();
     let background = Background::from_depth(&cage, full, &rig.depth.intrinsics, &cfg).unwrap();
     let mut segmenter = cfg.build(background).unwrap().with_world(rig.depth.world_from_camera);
-    let mut ids = Identities::new(2);
-    let mut last = Vec::new();
+    let mut tracker = MiceTracker::new(2);
     let (mut both, mut errors, mut possible) = (0, Vec::new(), 0);
     let (mut contacts, mut touching, mut touching_errors) = (0, false, Vec::new());
     let mut follows = Follows::default();
     for (k, first) in truth.joints.iter().enumerate() {
         let frame = reader.depth_frame(k).unwrap();
         assert_eq!(frame.stamp.seq, first.0);
-        let time_s = first.1 as f64 / 1e9;
-        let mice = segmenter.segment_mice(&frame, 2, &last).unwrap();
-        last = mice.iter().map(image_centre).collect();
-        let seen = seen_of(&mice);
-        let numbered = ids.assign(&seen, time_s);
+        let numbered = tracker.next(&mut segmenter, &frame).unwrap();
         possible += usize::from(numbered.possible_swap.is_some());
-        if mice.len() < 2 {
+        if numbered.mice.iter().any(Option::is_none) {
             continue;
         }
         both += 1;
@@ -273,15 +244,15 @@ fn two_rendered_mice_are_segmented_apart_and_keep_their_numbers() {
         let backs = [&first.2, &truth.others[0][k].2].map(|p| p[Joint::MidBack.index()].xy());
         // Each numbered mouse's nearest true mouse.
         let mut nearest_of = [0usize; 2];
-        for n in &numbered.numbered {
-            let c = seen[n.found].centre;
+        for (k, (mouse, _)) in numbered.mice.iter().flatten().enumerate() {
+            let c = mouse.centroid_mm.xy();
             let d: Vec<f64> = backs.iter().map(|b| (c - *b).norm()).collect();
             let t = usize::from(d[1] < d[0]);
             errors.push(d[t]);
             if touch {
                 touching_errors.push(d[t]);
             }
-            nearest_of[n.mouse - 1] = t;
+            nearest_of[k] = t;
         }
         follows.frame(nearest_of);
     }
@@ -337,7 +308,7 @@ fn moseq_frame(dat: &mut std::fs::File, i: usize, w: u32, h: u32) -> mousepose::
 /// issue's goal, and the figure is in FIGURES.md.
 #[test]
 fn two_real_mice_pasted_in_one_arena_are_segmented_apart_and_keep_their_numbers() {
-    use mousepose::vision::identity::Identities;
+    use mousepose::vision::identity::MiceTracker;
     use mousepose::vision::segment::{Background, SegmenterConfig};
     use std::ffi::OsStr;
     let Some(results) = crate::realdata::moseq_results() else {
@@ -373,17 +344,13 @@ fn two_real_mice_pasted_in_one_arena_are_segmented_apart_and_keep_their_numbers(
         })
         .collect();
     assert_eq!(truth.len(), frames);
-    let mut ids = Identities::new(2);
-    let mut last = Vec::new();
+    let mut tracker = MiceTracker::new(2);
     let (mut apart, mut both_apart, mut errors, mut met) = (0, 0, Vec::new(), 0);
     let (mut meetings, mut meeting) = (0, false);
     let mut follows = Follows::default();
     for (i, t) in truth.iter().enumerate() {
         let frame = moseq_frame(&mut dat, i, w, h);
-        let mice = segmenter.segment_mice(&frame, 2, &last).unwrap();
-        last = mice.iter().map(image_centre).collect();
-        let seen = seen_of(&mice);
-        let numbered = ids.assign(&seen, i as f64 / 30.0);
+        let numbered = tracker.next(&mut segmenter, &frame).unwrap();
         if t.iter().any(|c| c.0.is_nan() || c.1.is_nan()) {
             continue;
         }
@@ -396,17 +363,17 @@ fn two_real_mice_pasted_in_one_arena_are_segmented_apart_and_keep_their_numbers(
             continue;
         }
         apart += 1;
-        if mice.len() < 2 {
+        if numbered.mice.iter().any(Option::is_none) {
             continue;
         }
         both_apart += 1;
         let mut nearest_of = [0usize; 2];
-        for n in &numbered.numbered {
-            let c = last[n.found];
+        for (number, (mouse, _)) in numbered.mice.iter().flatten().enumerate() {
+            let c = mouse.image_centre();
             let d: Vec<f64> = t.iter().map(|m| (c.0 - m.0).hypot(c.1 - m.1)).collect();
             let k = usize::from(d[1] < d[0]);
             errors.push(d[k]);
-            nearest_of[n.mouse - 1] = k;
+            nearest_of[number] = k;
         }
         follows.frame(nearest_of);
     }
@@ -423,4 +390,112 @@ fn two_real_mice_pasted_in_one_arena_are_segmented_apart_and_keep_their_numbers(
     );
     assert!(median < 4.0, "median {median} px from MoSeq's centroid");
     assert!(swaps <= meetings, "{swaps} identity swaps in {meetings} meetings");
+}
+
+/// `replay --mice 2` on two rendered mice with the bottom camera (6 s, a seed not tuned on):
+/// `poses.csv` holds a row per pair and mouse (the pair's columns, the mouse's number, its
+/// status and how sure its number is), and `summary.json` each mouse's own figures against the
+/// truth, with the frames that could have swapped two.
+#[test]
+fn a_replay_of_two_mice_writes_a_row_per_pair_and_mouse_and_each_ones_figures() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (session, out) = (tmp.path().join("two"), tmp.path().join("poses"));
+    let made = mousepose()
+        .args([
+            "synth",
+            "session",
+            "--seconds",
+            "6",
+            "--seed",
+            "12",
+            "--mice",
+            "2",
+            "--out",
+        ])
+        .arg(&session)
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let ran = mousepose()
+        .arg("replay")
+        .arg(&session)
+        .args(["--mice", "2", "--json", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let text = std::fs::read_to_string(out.join("poses.csv")).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    assert_eq!(header, mousepose::runtime::sink::poses::header_for(2));
+    assert!(
+        header.contains(",skew_ns,mouse,status,identity_confidence,snout_x,"),
+        "{header}"
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let pairs = summary["pairs"].as_u64().unwrap() as usize;
+    assert!(pairs >= 170, "{pairs} pairs");
+    assert_eq!(rows.len(), 2 * pairs);
+    for (k, pair) in rows.chunks(2).enumerate() {
+        assert_eq!(
+            (pair[0][0], pair[1][0]),
+            (k.to_string().as_str(), k.to_string().as_str())
+        );
+        assert_eq!((pair[0][7], pair[1][7]), ("1", "2"), "pair {k}");
+        for row in pair {
+            let sure: f64 = row[9].parse().unwrap();
+            assert!((0.0..=1.0).contains(&sure), "{row:?}");
+            assert!(row[8] == "ok" || (row[8] == "no_mouse" && sure == 0.0), "{row:?}");
+        }
+    }
+    let statuses: u64 = summary["statuses"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|v| v.as_u64().unwrap())
+        .sum();
+    assert_eq!(statuses as usize, 2 * pairs);
+    let mice = summary["mice"].as_array().unwrap();
+    assert_eq!(mice.len(), 2);
+    let mut swaps = 0;
+    for (k, m) in mice.iter().enumerate() {
+        eprintln!("{m}");
+        assert_eq!(m["mouse"].as_u64(), Some(k as u64 + 1));
+        let found = m["found"].as_u64().unwrap() as usize;
+        assert!(found * 10 >= pairs * 9, "mouse {} found in {found} of {pairs}", k + 1);
+        let body = m["group_error_mm"]["body"].as_f64().unwrap();
+        assert!(body < 12.0, "mouse {}: body {body} mm", k + 1);
+        assert!(m["group_error_mm"]["paws"].as_f64().is_some(), "{m}");
+        swaps += m["identity_swaps"].as_u64().unwrap();
+        assert!(m["contacts"].as_u64().is_some());
+    }
+    assert!(swaps <= 2, "{swaps} identity swaps");
+    assert!(summary["possible_swaps"].is_array());
+}
+
+/// A count of mice mousepose cannot follow: one sentence, nothing written (the rig config's
+/// `[mice] count`: `config::tests`).
+#[test]
+fn a_replay_of_zero_or_fifty_mice_is_refused_in_one_sentence() {
+    let tmp = tempfile::tempdir().unwrap();
+    for n in ["0", "50", "-1", "two"] {
+        let out = tmp.path().join(format!("out{n}"));
+        let ran = mousepose()
+            .arg("replay")
+            .arg(repo_root().join("fixtures/sessions/synthetic-small"))
+            .args(["--mice", n, "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(!ran.status.success());
+        let err = String::from_utf8_lossy(&ran.stderr);
+        let said = if n == "two" {
+            "expected a number of mice".to_owned()
+        } else {
+            format!("follows 1 to 5 mice in one cage, not {n}")
+        };
+        assert!(err.contains(&said), "{n}: {err}");
+        assert!(!out.exists());
+    }
 }

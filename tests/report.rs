@@ -236,6 +236,7 @@ fn a_depth_only_run_says_gait_needs_the_bottom_camera_and_shows_no_empty_gait() 
         lsl: None,
         lead_ns: None,
         partner_wait: None,
+        mice: 1,
         calibration: Some(moseq.join(RIG_FILE)),
         ..crate::util::replay_options(&moseq, &run, 1)
     })

@@ -26,6 +26,7 @@ pub fn replay_options(
         lsl: None,
         lead_ns: None,
         partner_wait: None,
+        mice: 1,
         session: session.to_owned(),
         out: out.to_owned(),
         models: Some(repo_root().join("fixtures/models")),

@@ -56,6 +56,15 @@ pub fn lead_ms(s: &str) -> Result<u64, String> {
     crate::runtime::pose_record::lead_ns(ms)
 }
 
+/// `--mice N`: how many mice share the cage ([`crate::vision::identity::mice_count`]).
+pub fn mice(s: &str) -> Result<usize, String> {
+    let n = s
+        .trim()
+        .parse::<i64>()
+        .map_err(|_| format!("expected a number of mice, got {s:?}"))?;
+    crate::vision::identity::mice_count(n)
+}
+
 /// A pairing time in milliseconds (`--partner-wait`, `--partner-reach`), as nanoseconds.
 pub fn partner_ms(s: &str) -> Result<u64, String> {
     ranged(s, "a number of milliseconds", 0.0_f64, 1000.0).map(|ms| (ms * 1e6).round() as u64)

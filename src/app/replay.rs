@@ -146,6 +146,10 @@ pub struct ReplayArgs {
     /// from the depth frame pairs at the end of the wait (by default up to the tolerance).
     #[arg(long, value_name = "MS", requires = "partner_wait", value_parser = crate::app::parse::partner_ms)]
     pub partner_reach: Option<u64>,
+    /// How many mice share the cage (1 to 5), as the rig config's `[mice] count`: with more
+    /// than one, each is found, numbered and posed on its own, a row per pair and mouse.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = crate::app::parse::mice, allow_negative_numbers = true)]
+    pub mice: usize,
     /// Body-forest worker threads (0: one per core).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=64))]
     pub workers: u32,
@@ -179,6 +183,11 @@ pub fn command(args: &ReplayArgs) -> Outcome {
         return replay_many(args);
     }
     let session = args.sessions.first().cloned().unwrap_or_default();
+    if args.mice > 1 && args.lsl.is_some() {
+        return Err(Failure::usage(anyhow::anyhow!(
+            "--lsl offers one mouse's stream: with --mice, take the poses from --stream or poses.csv"
+        )));
+    }
     let options = ReplayOptions {
         stream: args.stream.clone().map(|endpoint| StreamConfig {
             host_clock: "recording",
@@ -192,6 +201,7 @@ pub fn command(args: &ReplayArgs) -> Outcome {
         }),
         lead_ns: args.lead,
         partner_wait: args.partner_wait.map(|wait| (wait, args.partner_reach)),
+        mice: args.mice,
         session: session.clone(),
         out: args.out.clone(),
         models: args.models.clone(),
@@ -226,9 +236,10 @@ fn replay_many(args: &ReplayArgs) -> Outcome {
         || args.lsl.is_some()
         || args.lead.is_some()
         || args.partner_wait.is_some()
+        || args.mice > 1
     {
         return Err(Failure::usage(anyhow::anyhow!(
-            "--realtime, --overlays, --stream, --lsl, --lead and --partner-wait are for one session, not a batch"
+            "--realtime, --overlays, --stream, --lsl, --lead, --partner-wait and --mice are for one session, not a batch"
         )));
     }
     let options = BatchOptions {

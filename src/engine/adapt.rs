@@ -330,6 +330,7 @@ fn replay_options(recording: &Path, options: &AdaptOptions, out: PathBuf, models
         lsl: None,
         lead_ns: None,
         partner_wait: None,
+        mice: 1,
     }
 }
 

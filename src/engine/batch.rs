@@ -258,6 +258,7 @@ pub fn run_local(
                     lsl: None,
                     lead_ns: None,
                     partner_wait: None,
+                    mice: 1,
                     session: item.session.clone(),
                     out: item.out.clone(),
                     models: options.models.clone(),

@@ -441,6 +441,7 @@ fn bench_pipeline(quick: bool) -> Result<PipelineBench, Box<dyn std::error::Erro
         lsl: None,
         lead_ns: None,
         partner_wait: None,
+        mice: 1,
         session: session.clone(),
         out: root.join(out),
         models: None,

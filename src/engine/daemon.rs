@@ -114,14 +114,15 @@ fn status_line(healths: &[(&str, SharedHealth)], live: &Live, fps: f64) -> Strin
 /// # Errors
 /// The reference cannot be read, or is not of the depth camera's size.
 pub fn segment_stage(config: &Config, rig: &Rig) -> anyhow::Result<SegmentStage> {
-    Ok(match &config.background {
+    let stage = match &config.background {
         Some(dir) => SegmentStage::new(reference_background(dir, &config.depth, rig)?),
         None => SegmentStage::learning(
             SegmenterConfig::default(),
             rig.depth.intrinsics,
             rig.depth.world_from_camera,
         ),
-    })
+    };
+    Ok(stage.with_mice(config.mice))
 }
 
 /// The segmenter with the empty cage of the reference session `dir`.
@@ -364,6 +365,7 @@ impl ChunkSinks {
             body_model: models.body_path(),
             paw_model: models.paws_path(),
             models: Some(models.used()),
+            mice: config.mice,
         });
         let gauges = config.record.then(|| Arc::new(RecorderGauges::default()));
         let recorder = gauges.as_ref().map(|gauges| {

@@ -9,6 +9,7 @@
 use crate::core::frame::DepthFrame;
 use crate::core::geometry::Rig;
 use crate::core::image::RgbImage;
+use crate::core::pose::JointPositions;
 use crate::engine::{Interrupt, project_python};
 use crate::io::mask::{MaskError, read_mask_png};
 use crate::io::output::{OutputError, Staging};
@@ -16,7 +17,7 @@ use crate::io::session::SessionSource;
 use crate::runtime::accounting::{CameraSummary, EdgeSummary};
 use crate::runtime::models::{Models, ModelsError};
 use crate::runtime::pipeline::{LatencySummary, PipelineError, StageReport};
-use crate::runtime::pose_record::PoseRecord;
+use crate::runtime::pose_record::{PoseRecord, PoseStatus};
 use crate::runtime::recording::{Recording, RecordingError, RecordingRig};
 use crate::runtime::sink::poses::{POSES_FILE, PoseTally, PoseWriter};
 use crate::runtime::stages::segment::SegmentStage;
@@ -65,6 +66,8 @@ pub struct ReplayOptions {
     /// the recorded arrival stamps: the wait and the reach (ns; `--partner-wait`,
     /// `--partner-reach`). `None`: each depth frame with its nearest partner.
     pub partner_wait: Option<(u64, Option<u64>)>,
+    /// How many mice share the cage (`--mice`, 1 to [`crate::vision::identity::MOST_MICE`]).
+    pub mice: usize,
 }
 
 /// Why a replay failed.
@@ -208,6 +211,72 @@ fn arena_on_floor(
     Some((rectangle, crate::vision::behaviour::Outline::of_points(&points)))
 }
 
+/// One of several mice in `summary.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct MouseSummary {
+    /// Its number (1..N).
+    pub mouse: usize,
+    /// Pairs it was found in.
+    pub found: u64,
+    /// Its mean error per group of joints against the true mouse nearest it in each frame,
+    /// as the summary's own (`group_error_mm`), where there is truth.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub group_error_mm: Option<BTreeMap<&'static str, f64>>,
+    /// How often the true mouse its number follows changed, where there is truth.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub identity_swaps: Option<u64>,
+    /// Times it came into contact with another mouse (their nearest main-body joints within
+    /// [`crate::vision::identity::CONTACT_MM`]).
+    pub contacts: u64,
+}
+
+impl MouseSummary {
+    /// Each mouse's figures from the pose writer's tally; `truth`: whether the recording has
+    /// ground truth.
+    fn of_tally(tally: &PoseTally, truth: bool) -> Vec<Self> {
+        (tally.mice.iter().zip(1..))
+            .map(|(m, mouse)| Self {
+                mouse,
+                found: m.rows.statuses.get(PoseStatus::Ok.name()).copied().unwrap_or(0),
+                group_error_mm: truth.then(|| m.rows.group_error_mm()),
+                identity_swaps: truth.then_some(m.identity_swaps),
+                contacts: m.contacts,
+            })
+            .collect()
+    }
+}
+
+/// A frame where two mice could have swapped numbers (the next best numbering, nearly as
+/// good, would have).
+#[derive(Clone, Debug, Serialize)]
+pub struct PossibleSwap {
+    pub depth_seq: u64,
+    pub mice: [usize; 2],
+}
+
+impl PossibleSwap {
+    /// The frames the pose writer found that could have swapped two mice.
+    fn of_tally(tally: &PoseTally) -> Vec<Self> {
+        (tally.possible_swaps.iter())
+            .map(|&(depth_seq, a, b)| Self {
+                depth_seq,
+                mice: [a, b],
+            })
+            .collect()
+    }
+}
+
+/// The true joints of each mouse by depth sequence number, mouse 1's first.
+fn by_frame(truth: &crate::io::session::Truth) -> HashMap<u64, Vec<JointPositions>> {
+    let mut frames: HashMap<u64, Vec<JointPositions>> = HashMap::new();
+    for rows in std::iter::once(&truth.joints).chain(&truth.others) {
+        for (seq, _, joints) in rows {
+            frames.entry(*seq).or_default().push(*joints);
+        }
+    }
+    frames
+}
+
 /// `summary.json`.
 #[derive(Clone, Debug, Serialize)]
 pub struct ReplaySummary {
@@ -257,6 +326,12 @@ pub struct ReplaySummary {
     /// In how many frames with a mouse a tail was seen, on any recording (truth or not).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tails: Option<crate::runtime::sink::poses::TailsSeen>,
+    /// With several mice (`--mice`), each one's own figures; absent with one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mice: Option<Vec<MouseSummary>>,
+    /// With several mice, the frames where two of them could have swapped numbers.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub possible_swaps: Option<Vec<PossibleSwap>>,
     /// What the user should know about the replay (the arena missing the mouse), one
     /// sentence each; also printed on stderr.
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -417,11 +492,9 @@ pub fn replay_with(
     let scene = Scene::place(options, chosen, background)?;
     let truth = recording.truth()?;
     let staging = Staging::new(&options.out, options.force)?;
-    let truth_joints: HashMap<u64, _> = truth
-        .as_ref()
-        .map(|t| t.joints.iter().map(|(seq, _, j)| (*seq, *j)).collect())
-        .unwrap_or_default();
-    let writer = PoseWriter::create(staging.path(), truth_joints, recording.depth_count() as u64 / 2)
+    let mice = options.mice.max(1);
+    let truth_joints = truth.as_ref().map(by_frame).unwrap_or_default();
+    let writer = PoseWriter::create(staging.path(), truth_joints, recording.depth_count() as u64 / 2, mice)
         .and_then(PoseWriter::with_raw_file)
         .and_then(|w| match options.lead_ns {
             Some(ns) => w.with_predicted_file(ns as f64 * 1e-9),
@@ -503,6 +576,8 @@ pub fn replay_with(
         group_error_mm: tally.group_error_mm(),
         orientation: (tally.orientation.frames > 0).then_some(tally.orientation),
         tails: (tally.tails.frames > 0).then_some(tally.tails),
+        mice: (mice > 1).then(|| MouseSummary::of_tally(&tally, truth.is_some())),
+        possible_swaps: (mice > 1).then(|| PossibleSwap::of_tally(&tally)),
         warnings: arena_warnings(
             world.arena_check.as_ref(),
             if options.roi.is_some() { "given" } else { "found" },
@@ -665,7 +740,7 @@ fn replay_topology<'a>(
         },
         edges: Edges::replay(),
         processing: Some(Processing {
-            segment: SegmentStage::new(segmenter),
+            segment: SegmentStage::new(segmenter).with_mice(options.mice),
             models,
             rig,
             workers: options.workers,

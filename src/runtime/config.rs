@@ -68,6 +68,14 @@ struct RawConfig {
     stream: Option<RawStream>,
     /// The LSL outlet: none without the table.
     lsl: Option<RawLsl>,
+    #[serde(default)]
+    mice: RawMice,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMice {
+    count: Option<i64>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -221,6 +229,9 @@ pub struct Config {
     pub stream: Option<StreamConfig>,
     /// The LSL outlet (`[lsl]`), when the config has one and it is enabled.
     pub lsl: Option<LslConfig>,
+    /// How many mice share the cage (`[mice] count`, 1 to
+    /// [`crate::vision::identity::MOST_MICE`]; 1 without the table).
+    pub mice: usize,
 }
 
 /// The `[http]` table: where the daemon serves its live page, metrics and status.
@@ -438,6 +449,20 @@ impl Checker<'_> {
         let http = self.http(raw.http)?;
         let stream = raw.stream.as_ref().map(|s| self.stream(s)).transpose()?.flatten();
         let lsl = raw.lsl.map(|l| self.lsl(l)).transpose()?.flatten();
+        let mice = raw.mice.count.unwrap_or(1);
+        let mice = crate::vision::identity::mice_count(mice).map_err(|_| {
+            let most = crate::vision::identity::MOST_MICE;
+            self.bad(
+                "mice.count",
+                format!("must be from 1 to {most} (the most mice followed in one cage), not {mice}"),
+            )
+        })?;
+        if mice > 1 && lsl.is_some() {
+            return Err(self.bad(
+                "mice.count",
+                format!("is {mice}, but the LSL outlet offers one mouse's stream: take several mice's poses from [stream] or poses.csv"),
+            ));
+        }
         Ok(Config {
             path: self.path.to_owned(),
             depth,
@@ -458,6 +483,7 @@ impl Checker<'_> {
             http,
             stream,
             lsl,
+            mice,
         })
     }
 
@@ -801,6 +827,28 @@ mod tests {
             let e = parse(&format!("{base}[lsl]\n{lsl}")).unwrap_err().to_string();
             assert!(e.contains(key), "{lsl}: {e}");
         }
+    }
+
+    #[test]
+    fn issue60_one_mouse_without_the_mice_table_and_a_count_checked() {
+        let base = "[depth]\nbackend = \"openni2\"\nuri = \"Dummy\"\n";
+        assert_eq!(parse(base).unwrap().mice, 1);
+        assert_eq!(parse(&format!("{base}[mice]\ncount = 3\n")).unwrap().mice, 3);
+        for count in ["0", "50", "-2"] {
+            let e = parse(&format!("{base}[mice]\ncount = {count}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(&format!(
+                    "mice.count must be from 1 to 5 (the most mice followed in one cage), not {count}"
+                )),
+                "{e}"
+            );
+        }
+        let e = parse(&format!("{base}[mice]\ncount = \"two\"\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("\"two\"") && e.contains("line 5"), "{e}");
     }
 
     #[test]

@@ -368,6 +368,7 @@ mod tests {
             orientation: None,
             raw_body: None,
             velocities: None,
+            identity: None,
         };
         let frame = ColorFrame {
             stamp: Stamp::default(),

@@ -57,6 +57,20 @@ pub struct PoseRecord {
     /// [`crate::core::skeleton::Joint::MAIN_BODY`]'s order (see
     /// [`crate::vision::smoothing::Smoother::velocities`]); `None` without a mouse.
     pub velocities: Option<Box<[Option<nalgebra::Vector3<f64>>; 12]>>,
+    /// With several mice in the cage, which one this is; `None` with one mouse.
+    pub identity: Option<Identity>,
+}
+
+/// Which of several mice a pose is of.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Identity {
+    /// Its number, 1..N, kept from the first frame to the last.
+    pub mouse: usize,
+    /// How sure that number is in this frame (0-1; `identity_confidence`): 0 where it was not
+    /// found.
+    pub confidence: f64,
+    /// The other mouse's number, when this frame could have swapped the two.
+    pub swap_with: Option<usize>,
 }
 
 /// The longest lead a pose is predicted for (ms): past a second, a mouse's velocity says

@@ -53,8 +53,8 @@ pub struct SessionSpec {
     pub count: usize,
 }
 
-/// The most mice a synthetic session renders in its cage.
-pub const MOST_MICE: usize = 5;
+/// The most mice a synthetic session renders in its cage: as many as are followed.
+pub use crate::vision::identity::MOST_MICE;
 
 /// How a depth camera shows a mouse's tail: real ones show it in each of these ways.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -260,6 +260,11 @@ impl Fuser {
         }
     }
 
+    /// A fuser for the same rig that has seen nothing yet (another mouse's).
+    pub fn fresh(&self) -> Self {
+        Self::new(self.color, self.config)
+    }
+
     /// Completes `pose` (whose joints 1-12 come from the depth image) with the paws in
     /// `paws` (detections in the bottom frame of depth frame `seq`, or none when there was no
     /// colour frame) and the limbs. A pose without its body joints is left as it is.

@@ -14,7 +14,15 @@
 //! In the first frame the mice are numbered from left to right in the image (by their centres'
 //! x), since nothing else tells them apart yet.
 
-use nalgebra::{Point2, Vector2};
+use crate::core::frame::DepthFrame;
+use crate::core::pose::{JointPositions, JointSource, Pose};
+use crate::core::skeleton::Joint;
+use crate::vision::segment::{Mouse, SegmentError, Segmenter};
+use nalgebra::{Point2, Point3, Vector2};
+
+/// The most mice followed in one cage: every assignment of a frame's mice to the tracks is
+/// tried, 120 of them for five.
+pub const MOST_MICE: usize = 5;
 
 /// How far a mouse may move in a frame's time at most, on top of what its speed predicts
 /// (mm): the scale of a position's cost.
@@ -38,6 +46,16 @@ pub struct Seen {
     pub centre: Point2<f64>,
     /// Its build: body length, width and mean height (mm).
     pub build: [f64; 3],
+}
+
+impl Seen {
+    /// What identity is told of a segmented mouse: its centre on the floor and its build.
+    pub fn of(mouse: &Mouse) -> Self {
+        Self {
+            centre: mouse.centroid_mm.xy(),
+            build: [mouse.length_mm, mouse.width_mm, mouse.mean_height_mm],
+        }
+    }
 }
 
 /// A mouse's number in a frame and how sure it is.
@@ -233,6 +251,105 @@ impl Identities {
         }
         track.centre = s.centre;
         track.seen_s = time_s;
+    }
+}
+
+/// A number of mice to follow, checked: 1 to [`MOST_MICE`].
+///
+/// # Errors
+/// Another number, in one sentence.
+pub fn mice_count(n: i64) -> Result<usize, String> {
+    match usize::try_from(n) {
+        Ok(n @ 1..=MOST_MICE) => Ok(n),
+        _ => Err(format!("mousepose follows 1 to {MOST_MICE} mice in one cage, not {n}")),
+    }
+}
+
+/// Two mice whose nearest main-body joints (1-12) are closer than this (mm) touch: their
+/// spines are about a body's width apart when their sides meet.
+pub const CONTACT_MM: f64 = 25.0;
+
+/// The main-body joints of `pose` that were estimated.
+fn body_joints(pose: &Pose) -> impl Iterator<Item = (usize, Point3<f64>)> + '_ {
+    Joint::MAIN_BODY.iter().filter_map(|j| {
+        let e = pose.joint(*j);
+        (e.source != JointSource::Missing).then_some((j.index(), e.position_mm))
+    })
+}
+
+/// The distance between the nearest main-body joints of two poses (mm); `None` when either
+/// has none.
+pub fn nearest_mm(a: &Pose, b: &Pose) -> Option<f64> {
+    body_joints(a)
+        .flat_map(|(_, p)| body_joints(b).map(move |(_, q)| (p - q).norm()))
+        .min_by(f64::total_cmp)
+}
+
+/// Which of the true mice `truth` the pose is of: the one whose main-body joints are nearest
+/// its own on average; `None` without truth or estimated joints.
+pub fn nearest_truth(pose: &Pose, truth: &[JointPositions]) -> Option<usize> {
+    let joints: Vec<(usize, Point3<f64>)> = body_joints(pose).collect();
+    if joints.is_empty() {
+        return None;
+    }
+    let apart = |t: &JointPositions| joints.iter().map(|(k, p)| (p - t[*k]).norm()).sum::<f64>();
+    (0..truth.len()).min_by(|&a, &b| apart(&truth[a]).total_cmp(&apart(&truth[b])))
+}
+
+/// Several mice followed from frame to frame: each frame's mice segmented alone
+/// ([`Segmenter::segment_mice`], touching mice split from where they were in the frame before)
+/// and numbered ([`Identities::assign`]).
+#[derive(Clone, Debug)]
+pub struct MiceTracker {
+    identities: Identities,
+    /// Where each mouse found in the frame before lay in the image (pixels).
+    last: Vec<(f64, f64)>,
+}
+
+/// One frame's mice by number.
+#[derive(Debug)]
+pub struct NumberedMice {
+    /// Mouse k + 1 at index k with its number's confidence (0-1); `None` where it was not found.
+    pub mice: Vec<Option<(Mouse, f64)>>,
+    /// Two numbers the frame could have swapped ([`Frame::possible_swap`]).
+    pub possible_swap: Option<(usize, usize)>,
+}
+
+impl MiceTracker {
+    /// Follows `count` mice (1 to [`MOST_MICE`]).
+    pub fn new(count: usize) -> Self {
+        Self {
+            identities: Identities::new(count.clamp(1, MOST_MICE)),
+            last: Vec::new(),
+        }
+    }
+
+    /// How many mice it follows.
+    pub fn count(&self) -> usize {
+        self.identities.count
+    }
+
+    /// The mice of `frame`, segmented by `segmenter` and numbered.
+    ///
+    /// # Errors
+    /// As [`Segmenter::segment_mice`].
+    pub fn next(&mut self, segmenter: &mut Segmenter, frame: &DepthFrame) -> Result<NumberedMice, SegmentError> {
+        let count = self.count();
+        let found = segmenter.segment_mice(frame, count, &self.last)?;
+        self.last = found.iter().map(Mouse::image_centre).collect();
+        let seen: Vec<Seen> = found.iter().map(Seen::of).collect();
+        let numbering = self.identities.assign(&seen, frame.stamp.device_ns as f64 * 1e-9);
+        let mut found: Vec<Option<Mouse>> = found.into_iter().map(Some).collect();
+        let mut mice: Vec<Option<(Mouse, f64)>> = (0..count).map(|_| None).collect();
+        for n in &numbering.numbered {
+            if let Some(mouse) = found.get_mut(n.found).and_then(Option::take) {
+                mice[n.mouse - 1] = Some((mouse, n.confidence));
+            }
+        }
+        Ok(NumberedMice {
+            mice,
+            possible_swap: numbering.possible_swap,
+        })
     }
 }
 

@@ -50,6 +50,8 @@ pub struct ChunkPlan {
     pub paw_model: Option<PathBuf>,
     /// Which models, with each file's hash.
     pub models: Option<crate::runtime::models::ModelsUsed>,
+    /// How many mice share the cage (`[mice] count`): the columns of each chunk's `poses.csv`.
+    pub mice: usize,
 }
 
 #[derive(Debug, Default)]
@@ -1024,7 +1026,7 @@ impl ChunkPoses {
         let dir = self.chunks.dir(self.index);
         let made = self.chunks.make_dir(self.index);
         match made
-            .and_then(|dir| PoseWriter::create(&dir, HashMap::new(), u64::MAX))
+            .and_then(|dir| PoseWriter::create(&dir, HashMap::new(), u64::MAX, self.chunks.plan.mice))
             .and_then(PoseWriter::with_raw_file)
             .and_then(PoseWriter::handing_over_each_row)
         {
@@ -1215,6 +1217,7 @@ mod tests {
             orientation: None,
             raw_body: None,
             velocities: None,
+            identity: None,
         };
         let frames = FramePair {
             color_again: false,
@@ -1265,12 +1268,14 @@ mod tests {
             body_model: PathBuf::from("body.forest"),
             paw_model: None,
             models: None,
+            mice: 1,
         });
         let mut sink = ChunkPoses::new(Arc::clone(&chunks), Arc::default());
         let write = |sink: &mut ChunkPoses, seq| {
             let (record, frames) = pose(seq, false);
             sink.write(Fused {
                 record,
+                others: Vec::new(),
                 frames,
                 overlay: None,
             })
@@ -1287,6 +1292,7 @@ mod tests {
         });
         sink.write(Fused {
             record,
+            others: Vec::new(),
             frames,
             overlay: None,
         })

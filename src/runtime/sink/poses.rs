@@ -13,8 +13,9 @@ use crate::core::pose::{JointPositions, JointSource};
 use crate::core::skeleton::{JOINT_COUNT, Joint};
 use crate::io::table::Fixed;
 use crate::runtime::pipeline::{Sink, StageError};
-use crate::runtime::pose_record::{PoseRecord, PoseStatus};
+use crate::runtime::pose_record::{Identity, PoseRecord, PoseStatus};
 use crate::runtime::stages::Fused;
+use crate::vision::identity::{CONTACT_MM, nearest_mm, nearest_truth};
 use crate::vision::orientation::{self, BodyJoints, Orientation};
 use nalgebra::Vector2;
 use std::collections::{BTreeMap, HashMap};
@@ -38,15 +39,24 @@ pub const OVERLAYS_DIR: &str = "overlays";
 
 /// The header line of `poses.csv`.
 pub fn header() -> String {
-    columns(true).join(",")
+    columns(true, false).join(",")
+}
+
+/// The header line of `poses.csv` of `mice` mice (that of [`header`] for one).
+pub fn header_for(mice: usize) -> String {
+    columns(true, mice > 1).join(",")
 }
 
 /// The last column's name.
 const ORIENTATION_COLUMN: &str = "orientation_confidence";
+/// With several mice: the column of the mouse's number, and of how sure it is.
+const MOUSE_COLUMN: &str = "mouse";
+const IDENTITY_COLUMN: &str = "identity_confidence";
 
 /// The columns of `poses.csv`; without `orientation`, those of files written before the
-/// orientation column was added.
-fn columns(orientation: bool) -> Vec<String> {
+/// orientation column was added; with `several` (mice), the mouse's number after the pair's
+/// columns and how sure it is after the status.
+fn columns(orientation: bool, several: bool) -> Vec<String> {
     let mut columns: Vec<String> = [
         "frame",
         "depth_seq",
@@ -55,10 +65,16 @@ fn columns(orientation: bool) -> Vec<String> {
         "depth_device_ns",
         "color_device_ns",
         "skew_ns",
-        "status",
     ]
     .map(str::to_owned)
     .into();
+    if several {
+        columns.push(MOUSE_COLUMN.to_owned());
+    }
+    columns.push("status".to_owned());
+    if several {
+        columns.push(IDENTITY_COLUMN.to_owned());
+    }
     for joint in Joint::ALL {
         for col in ["x", "y", "z", "score", "source"] {
             columns.push(format!("{}_{col}", joint.name()));
@@ -140,6 +156,26 @@ pub struct PoseTally {
     pub orientation: OrientationCheck,
     /// In how many frames a tail was seen, truth or not.
     pub tails: TailsSeen,
+    /// With several mice, each one's own tally, mouse 1's first (`rows` there counts its
+    /// rows); empty with one. The fields above count every mouse's rows but `rows` and
+    /// `pairs`, which count pairs.
+    pub mice: Vec<MouseTally>,
+    /// With several mice, the frames that could have swapped two of them: `(depth_seq, a, b)`.
+    pub possible_swaps: Vec<(u64, usize, usize)>,
+}
+
+/// What was written of one of several mice.
+#[derive(Clone, Debug, Default)]
+pub struct MouseTally {
+    /// Its rows' statuses and errors, each row's against the true mouse nearest it.
+    pub rows: PoseTally,
+    /// How often the true mouse its number follows changed (in frames where each mouse found
+    /// was nearest a true mouse of its own): identity swaps, where there is truth.
+    pub identity_swaps: u64,
+    /// Times it came into contact with another mouse ([`CONTACT_MM`]).
+    pub contacts: u64,
+    following: Option<usize>,
+    touching: bool,
 }
 
 /// In how many of the frames whose head's end the tracker chose a visible tail was found
@@ -153,6 +189,98 @@ pub struct TailsSeen {
 }
 
 impl PoseTally {
+    /// Counts one row of a mouse, `truth` its true joints when known (the rows themselves,
+    /// pairs and the snapshot are the writer's).
+    fn count(&mut self, r: &PoseRecord, truth: Option<&JointPositions>) {
+        if let (Some(t), Some(raw)) = (truth, &r.raw_body) {
+            for (j, t) in raw
+                .iter()
+                .zip(t.iter())
+                .filter(|(j, _)| j.source != JointSource::Missing)
+            {
+                self.raw_body_error.0 += (j.position_mm - t).norm();
+                self.raw_body_error.1 += 1;
+            }
+        }
+        for (k, j) in r.pose.joints.iter().enumerate() {
+            let Some(t) = truth
+                .and_then(|t| t.get(k))
+                .filter(|_| j.source != JointSource::Missing)
+            else {
+                continue;
+            };
+            let e = (j.position_mm - t).norm();
+            self.error_sum_mm[k] += e;
+            self.error_count[k] += 1;
+            if j.source == JointSource::Paw {
+                self.detected_paw_error.0 += e;
+                self.detected_paw_error.1 += 1;
+            }
+        }
+        if let Some(o) = &r.orientation {
+            self.tails.frames += 1;
+            self.tails.seen += u64::from(o.tail.is_some());
+        }
+        if let (Some(o), Some(t)) = (&r.orientation, truth) {
+            let body: BodyJoints = std::array::from_fn(|k| r.pose.joints[k]);
+            if let Some(true_heading) =
+                orientation::heading_between(&t[Joint::Neck.index()], &t[Joint::TailBase.index()])
+            {
+                self.orientation.count(true_heading, orientation::heading(&body), o);
+            }
+        }
+        *self.statuses.entry(r.status.name()).or_default() += 1;
+    }
+
+    /// Counts one pair's rows of several mice (`records`, in the order of their numbers),
+    /// `truth` the true joints of each mouse in the cage (empty without truth): each row
+    /// against the true mouse nearest it, identity swaps, contacts and possible swaps.
+    fn mice_frame<'a>(&mut self, records: impl Iterator<Item = &'a PoseRecord>, truth: &[JointPositions]) {
+        let records: Vec<&PoseRecord> = records.collect();
+        if self.mice.len() < records.len() {
+            self.mice.resize_with(records.len(), MouseTally::default);
+        }
+        let nearest: Vec<Option<usize>> = records.iter().map(|r| nearest_truth(&r.pose, truth)).collect();
+        for ((r, t), mouse) in records.iter().zip(&nearest).zip(&mut self.mice) {
+            let t = t.map(|t| &truth[t]);
+            mouse.rows.count(r, t);
+            mouse.rows.rows += 1;
+        }
+        for (r, t) in records.iter().zip(&nearest) {
+            self.count(r, t.map(|t| &truth[t]));
+        }
+        // A swap shows where every mouse found follows a true mouse of its own.
+        let followed: Vec<usize> = nearest.iter().flatten().copied().collect();
+        let distinct = followed.iter().enumerate().all(|(i, t)| !followed[..i].contains(t));
+        if followed.len() >= 2 && distinct {
+            for (mouse, t) in self.mice.iter_mut().zip(&nearest) {
+                if let Some(t) = *t {
+                    mouse.identity_swaps += u64::from(mouse.following.is_some_and(|f| f != t));
+                    mouse.following = Some(t);
+                }
+            }
+        }
+        for (k, r) in records.iter().enumerate() {
+            let touching = records
+                .iter()
+                .enumerate()
+                .any(|(j, other)| j != k && nearest_mm(&r.pose, &other.pose).is_some_and(|d| d < CONTACT_MM));
+            let mouse = &mut self.mice[k];
+            mouse.contacts += u64::from(touching && !mouse.touching);
+            mouse.touching = touching;
+            if let Some(Identity {
+                mouse: a,
+                swap_with: Some(b),
+                ..
+            }) = r.identity
+            {
+                if a < b {
+                    self.possible_swaps.push((r.depth.seq, a, b));
+                }
+            }
+        }
+    }
+
     /// Mean error per joint (mm), for joints that were ever compared.
     pub fn per_joint_error_mm(&self) -> BTreeMap<&'static str, f64> {
         Joint::ALL
@@ -205,13 +333,15 @@ impl PoseTally {
 struct PoseRow<'a> {
     frame: u64,
     record: &'a PoseRecord,
+    /// Whether the file has the columns of several mice.
+    several: bool,
 }
 
 impl serde::Serialize for PoseRow<'_> {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
         use serde::ser::SerializeTuple as _;
         let r = self.record;
-        let mut row = serializer.serialize_tuple(8 + 5 * JOINT_COUNT + 1)?;
+        let mut row = serializer.serialize_tuple(8 + 5 * JOINT_COUNT + 1 + 2 * usize::from(self.several))?;
         row.serialize_element(&self.frame)?;
         row.serialize_element(&r.depth.seq)?;
         row.serialize_element(&r.color.map(|c| c.seq))?;
@@ -219,7 +349,13 @@ impl serde::Serialize for PoseRow<'_> {
         row.serialize_element(&r.depth.device_ns)?;
         row.serialize_element(&r.color.map(|c| c.device_ns))?;
         row.serialize_element(&r.skew_ns)?;
+        if self.several {
+            row.serialize_element(&r.identity.map(|i| i.mouse))?;
+        }
         row.serialize_element(r.status.name())?;
+        if self.several {
+            row.serialize_element(&r.identity.map(|i| Fixed::<3>(i.confidence)))?;
+        }
         for j in &r.pose.joints {
             let known = (j.source != JointSource::Missing).then_some(j);
             let p = known.map(|j| j.position_mm);
@@ -272,8 +408,11 @@ pub struct PoseWriter {
     /// ([`PoseWriter::with_raw_file`], [`PoseWriter::with_predicted_file`]).
     beside: Vec<(Beside, csv::Writer<File>)>,
     dir: std::path::PathBuf,
-    truth: HashMap<u64, JointPositions>,
+    /// Per depth sequence number, the true joints of each mouse in the cage (mouse 1's first).
+    truth: HashMap<u64, Vec<JointPositions>>,
     snapshot_row: u64,
+    /// Whether the file has the columns of several mice.
+    several: bool,
     tally: Arc<Mutex<PoseTally>>,
     /// When each row is handed to the operating system as it is written
     /// ([`PoseWriter::handing_over_each_row`]): the file's length after its last whole row.
@@ -308,24 +447,31 @@ impl std::io::Write for RowFile {
 }
 
 impl PoseWriter {
-    /// Creates `dir/poses.csv` and writes the header. `truth` maps depth sequence numbers to
-    /// the true joints (empty for recorded sessions).
+    /// Creates `dir/poses.csv` for `mice` mice and writes the header. `truth` maps depth
+    /// sequence numbers to the true joints of each mouse (empty for recorded sessions).
     ///
     /// # Errors
     /// The file cannot be created or written.
     /// The tally keeps the first pose with a mouse from row `snapshot_row` on.
-    pub fn create(dir: &Path, truth: HashMap<u64, JointPositions>, snapshot_row: u64) -> std::io::Result<Self> {
+    pub fn create(
+        dir: &Path,
+        truth: HashMap<u64, Vec<JointPositions>>,
+        snapshot_row: u64,
+        mice: usize,
+    ) -> std::io::Result<Self> {
+        let several = mice > 1;
         let mut out = csv::Writer::from_writer(RowFile {
             file: File::create(dir.join(POSES_FILE))?,
             cut: std::sync::atomic::AtomicBool::new(false),
         });
-        out.write_record(columns(true))?;
+        out.write_record(columns(true, several))?;
         Ok(Self {
             out,
             beside: Vec::new(),
             dir: dir.to_owned(),
             truth,
             snapshot_row,
+            several,
             tally: Arc::default(),
             whole_len: None,
         })
@@ -351,7 +497,7 @@ impl PoseWriter {
 
     fn with_beside(mut self, which: Beside, name: &str) -> std::io::Result<Self> {
         let mut out = csv::Writer::from_writer(File::create(self.dir.join(name))?);
-        out.write_record(columns(true))?;
+        out.write_record(columns(true, self.several))?;
         self.beside.push((which, out));
         Ok(self)
     }
@@ -384,6 +530,39 @@ impl PoseWriter {
         crate::io::gone(&self.out.get_ref().file, &self.dir.join(POSES_FILE))
     }
 
+    /// Writes one row of pair `frame`: to the files beside first, so that a row one cannot
+    /// take is not written to `poses.csv` either, whose rows the tally counts.
+    fn write_row(&mut self, frame: u64, record: &PoseRecord) -> Result<(), StageError> {
+        let several = self.several;
+        for (which, out) in &mut self.beside {
+            out.serialize(PoseRow {
+                frame,
+                record: &which.of(record),
+                several,
+            })?;
+            if self.whole_len.is_some() {
+                out.flush()?;
+            }
+        }
+        self.out.serialize(PoseRow { frame, record, several })?;
+        if self.whole_len.is_some() {
+            self.out.flush().map_err(|e| self.cut_back(e))?;
+        }
+        Ok(())
+    }
+
+    /// After a write error, while each row is handed over: cuts `poses.csv` back to its last
+    /// whole pair's rows, and returns the error to report.
+    fn cut_back(&self, error: std::io::Error) -> StageError {
+        if let Some(len) = self.whole_len {
+            // Best effort: the error to report is the write's. What the writer still holds
+            // of the row goes nowhere (dropping it would flush it).
+            let _ = self.out.get_ref().file.set_len(len);
+            self.out.get_ref().cut.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+        error.into()
+    }
+
     /// The tally, readable while and after the writer runs.
     pub fn tally(&self) -> Arc<Mutex<PoseTally>> {
         Arc::clone(&self.tally)
@@ -394,85 +573,37 @@ impl Sink for PoseWriter {
     type In = Fused;
 
     fn write(&mut self, item: Fused) -> Result<(), StageError> {
-        let Fused { record: r, overlay, .. } = item;
+        let Fused {
+            record: r,
+            others,
+            overlay,
+            ..
+        } = item;
         if let Some(picture) = overlay {
             let dir = self.dir.join(OVERLAYS_DIR);
             std::fs::create_dir_all(&dir)?;
             picture.write_png(&dir.join(format!("{:06}.png", r.depth.seq)))?;
         }
-        let mut tally = self.tally.lock().unwrap_or_else(PoisonError::into_inner);
-        // The files beside first: a row one cannot take is not written to `poses.csv`
-        // either, whose rows the tally counts.
-        for (which, out) in &mut self.beside {
-            out.serialize(PoseRow {
-                frame: tally.rows,
-                record: &which.of(&r),
-            })?;
-            if self.whole_len.is_some() {
-                out.flush()?;
-            }
+        // Only this writer changes the tally: it is locked once the rows are written.
+        let frame = self.tally.lock().unwrap_or_else(PoisonError::into_inner).rows;
+        for record in std::iter::once(&r).chain(&others) {
+            self.write_row(frame, record)?;
         }
-        self.out.serialize(PoseRow {
-            frame: tally.rows,
-            record: &r,
-        })?;
-        if let Some(len) = self.whole_len {
+        if self.whole_len.is_some() {
             use std::io::Seek as _;
-            let handed = self
-                .out
-                .flush()
-                .and_then(|()| (&self.out.get_ref().file).stream_position());
-            match handed {
-                Ok(end) => self.whole_len = Some(end),
-                Err(e) => {
-                    // Best effort: the error to report is the write's. What the writer still
-                    // holds of the row goes nowhere (dropping it would flush it).
-                    let _ = self.out.get_ref().file.set_len(len);
-                    self.out.get_ref().cut.store(true, std::sync::atomic::Ordering::Relaxed);
-                    return Err(e.into());
-                }
-            }
+            let end = (&self.out.get_ref().file)
+                .stream_position()
+                .map_err(|e| self.cut_back(e))?;
+            self.whole_len = Some(end);
         }
-        let truth = self.truth.get(&r.depth.seq);
-        if let (Some(t), Some(raw)) = (truth, &r.raw_body) {
-            for (j, t) in raw
-                .iter()
-                .zip(t.iter())
-                .filter(|(j, _)| j.source != JointSource::Missing)
-            {
-                tally.raw_body_error.0 += (j.position_mm - t).norm();
-                tally.raw_body_error.1 += 1;
-            }
-        }
-        for (k, j) in r.pose.joints.iter().enumerate() {
-            let Some(t) = truth
-                .and_then(|t| t.get(k))
-                .filter(|_| j.source != JointSource::Missing)
-            else {
-                continue;
-            };
-            let e = (j.position_mm - t).norm();
-            tally.error_sum_mm[k] += e;
-            tally.error_count[k] += 1;
-            if j.source == JointSource::Paw {
-                tally.detected_paw_error.0 += e;
-                tally.detected_paw_error.1 += 1;
-            }
-        }
-        if let Some(o) = &r.orientation {
-            tally.tails.frames += 1;
-            tally.tails.seen += u64::from(o.tail.is_some());
-        }
-        if let (Some(o), Some(t)) = (&r.orientation, truth) {
-            let body: BodyJoints = std::array::from_fn(|k| r.pose.joints[k]);
-            if let Some(true_heading) =
-                orientation::heading_between(&t[Joint::Neck.index()], &t[Joint::TailBase.index()])
-            {
-                tally.orientation.count(true_heading, orientation::heading(&body), o);
-            }
+        let mut tally = self.tally.lock().unwrap_or_else(PoisonError::into_inner);
+        let truth = self.truth.get(&r.depth.seq).map(Vec::as_slice).unwrap_or_default();
+        if self.several {
+            tally.mice_frame(std::iter::once(&r).chain(&others), truth);
+        } else {
+            tally.count(&r, truth.first());
         }
         tally.rows += 1;
-        *tally.statuses.entry(r.status.name()).or_default() += 1;
         if !self.truth.is_empty() {
             tally.pairs.push((r.depth.seq, r.color.map(|c| c.seq)));
         }
@@ -548,7 +679,7 @@ impl PosesRows {
         let is = |orientation: bool| {
             header
                 .as_ref()
-                .is_some_and(|h| h.iter().eq(columns(orientation).iter()))
+                .is_some_and(|h| h.iter().eq(columns(orientation, false).iter()))
         };
         let orientation = if is(true) {
             true
@@ -684,6 +815,7 @@ fn parse_row(record: &csv::StringRecord, orientation: bool) -> Result<PoseRecord
         }),
         raw_body: None,
         velocities: None,
+        identity: None,
     })
 }
 
@@ -704,7 +836,7 @@ mod tests {
     fn files_with_and_without_the_orientation_column_read_back() {
         let dir = tempfile::tempdir().unwrap();
         let old = dir.path().join("old.csv");
-        std::fs::write(&old, format!("{}\n{}\n", columns(false).join(","), empty_row(3))).unwrap();
+        std::fs::write(&old, format!("{}\n{}\n", columns(false, false).join(","), empty_row(3))).unwrap();
         let rows = read_poses(&old).unwrap();
         assert_eq!(rows.len(), 1);
         assert_eq!(rows[0].depth.seq, 3);

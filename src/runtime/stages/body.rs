@@ -2,7 +2,8 @@
 //! the evidence of which end is the head (the forest's votes, the learnt body shape judged
 //! without the tail, and a visible tail found as one).
 
-use super::{Posed, Segmented};
+use super::{Found, Posed, Segmented};
+use crate::core::frame::FramePair;
 use crate::core::geometry::Camera;
 use crate::core::pose::{JointEstimate, JointSource, Pose};
 use crate::core::skeleton::Joint;
@@ -180,17 +181,11 @@ impl BodyStage {
     }
 }
 
-impl Map for BodyStage {
-    type In = Segmented;
-    type Out = Posed;
-    const NAME: &'static str = "body";
-
-    fn process(&mut self, input: Segmented) -> Result<Posed, StageError> {
-        let Segmented {
-            pair,
-            mouse,
-            background,
-        } = input;
+impl BodyStage {
+    /// The pose of one mouse `found` in `pair` (`background`: whether there is a model of the
+    /// empty cage yet).
+    fn pose(&mut self, pair: &FramePair, found: Found, background: bool) -> PoseRecord {
+        let Found { mouse, identity } = found;
         let mut record = PoseRecord {
             depth: pair.depth.stamp,
             color: pair.color.as_ref().map(|c| c.stamp),
@@ -206,6 +201,7 @@ impl Map for BodyStage {
             orientation: None,
             raw_body: None,
             velocities: None,
+            identity,
         };
         if let Some(mouse) = mouse {
             let r = mouse.region;
@@ -248,6 +244,31 @@ impl Map for BodyStage {
                 record.status = PoseStatus::Ok;
             }
         }
-        Ok(Posed { pair, record })
+        record
+    }
+}
+
+impl Map for BodyStage {
+    type In = Segmented;
+    type Out = Posed;
+    const NAME: &'static str = "body";
+
+    fn process(&mut self, input: Segmented) -> Result<Posed, StageError> {
+        let Segmented { pair, mice, background } = input;
+        let records: Vec<PoseRecord> = mice
+            .into_iter()
+            .map(|found| self.pose(&pair, found, background))
+            .collect();
+        let mut records = records.into_iter();
+        let nobody = Found {
+            mouse: None,
+            identity: None,
+        };
+        let record = match records.next() {
+            Some(record) => record,
+            None => self.pose(&pair, nobody, background),
+        };
+        let others = records.collect();
+        Ok(Posed { pair, record, others })
     }
 }

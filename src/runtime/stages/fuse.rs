@@ -9,7 +9,7 @@ use crate::core::geometry::Rig;
 use crate::core::skeleton::Joint;
 use crate::runtime::overlay;
 use crate::runtime::pipeline::{Map, StageError};
-use crate::runtime::pose_record::PoseStatus;
+use crate::runtime::pose_record::{PoseRecord, PoseStatus};
 use crate::vision::fusion::Fuser;
 use crate::vision::orientation::{self, BodyJoints, Orientation, Tracker, TrackerConfig};
 use crate::vision::smoothing::{Smoother, SmootherConfig};
@@ -17,33 +17,43 @@ use crate::vision::smoothing::{Smoother, SmootherConfig};
 /// Runs a [`Fuser`] on each pose.
 #[derive(Debug, Clone)]
 pub struct FuseStage {
-    fuser: Fuser,
-    tracker: Tracker,
-    smoother: Smoother,
+    /// Mouse 1's memory (the only mouse's, with one).
+    first: MouseMemory,
+    /// With several mice, those of mice 2.. (made as they first come).
+    others: Vec<MouseMemory>,
     rig: Rig,
     /// Draw a picture of the frames whose depth sequence number is a multiple of this.
     overlay_every: Option<u64>,
 }
 
+/// What the stage remembers of one mouse from frame to frame: its legs, which end is its
+/// head, and its joints' motion.
+#[derive(Debug, Clone)]
+struct MouseMemory {
+    fuser: Fuser,
+    tracker: Tracker,
+    smoother: Smoother,
+}
+
 impl FuseStage {
     pub fn new(fuser: Fuser, rig: Rig, overlay_every: Option<u64>) -> Self {
         Self {
-            fuser,
-            tracker: Tracker::new(TrackerConfig::default()),
-            smoother: Smoother::new(SmootherConfig::default()),
+            first: MouseMemory {
+                fuser,
+                tracker: Tracker::new(TrackerConfig::default()),
+                smoother: Smoother::new(SmootherConfig::default()),
+            },
+            others: Vec::new(),
             rig,
             overlay_every: overlay_every.filter(|&n| n > 0),
         }
     }
 }
 
-impl Map for FuseStage {
-    type In = Posed;
-    type Out = Fused;
-    const NAME: &'static str = "fuse";
-
-    fn process(&mut self, input: Posed) -> Result<Fused, StageError> {
-        let Posed { pair, mut record } = input;
+impl MouseMemory {
+    /// Finishes the pose of `record` (see the module documentation); `color`: whether its
+    /// pair has a colour frame.
+    fn finish(&mut self, record: &mut PoseRecord, color: bool) {
         if let Some(headings) = record.headings.take() {
             let decision = self.tracker.update(record.depth.device_ns, &headings);
             let raw = headings.joints[decision.chosen];
@@ -71,8 +81,39 @@ impl Map for FuseStage {
             self.smoother.reset();
         }
         // Depth-only pairs keep joints 1-12 (the paper's single depth image mode).
-        if record.status == PoseStatus::Ok && pair.color.is_some() {
+        if record.status == PoseStatus::Ok && color {
             self.fuser.fuse(record.depth.seq, &mut record.pose, &record.paws);
+        }
+    }
+
+    /// The memory of a mouse not seen before, as `self` was made.
+    fn fresh(&self) -> Self {
+        Self {
+            fuser: self.fuser.fresh(),
+            tracker: Tracker::new(TrackerConfig::default()),
+            smoother: Smoother::new(SmootherConfig::default()),
+        }
+    }
+}
+
+impl Map for FuseStage {
+    type In = Posed;
+    type Out = Fused;
+    const NAME: &'static str = "fuse";
+
+    fn process(&mut self, input: Posed) -> Result<Fused, StageError> {
+        let Posed {
+            pair,
+            mut record,
+            mut others,
+        } = input;
+        let color = pair.color.is_some();
+        self.first.finish(&mut record, color);
+        while self.others.len() < others.len() {
+            self.others.push(self.first.fresh());
+        }
+        for (memory, record) in self.others.iter_mut().zip(&mut others) {
+            memory.finish(record, color);
         }
         let overlay = self
             .overlay_every
@@ -80,6 +121,7 @@ impl Map for FuseStage {
             .map(|_| overlay::draw(&self.rig, &pair.depth, pair.color.as_deref(), &record));
         Ok(Fused {
             record,
+            others,
             frames: pair,
             overlay,
         })

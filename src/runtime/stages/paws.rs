@@ -2,8 +2,10 @@
 //! stands (its body joints' footprint on the glass, projected into the bottom camera).
 
 use super::Posed;
+use crate::core::frame::FramePair;
 use crate::core::geometry::Camera;
 use crate::runtime::pipeline::{Map, StageError};
+use crate::runtime::pose_record::PoseRecord;
 use crate::runtime::pose_record::PoseStatus;
 use crate::vision::paws::{FOOTPRINT_MARGIN_MM, PawModel, footprint};
 use std::sync::Arc;
@@ -37,29 +39,40 @@ impl Map for PawStage {
     const NAME: &'static str = "paws";
 
     fn process(&mut self, mut input: Posed) -> Result<Posed, StageError> {
-        let Posed { pair, record } = &mut input;
-        if let (Some(detector), Some(color), PoseStatus::Ok) = (&mut self.detector, &pair.color, record.status) {
-            let i = &self.color.intrinsics;
-            if (color.width, color.height) != (i.width, i.height) {
-                // The rig's colour camera is another size (a live rig without a calibration
-                // for this camera mode): no paws rather than paws in the wrong place. The
-                // joints then come from the fusion's defaults, as without a paw model.
-                if !self.warned.swap(true, Ordering::Relaxed) {
-                    tracing::warn!(
-                        "colour frames are {}x{} but the rig's colour camera is {}x{}: no paw detection (calibrate this camera)",
-                        color.width,
-                        color.height,
-                        i.width,
-                        i.height
-                    );
-                }
-                return Ok(input);
-            }
-            if let Some((roi, px_per_mm)) = footprint(&record.pose, &self.color, FOOTPRINT_MARGIN_MM) {
-                detector.detect(color, roi, px_per_mm, &mut record.paws);
-            }
+        let Posed { pair, record, others } = &mut input;
+        for record in std::iter::once(record).chain(others) {
+            self.detect(pair, record);
         }
         Ok(input)
+    }
+}
+
+impl PawStage {
+    /// The paws of the mouse of `record` in `pair`'s colour frame: those around where it
+    /// stands (with several mice, each its own footprint).
+    fn detect(&mut self, pair: &FramePair, record: &mut PoseRecord) {
+        let (Some(detector), Some(color), PoseStatus::Ok) = (&mut self.detector, &pair.color, record.status) else {
+            return;
+        };
+        let i = &self.color.intrinsics;
+        if (color.width, color.height) != (i.width, i.height) {
+            // The rig's colour camera is another size (a live rig without a calibration
+            // for this camera mode): no paws rather than paws in the wrong place. The
+            // joints then come from the fusion's defaults, as without a paw model.
+            if !self.warned.swap(true, Ordering::Relaxed) {
+                tracing::warn!(
+                    "colour frames are {}x{} but the rig's colour camera is {}x{}: no paw detection (calibrate this camera)",
+                    color.width,
+                    color.height,
+                    i.width,
+                    i.height
+                );
+            }
+            return;
+        }
+        if let Some((roi, px_per_mm)) = footprint(&record.pose, &self.color, FOOTPRINT_MARGIN_MM) {
+            detector.detect(color, roi, px_per_mm, &mut record.paws);
+        }
     }
 }
 
@@ -69,7 +82,6 @@ mod tests {
     use crate::core::frame::{ColorFrame, DepthFrame, FramePair, PixelFormat, Stamp};
     use crate::core::geometry::Rig;
     use crate::core::pose::Pose;
-    use crate::runtime::pose_record::PoseRecord;
 
     /// Warnings caught while `f` runs.
     fn warnings(f: impl FnOnce()) -> Vec<String> {
@@ -114,8 +126,14 @@ mod tests {
                     orientation: None,
                     raw_body: None,
                     velocities: None,
+                    identity: None,
                 };
-                w.process(Posed { pair, record }).unwrap();
+                w.process(Posed {
+                    pair,
+                    record,
+                    others: Vec::new(),
+                })
+                .unwrap();
             }
         });
         assert_eq!(

@@ -10,11 +10,13 @@
 //! place. While no floor can be found in what was learnt (a camera pointed wrong, a test
 //! device), frames go on with the status `no_background`, and learning goes on.
 
-use super::Segmented;
+use super::{Found, Segmented};
 use crate::core::frame::{DepthFrame, FramePair};
 use crate::core::geometry::Intrinsics;
 use crate::core::image::Region;
 use crate::runtime::pipeline::{Map, StageError};
+use crate::runtime::pose_record::Identity;
+use crate::vision::identity::{MiceTracker, NumberedMice};
 use crate::vision::segment::{Background, FloorPlane, SegmentError, Segmenter, SegmenterConfig};
 use nalgebra::Isometry3;
 use std::sync::{Arc, Mutex, PoisonError};
@@ -29,6 +31,8 @@ pub struct SegmentStage {
     segmenter: Option<Segmenter>,
     learner: Option<Learner>,
     floor: Option<FloorSlot>,
+    /// With several mice in the cage: their tracks ([`SegmentStage::with_mice`]).
+    mice: Option<MiceTracker>,
 }
 
 /// The background learnt online; see the module documentation.
@@ -59,6 +63,7 @@ impl SegmentStage {
             segmenter: Some(segmenter),
             learner: None,
             floor: None,
+            mice: None,
         }
     }
 
@@ -90,6 +95,35 @@ impl SegmentStage {
                 frames: 0,
             }),
             floor: None,
+            mice: None,
+        }
+    }
+
+    /// The same stage, finding `count` mice in each frame and numbering them (1 to
+    /// [`crate::vision::identity::MOST_MICE`]); one is what it does without.
+    #[must_use]
+    pub fn with_mice(mut self, count: usize) -> Self {
+        self.mice = (count > 1).then(|| MiceTracker::new(count));
+        self
+    }
+
+    /// What a frame without a segmenter gives: no mouse, each numbered as ever.
+    fn nothing_found(&self) -> Vec<Found> {
+        match &self.mice {
+            None => vec![Found {
+                mouse: None,
+                identity: None,
+            }],
+            Some(tracker) => (1..=tracker.count())
+                .map(|mouse| Found {
+                    mouse: None,
+                    identity: Some(Identity {
+                        mouse,
+                        confidence: 0.0,
+                        swap_with: None,
+                    }),
+                })
+                .collect(),
         }
     }
 
@@ -167,31 +201,63 @@ impl Map for SegmentStage {
         }
         let Some(segmenter) = &mut self.segmenter else {
             return Ok(Segmented {
+                mice: self.nothing_found(),
                 pair,
-                mouse: None,
                 background: false,
             });
         };
-        let mouse = match segmenter.segment(&pair.depth) {
-            Ok(m) => m,
+        let found = match &mut self.mice {
+            None => segmenter
+                .segment(&pair.depth)
+                .map(|mouse| vec![Found { mouse, identity: None }]),
+            Some(tracker) => tracker.next(segmenter, &pair.depth).map(numbered),
+        };
+        let mice = match found {
+            Ok(mice) => mice,
             // A live camera that came back in another mode: the learner starts again.
             Err(SegmentError::FrameSize { .. }) if self.learner.is_some() => {
                 self.segmenter = None;
                 return Ok(Segmented {
+                    mice: self.nothing_found(),
                     pair,
-                    mouse: None,
                     background: false,
                 });
             }
             Err(e) => return Err(e.into()),
         };
-        if mouse.is_none() {
+        if mice.iter().all(|m| m.mouse.is_none()) {
             segmenter.update_background(&pair.depth, false)?;
         }
         Ok(Segmented {
             pair,
-            mouse,
+            mice,
             background: true,
         })
     }
+}
+
+/// A frame's mice by number as the pipeline carries them, each with its identity.
+fn numbered(numbered: NumberedMice) -> Vec<Found> {
+    let swap = numbered.possible_swap;
+    let other_of = |k: usize| match swap {
+        Some((a, b)) if a == k => Some(b),
+        Some((a, b)) if b == k => Some(a),
+        _ => None,
+    };
+    numbered
+        .mice
+        .into_iter()
+        .zip(1..)
+        .map(|(found, k)| {
+            let (mouse, confidence) = found.map_or((None, 0.0), |(m, c)| (Some(m), c));
+            Found {
+                mouse,
+                identity: Some(Identity {
+                    mouse: k,
+                    confidence,
+                    swap_with: other_of(k),
+                }),
+            }
+        })
+        .collect()
 }

@@ -407,6 +407,7 @@ mod tests {
             orientation: None,
             raw_body: None,
             velocities: None,
+            identity: None,
         };
         let values = sample(&record, None);
         let labels: Vec<String> = channels(false).into_iter().map(|c| c.label).collect();
@@ -425,6 +426,7 @@ mod tests {
         velocities[0] = Some(nalgebra::Vector3::new(100.0, 0.0, -10.0));
         let record = PoseRecord {
             velocities: Some(Box::new(velocities)),
+            identity: None,
             ..record
         };
         let values = sample(&record, Some(50_000_000));

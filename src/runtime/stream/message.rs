@@ -68,7 +68,13 @@ struct PoseMessage {
     depth: Stamp,
     color: Option<Stamp>,
     skew_ns: i64,
+    /// With several mice: which one (1..N); absent with one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mouse: Option<usize>,
     status: &'static str,
+    /// With several mice: how sure its number is (0-1); absent with one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    identity_confidence: Option<f64>,
     orientation_confidence: Option<f64>,
     joints: BTreeMap<&'static str, Option<JointOut>>,
     predicted: Option<PredictedOut>,
@@ -122,7 +128,9 @@ pub fn pose(seq: u64, record: &PoseRecord, host_clock: &'static str, lead_ns: Op
         depth: record.depth.into(),
         color: record.color.map(Into::into),
         skew_ns: record.skew_ns,
+        mouse: record.identity.map(|i| i.mouse),
         status: record.status.name(),
+        identity_confidence: record.identity.map(|i| round(i.confidence, 1000.0)),
         orientation_confidence: record.orientation.as_ref().map(|o| round(o.confidence, 1000.0)),
         joints,
         predicted,
@@ -229,6 +237,7 @@ mod tests {
             orientation: None,
             raw_body: None,
             velocities: Some(Box::new(velocities)),
+            identity: None,
         };
         let v: serde_json::Value = serde_json::from_slice(&pose_message(&record, None)).unwrap();
         assert_eq!(

@@ -542,9 +542,9 @@ impl<S: crate::runtime::pipeline::Sink<In = crate::runtime::stages::Fused>> crat
     fn write(&mut self, item: Self::In) -> Result<(), crate::runtime::pipeline::StageError> {
         if let Some(stream) = &self.stream {
             let (host_clock, lead_ns) = (stream.host_clock, stream.lead_ns);
-            stream.publish(Topic::Poses, |seq| {
-                message::pose(seq, &item.record, host_clock, lead_ns)
-            });
+            for record in item.records() {
+                stream.publish(Topic::Poses, |seq| message::pose(seq, record, host_clock, lead_ns));
+            }
         }
         if let Some(lsl) = &self.lsl {
             lsl.publish(&item.record);

@@ -88,6 +88,19 @@ impl Mouse {
         let i = (y - self.region.y0) as usize * self.region.width as usize + (x - self.region.x0) as usize;
         self.mask.get(i).is_some_and(|&m| m != 0)
     }
+
+    /// The mean position of the mask's pixels in the image (pixels): where a split of touching
+    /// mice starts from in the next frame ([`super::Segmenter::segment_mice`]).
+    pub fn image_centre(&self) -> (f64, f64) {
+        let w = self.region.width as usize;
+        let (mut sx, mut sy, mut n) = (0.0, 0.0, 0.0f64);
+        for (i, _) in self.mask.iter().enumerate().filter(|(_, m)| **m != 0) {
+            sx += f64::from(self.region.x0) + (i % w) as f64;
+            sy += f64::from(self.region.y0) + (i / w) as f64;
+            n += 1.0;
+        }
+        (sx / n.max(1.0), sy / n.max(1.0))
+    }
 }
 
 /// The mask's box with a border of one empty pixel, as a local image of `lw` x `lh` pixels
