@@ -8,6 +8,11 @@ when the run has one), the videos to link, the software version and the models. 
 are stored in millimetres with conversion 0.001 to metres; a joint without an estimate is
 NaN; confidence is the joint's score. Each frame's status, orientation confidence and the
 source of each joint go to the `PoseFrames` table beside the PoseEstimation.
+
+A run of several mice (`poses.csv` with a `mouse` column) gets one PoseEstimation per mouse,
+`mouse1`, `mouse2`, ..., each with its skeleton of that name and its `PoseFrames_mouse1`, ...
+table (with `identity_confidence`); META_JSON's `mouse` set to k writes mouse k alone, as a
+run of one mouse is written (what `export nwb --per-mouse` writes a file of each).
 """
 
 import csv
@@ -87,20 +92,108 @@ def linked_video(nwb, name, video, out, t0_ns, description):
     return series
 
 
+def number(text):
+    return float(text) if text != "" else math.nan
+
+
+def pose_of(rows, meta, t0, device, source_video, labeled_video, name=None, identity=False):
+    """One mouse's skeleton (named `name`, or mouse), PoseEstimation (named `name`, or
+    PoseEstimation for a file's only mouse) and frames' table (with `identity_confidence`
+    when `identity`)."""
+    joints = meta["joints"]
+    timestamps = np.array([(int(r["depth_device_ns"]) - t0) / 1e9 for r in rows], dtype=np.float64)
+    skeleton = Skeleton(
+        name=name or "mouse",
+        nodes=joints,
+        edges=np.array(meta["edges"], dtype=np.uint8),
+    )
+    series = []
+    for k, joint in enumerate(joints):
+        data = np.array(
+            [[number(r[f"{joint}_x"]), number(r[f"{joint}_y"]), number(r[f"{joint}_z"])] for r in rows],
+            dtype=np.float64,
+        )
+        confidence = np.array([number(r[f"{joint}_score"]) for r in rows], dtype=np.float64)
+        series.append(
+            PoseEstimationSeries(
+                name=joint,
+                description=f"joint {k + 1}, {joint}: position in the cage's world frame (origin on the glass, z up)",
+                data=data,
+                unit="meters",
+                conversion=0.001,
+                reference_frame="the cage's world frame: origin on the glass floor's top surface, z up, millimetres scaled by conversion",
+                timestamps=timestamps if k == 0 else series[0],
+                confidence=np.nan_to_num(confidence, nan=0.0),
+                confidence_definition="the joint's score in [0, 1] (0 where the joint has no estimate)",
+            )
+        )
+    estimation = PoseEstimation(
+        name=name or "PoseEstimation",
+        source_video=source_video,
+        labeled_video=labeled_video,
+        pose_estimation_series=series,
+        description=meta["description"],
+        scorer=meta["scorer"],
+        source_software="mousepose",
+        source_software_version=meta["software_version"],
+        skeleton=skeleton,
+        device=device,
+    )
+
+    # What poses.csv says of each frame beyond the positions: one row per frame, in the
+    # series' order.
+    def seq(text):
+        return int(text) if text != "" else -1
+
+    columns = [
+        VectorData(name="timestamp", description="seconds, as the PoseEstimationSeries' timestamps", data=timestamps),
+        VectorData(name="depth_seq", description="the depth camera's frame counter", data=np.array([seq(r["depth_seq"]) for r in rows], dtype=np.int64)),
+        VectorData(name="color_seq", description="the colour camera's frame counter of the pair, -1 for a depth-only frame", data=np.array([seq(r["color_seq"]) for r in rows], dtype=np.int64)),
+        VectorData(name="status", description="ok (joints estimated) or no_mouse", data=[r["status"] for r in rows]),
+        VectorData(
+            name="orientation_confidence",
+            description="how sure the orientation tracker is of which end of the mouse is the head, 0.5 (a guess) to 1; NaN without a mouse",
+            data=np.array([number(r.get("orientation_confidence") or "") for r in rows], dtype=np.float64),
+        ),
+        VectorData(
+            name="joint_source",
+            description="per joint in the skeleton's node order, where its position comes from: depth (the top depth image), paw (a detection in the bottom colour image), ik (inverse kinematics), default (the model's rest pose) or missing",
+            data=[[r[f"{joint}_source"] for joint in joints] for r in rows],
+        ),
+    ]
+    if identity:
+        columns.append(
+            VectorData(
+                name="identity_confidence",
+                description="how sure the mouse's number is in the frame, 0-1 (0 where it was not found)",
+                data=np.array([number(r["identity_confidence"]) for r in rows], dtype=np.float64),
+            )
+        )
+    frames = DynamicTable(
+        name=f"PoseFrames_{name}" if name else "PoseFrames",
+        description="per frame of the PoseEstimation series (same rows, same order): how each pose was made",
+        columns=columns,
+    )
+    return skeleton, estimation, frames
+
+
 def main(poses_csv, meta_json, out):
     with open(meta_json, encoding="utf-8") as f:
         meta = json.load(f)
-    joints = meta["joints"]
     with open(poses_csv, newline="", encoding="utf-8") as f:
         rows = list(csv.DictReader(f))
     if not rows:
         raise SystemExit(f"{poses_csv} has no rows")
     t0 = int(rows[0]["depth_device_ns"])
-    timestamps = np.array([(int(r["depth_device_ns"]) - t0) / 1e9 for r in rows], dtype=np.float64)
-
-    def number(text):
-        return float(text) if text != "" else math.nan
-
+    # One mouse's rows (all of them in a run of one), by number.
+    mice = {}
+    for r in rows:
+        mice.setdefault(int(r["mouse"]) if "mouse" in r else 1, []).append(r)
+    alone = meta.get("mouse")
+    if alone is not None:
+        if alone not in mice:
+            raise SystemExit(f"{poses_csv} has no mouse {alone}")
+        mice = {alone: mice[alone]}
     start = datetime.fromisoformat(meta["session_start_time"].replace("Z", "+00:00"))
     nwb = NWBFile(
         session_description=meta["session_description"],
@@ -159,31 +252,6 @@ def main(poses_csv, meta_json, out):
         )
         nwb.add_device(camera)
         devices.append(camera)
-    skeleton = Skeleton(
-        name="mouse",
-        nodes=joints,
-        edges=np.array(meta["edges"], dtype=np.uint8),
-    )
-    series = []
-    for k, name in enumerate(joints):
-        data = np.array(
-            [[number(r[f"{name}_x"]), number(r[f"{name}_y"]), number(r[f"{name}_z"])] for r in rows],
-            dtype=np.float64,
-        )
-        confidence = np.array([number(r[f"{name}_score"]) for r in rows], dtype=np.float64)
-        series.append(
-            PoseEstimationSeries(
-                name=name,
-                description=f"joint {k + 1}, {name}: position in the cage's world frame (origin on the glass, z up)",
-                data=data,
-                unit="meters",
-                conversion=0.001,
-                reference_frame="the cage's world frame: origin on the glass floor's top surface, z up, millimetres scaled by conversion",
-                timestamps=timestamps if k == 0 else series[0],
-                confidence=np.nan_to_num(confidence, nan=0.0),
-                confidence_definition="the joint's score in [0, 1] (0 where the joint has no estimate)",
-            )
-        )
     videos = meta.get("videos") or {}
     source_video = labeled_video = None
     if videos.get("source"):
@@ -196,49 +264,22 @@ def main(poses_csv, meta_json, out):
             nwb, "labeled_video", videos["labeled"], out, t0,
             "the poses drawn over the frames (mousepose export video; external file, path relative to this file)",
         )
-    estimation = PoseEstimation(
-        name="PoseEstimation",
-        source_video=source_video,
-        labeled_video=labeled_video,
-        pose_estimation_series=series,
-        description=meta["description"],
-        scorer=meta["scorer"],
-        source_software="mousepose",
-        source_software_version=meta["software_version"],
-        skeleton=skeleton,
-        # ndx-pose links one camera to a PoseEstimation: the depth camera, whose image gives
-        # the body (the bottom camera, which gives the paws, is among the file's devices).
-        device=next((d for d in devices if d.name == "depth_camera"), devices[0]),
-    )
     behavior = nwb.create_processing_module(name="behavior", description="3D pose of the mouse from mousepose")
-    behavior.add(Skeletons(skeletons=[skeleton]))
-    behavior.add(estimation)
-    # What poses.csv says of each frame beyond the positions: one row per frame, in the
-    # series' order.
-    def seq(text):
-        return int(text) if text != "" else -1
-
-    frames = DynamicTable(
-        name="PoseFrames",
-        description="per frame of the PoseEstimation series (same rows, same order): how each pose was made",
-        columns=[
-            VectorData(name="timestamp", description="seconds, as the PoseEstimationSeries' timestamps", data=timestamps),
-            VectorData(name="depth_seq", description="the depth camera's frame counter", data=np.array([seq(r["depth_seq"]) for r in rows], dtype=np.int64)),
-            VectorData(name="color_seq", description="the colour camera's frame counter of the pair, -1 for a depth-only frame", data=np.array([seq(r["color_seq"]) for r in rows], dtype=np.int64)),
-            VectorData(name="status", description="ok (joints estimated) or no_mouse", data=[r["status"] for r in rows]),
-            VectorData(
-                name="orientation_confidence",
-                description="how sure the orientation tracker is of which end of the mouse is the head, 0.5 (a guess) to 1; NaN without a mouse",
-                data=np.array([number(r.get("orientation_confidence") or "") for r in rows], dtype=np.float64),
-            ),
-            VectorData(
-                name="joint_source",
-                description="per joint in the skeleton's node order, where its position comes from: depth (the top depth image), paw (a detection in the bottom colour image), ik (inverse kinematics), default (the model's rest pose) or missing",
-                data=[[r[f"{name}_source"] for name in joints] for r in rows],
-            ),
-        ],
-    )
-    behavior.add(frames)
+    # ndx-pose links one camera to a PoseEstimation: the depth camera, whose image gives the
+    # body (the bottom camera, which gives the paws, is among the file's devices).
+    device = next((d for d in devices if d.name == "depth_camera"), devices[0])
+    poses = [
+        pose_of(
+            mouse_rows, meta, t0, device, source_video, labeled_video,
+            name=f"mouse{k}" if len(mice) > 1 else None,
+            identity=len(mice) > 1 or alone is not None,
+        )
+        for k, mouse_rows in sorted(mice.items())
+    ]
+    behavior.add(Skeletons(skeletons=[skeleton for skeleton, _, _ in poses]))
+    for _, estimation, frames in poses:
+        behavior.add(estimation)
+        behavior.add(frames)
     with NWBHDF5IO(out, mode="w") as io:
         io.write(nwb)
 

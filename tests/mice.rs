@@ -499,3 +499,137 @@ fn a_replay_of_zero_or_fifty_mice_is_refused_in_one_sentence() {
         assert!(!out.exists());
     }
 }
+
+/// `export nwb` of a replay of two mice: one PoseEstimation per mouse (`mouse1`, `mouse2`)
+/// with a row per pair each, and `--per-mouse` a file per mouse written as one mouse's is
+/// (what keypoint-MoSeq and movement read), both passing nwbinspector; `--per-mouse` of a
+/// run of one mouse is refused in one sentence, and `report` says it reads one mouse so far.
+#[test]
+fn two_mice_export_to_nwb_together_and_a_file_each() {
+    let python = Path::new(mousepose::engine::export::nwb::DEFAULT_PYTHON);
+    assert!(python.is_file(), "{python:?} is missing: run scripts/setup.sh");
+    let tmp = tempfile::tempdir().unwrap();
+    let (session, run) = (tmp.path().join("two"), tmp.path().join("run"));
+    let made = mousepose()
+        .args([
+            "synth",
+            "session",
+            "--seconds",
+            "2",
+            "--seed",
+            "13",
+            "--mice",
+            "2",
+            "--out",
+        ])
+        .arg(&session)
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    let ran = mousepose()
+        .arg("replay")
+        .arg(&session)
+        .args(["--mice", "2", "--out"])
+        .arg(&run)
+        .output()
+        .unwrap();
+    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let pairs = (std::fs::read_to_string(run.join("poses.csv")).unwrap().lines().count() - 1) / 2;
+    let export = |out: &Path, per_mouse: bool| {
+        let mut c = mousepose();
+        c.args(["export", "nwb"]).arg(&run).arg("--out").arg(out);
+        c.args(["--subject-id", "cage7", "--age", "P84D"]);
+        if per_mouse {
+            c.arg("--per-mouse");
+        }
+        c.output().unwrap()
+    };
+    let both = tmp.path().join("both.nwb");
+    let o = export(&both, false);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = export(&tmp.path().join("each.nwb"), true);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let check = r#"
+import json, sys
+from pynwb import NWBHDF5IO
+import ndx_pose
+from nwbinspector import inspect_nwbfile, Importance
+out = {}
+for path in sys.argv[1:]:
+    with NWBHDF5IO(path, "r") as io:
+        f = io.read()
+        b = f.processing["behavior"]
+        poses = {n: len(next(iter(b[n].pose_estimation_series.values())).timestamps)
+                 for n in b.data_interfaces if type(b[n]).__name__ == "PoseEstimation"}
+        tables = sorted(n for n in b.data_interfaces if n.startswith("PoseFrames"))
+        identity = [list(b[t]["identity_confidence"][:3]) for t in tables if "identity_confidence" in b[t].colnames]
+    serious = [m.message for m in inspect_nwbfile(nwbfile_path=path)
+               if m.importance.value >= Importance.BEST_PRACTICE_VIOLATION.value]
+    out[path.rsplit("/", 1)[1]] = {"poses": poses, "tables": tables, "identity": identity, "serious": serious}
+print(json.dumps(out))
+"#;
+    let files = [
+        both,
+        tmp.path().join("each_mouse1.nwb"),
+        tmp.path().join("each_mouse2.nwb"),
+    ];
+    let read = std::process::Command::new(python)
+        .args(["-c", check])
+        .args(&files)
+        .output()
+        .unwrap();
+    assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&read.stdout).unwrap();
+    let n = serde_json::json!(pairs);
+    assert_eq!(
+        v["both.nwb"]["poses"],
+        serde_json::json!({"mouse1": n, "mouse2": n}),
+        "{v}"
+    );
+    assert_eq!(
+        v["both.nwb"]["tables"],
+        serde_json::json!(["PoseFrames_mouse1", "PoseFrames_mouse2"])
+    );
+    for each in ["each_mouse1.nwb", "each_mouse2.nwb"] {
+        assert_eq!(v[each]["poses"], serde_json::json!({"PoseEstimation": n}), "{v}");
+        assert_eq!(v[each]["tables"], serde_json::json!(["PoseFrames"]));
+        assert_eq!(v[each]["identity"].as_array().unwrap().len(), 1);
+    }
+    for f in ["both.nwb", "each_mouse1.nwb", "each_mouse2.nwb"] {
+        assert_eq!(v[f]["serious"], serde_json::json!([]), "{f}: {v}");
+    }
+    // A run of one mouse has nothing to split; report reads one mouse so far.
+    let one = tmp.path().join("one");
+    let ran = mousepose()
+        .arg("replay")
+        .arg(repo_root().join("fixtures/sessions/synthetic-small"))
+        .arg("--out")
+        .arg(&one)
+        .output()
+        .unwrap();
+    assert!(ran.status.success());
+    let o = mousepose()
+        .args(["export", "nwb"])
+        .arg(&one)
+        .arg("--out")
+        .arg(tmp.path().join("one.nwb"))
+        .args(["--age", "P84D", "--per-mouse"])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("is of one mouse: --per-mouse is for runs of several"));
+    assert!(!tmp.path().join("one_mouse1.nwb").exists());
+    let o = mousepose()
+        .arg("report")
+        .arg(&run)
+        .arg("--out")
+        .arg(tmp.path().join("report"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("holds several mice (replay --mice)"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}

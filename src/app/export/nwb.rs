@@ -78,6 +78,11 @@ pub struct NwbArgs {
     /// Replace the file if it exists.
     #[arg(long)]
     pub force: bool,
+    /// A run of several mice (`replay --mice N`): a file per mouse, FILE's name with
+    /// `_mouse1`, `_mouse2`, ... before `.nwb` (each as a run of one mouse is written: what
+    /// keypoint-MoSeq and movement read), instead of one file holding every mouse.
+    #[arg(long)]
+    pub per_mouse: bool,
     /// Print what was written as one JSON object (`out`, `rows`, `series`, `subject_id`,
     /// `warnings`).
     #[arg(long)]
@@ -128,17 +133,25 @@ pub fn command(args: &NwbArgs) -> crate::app::Outcome {
             labeled_video: args.labeled_video.clone(),
             python: args.python.clone(),
             force: args.force,
+            per_mouse: args.per_mouse,
         },
         &Bars::default(),
     )?;
     if args.json {
-        return Ok(crate::app::output::print_json(&serde_json::json!({
-            "out": written.out,
+        let mut json = serde_json::json!({
+            "out": args.out,
             "rows": written.rows,
             "series": written.series,
             "subject_id": written.subject_id,
             "warnings": written.warnings,
-        }))?);
+        });
+        if args.per_mouse {
+            json["files"] = serde_json::json!(written.out);
+        }
+        return Ok(crate::app::output::print_json(&json)?);
     }
-    Ok(print(&format!("{:?}: 24 joints, NWB with ndx-pose\n", args.out))?)
+    for out in &written.out {
+        print(&format!("{out:?}: 24 joints, NWB with ndx-pose\n"))?;
+    }
+    Ok(())
 }

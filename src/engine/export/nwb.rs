@@ -14,7 +14,7 @@ use crate::engine::Failure;
 use crate::engine::export::{Run, check_file_out};
 use crate::engine::progress::Progress;
 use crate::io::session::{CameraMeta, SessionReader};
-use crate::runtime::sink::poses::POSES_FILE;
+use crate::runtime::sink::poses::{POSES_FILE, mice_in};
 use crate::vision::calibrate::{CameraCalibration, RigCalibration};
 use anyhow::Context as _;
 use serde::Serialize;
@@ -57,12 +57,16 @@ pub struct NwbOptions {
     pub python: Option<PathBuf>,
     /// Replace the file if it exists.
     pub force: bool,
+    /// A run of several mice: a file per mouse (`OUT`'s name with `_mouse1`, ... before its
+    /// extension) instead of one holding them all.
+    pub per_mouse: bool,
 }
 
 /// What `export nwb` wrote.
 #[derive(Clone, Debug)]
 pub struct NwbSummary {
-    pub out: PathBuf,
+    /// The files written: one, or one per mouse (`--per-mouse`).
+    pub out: Vec<PathBuf>,
     /// Rows of `poses.csv`.
     pub rows: usize,
     /// Pose series (one per joint).
@@ -156,6 +160,9 @@ struct Meta<'a> {
     scorer: String,
     software_version: &'static str,
     videos: Videos,
+    /// In a file of one of several mice, its number.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mouse: Option<usize>,
 }
 
 fn device(c: &CameraMeta, rig: Option<&RigCalibration>) -> Device {
@@ -207,7 +214,20 @@ pub fn nwb(options: &NwbOptions, progress: &dyn Progress) -> Result<NwbSummary, 
             run.dir
         )));
     }
-    check_file_out(&options.out, options.force)?;
+    let mice = mice_in(&poses).map_err(Failure::usage)?;
+    let files = match (options.per_mouse, mice) {
+        (true, 1) => {
+            return Err(Failure::usage(anyhow::anyhow!(
+                "the run {:?} is of one mouse: --per-mouse is for runs of several (replay --mice N)",
+                run.dir
+            )));
+        }
+        (true, _) => (1..=mice).map(|k| (Some(k), per_mouse_file(&options.out, k))).collect(),
+        (false, _) => vec![(None, options.out.clone())],
+    };
+    for (_, out) in &files {
+        check_file_out(out, options.force)?;
+    }
     let reader = SessionReader::open(&run.session)
         .map_err(|e| Failure::usage(e).context(format!("opening the session {:?}", run.session)))?;
     let session_meta = reader.meta();
@@ -235,11 +255,20 @@ pub fn nwb(options: &NwbOptions, progress: &dyn Progress) -> Result<NwbSummary, 
         source: linked_video(options.source_video.as_ref(), "--source-video")?,
         labeled: linked_video(options.labeled_video.as_ref(), "--labeled-video")?,
     };
-    let meta = metadata(options, &run, session_meta, calibration.as_ref(), videos);
-    write_with_helper(options, &poses, &meta).map_err(|f| f.context(format!("exporting {:?} to NWB", options.run)))?;
+    let mut meta = metadata(options, &run, session_meta, calibration.as_ref(), videos);
+    for (k, (mouse, out)) in files.iter().enumerate() {
+        meta.mouse = *mouse;
+        if let Err(f) = write_with_helper(options, &poses, &meta, out) {
+            // A file per mouse, all or none: those written before go again.
+            for (_, written) in &files[..k] {
+                let _ = std::fs::remove_file(written);
+            }
+            return Err(f.context(format!("exporting {:?} to NWB", options.run)));
+        }
+    }
     let rows = std::fs::read_to_string(&poses).map_or(0, |t| t.lines().count().saturating_sub(1));
     Ok(NwbSummary {
-        out: options.out.clone(),
+        out: files.into_iter().map(|(_, out)| out).collect(),
         rows,
         series: Joint::ALL.len(),
         subject_id: options.subject_id.clone(),
@@ -316,27 +345,38 @@ fn metadata<'a>(
         scorer: format!("body model {}; paw model {}", model("body_model"), model("paw_model")),
         software_version: env!("CARGO_PKG_VERSION"),
         videos,
+        mouse: None,
     }
+}
+
+/// The file of mouse `k` of `--per-mouse`: `out`'s name with `_mouse{k}` before its extension.
+fn per_mouse_file(out: &Path, k: usize) -> PathBuf {
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let name = match out.extension() {
+        Some(ext) => format!("{stem}_mouse{k}.{}", ext.to_string_lossy()),
+        None => format!("{stem}_mouse{k}"),
+    };
+    out.with_file_name(name)
 }
 
 /// Runs the helper with `options`'s Python on `poses` and `meta` (both written with a copy of
 /// the helper into a temporary directory, removed after), into a hidden file renamed to
-/// `options.out` when it succeeds.
-fn write_with_helper(options: &NwbOptions, poses: &Path, meta: &Meta<'_>) -> Result<(), Failure> {
+/// `out` when it succeeds.
+fn write_with_helper(options: &NwbOptions, poses: &Path, meta: &Meta<'_>, out: &Path) -> Result<(), Failure> {
     let python = options.python.clone().unwrap_or_else(project_python);
     let work = std::env::temp_dir().join(format!("mousepose-nwb-{}", std::process::id()));
     std::fs::create_dir_all(&work).with_context(|| format!("creating {work:?}"))?;
     let result = (|| -> Result<(), Failure> {
         std::fs::write(work.join("nwb.py"), HELPER).context("writing the NWB helper")?;
         std::fs::write(work.join("meta.json"), serde_json::to_vec_pretty(meta)?).context("writing the metadata")?;
-        let name = options
-            .out
+        let name = out
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| "out.nwb".to_owned());
-        let partial = options
-            .out
-            .with_file_name(format!(".{name}.partial-{}", std::process::id()));
+        let partial = out.with_file_name(format!(".{name}.partial-{}", std::process::id()));
         let output = Command::new(&python)
             .arg(work.join("nwb.py"))
             .arg(poses)
@@ -358,7 +398,7 @@ fn write_with_helper(options: &NwbOptions, poses: &Path, meta: &Meta<'_>) -> Res
                 .unwrap_or("no message");
             return Err(Failure::from(anyhow::anyhow!("the NWB helper failed: {last}")));
         }
-        std::fs::rename(&partial, &options.out).with_context(|| format!("writing {:?}", options.out))?;
+        std::fs::rename(&partial, out).with_context(|| format!("writing {:?}", out))?;
         Ok(())
     })();
     let _ = std::fs::remove_dir_all(&work);

@@ -635,12 +635,50 @@ pub enum PosesReadError {
     },
     #[error("{path:?} does not start with the header of poses.csv")]
     Header { path: std::path::PathBuf },
+    #[error("{path:?} holds several mice (replay --mice): this reads one mouse's poses.csv so far")]
+    SeveralMice { path: std::path::PathBuf },
     #[error("{path:?} line {line}: {what}")]
     Row {
         path: std::path::PathBuf,
         line: usize,
         what: String,
     },
+}
+
+/// How many mice a `poses.csv` is of: 1 without the `mouse` column, else the rows of its
+/// first pair.
+///
+/// # Errors
+/// The file cannot be read, or its header is not that of `poses.csv`.
+pub fn mice_in(path: &Path) -> Result<usize, PosesReadError> {
+    let io = |source| PosesReadError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let file = File::open(path).map_err(io)?;
+    let mut rows = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .from_reader(std::io::BufReader::new(file))
+        .into_records();
+    let header = rows.next().and_then(Result::ok);
+    let Some(header) = header.filter(|h| h.get(0) == Some("frame")) else {
+        return Err(PosesReadError::Header { path: path.to_owned() });
+    };
+    if !header.iter().any(|c| c == MOUSE_COLUMN) {
+        return Ok(1);
+    }
+    let mut first = None;
+    let mut mice = 0;
+    for row in rows {
+        let row = row.map_err(|e| io(e.into()))?;
+        let frame = row.get(0).unwrap_or_default().to_owned();
+        if first.get_or_insert_with(|| frame.clone()) != &frame {
+            break;
+        }
+        mice += 1;
+    }
+    Ok(mice.max(1))
 }
 
 /// Reads a `poses.csv` back into pose records, in row order (the colour stamp's host time,
@@ -685,6 +723,8 @@ impl PosesRows {
             true
         } else if is(false) {
             false
+        } else if header.as_ref().is_some_and(|h| h.iter().eq(columns(true, true).iter())) {
+            return Err(PosesReadError::SeveralMice { path: path.to_owned() });
         } else {
             return Err(PosesReadError::Header { path: path.to_owned() });
         };
