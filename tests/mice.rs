@@ -301,11 +301,10 @@ fn moseq_frame(dat: &mut std::fs::File, i: usize, w: u32, h: u32) -> mousepose::
 /// The real MoSeq mouse twice in its arena (`scripts/real-moseq-session build --pair`: the same
 /// frames half a session later, mirrored, the nearer reading where they overlap; both mice's
 /// MoSeq centroids are known): each frame's mice segmented alone and numbered. Where the two
-/// are apart, both are found, each centre near MoSeq's own. Identity is not yet what it must
-/// be here: the two are the same mouse (one build) and pass right over each other (their
-/// centroids 2 px apart) in each of their two meetings, and the numbers swapped in both; the
-/// check below guards against worse (more than one swap a meeting) until identity meets the
-/// issue's goal, and the figure is in FIGURES.md.
+/// are apart, both are found, each centre near MoSeq's own, and each number follows the same
+/// real mouse through both of their meetings, though the two are one build and pass right
+/// over each other (their centroids 2 px apart): the numbers swapped in both before a mouse
+/// alone was no longer split in two (the area one mouse covers, learnt as the mice go).
 #[test]
 fn two_real_mice_pasted_in_one_arena_are_segmented_apart_and_keep_their_numbers() {
     use mousepose::vision::identity::MiceTracker;
@@ -389,7 +388,7 @@ fn two_real_mice_pasted_in_one_arena_are_segmented_apart_and_keep_their_numbers(
         "both mice in {both_apart} of {apart} frames apart"
     );
     assert!(median < 4.0, "median {median} px from MoSeq's centroid");
-    assert!(swaps <= meetings, "{swaps} identity swaps in {meetings} meetings");
+    assert_eq!(swaps, 0, "{swaps} identity swaps in {meetings} meetings");
 }
 
 /// `replay --mice 2` on two rendered mice with the bottom camera (6 s, a seed not tuned on):
@@ -632,4 +631,69 @@ print(json.dumps(out))
         "{}",
         String::from_utf8_lossy(&o.stderr)
     );
+}
+
+/// More mice in the cage than counted, and fewer: three rendered mice replayed as two are
+/// counted in `more_mice_seen` (the two largest posed, every row still numbered 1 or 2), two
+/// replayed as three leave mouse 3 unfound (`no_mouse` rows; found in the first few frames
+/// only, a mouse split in two before the area one mouse covers is known) and both real ones
+/// found.
+#[test]
+fn more_mice_than_counted_are_counted_and_fewer_leave_rows_without_a_mouse() {
+    let tmp = tempfile::tempdir().unwrap();
+    let replay = |mice: &str, counted: &str| -> (serde_json::Value, Vec<Vec<String>>) {
+        let (session, out) = (tmp.path().join(mice), tmp.path().join(format!("{mice}-as-{counted}")));
+        if !session.exists() {
+            let made = mousepose()
+                .args([
+                    "synth",
+                    "session",
+                    "--seconds",
+                    "4",
+                    "--seed",
+                    "16",
+                    "--no-color",
+                    "--mice",
+                    mice,
+                    "--out",
+                ])
+                .arg(&session)
+                .output()
+                .unwrap();
+            assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+        }
+        let ran = mousepose()
+            .arg("replay")
+            .arg(&session)
+            .args(["--mice", counted, "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+        let summary = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+        let rows = std::fs::read_to_string(out.join("poses.csv"))
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').take(9).map(str::to_owned).collect())
+            .collect();
+        (summary, rows)
+    };
+    let (three_as_two, rows) = replay("3", "2");
+    let pairs = three_as_two["pairs"].as_u64().unwrap();
+    let more = three_as_two["more_mice_seen"].as_u64().unwrap();
+    assert!(more * 2 >= pairs, "more mice seen in {more} of {pairs} pairs");
+    assert!(rows.iter().all(|r| r[7] == "1" || r[7] == "2"));
+    let (two_as_three, rows) = replay("2", "3");
+    let mice = two_as_three["mice"].as_array().unwrap();
+    let found: Vec<u64> = mice.iter().map(|m| m["found"].as_u64().unwrap()).collect();
+    let pairs = two_as_three["pairs"].as_u64().unwrap();
+    eprintln!("three as two: more seen in {more} of {pairs}; two as three: found {found:?}");
+    // Two real mice and a third that is mostly not there (a mouse split in two now and then).
+    let mut sorted = found.clone();
+    sorted.sort_unstable();
+    assert!(sorted[1] * 10 >= pairs * 9, "{found:?} of {pairs}");
+    assert!(sorted[0] * 4 <= pairs, "{found:?} of {pairs}");
+    assert!(rows.iter().filter(|r| r[8] == "no_mouse").count() as u64 >= pairs - sorted[0]);
+    assert_eq!(two_as_three["more_mice_seen"].as_u64(), Some(0));
 }

@@ -266,6 +266,28 @@ impl PossibleSwap {
     }
 }
 
+/// The writer of `poses.csv` (and the files beside it) in `staging`, for `options.mice` mice,
+/// with the recording's `truth`.
+fn pose_writer(
+    options: &ReplayOptions,
+    staging: &Staging,
+    recording: &Recording,
+    truth: Option<&crate::io::session::Truth>,
+) -> Result<PoseWriter, ReplayError> {
+    let truth_joints = truth.map(by_frame).unwrap_or_default();
+    let snapshot_row = recording.depth_count() as u64 / 2;
+    PoseWriter::create(staging.path(), truth_joints, snapshot_row, options.mice.max(1))
+        .and_then(PoseWriter::with_raw_file)
+        .and_then(|w| match options.lead_ns {
+            Some(ns) => w.with_predicted_file(ns as f64 * 1e-9),
+            None => Ok(w),
+        })
+        .map_err(|source| ReplayError::Write {
+            path: staging.path().join(POSES_FILE),
+            source,
+        })
+}
+
 /// The true joints of each mouse by depth sequence number, mouse 1's first.
 fn by_frame(truth: &crate::io::session::Truth) -> HashMap<u64, Vec<JointPositions>> {
     let mut frames: HashMap<u64, Vec<JointPositions>> = HashMap::new();
@@ -332,6 +354,10 @@ pub struct ReplaySummary {
     /// With several mice, the frames where two of them could have swapped numbers.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub possible_swaps: Option<Vec<PossibleSwap>>,
+    /// With several mice, the pairs whose depth frame showed more mouse-sized things than
+    /// mice (the largest were taken as the mice).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub more_mice_seen: Option<u64>,
     /// What the user should know about the replay (the arena missing the mouse), one
     /// sentence each; also printed on stderr.
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -493,17 +519,7 @@ pub fn replay_with(
     let truth = recording.truth()?;
     let staging = Staging::new(&options.out, options.force)?;
     let mice = options.mice.max(1);
-    let truth_joints = truth.as_ref().map(by_frame).unwrap_or_default();
-    let writer = PoseWriter::create(staging.path(), truth_joints, recording.depth_count() as u64 / 2, mice)
-        .and_then(PoseWriter::with_raw_file)
-        .and_then(|w| match options.lead_ns {
-            Some(ns) => w.with_predicted_file(ns as f64 * 1e-9),
-            None => Ok(w),
-        })
-        .map_err(|source| ReplayError::Write {
-            path: staging.path().join(POSES_FILE),
-            source,
-        })?;
+    let writer = pose_writer(options, &staging, &recording, truth.as_ref())?;
     let tally = writer.tally();
     let Scene {
         rig,
@@ -578,6 +594,7 @@ pub fn replay_with(
         tails: (tally.tails.frames > 0).then_some(tally.tails),
         mice: (mice > 1).then(|| MouseSummary::of_tally(&tally, truth.is_some())),
         possible_swaps: (mice > 1).then(|| PossibleSwap::of_tally(&tally)),
+        more_mice_seen: (mice > 1).then_some(tally.more_mice_seen),
         warnings: arena_warnings(
             world.arena_check.as_ref(),
             if options.roi.is_some() { "given" } else { "found" },

@@ -71,6 +71,9 @@ pub struct Identity {
     pub confidence: f64,
     /// The other mouse's number, when this frame could have swapped the two.
     pub swap_with: Option<usize>,
+    /// Mouse-sized things the frame showed beyond the mice counted (the same in each mouse's
+    /// record of the frame): more mice seen than there are.
+    pub beyond: usize,
 }
 
 /// The longest lead a pose is predicted for (ms): past a second, a mouse's velocity says

@@ -17,7 +17,7 @@
 use crate::core::frame::DepthFrame;
 use crate::core::pose::{JointPositions, JointSource, Pose};
 use crate::core::skeleton::Joint;
-use crate::vision::segment::{Mouse, SegmentError, Segmenter};
+use crate::vision::segment::{Mouse, SegmentError, Segmenter, SeveralMice};
 use nalgebra::{Point2, Point3, Vector2};
 
 /// The most mice followed in one cage: every assignment of a frame's mice to the tracks is
@@ -304,7 +304,13 @@ pub struct MiceTracker {
     identities: Identities,
     /// Where each mouse found in the frame before lay in the image (pixels).
     last: Vec<(f64, f64)>,
+    /// The areas (mm^2) of the last [`AREAS_KEPT`] components that claimed one mouse alone:
+    /// their median is one mouse's (touching mice, split, are not among them).
+    areas: std::collections::VecDeque<f64>,
 }
+
+/// Components whose areas [`MiceTracker`] keeps.
+const AREAS_KEPT: usize = 301;
 
 /// One frame's mice by number.
 #[derive(Debug)]
@@ -313,6 +319,8 @@ pub struct NumberedMice {
     pub mice: Vec<Option<(Mouse, f64)>>,
     /// Two numbers the frame could have swapped ([`Frame::possible_swap`]).
     pub possible_swap: Option<(usize, usize)>,
+    /// Mouse-sized things seen beyond the mice counted ([`crate::vision::segment::Claims::beyond`]).
+    pub beyond: usize,
 }
 
 impl MiceTracker {
@@ -321,6 +329,7 @@ impl MiceTracker {
         Self {
             identities: Identities::new(count.clamp(1, MOST_MICE)),
             last: Vec::new(),
+            areas: std::collections::VecDeque::with_capacity(AREAS_KEPT),
         }
     }
 
@@ -329,13 +338,34 @@ impl MiceTracker {
         self.identities.count
     }
 
+    /// The area one mouse covers, by the components seen so far (none before a few).
+    fn mouse_area(&self) -> Option<f64> {
+        if self.areas.len() < 5 {
+            return None;
+        }
+        let mut sorted: Vec<f64> = self.areas.iter().copied().collect();
+        sorted.sort_by(f64::total_cmp);
+        Some(sorted[sorted.len() / 2])
+    }
+
     /// The mice of `frame`, segmented by `segmenter` and numbered.
     ///
     /// # Errors
     /// As [`Segmenter::segment_mice`].
     pub fn next(&mut self, segmenter: &mut Segmenter, frame: &DepthFrame) -> Result<NumberedMice, SegmentError> {
         let count = self.count();
-        let found = segmenter.segment_mice(frame, count, &self.last)?;
+        let mouse_area = self.mouse_area();
+        let SeveralMice {
+            mice: found,
+            beyond,
+            areas,
+        } = segmenter.segment_mice(frame, count, &self.last, mouse_area)?;
+        for a in areas {
+            if self.areas.len() == AREAS_KEPT {
+                self.areas.pop_front();
+            }
+            self.areas.push_back(a);
+        }
         self.last = found.iter().map(Mouse::image_centre).collect();
         let seen: Vec<Seen> = found.iter().map(Seen::of).collect();
         let numbering = self.identities.assign(&seen, frame.stamp.device_ns as f64 * 1e-9);
@@ -349,6 +379,7 @@ impl MiceTracker {
         Ok(NumberedMice {
             mice,
             possible_swap: numbering.possible_swap,
+            beyond,
         })
     }
 }

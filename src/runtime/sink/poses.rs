@@ -162,6 +162,8 @@ pub struct PoseTally {
     pub mice: Vec<MouseTally>,
     /// With several mice, the frames that could have swapped two of them: `(depth_seq, a, b)`.
     pub possible_swaps: Vec<(u64, usize, usize)>,
+    /// With several mice, the pairs whose depth frame showed more mouse-sized things than mice.
+    pub more_mice_seen: u64,
 }
 
 /// What was written of one of several mice.
@@ -241,6 +243,7 @@ impl PoseTally {
             self.mice.resize_with(records.len(), MouseTally::default);
         }
         let nearest: Vec<Option<usize>> = records.iter().map(|r| nearest_truth(&r.pose, truth)).collect();
+        self.more_mice_seen += u64::from(records.first().and_then(|r| r.identity).is_some_and(|i| i.beyond > 0));
         for ((r, t), mouse) in records.iter().zip(&nearest).zip(&mut self.mice) {
             let t = t.map(|t| &truth[t]);
             mouse.rows.count(r, t);

@@ -121,6 +121,7 @@ impl SegmentStage {
                         mouse,
                         confidence: 0.0,
                         swap_with: None,
+                        beyond: 0,
                     }),
                 })
                 .collect(),
@@ -238,7 +239,7 @@ impl Map for SegmentStage {
 
 /// A frame's mice by number as the pipeline carries them, each with its identity.
 fn numbered(numbered: NumberedMice) -> Vec<Found> {
-    let swap = numbered.possible_swap;
+    let (swap, beyond) = (numbered.possible_swap, numbered.beyond);
     let other_of = |k: usize| match swap {
         Some((a, b)) if a == k => Some(b),
         Some((a, b)) if b == k => Some(a),
@@ -256,6 +257,7 @@ fn numbered(numbered: NumberedMice) -> Vec<Found> {
                     mouse: k,
                     confidence,
                     swap_with: other_of(k),
+                    beyond,
                 }),
             }
         })

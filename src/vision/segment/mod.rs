@@ -67,7 +67,7 @@ pub use config::SegmenterConfig;
 pub use floor::FloorPlane;
 pub use mouse::{Mouse, PoseFrame};
 pub use picture::{PICTURE_HEIGHT_MM, caption, frame_picture, height_picture};
-pub use several::{CLAIM_MARGIN_PX, Claim, PIECE_SHARE, SPLIT_SHARE};
+pub use several::{CLAIM_MARGIN_PX, Claim, Claims, PIECE_SHARE, SPLIT_SHARE, SeveralMice};
 pub use walls::{WALL_HEIGHT_MM, WALL_REACH_MM};
 
 use crate::core::frame::DepthFrame;

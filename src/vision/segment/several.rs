@@ -7,8 +7,10 @@
 //! components of their own; pieces smaller than [`PIECE_SHARE`] of the smallest mouse
 //! (`min_area_mm2`) are noise or a tail and claim nothing. When fewer components than mice are
 //! seen, touching mice share one: the components are given mice one at a time, each next mouse
-//! to the component with the most pixels a mouse, while that is at least [`SPLIT_SHARE`] mice'
-//! worth of the smallest mouse; a component of several mice is split by k-means on the pixels'
+//! to the component with the most area a mouse, while that is at least [`SPLIT_SHARE`] mice'
+//! worth of one mouse (the area a mouse of this cage covers, as the caller has seen it, else
+//! the smallest mouse's), so that a mouse alone is not split when fewer mice are in view than
+//! counted; a component of several mice is split by k-means on the pixels'
 //! image positions, started from where the mice were seen last when that is inside it (so a
 //! mouse keeps its side through a contact), or else from points spread along the component's
 //! long axis.
@@ -28,6 +30,28 @@ pub const CLAIM_MARGIN_PX: usize = 3;
 /// Rounds of k-means when a component is split.
 const KMEANS_ROUNDS: usize = 12;
 
+/// A frame's claims, and what was left unclaimed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Claims {
+    pub claims: Vec<Claim>,
+    /// Components of a whole mouse's area (`min_area_mm2`) beyond the mice counted: more mice
+    /// seen than there are (clutter of a mouse's size, or a count set too low).
+    pub beyond: usize,
+    /// The area (mm^2, seen from above) of each component that claimed one mouse alone.
+    pub areas: Vec<f64>,
+}
+
+/// A frame's mice, each segmented alone ([`Segmenter::segment_mice`]).
+#[derive(Debug)]
+pub struct SeveralMice {
+    /// In the order of their claims.
+    pub mice: Vec<Mouse>,
+    /// As [`Claims::beyond`].
+    pub beyond: usize,
+    /// As [`Claims::areas`].
+    pub areas: Vec<f64>,
+}
+
 /// The strong pixels one mouse claims in a frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Claim {
@@ -40,12 +64,19 @@ pub struct Claim {
 impl Segmenter {
     /// The frame's strong pixels split among at most `count` mice (see the module
     /// documentation); `last` are where mice were seen in the frame before (image pixels), to
-    /// start splits from. Fewer claims than `count` when fewer mice can be told apart; the
-    /// claims are in no particular order of identity.
+    /// start splits from; `mouse_area` the area (mm^2) one mouse of the cage covers, when
+    /// known. Fewer claims than `count` when fewer mice can be told apart; the claims are in
+    /// no particular order of identity.
     ///
     /// # Errors
     /// A frame of another size than the background.
-    pub fn claim(&mut self, frame: &DepthFrame, count: usize, last: &[(f64, f64)]) -> Result<Vec<Claim>, SegmentError> {
+    pub fn claim(
+        &mut self,
+        frame: &DepthFrame,
+        count: usize,
+        last: &[(f64, f64)],
+        mouse_area: Option<f64>,
+    ) -> Result<Claims, SegmentError> {
         check_frame(frame, self.background.region)?;
         let region = self.background.region;
         let (w, h) = (region.width as usize, region.height as usize);
@@ -86,6 +117,7 @@ impl Segmenter {
             .filter(|(_, area, _)| *area >= PIECE_SHARE * smallest)
             .collect();
         blobs.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let beyond = blobs.iter().skip(count).filter(|b| b.1 >= smallest).count();
         blobs.truncate(count);
         for b in &mut blobs {
             b.2 = 1;
@@ -95,7 +127,7 @@ impl Segmenter {
         while given < count {
             let Some(b) = blobs
                 .iter_mut()
-                .filter(|b| b.1 / b.2 as f64 >= SPLIT_SHARE * smallest)
+                .filter(|b| b.1 / b.2 as f64 >= SPLIT_SHARE * mouse_area.unwrap_or(smallest).max(smallest))
                 .max_by(|a, b| (a.1 / a.2 as f64).total_cmp(&(b.1 / b.2 as f64)))
             else {
                 break;
@@ -103,6 +135,7 @@ impl Segmenter {
             b.2 += 1;
             given += 1;
         }
+        let areas = blobs.iter().filter(|b| b.2 == 1).map(|b| b.1).collect();
         let mut claims = Vec::new();
         for (px, _, mice) in blobs {
             if mice == 1 {
@@ -111,11 +144,12 @@ impl Segmenter {
                 claims.extend(split(&px, w, mice, last).into_iter().map(|p| claim_of(p, w)));
             }
         }
-        Ok(claims)
+        Ok(Claims { claims, beyond, areas })
     }
 
     /// Each of the frame's mice (at most `count`) segmented alone (see the module
-    /// documentation), in the order of their claims; `last` as [`Self::claim`] takes it.
+    /// documentation), in the order of their claims, and how many more were seen; `last` and
+    /// `mouse_area` as [`Self::claim`] takes them.
     ///
     /// # Errors
     /// As [`Self::segment`].
@@ -124,10 +158,12 @@ impl Segmenter {
         frame: &DepthFrame,
         count: usize,
         last: &[(f64, f64)],
-    ) -> Result<Vec<Mouse>, SegmentError> {
-        let claims = self.claim(frame, count, last)?;
+        mouse_area: Option<f64>,
+    ) -> Result<SeveralMice, SegmentError> {
+        let Claims { claims, beyond, areas } = self.claim(frame, count, last, mouse_area)?;
         if claims.len() <= 1 {
-            return Ok(self.segment(frame)?.into_iter().collect());
+            let mice = self.segment(frame)?.into_iter().collect();
+            return Ok(SeveralMice { mice, beyond, areas });
         }
         let (w, h) = (frame.width as usize, frame.height as usize);
         let mut owner = vec![0u8; w * h];
@@ -136,24 +172,33 @@ impl Segmenter {
                 owner[i as usize] = k as u8 + 1;
             }
         }
-        let near = spread(&owner, w, h, CLAIM_MARGIN_PX);
+        let zones: Vec<Vec<u32>> = claims.iter().map(|c| zone(&c.pixels, w, h, CLAIM_MARGIN_PX)).collect();
         let mut mice = Vec::with_capacity(claims.len());
         let mut alone = frame.clone();
+        let mut emptied = Vec::new();
         for k in 0..claims.len() {
             let me = k as u8 + 1;
-            for (i, (out, &d)) in alone.data.iter_mut().zip(&frame.data).enumerate() {
-                let other = near[i] != 0 && near[i] != me && owner[i] != me;
-                *out = if other {
-                    self.background.depth.get(i).map_or(0, |&b| b.round() as u16)
-                } else {
-                    d
-                };
+            // The other mice's pixels and their margins read as the empty cage, but for this
+            // mouse's own; they are put back after.
+            emptied.clear();
+            for (j, zone) in zones.iter().enumerate() {
+                if j != k {
+                    emptied.extend(zone.iter().copied().filter(|&i| owner[i as usize] != me));
+                }
             }
-            if let Some(m) = self.segment(&alone)? {
+            for &i in &emptied {
+                let i = i as usize;
+                alone.data[i] = self.background.depth.get(i).map_or(0, |&b| b.round() as u16);
+            }
+            let found = self.segment(&alone)?;
+            for &i in &emptied {
+                alone.data[i as usize] = frame.data[i as usize];
+            }
+            if let Some(m) = found {
                 mice.push(m);
             }
         }
-        Ok(mice)
+        Ok(SeveralMice { mice, beyond, areas })
     }
 }
 
@@ -252,27 +297,38 @@ fn split(pixels: &[u32], w: usize, k: usize, last: &[(f64, f64)]) -> Vec<Vec<u32
     out
 }
 
-/// Each pixel's owner (`owner`, 0 = none) spread `radius` pixels into its neighbours that have
-/// none (a square's reach; where two spread into the same pixel, either).
-fn spread(owner: &[u8], w: usize, h: usize, radius: usize) -> Vec<u8> {
-    let mut rows = owner.to_vec();
-    for y in 0..h {
-        let row = &owner[y * w..(y + 1) * w];
-        for x in 0..w {
-            if row[x] == 0 {
-                let from = x.saturating_sub(radius);
-                let to = (x + radius + 1).min(w);
-                rows[y * w + x] = row[from..to].iter().copied().find(|&o| o != 0).unwrap_or(0);
-            }
+/// The pixels (frame indices, raster order) within `radius` of any of `pixels` (a square's
+/// reach), `pixels` among them, in a frame `w` x `h`: worked out in their bounding box only.
+fn zone(pixels: &[u32], w: usize, h: usize, radius: usize) -> Vec<u32> {
+    let Some((x0, y0, x1, y1)) = pixels.iter().fold(None, |b: Option<(usize, usize, usize, usize)>, &i| {
+        let (x, y) = (i as usize % w, i as usize / w);
+        Some(b.map_or((x, y, x, y), |(x0, y0, x1, y1)| {
+            (x0.min(x), y0.min(y), x1.max(x), y1.max(y))
+        }))
+    }) else {
+        return Vec::new();
+    };
+    let (bx, by) = (x0.saturating_sub(radius), y0.saturating_sub(radius));
+    let (bw, bh) = ((x1 + radius + 1).min(w) - bx, (y1 + radius + 1).min(h) - by);
+    let mut mark = vec![false; bw * bh];
+    for &i in pixels {
+        let (x, y) = (i as usize % w - bx, i as usize / w - by);
+        mark[y * bw + x] = true;
+    }
+    // Along the rows, then down the columns.
+    let mut rows = vec![false; bw * bh];
+    for y in 0..bh {
+        let row = &mark[y * bw..(y + 1) * bw];
+        for x in 0..bw {
+            rows[y * bw + x] = row[x.saturating_sub(radius)..(x + radius + 1).min(bw)].contains(&true);
         }
     }
-    let mut out = rows.clone();
-    for y in 0..h {
-        for x in 0..w {
-            if out[y * w + x] == 0 {
-                let from = y.saturating_sub(radius);
-                let to = (y + radius + 1).min(h);
-                out[y * w + x] = (from..to).map(|yy| rows[yy * w + x]).find(|&o| o != 0).unwrap_or(0);
+    let mut out = Vec::new();
+    for y in 0..bh {
+        for x in 0..bw {
+            let near = (y.saturating_sub(radius)..(y + radius + 1).min(bh)).any(|yy| rows[yy * bw + x]);
+            if near {
+                out.push(((by + y) * w + bx + x) as u32);
             }
         }
     }
@@ -304,15 +360,23 @@ mod tests {
     }
 
     #[test]
-    fn owners_spread_into_unowned_neighbours_only() {
+    fn a_zone_reaches_its_radius_around_its_pixels_and_no_further() {
         let (w, h) = (7, 5);
-        let mut owner = vec![0u8; w * h];
-        owner[2 * w + 1] = 1;
-        owner[2 * w + 5] = 2;
-        let near = spread(&owner, w, h, 1);
-        assert_eq!(near[2 * w + 1], 1);
-        assert_eq!(near[w], 1);
-        assert_eq!(near[3 * w + 6], 2);
-        assert_eq!(near[2 * w + 3], 0);
+        let pixels = [(2 * w + 1) as u32, (2 * w + 5) as u32];
+        let zone = zone(&pixels, w, h, 1);
+        let expected: Vec<u32> = (0..(w * h) as u32)
+            .filter(|&i| {
+                let (x, y) = ((i as usize % w) as i64, (i as usize / w) as i64);
+                pixels.iter().any(|&p| {
+                    let (px, py) = ((p as usize % w) as i64, (p as usize / w) as i64);
+                    (x - px).abs() <= 1 && (y - py).abs() <= 1
+                })
+            })
+            .collect();
+        assert_eq!(zone, expected);
+        assert!(!zone.contains(&((2 * w + 3) as u32)));
+        // At the frame's corner, clipped.
+        assert_eq!(super::zone(&[0], w, h, 2).len(), 9);
+        assert!(super::zone(&[], w, h, 2).is_empty());
     }
 }
