@@ -6,7 +6,7 @@ use crate::util::{mousepose, repo_root, walk};
 use mousepose::core::pose::JointPositions;
 use mousepose::core::skeleton::Joint;
 use mousepose::io::session::SessionReader;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Every file under `a` is under `b` with the same bytes, and the other way round.
 fn same_files(a: &Path, b: &Path) {
@@ -391,6 +391,32 @@ fn two_real_mice_pasted_in_one_arena_are_segmented_apart_and_keep_their_numbers(
     assert_eq!(swaps, 0, "{swaps} identity swaps in {meetings} meetings");
 }
 
+/// Renders `synth session --mice MICE` (`seconds` long, `seed`, with `flags`) into `dir/MICE`
+/// unless it is there, and replays it with `--mice COUNTED` into `dir/MICE-as-COUNTED`, which
+/// it returns.
+fn rendered_replay(dir: &Path, mice: &str, counted: &str, seconds: &str, seed: &str, flags: &[&str]) -> PathBuf {
+    let (session, out) = (dir.join(mice), dir.join(format!("{mice}-as-{counted}")));
+    if !session.exists() {
+        let made = mousepose()
+            .args(["synth", "session", "--seconds", seconds, "--seed", seed, "--mice", mice])
+            .args(flags)
+            .arg("--out")
+            .arg(&session)
+            .output()
+            .unwrap();
+        assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    }
+    let ran = mousepose()
+        .arg("replay")
+        .arg(&session)
+        .args(["--mice", counted, "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    out
+}
+
 /// `replay --mice 2` on two rendered mice with the bottom camera (6 s, a seed not tuned on):
 /// `poses.csv` holds a row per pair and mouse (the pair's columns, the mouse's number, its
 /// status and how sure its number is), and `summary.json` each mouse's own figures against the
@@ -398,31 +424,7 @@ fn two_real_mice_pasted_in_one_arena_are_segmented_apart_and_keep_their_numbers(
 #[test]
 fn a_replay_of_two_mice_writes_a_row_per_pair_and_mouse_and_each_ones_figures() {
     let tmp = tempfile::tempdir().unwrap();
-    let (session, out) = (tmp.path().join("two"), tmp.path().join("poses"));
-    let made = mousepose()
-        .args([
-            "synth",
-            "session",
-            "--seconds",
-            "6",
-            "--seed",
-            "12",
-            "--mice",
-            "2",
-            "--out",
-        ])
-        .arg(&session)
-        .output()
-        .unwrap();
-    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
-    let ran = mousepose()
-        .arg("replay")
-        .arg(&session)
-        .args(["--mice", "2", "--json", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let out = rendered_replay(tmp.path(), "2", "2", "6", "12", &[]);
     let text = std::fs::read_to_string(out.join("poses.csv")).unwrap();
     let mut lines = text.lines();
     let header = lines.next().unwrap();
@@ -508,31 +510,7 @@ fn two_mice_export_to_nwb_together_and_a_file_each() {
     let python = Path::new(mousepose::engine::export::nwb::DEFAULT_PYTHON);
     assert!(python.is_file(), "{python:?} is missing: run scripts/setup.sh");
     let tmp = tempfile::tempdir().unwrap();
-    let (session, run) = (tmp.path().join("two"), tmp.path().join("run"));
-    let made = mousepose()
-        .args([
-            "synth",
-            "session",
-            "--seconds",
-            "2",
-            "--seed",
-            "13",
-            "--mice",
-            "2",
-            "--out",
-        ])
-        .arg(&session)
-        .output()
-        .unwrap();
-    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
-    let ran = mousepose()
-        .arg("replay")
-        .arg(&session)
-        .args(["--mice", "2", "--out"])
-        .arg(&run)
-        .output()
-        .unwrap();
-    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let run = rendered_replay(tmp.path(), "2", "2", "2", "13", &[]);
     let pairs = (std::fs::read_to_string(run.join("poses.csv")).unwrap().lines().count() - 1) / 2;
     let export = |out: &Path, per_mouse: bool| {
         let mut c = mousepose();
@@ -642,34 +620,7 @@ print(json.dumps(out))
 fn more_mice_than_counted_are_counted_and_fewer_leave_rows_without_a_mouse() {
     let tmp = tempfile::tempdir().unwrap();
     let replay = |mice: &str, counted: &str| -> (serde_json::Value, Vec<Vec<String>>) {
-        let (session, out) = (tmp.path().join(mice), tmp.path().join(format!("{mice}-as-{counted}")));
-        if !session.exists() {
-            let made = mousepose()
-                .args([
-                    "synth",
-                    "session",
-                    "--seconds",
-                    "4",
-                    "--seed",
-                    "16",
-                    "--no-color",
-                    "--mice",
-                    mice,
-                    "--out",
-                ])
-                .arg(&session)
-                .output()
-                .unwrap();
-            assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
-        }
-        let ran = mousepose()
-            .arg("replay")
-            .arg(&session)
-            .args(["--mice", counted, "--out"])
-            .arg(&out)
-            .output()
-            .unwrap();
-        assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+        let out = rendered_replay(tmp.path(), mice, counted, "4", "16", &["--no-color"]);
         let summary = serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
         let rows = std::fs::read_to_string(out.join("poses.csv"))
             .unwrap()
