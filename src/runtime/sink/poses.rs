@@ -648,6 +648,24 @@ pub enum PosesReadError {
     },
 }
 
+/// A `poses.csv`'s header (`None` when its first line does not read) and its rows after it.
+fn rows_of(path: &Path) -> Result<(Option<csv::StringRecord>, PoseRecords), PosesReadError> {
+    let file = File::open(path).map_err(|source| PosesReadError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    let mut records = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .from_reader(std::io::BufReader::new(file))
+        .into_records();
+    let header = records.next().and_then(Result::ok);
+    Ok((header, records))
+}
+
+/// The rows of a `poses.csv` as the csv crate reads them.
+type PoseRecords = csv::StringRecordsIntoIter<std::io::BufReader<File>>;
+
 /// How many mice a `poses.csv` is of: 1 without the `mouse` column, else the rows of its
 /// first pair.
 ///
@@ -658,13 +676,7 @@ pub fn mice_in(path: &Path) -> Result<usize, PosesReadError> {
         path: path.to_owned(),
         source,
     };
-    let file = File::open(path).map_err(io)?;
-    let mut rows = csv::ReaderBuilder::new()
-        .has_headers(false)
-        .flexible(true)
-        .from_reader(std::io::BufReader::new(file))
-        .into_records();
-    let header = rows.next().and_then(Result::ok);
+    let (header, rows) = rows_of(path)?;
     let Some(header) = header.filter(|h| h.get(0) == Some("frame")) else {
         return Err(PosesReadError::Header { path: path.to_owned() });
     };
@@ -696,7 +708,7 @@ pub fn read_poses(path: &Path) -> Result<Vec<PoseRecord>, PosesReadError> {
 /// The rows of a `poses.csv` read one at a time, as [`read_poses`] reads them all (a long
 /// run's file is never held in memory).
 pub struct PosesRows {
-    records: csv::StringRecordsIntoIter<std::io::BufReader<File>>,
+    records: PoseRecords,
     orientation: bool,
     path: std::path::PathBuf,
 }
@@ -707,16 +719,7 @@ impl PosesRows {
     /// # Errors
     /// The file cannot be read, or its header is not this version's.
     pub fn open(path: &Path) -> Result<Self, PosesReadError> {
-        let file = File::open(path).map_err(|source| PosesReadError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
-        let mut records = csv::ReaderBuilder::new()
-            .has_headers(false)
-            .flexible(true)
-            .from_reader(std::io::BufReader::new(file))
-            .into_records();
-        let header = records.next().and_then(Result::ok);
+        let (header, records) = rows_of(path)?;
         let is = |orientation: bool| {
             header
                 .as_ref()
